@@ -1,0 +1,38 @@
+// lfnet info: what a light-field folder holds.
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cstdio>
+
+#include "command.h"
+#include "lfnet/io/light_field_io.h"
+
+namespace lfnet::app {
+
+void add_info_command(CLI::App& app, const GlobalOptions& global) {
+  auto* cmd = app.add_subcommand("info", "Print the shape, value range, naming scheme and grid of a light field folder");
+  auto dir = std::make_shared<std::string>();
+  cmd->add_option("--lf", *dir, "light field folder of sub-aperture images")->required();
+  cmd->callback([dir] {
+    const auto layout = io::scan_folder(*dir);
+    const auto start = std::chrono::steady_clock::now();
+    const LightField lf = io::read_light_field(*dir);
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const auto& d = lf.data();
+    std::printf("folder:    %s\n", dir->c_str());
+    std::printf("scheme:    %s\n", io::to_string(layout.scheme).c_str());
+    std::printf("grid:      %lld x %lld views (U x V)\n", static_cast<long long>(lf.rows()),
+                static_cast<long long>(lf.cols()));
+    std::printf("view size: %lld x %lld (W x H), %lld channel(s)\n",
+                static_cast<long long>(lf.width()), static_cast<long long>(lf.height()),
+                static_cast<long long>(lf.channels()));
+    std::printf("shape:     %s (C x U x V x H x W)\n", lf.shape_string().c_str());
+    std::printf("values:    min %.4f, max %.4f, mean %.4f\n", d.min().item<double>(),
+                d.max().item<double>(), d.mean().item<double>());
+    std::printf("loaded in: %.3f s\n", seconds);
+  });
+}
+
+}  // namespace lfnet::app

@@ -1,0 +1,59 @@
+// lfnet: recovers 4D light fields from single coded 2D sensor images.
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <vector>
+
+#include "command.h"
+#include "lfnet/core/error.h"
+#include "lfnet/core/runtime.h"
+
+namespace {
+
+int fail(const std::string& what) {
+  std::string line = what;
+  for (auto& ch : line) {
+    if (ch == '\n') ch = ' ';
+  }
+  std::fprintf(stderr, "lfnet: error: %s\n", line.c_str());
+  return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace lfnet::app;
+  CLI::App app{"lfnet: compressive light field reconstruction from coded sensor images"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "lfnet 0.1.0");
+  GlobalOptions global;
+  app.add_option("--threads", global.threads, "CPU threads (default: every core)")
+      ->check(CLI::NonNegativeNumber);
+  app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
+  app.preparse_callback([&](size_t) {});
+  app.parse_complete_callback([&] {
+    spdlog::set_level(spdlog::level::from_str(global.log_level));
+    spdlog::set_pattern("[%H:%M:%S] %^%l%$ %v");
+    int n = lfnet::configure_threads(global.threads);
+    spdlog::debug("using {} threads", n);
+  });
+
+  const std::vector<CommandFactory> commands = {add_info_command};
+  for (const auto& add : commands) add(app, global);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    return fail(e.what() + std::string(" (run lfnet --help)"));
+  } catch (const std::exception& e) {
+    return fail(e.what());
+  }
+  return 0;
+}

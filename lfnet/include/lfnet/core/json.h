@@ -1,0 +1,72 @@
+// Strict JSON reading for Options structs: unknown keys are errors that name the JSON path.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <set>
+#include <string>
+
+#include "lfnet/core/error.h"
+
+namespace lfnet {
+
+// Reads the fields of one JSON object. Every key read is remembered; `finish()` throws a
+// ConfigError naming the first key nobody asked for, with its path, e.g. "$.train.lr".
+class JsonReader {
+ public:
+  JsonReader(const nlohmann::json& object, std::string path);
+
+  // Sets `out` from `key` if present; a value of the wrong type is a ConfigError.
+  template <typename T>
+  bool get(const std::string& key, T& out) {
+    seen_.insert(key);
+    auto it = object_.find(key);
+    if (it == object_.end()) return false;
+    try {
+      out = it->template get<T>();
+    } catch (const nlohmann::json::exception& e) {
+      throw ConfigError(path_of(key) + ": " + type_hint(*it, out) + " (" + e.what() + ")");
+    }
+    return true;
+  }
+
+  // Like get(), but a missing key is a ConfigError.
+  template <typename T>
+  void require(const std::string& key, T& out) {
+    if (!get(key, out)) throw ConfigError(path_of(key) + ": required key is missing");
+  }
+
+  bool has(const std::string& key) const { return object_.contains(key); }
+
+  // A reader of the nested object at `key` (which must be an object).
+  JsonReader child(const std::string& key);
+
+  // The JSON path of `key`, e.g. "$.phi.n".
+  std::string path_of(const std::string& key) const { return path_ + "." + key; }
+  const std::string& path() const { return path_; }
+  const nlohmann::json& object() const { return object_; }
+
+  // Throws ConfigError for the first key that was never read.
+  void finish() const;
+
+ private:
+  template <typename T>
+  static std::string type_hint(const nlohmann::json& value, const T&) {
+    return "unexpected value " + value.dump();
+  }
+
+  const nlohmann::json& object_;
+  std::string path_;
+  std::set<std::string> seen_;
+};
+
+// Parses JSON text; a syntax error is a ConfigError naming `source` and the byte offset.
+nlohmann::json parse_json(const std::string& text, const std::string& source);
+
+// Reads and parses a JSON file.
+nlohmann::json read_json_file(const std::string& path);
+
+// Writes `value` to `path` atomically (temporary file, then rename), pretty-printed.
+void write_json_file(const std::string& path, const nlohmann::json& value);
+
+}  // namespace lfnet

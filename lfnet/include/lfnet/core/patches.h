@@ -1,0 +1,69 @@
+// Patch grids: extraction of (U, V, h, w) patches at any stride and stitching by averaging.
+#pragma once
+
+#include <torch/types.h>
+
+#include <cstdint>
+#include <vector>
+
+#include "lfnet/core/light_field.h"
+
+namespace lfnet {
+
+// Patch origins along one axis: 0, s, 2s, ... while the patch fits, plus one last patch flush
+// with the far border when the regular ones leave pixels uncovered. Requires size <= extent.
+std::vector<int64_t> patch_origins(int64_t extent, int64_t size, int64_t stride);
+
+// The spatial grid of patches of size (h, w) at stride s over an H x W light field.
+class PatchGrid {
+ public:
+  PatchGrid(int64_t height, int64_t width, int64_t patch_h, int64_t patch_w, int64_t stride);
+
+  int64_t height() const { return height_; }
+  int64_t width() const { return width_; }
+  int64_t patch_h() const { return patch_h_; }
+  int64_t patch_w() const { return patch_w_; }
+  int64_t stride() const { return stride_; }
+  const std::vector<int64_t>& ys() const { return ys_; }
+  const std::vector<int64_t>& xs() const { return xs_; }
+  int64_t rows() const { return static_cast<int64_t>(ys_.size()); }
+  int64_t cols() const { return static_cast<int64_t>(xs_.size()); }
+  int64_t size() const { return rows() * cols(); }
+
+  // Patches of patch rows [row_begin, row_end) of every channel of `lf`, shape
+  // (C * n, U, V, h, w), channel-major then row-major over origins. Streaming callers take a
+  // band of rows at a time so memory is bounded by the band, not the light field.
+  torch::Tensor extract(const torch::Tensor& lf, int64_t row_begin, int64_t row_end) const;
+  torch::Tensor extract(const torch::Tensor& lf) const { return extract(lf, 0, rows()); }
+
+ private:
+  int64_t height_, width_, patch_h_, patch_w_, stride_;
+  std::vector<int64_t> ys_, xs_;
+};
+
+// Accumulates patch estimates and averages every estimate of a pixel. Sums are kept in
+// float64, so stitching identical copies reproduces the values exactly.
+class Stitcher {
+ public:
+  // `channels`, `rows`, `cols`: the light field's C, U, V. `weight` (h, w), optional: a
+  // spatial window applied to every patch estimate (e.g. to soften patch seams).
+  Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_t cols,
+           torch::Tensor weight = {});
+
+  // Adds patches of patch rows [row_begin, row_end) in the layout `PatchGrid::extract` gives.
+  void add(const torch::Tensor& patches, int64_t row_begin, int64_t row_end);
+
+  // The averaged light field (C, U, V, H, W), float32. Every pixel must have been covered.
+  torch::Tensor result() const;
+
+ private:
+  torch::Tensor flat_indices(int64_t row_begin, int64_t row_end) const;
+
+  const PatchGrid grid_;
+  int64_t channels_, rows_, cols_;
+  torch::Tensor weight_;  // (h * w) float64
+  torch::Tensor sum_;     // (C, U, V, H * W) float64
+  torch::Tensor count_;   // (H * W) float64
+};
+
+}  // namespace lfnet

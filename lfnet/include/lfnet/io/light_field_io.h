@@ -1,0 +1,82 @@
+// Reading and writing light fields as folders of sub-aperture images, and images for viewing.
+#pragma once
+
+#include <torch/types.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/light_field.h"
+
+namespace lfnet::io {
+
+// File naming schemes of sub-aperture folders (see ../shared/data/README.md).
+enum class NamingScheme {
+  kHciCam,    // input_CamNNN.ext, NNN = rows * row + col, 0-based (HCI benchmark)
+  kRowCol,    // lf_R_C.ext, 1-based (Stanford Lytro archive, deepulfcam; lfnet's own writer)
+  kTmRowCol,  // TM_RR_CC.ext, 1-based, two digits (Lytro Illum validation set)
+  kMitIndex,  // <name>-NN.ext, NN 1-based row-major over the grid (MIT Synthetic LF Archive)
+};
+std::string to_string(NamingScheme scheme);
+
+// One view file of a folder.
+struct ViewFile {
+  int64_t u = 0;  // 0-based view row
+  int64_t v = 0;  // 0-based view column
+  std::string path;
+};
+
+// What a folder holds: its scheme, grid and one file per view, row-major.
+struct FolderLayout {
+  NamingScheme scheme = NamingScheme::kRowCol;
+  int64_t rows = 0;
+  int64_t cols = 0;
+  std::vector<ViewFile> views;
+};
+
+// Recognises the naming scheme of a folder and checks the grid is complete. Throws IoError
+// naming the folder or the missing file.
+FolderLayout scan_folder(const std::string& dir);
+
+// Reads every view of a folder into a light field (C, U, V, H, W) with C = 3 (RGB; alpha
+// dropped) or 1 (grey). Views of different sizes or channel counts are an IoError naming the
+// file. `threads` <= 0 uses every core.
+LightField read_light_field(const std::string& dir, int threads = 0);
+
+// Reads one image as (C, H, W) float32: integer formats scaled to [0, 1], floats as stored.
+torch::Tensor read_image(const std::string& path);
+
+// Writes a (C, H, W) or (H, W) image in [0, 1]; the extension picks the format. `bits` 8 or
+// 16 for integer formats (PNG, TIFF); EXR and float TIFF (bits 32) store float32. The file is
+// written to a temporary name and renamed, so a failure leaves no partial file.
+void write_image(const std::string& path, const torch::Tensor& image, int bits = 8);
+
+// Options of write_light_field.
+struct WriteOptions {
+  std::string extension = "png";  // png, tif, exr
+  int bits = 16;                   // 8 or 16 for png/tif, 32 for float tif; exr is float
+};
+
+// Writes views as DIR/lf_R_C.ext (1-based). The folder must not hold views already.
+void write_light_field(const LightField& lf, const std::string& dir,
+                       const WriteOptions& options = {});
+
+// The sub-aperture views tiled into one (C, U * (H + gap) - gap, V * (W + gap) - gap) image.
+torch::Tensor grid_image(const LightField& lf, int64_t gap = 2);
+
+// Epipolar-plane images through the central view: horizontal (C, V * scale, W) at spatial row
+// `y`, vertical (C, U * scale, H) at column `x` (transposed so it reads left to right).
+// Negative y / x take the centre.
+torch::Tensor horizontal_epi(const LightField& lf, int64_t y = -1, int64_t scale = 8);
+torch::Tensor vertical_epi(const LightField& lf, int64_t x = -1, int64_t scale = 8);
+
+// Writes grid.png, epi_h.png and epi_v.png into `dir`, for looking at a result.
+void write_previews(const LightField& lf, const std::string& dir);
+
+// Reads a PFM (PF: 3 channels, Pf: 1) as (C, H, W) float32, rows top to bottom.
+torch::Tensor read_pfm(const std::string& path);
+// Writes a (H, W) or (C, H, W) float tensor as little-endian PFM.
+void write_pfm(const std::string& path, const torch::Tensor& image);
+
+}  // namespace lfnet::io

@@ -1,0 +1,66 @@
+#include "lfnet/core/json.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace lfnet {
+
+JsonReader::JsonReader(const nlohmann::json& object, std::string path)
+    : object_(object), path_(std::move(path)) {
+  if (!object_.is_object()) throw ConfigError(path_ + ": expected a JSON object, got " + object_.dump());
+}
+
+JsonReader JsonReader::child(const std::string& key) {
+  seen_.insert(key);
+  auto it = object_.find(key);
+  if (it == object_.end()) throw ConfigError(path_of(key) + ": required object is missing");
+  return JsonReader(*it, path_of(key));
+}
+
+void JsonReader::finish() const {
+  for (auto it = object_.begin(); it != object_.end(); ++it) {
+    if (!seen_.count(it.key())) {
+      std::string known;
+      for (const auto& k : seen_) known += (known.empty() ? "" : ", ") + k;
+      throw ConfigError(path_of(it.key()) + ": unknown key (known keys here: " + known + ")");
+    }
+  }
+}
+
+nlohmann::json parse_json(const std::string& text, const std::string& source) {
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw ConfigError(source + ": malformed JSON at byte " + std::to_string(e.byte) + ": " +
+                      e.what());
+  }
+}
+
+nlohmann::json read_json_file(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw IoError("cannot read " + path + ": no such file or not readable");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return parse_json(buffer.str(), path);
+}
+
+void write_json_file(const std::string& path, const nlohmann::json& value) {
+  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp);
+    if (!out) throw IoError("cannot write " + path);
+    out << value.dump(2) << "\n";
+    if (!out.good()) throw IoError("cannot write " + path);
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError("cannot write " + path + ": " + ec.message());
+  }
+}
+
+}  // namespace lfnet

@@ -1,0 +1,80 @@
+#include "lfnet/core/light_field.h"
+
+#include <regex>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+
+namespace lfnet {
+
+LightField::LightField(torch::Tensor data) {
+  LFNET_CHECK(data.defined() && data.dim() == axis::kRank,
+              "a light field needs a tensor of shape (C, U, V, H, W)");
+  LFNET_CHECK(data.size(axis::kC) == 1 || data.size(axis::kC) == 3,
+              "a light field has 1 or 3 channels, got ", data.size(axis::kC));
+  data_ = data.to(torch::kFloat32).contiguous();
+}
+
+torch::Tensor LightField::view(int64_t u, int64_t v) const {
+  LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v,
+              ") outside the ", rows(), "x", cols(), " grid");
+  return data_.select(axis::kU, u).select(axis::kU, v);
+}
+
+LightField LightField::grey() const {
+  if (channels() == 1) return *this;
+  auto weights = torch::tensor({0.299f, 0.587f, 0.114f}).view({3, 1, 1, 1, 1});
+  return LightField((data_ * weights).sum(axis::kC, /*keepdim=*/true));
+}
+
+LightField LightField::window(AngularRange u, AngularRange v) const {
+  LFNET_CHECK(u.begin >= 0 && u.end <= rows() && u.size() > 0 && v.begin >= 0 &&
+                  v.end <= cols() && v.size() > 0,
+              "angular window rows ", u.begin + 1, ":", u.end, ", columns ", v.begin + 1, ":",
+              v.end, " (1-based) does not fit the ", rows(), "x", cols(), " grid");
+  return LightField(data_.slice(axis::kU, u.begin, u.end).slice(axis::kV, v.begin, v.end));
+}
+
+LightField LightField::central(int64_t n) const {
+  LFNET_CHECK(n <= rows() && n <= cols(), "cannot take the central ", n, "x", n,
+              " views of a ", rows(), "x", cols(), " grid");
+  int64_t u0 = central_start(rows(), n);
+  int64_t v0 = central_start(cols(), n);
+  return window({u0, u0 + n}, {v0, v0 + n});
+}
+
+LightField LightField::angular_mean() const {
+  auto mean = data_.mean({axis::kU, axis::kV}, /*keepdim=*/true);
+  return LightField(mean.expand_as(data_).clone());
+}
+
+std::string LightField::shape_string() const {
+  if (!defined()) return "(empty)";
+  std::ostringstream out;
+  out << channels() << "x" << rows() << "x" << cols() << "x" << height() << "x" << width();
+  return out.str();
+}
+
+int64_t central_start(int64_t total, int64_t n) {
+  LFNET_CHECK(n >= 1 && n <= total, "cannot take ", n, " central views of ", total);
+  // The Lytro protocol of the paper takes views 6..10 (1-based) of a 14 x 14 grid, one view
+  // after the floor of the centre; every other grid uses the floor.
+  if (total == 14 && n == 5) return 5;
+  return (total - n) / 2;
+}
+
+std::pair<AngularRange, AngularRange> parse_views(const std::string& text) {
+  static const std::regex kPattern(R"(^\s*(\d+):(\d+)\s*,\s*(\d+):(\d+)\s*$)");
+  std::smatch m;
+  if (!std::regex_match(text, m, kPattern)) {
+    throw ConfigError("views '" + text +
+                      "' is not of the form R0:R1,C0:C1 (1-based, inclusive), e.g. 3:7,3:7");
+  }
+  auto r0 = std::stoll(m[1]), r1 = std::stoll(m[2]), c0 = std::stoll(m[3]), c1 = std::stoll(m[4]);
+  if (r0 < 1 || c0 < 1 || r1 < r0 || c1 < c0) {
+    throw ConfigError("views '" + text + "': indices are 1-based and R0 <= R1, C0 <= C1");
+  }
+  return {AngularRange{r0 - 1, r1}, AngularRange{c0 - 1, c1}};
+}
+
+}  // namespace lfnet

@@ -1,0 +1,363 @@
+#include "lfnet/io/light_field_io.h"
+
+#include <OpenImageIO/imageio.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <regex>
+#include <thread>
+
+#include "lfnet/core/error.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::io {
+
+std::string to_string(NamingScheme scheme) {
+  switch (scheme) {
+    case NamingScheme::kHciCam: return "input_CamNNN (HCI)";
+    case NamingScheme::kRowCol: return "lf_R_C";
+    case NamingScheme::kTmRowCol: return "TM_RR_CC";
+    case NamingScheme::kMitIndex: return "<name>-NN (MIT)";
+  }
+  return "unknown";
+}
+
+namespace {
+
+const std::regex kHci(R"(^input_Cam(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
+const std::regex kRowColRe(R"(^lf_(\d+)_(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
+const std::regex kTm(R"(^TM_(\d+)_(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
+const std::regex kMit(R"(^(.+)-(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
+
+// Side of a square grid holding `count` views, or 0 if not square.
+int64_t square_side(int64_t count) {
+  auto n = static_cast<int64_t>(std::llround(std::sqrt(static_cast<double>(count))));
+  return n * n == count ? n : 0;
+}
+
+struct Candidate {
+  int64_t a = 0, b = 0;  // index, or (row, col)
+  std::string path;
+};
+
+FolderLayout layout_from_pairs(NamingScheme scheme, const std::vector<Candidate>& found,
+                               const std::string& dir, int64_t base,
+                               const std::string& example) {
+  FolderLayout layout;
+  layout.scheme = scheme;
+  std::map<std::pair<int64_t, int64_t>, std::string> grid;
+  for (const auto& c : found) {
+    LFNET_CHECK_AS(IoError, c.a >= base && c.b >= base, "view file ", c.path,
+                   " has an index below ", base);
+    auto key = std::make_pair(c.a - base, c.b - base);
+    LFNET_CHECK_AS(IoError, grid.emplace(key, c.path).second, "two files name view (", c.a, ", ",
+                   c.b, ") in ", dir, ": ", grid[key], " and ", c.path);
+    layout.rows = std::max(layout.rows, key.first + 1);
+    layout.cols = std::max(layout.cols, key.second + 1);
+  }
+  for (int64_t u = 0; u < layout.rows; ++u) {
+    for (int64_t v = 0; v < layout.cols; ++v) {
+      auto it = grid.find({u, v});
+      if (it == grid.end()) {
+        char name[64];
+        std::snprintf(name, sizeof name, example.c_str(), static_cast<long long>(u + base),
+                      static_cast<long long>(v + base));
+        throw IoError("light field folder " + dir + " has a gap in its " +
+                      std::to_string(layout.rows) + "x" + std::to_string(layout.cols) +
+                      " grid: view file " + name + " is missing");
+      }
+      layout.views.push_back({u, v, it->second});
+    }
+  }
+  return layout;
+}
+
+FolderLayout layout_from_index(NamingScheme scheme, std::vector<Candidate> found,
+                               const std::string& dir, int64_t base, const std::string& what) {
+  int64_t max_index = 0;
+  std::map<int64_t, std::string> by_index;
+  for (const auto& c : found) {
+    LFNET_CHECK_AS(IoError, c.a >= base, "view file ", c.path, " has an index below ", base);
+    LFNET_CHECK_AS(IoError, by_index.emplace(c.a - base, c.path).second, "two files name view ",
+                   c.a, " in ", dir);
+    max_index = std::max(max_index, c.a - base);
+  }
+  const int64_t n = square_side(max_index + 1);
+  LFNET_CHECK_AS(IoError, n > 0, "light field folder ", dir, ": ", what, " views are numbered up to ",
+                 max_index + base, ", which is not a square grid");
+  FolderLayout layout;
+  layout.scheme = scheme;
+  layout.rows = layout.cols = n;
+  for (int64_t i = 0; i < n * n; ++i) {
+    auto it = by_index.find(i);
+    LFNET_CHECK_AS(IoError, it != by_index.end(), "light field folder ", dir, " has a gap in its ",
+                   n, "x", n, " grid: the ", what, " view numbered ", i + base,
+                   " (row ", i / n + 1, ", column ", i % n + 1, ") is missing");
+    layout.views.push_back({i / n, i % n, it->second});
+  }
+  return layout;
+}
+
+}  // namespace
+
+FolderLayout scan_folder(const std::string& dir) {
+  std::error_code ec;
+  LFNET_CHECK_AS(IoError, fs::is_directory(dir, ec), "light field folder ", dir,
+                 " does not exist or is not a folder");
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    if (entry.is_regular_file()) names.push_back(entry.path().filename().string());
+  }
+  LFNET_CHECK_AS(IoError, !ec, "cannot list ", dir, ": ", ec.message());
+  std::sort(names.begin(), names.end());
+
+  std::map<NamingScheme, std::vector<Candidate>> found;
+  std::smatch m;
+  for (const auto& name : names) {
+    const std::string path = (fs::path(dir) / name).string();
+    if (std::regex_match(name, m, kHci)) {
+      found[NamingScheme::kHciCam].push_back({std::stoll(m[1]), 0, path});
+    } else if (std::regex_match(name, m, kRowColRe)) {
+      found[NamingScheme::kRowCol].push_back({std::stoll(m[1]), std::stoll(m[2]), path});
+    } else if (std::regex_match(name, m, kTm)) {
+      found[NamingScheme::kTmRowCol].push_back({std::stoll(m[1]), std::stoll(m[2]), path});
+    } else if (std::regex_match(name, m, kMit)) {
+      found[NamingScheme::kMitIndex].push_back({std::stoll(m[2]), 0, path});
+    }
+  }
+  if (found.empty()) {
+    throw IoError("no light field views found in " + dir +
+                  ": expected input_CamNNN.png, lf_R_C.png, TM_RR_CC.png or <name>-NN.png files");
+  }
+  if (found.size() > 1) {
+    std::string schemes;
+    for (const auto& [scheme, files] : found) schemes += (schemes.empty() ? "" : ", ") + to_string(scheme);
+    throw IoError("light field folder " + dir + " mixes naming schemes (" + schemes +
+                  "): keep one light field per folder");
+  }
+  auto& [scheme, files] = *found.begin();
+  switch (scheme) {
+    case NamingScheme::kHciCam: return layout_from_index(scheme, files, dir, 0, "input_Cam");
+    case NamingScheme::kMitIndex: return layout_from_index(scheme, files, dir, 1, "<name>-NN");
+    case NamingScheme::kRowCol: return layout_from_pairs(scheme, files, dir, 1, "lf_%lld_%lld.png");
+    case NamingScheme::kTmRowCol:
+      return layout_from_pairs(scheme, files, dir, 1, "TM_%02lld_%02lld.png");
+  }
+  throw IoError("unhandled naming scheme");
+}
+
+torch::Tensor read_image(const std::string& path) {
+  // Keep alpha as stored: colour channels are read as they are, never premultiplied.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto input = OIIO::ImageInput::open(path, &config);
+  if (!input) {
+    throw IoError("cannot read image " + path + ": " + OIIO::geterror());
+  }
+  const OIIO::ImageSpec& spec = input->spec();
+  const int64_t h = spec.height, w = spec.width, nc = spec.nchannels;
+  LFNET_CHECK_AS(IoError, h > 0 && w > 0 && nc > 0, "image ", path, " is empty");
+  auto pixels = torch::empty({h, w, nc}, torch::kFloat32);
+  if (!input->read_image(0, 0, 0, static_cast<int>(nc), OIIO::TypeDesc::FLOAT,
+                         pixels.data_ptr<float>())) {
+    std::string err = input->geterror();
+    throw IoError("cannot decode image " + path + " (truncated or corrupt?): " + err);
+  }
+  input->close();
+  // Alpha is dropped: grey+alpha -> grey, RGBA -> RGB.
+  int64_t keep = nc;
+  if (nc == 2) keep = 1;
+  if (nc >= 4) keep = 3;
+  LFNET_CHECK_AS(IoError, keep == 1 || keep == 3, "image ", path, " has ", nc,
+                 " channels; lfnet reads grey, grey+alpha, RGB and RGBA");
+  auto chw = pixels.slice(2, 0, keep).permute({2, 0, 1}).contiguous();
+  LFNET_CHECK_AS(IoError, torch::isfinite(chw).all().item<bool>(), "image ", path,
+                 " holds NaN or infinite values");
+  return chw;
+}
+
+LightField read_light_field(const std::string& dir, int threads) {
+  const FolderLayout layout = scan_folder(dir);
+  const int64_t n = static_cast<int64_t>(layout.views.size());
+  std::vector<torch::Tensor> images(n);
+  std::atomic<int64_t> next{0};
+  std::mutex error_mutex;
+  std::string first_error;
+  int workers = threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency());
+  workers = std::max(1, std::min<int>(workers, static_cast<int>(n)));
+  auto work = [&] {
+    for (int64_t i = next++; i < n; i = next++) {
+      try {
+        images[i] = read_image(layout.views[i].path);
+      } catch (const std::exception& e) {
+        std::lock_guard<std::mutex> lock(error_mutex);
+        if (first_error.empty()) first_error = e.what();
+        next = n;
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (int t = 0; t < workers; ++t) pool.emplace_back(work);
+  for (auto& t : pool) t.join();
+  if (!first_error.empty()) throw IoError(first_error);
+
+  const auto ref = images[0].sizes().vec();
+  for (int64_t i = 1; i < n; ++i) {
+    if (images[i].sizes().vec() != ref) {
+      auto s = images[i].sizes();
+      throw IoError("view " + layout.views[i].path + " is " + std::to_string(s[2]) + "x" +
+                    std::to_string(s[1]) + " with " + std::to_string(s[0]) +
+                    " channels, but " + layout.views[0].path + " is " + std::to_string(ref[2]) +
+                    "x" + std::to_string(ref[1]) + " with " + std::to_string(ref[0]) +
+                    ": every view must have the same size and channels");
+    }
+  }
+  // (U * V, C, H, W) -> (C, U, V, H, W)
+  auto stacked = torch::stack(images, 0).view({layout.rows, layout.cols, ref[0], ref[1], ref[2]});
+  return LightField(stacked.permute({2, 0, 1, 3, 4}).contiguous());
+}
+
+namespace {
+// A temporary name beside `path` that keeps its extension, so OIIO picks the same format.
+std::string temporary_beside(const std::string& path) {
+  fs::path p(path);
+  return (p.parent_path() / ("." + p.stem().string() + ".tmp" + std::to_string(::getpid()) +
+                             p.extension().string()))
+      .string();
+}
+}  // namespace
+
+void write_image(const std::string& path, const torch::Tensor& image, int bits) {
+  LFNET_CHECK(image.dim() == 2 || image.dim() == 3, "write_image takes (H, W) or (C, H, W)");
+  auto chw = image.dim() == 2 ? image.unsqueeze(0) : image;
+  const int64_t c = chw.size(0), h = chw.size(1), w = chw.size(2);
+  auto hwc = chw.to(torch::kFloat32).permute({1, 2, 0}).contiguous();
+  const std::string ext = fs::path(path).extension().string();
+  const bool is_float = ext == ".exr" || ext == ".pfm" || bits == 32;
+  if (!is_float) hwc = hwc.clamp(0, 1);
+  OIIO::TypeDesc type = is_float ? OIIO::TypeDesc::FLOAT
+                                 : (bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::UINT8);
+  const std::string tmp = temporary_beside(path);
+  auto out = OIIO::ImageOutput::create(path);
+  if (!out) throw IoError("cannot write " + path + ": unknown image format " + ext);
+  OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), static_cast<int>(c), type);
+  spec.attribute("oiio:UnassociatedAlpha", 1);
+  bool ok = out->open(tmp, spec) &&
+            out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
+  if (!ok) {
+    std::string err = out->geterror();
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw IoError("cannot write " + path + ": " + err);
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw IoError("cannot write " + path + ": " + ec.message());
+  }
+}
+
+void write_light_field(const LightField& lf, const std::string& dir, const WriteOptions& options) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  LFNET_CHECK_AS(IoError, !ec && fs::is_directory(dir), "cannot create folder ", dir, ": ",
+                 ec.message());
+  for (int64_t u = 0; u < lf.rows(); ++u) {
+    for (int64_t v = 0; v < lf.cols(); ++v) {
+      auto name = "lf_" + std::to_string(u + 1) + "_" + std::to_string(v + 1) + "." +
+                  options.extension;
+      write_image((fs::path(dir) / name).string(), lf.view(u, v), options.bits);
+    }
+  }
+}
+
+torch::Tensor grid_image(const LightField& lf, int64_t gap) {
+  const int64_t c = lf.channels(), u = lf.rows(), v = lf.cols(), h = lf.height(), w = lf.width();
+  auto out = torch::ones({c, u * (h + gap) - gap, v * (w + gap) - gap});
+  for (int64_t i = 0; i < u; ++i) {
+    for (int64_t j = 0; j < v; ++j) {
+      out.slice(1, i * (h + gap), i * (h + gap) + h).slice(2, j * (w + gap), j * (w + gap) + w)
+          .copy_(lf.view(i, j));
+    }
+  }
+  return out;
+}
+
+torch::Tensor horizontal_epi(const LightField& lf, int64_t y, int64_t scale) {
+  if (y < 0) y = lf.height() / 2;
+  LFNET_CHECK(y < lf.height(), "EPI row ", y, " outside the image");
+  // (C, V, W) at the central view row, each view repeated `scale` times.
+  auto epi = lf.data().select(axis::kU, lf.rows() / 2).select(2, y);
+  return epi.repeat_interleave(scale, 1);
+}
+
+torch::Tensor vertical_epi(const LightField& lf, int64_t x, int64_t scale) {
+  if (x < 0) x = lf.width() / 2;
+  LFNET_CHECK(x < lf.width(), "EPI column ", x, " outside the image");
+  // (C, U, H) at the central view column.
+  auto epi = lf.data().select(axis::kV, lf.cols() / 2).select(3, x);
+  return epi.repeat_interleave(scale, 1);
+}
+
+void write_previews(const LightField& lf, const std::string& dir) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  write_image((fs::path(dir) / "grid.png").string(), grid_image(lf));
+  write_image((fs::path(dir) / "epi_h.png").string(), horizontal_epi(lf));
+  write_image((fs::path(dir) / "epi_v.png").string(), vertical_epi(lf));
+}
+
+torch::Tensor read_pfm(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  LFNET_CHECK_AS(IoError, in, "cannot open PFM file ", path);
+  std::string magic;
+  int64_t w = 0, h = 0;
+  double scale = 0;
+  in >> magic >> w >> h >> scale;
+  LFNET_CHECK_AS(IoError, in && (magic == "PF" || magic == "Pf") && w > 0 && h > 0 && scale != 0,
+                 "PFM file ", path, " has a malformed header");
+  in.get();  // the single whitespace after the scale
+  const int64_t c = magic == "PF" ? 3 : 1;
+  auto data = torch::empty({h, w, c}, torch::kFloat32);
+  const auto bytes = static_cast<std::streamsize>(h * w * c * sizeof(float));
+  in.read(reinterpret_cast<char*>(data.data_ptr<float>()), bytes);
+  LFNET_CHECK_AS(IoError, in.gcount() == bytes, "PFM file ", path, " is truncated: expected ",
+                 bytes, " bytes of pixels, found ", in.gcount());
+  if (scale > 0) {  // big-endian data
+    auto* p = reinterpret_cast<uint32_t*>(data.data_ptr<float>());
+    for (int64_t i = 0; i < h * w * c; ++i) p[i] = __builtin_bswap32(p[i]);
+  }
+  // PFM stores rows bottom to top.
+  return data.flip({0}).permute({2, 0, 1}).contiguous();
+}
+
+void write_pfm(const std::string& path, const torch::Tensor& image) {
+  auto chw = image.dim() == 2 ? image.unsqueeze(0) : image;
+  LFNET_CHECK(chw.dim() == 3 && (chw.size(0) == 1 || chw.size(0) == 3),
+              "PFM holds 1 or 3 channels");
+  auto hwc = chw.to(torch::kFloat32).permute({1, 2, 0}).flip({0}).contiguous();
+  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
+  {
+    std::ofstream out(tmp, std::ios::binary);
+    LFNET_CHECK_AS(IoError, out, "cannot write ", path);
+    out << (chw.size(0) == 3 ? "PF" : "Pf") << "\n"
+        << chw.size(2) << " " << chw.size(1) << "\n-1.0\n";
+    out.write(reinterpret_cast<const char*>(hwc.data_ptr<float>()),
+              static_cast<std::streamsize>(hwc.numel() * sizeof(float)));
+    LFNET_CHECK_AS(IoError, out.good(), "cannot write ", path);
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  LFNET_CHECK_AS(IoError, !ec, "cannot write ", path, ": ", ec.message());
+}
+
+}  // namespace lfnet::io

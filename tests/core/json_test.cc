@@ -1,0 +1,50 @@
+#include "lfnet/core/json.h"
+
+#include <catch2/catch.hpp>
+
+#include "support/test_support.h"
+
+TEST_CASE("the JSON reader rejects unknown keys and names the path", "[core][json]") {
+  auto doc = nlohmann::json::parse(R"({"train": {"lr": 0.001, "epochs": 3, "lrr": 1}})");
+  lfnet::JsonReader root(doc, "$");
+  auto train = root.child("train");
+  double lr = 0;
+  int epochs = 0;
+  train.get("lr", lr);
+  train.get("epochs", epochs);
+  CHECK(lr == 0.001);
+  CHECK(epochs == 3);
+  try {
+    train.finish();
+    FAIL("unknown key accepted");
+  } catch (const lfnet::ConfigError& e) {
+    CHECK(std::string(e.what()).find("$.train.lrr") != std::string::npos);
+  }
+}
+
+TEST_CASE("the JSON reader reports wrong types and missing keys with their path", "[core][json]") {
+  auto doc = nlohmann::json::parse(R"({"n": "two"})");
+  lfnet::JsonReader r(doc, "$.phi");
+  int n = 0;
+  try {
+    r.get("n", n);
+    FAIL("string accepted as int");
+  } catch (const lfnet::ConfigError& e) {
+    CHECK(std::string(e.what()).find("$.phi.n") != std::string::npos);
+  }
+  std::string name;
+  CHECK_THROWS_WITH(r.require("name", name), Catch::Contains("$.phi.name"));
+}
+
+TEST_CASE("malformed JSON is a ConfigError with the byte offset", "[core][json]") {
+  CHECK_THROWS_WITH(lfnet::parse_json("{\"a\": 1,,}", "cfg.json"), Catch::Contains("cfg.json"));
+  CHECK_THROWS_AS(lfnet::parse_json("{", "x"), lfnet::ConfigError);
+}
+
+TEST_CASE("JSON files are written atomically and read back", "[core][json]") {
+  lfnet::test::TempDir tmp;
+  nlohmann::json j = {{"a", 1}, {"b", {1, 2, 3}}};
+  lfnet::write_json_file(tmp / "x.json", j);
+  CHECK(lfnet::read_json_file(tmp / "x.json") == j);
+  CHECK_THROWS_AS(lfnet::read_json_file(tmp / "missing.json"), lfnet::IoError);
+}

@@ -1,0 +1,181 @@
+#include "lfnet/io/light_field_io.h"
+
+#include <catch2/catch.hpp>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "lfnet/core/error.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using lfnet::LightField;
+namespace io = lfnet::io;
+
+namespace {
+// Writes the views of `lf` under the file names `name(u, v)` (0-based u, v).
+template <typename Namer>
+void write_views(const LightField& lf, const std::string& dir, Namer name, int bits = 16) {
+  fs::create_directories(dir);
+  for (int64_t u = 0; u < lf.rows(); ++u) {
+    for (int64_t v = 0; v < lf.cols(); ++v) {
+      io::write_image((fs::path(dir) / name(u, v)).string(), lf.view(u, v), bits);
+    }
+  }
+}
+
+std::string fmt(const char* pattern, long long a, long long b = 0) {
+  char buf[128];
+  std::snprintf(buf, sizeof buf, pattern, a, b);
+  return buf;
+}
+}  // namespace
+
+TEST_CASE("light fields round-trip through PNG, TIFF and EXR", "[io]") {
+  lfnet::test::TempDir tmp;
+  LightField lf(torch::rand({3, 2, 3, 7, 11}));
+  SECTION("16-bit PNG") {
+    io::write_light_field(lf, tmp / "png16", {"png", 16});
+    auto back = io::read_light_field(tmp / "png16");
+    lfnet::test::require_close(back.data(), lf.data(), 0.5 / 65535 + 1e-7);
+  }
+  SECTION("8-bit PNG") {
+    io::write_light_field(lf, tmp / "png8", {"png", 8});
+    auto back = io::read_light_field(tmp / "png8");
+    lfnet::test::require_close(back.data(), lf.data(), 0.5 / 255 + 1e-7);
+    CHECK_FALSE(torch::allclose(back.data(), lf.data(), 0, 1e-4));  // really quantised
+  }
+  SECTION("float TIFF and EXR are exact") {
+    io::write_light_field(lf, tmp / "tif", {"tif", 32});
+    REQUIRE(torch::equal(io::read_light_field(tmp / "tif").data(), lf.data()));
+    io::write_light_field(lf, tmp / "exr", {"exr", 32});
+    REQUIRE(torch::equal(io::read_light_field(tmp / "exr").data(), lf.data()));
+  }
+}
+
+TEST_CASE("every naming scheme is recognised with its grid", "[io]") {
+  lfnet::test::TempDir tmp;
+  LightField lf(torch::rand({1, 3, 3, 5, 6}));
+  struct Case {
+    std::string name;
+    std::function<std::string(int64_t, int64_t)> namer;
+    io::NamingScheme scheme;
+  };
+  std::vector<Case> cases = {
+      {"hci", [](int64_t u, int64_t v) { return fmt("input_Cam%03lld.png", 3 * u + v); },
+       io::NamingScheme::kHciCam},
+      {"rowcol", [](int64_t u, int64_t v) { return fmt("lf_%lld_%lld.png", u + 1, v + 1); },
+       io::NamingScheme::kRowCol},
+      {"tm", [](int64_t u, int64_t v) { return fmt("TM_%02lld_%02lld.png", u + 1, v + 1); },
+       io::NamingScheme::kTmRowCol},
+      {"mit", [](int64_t u, int64_t v) { return fmt("dragons-%lld.png", 3 * u + v + 1); },
+       io::NamingScheme::kMitIndex},
+  };
+  for (const auto& c : cases) {
+    INFO(c.name);
+    write_views(lf, tmp / c.name, c.namer);
+    // Unrelated files are ignored.
+    std::ofstream(tmp / c.name + "/README.txt") << "notes";
+    auto layout = io::scan_folder(tmp / c.name);
+    CHECK(layout.scheme == c.scheme);
+    CHECK(layout.rows == 3);
+    CHECK(layout.cols == 3);
+    auto back = io::read_light_field(tmp / c.name);
+    // View (u, v) lands at (u, v): compare every view, not just the shape.
+    lfnet::test::require_close(back.data(), lf.data(), 0.5 / 65535 + 1e-7);
+  }
+}
+
+TEST_CASE("RGBA views are read as RGB", "[io]") {
+  lfnet::test::TempDir tmp;
+  auto rgba = torch::rand({4, 5, 6});
+  io::write_image(tmp / "lf_1_1.png", rgba, 16);
+  auto img = io::read_image(tmp / "lf_1_1.png");
+  REQUIRE(img.size(0) == 3);
+  lfnet::test::require_close(img, rgba.slice(0, 0, 3), 0.5 / 65535 + 1e-7);
+}
+
+TEST_CASE("broken folders give errors that name the file", "[io]") {
+  lfnet::test::TempDir tmp;
+  LightField lf(torch::rand({1, 2, 2, 5, 6}));
+  auto namer = [](int64_t u, int64_t v) { return fmt("lf_%lld_%lld.png", u + 1, v + 1); };
+
+  SECTION("missing view") {
+    write_views(lf, tmp / "gap", namer);
+    fs::remove(tmp / "gap/lf_2_1.png");
+    CHECK_THROWS_WITH(io::read_light_field(tmp / "gap"), Catch::Contains("lf_2_1.png"));
+  }
+  SECTION("views of different sizes") {
+    write_views(lf, tmp / "sizes", namer);
+    io::write_image(tmp / "sizes/lf_1_2.png", torch::rand({1, 4, 6}));
+    CHECK_THROWS_WITH(io::read_light_field(tmp / "sizes"), Catch::Contains("lf_1_2.png"));
+  }
+  SECTION("truncated file") {
+    write_views(lf, tmp / "trunc", namer);
+    fs::resize_file(tmp / "trunc/lf_2_2.png", 40);
+    CHECK_THROWS_WITH(io::read_light_field(tmp / "trunc"), Catch::Contains("lf_2_2.png"));
+  }
+  SECTION("gap in an index scheme") {
+    write_views(lf, tmp / "hci", [](int64_t u, int64_t v) {
+      return fmt("input_Cam%03lld.png", 2 * u + v);
+    });
+    fs::remove(tmp / "hci/input_Cam001.png");
+    CHECK_THROWS_WITH(io::read_light_field(tmp / "hci"), Catch::Contains("numbered 1"));
+  }
+  SECTION("no views and no folder") {
+    fs::create_directories(tmp / "empty");
+    CHECK_THROWS_AS(io::read_light_field(tmp / "empty"), lfnet::IoError);
+    CHECK_THROWS_WITH(io::read_light_field(tmp / "nope"), Catch::Contains("nope"));
+  }
+  SECTION("mixed schemes") {
+    write_views(lf, tmp / "mixed", namer);
+    io::write_image(tmp / "mixed/TM_01_01.png", lf.view(0, 0));
+    CHECK_THROWS_WITH(io::read_light_field(tmp / "mixed"), Catch::Contains("mixes"));
+  }
+}
+
+TEST_CASE("PFM round-trips with rows top to bottom", "[io]") {
+  lfnet::test::TempDir tmp;
+  auto img = torch::rand({1, 4, 7});
+  io::write_pfm(tmp / "d.pfm", img);
+  auto back = io::read_pfm(tmp / "d.pfm");
+  REQUIRE(torch::equal(back, img));
+  // The file stores the bottom row first.
+  std::ifstream in(tmp / "d.pfm", std::ios::binary);
+  std::string magic;
+  int w, h;
+  double scale;
+  in >> magic >> w >> h >> scale;
+  in.get();
+  float first = 0;
+  in.read(reinterpret_cast<char*>(&first), sizeof first);
+  CHECK(first == img[0][3][0].item<float>());
+  CHECK(scale < 0);
+  // Truncated PFM is an error.
+  fs::resize_file(tmp / "d.pfm", 30);
+  CHECK_THROWS_WITH(io::read_pfm(tmp / "d.pfm"), Catch::Contains("truncated"));
+}
+
+TEST_CASE("grid images and EPIs place the views", "[io]") {
+  LightField lf(torch::rand({1, 3, 5, 8, 10}));
+  auto grid = io::grid_image(lf, 2);
+  CHECK(grid.size(1) == 3 * 10 - 2);
+  CHECK(grid.size(2) == 5 * 12 - 2);
+  lfnet::test::require_close(grid.slice(1, 10, 18).slice(2, 24, 34), lf.view(1, 2), 0.0);
+  auto epi = io::horizontal_epi(lf, 3, 2);
+  REQUIRE(epi.sizes() == torch::IntArrayRef({1, 10, 10}));
+  lfnet::test::require_close(epi[0][2 * 4 + 1], lf.data()[0][1][4][3], 0.0);
+  auto vepi = io::vertical_epi(lf, 6, 1);
+  REQUIRE(vepi.sizes() == torch::IntArrayRef({1, 3, 8}));
+  lfnet::test::require_close(vepi[0][2], lf.data()[0][2][2].select(1, 6), 0.0);
+}
+
+TEST_CASE("writing never leaves partial files behind", "[io]") {
+  lfnet::test::TempDir tmp;
+  CHECK_THROWS_AS(io::write_image(tmp / "x.unknownformat", torch::rand({1, 4, 4})), lfnet::IoError);
+  CHECK_THROWS_AS(io::write_image(tmp / "missing_dir/x.png", torch::rand({1, 4, 4})), lfnet::IoError);
+  int files = 0;
+  for (auto& e : fs::recursive_directory_iterator(tmp.path())) files += e.is_regular_file();
+  CHECK(files == 0);
+}

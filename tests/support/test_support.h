@@ -1,0 +1,41 @@
+// Helpers shared by lfnet's tests.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <string>
+
+namespace lfnet::test {
+
+// Fails the current test with the first index where |got - want| > atol + rtol * |want|.
+void require_close(const torch::Tensor& got, const torch::Tensor& want, double atol,
+                   double rtol = 0.0);
+
+// A fresh temporary folder, removed when the object goes out of scope.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::filesystem::path& path() const { return path_; }
+  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+// ../shared/data beside the checkout (or $LFNET_SHARED_DATA), or "" when absent.
+std::string shared_data_dir();
+
+// Runs a shell command; returns its exit status and sets `output` to stdout and stderr.
+int run_command(const std::string& command, std::string& output);
+
+// Debian's python3 with the reference packages, or "" when a module is missing.
+std::string python_with(const std::string& module);
+
+// The lfnet program under test.
+std::string lfnet_binary();
+
+}  // namespace lfnet::test
