@@ -1,10 +1,12 @@
 // Coded acquisition: the measurement models Phi of DESIGN section 2, behind one interface.
+// The models, their parameters and normalisation are described in docs/acquisition.md.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -21,48 +23,111 @@ struct PhiSpec {
   nlohmann::json params = nlohmann::json::object();  // model-specific parameters, resolved
 
   nlohmann::json to_json() const;
+  // Strict: unknown keys and wrong types are ConfigErrors naming the JSON path. `params` are
+  // checked when the model is built (make_phi), which also fills in their defaults.
   static PhiSpec from_json(const nlohmann::json& j, const std::string& path = "$");
-  // Parses "asp", "asp:2", "mask:15" (name[:N]).
+  // Parses "asp", "asp:2", "mask:15" (name[:N]); N defaults to 2.
   static PhiSpec parse(const std::string& text);
+  // "asp:2" (name and N; the other fields are in to_json()).
+  std::string label() const;
+
+  bool operator==(const PhiSpec& other) const;
+  bool operator!=(const PhiSpec& other) const { return !(*this == other); }
 };
 
-// A linear coded-capture operator. Light fields are single-channel (U, V, H, W) tensors;
-// sensor images are (N, H, W): N measurement channels per pixel. A patch's measurement vector
-// is the (N, h, w) crop of the sensor image, flattened row-major (n, y, x): 81 N values for
-// 9 x 9 patches; a light-field patch is flattened (u, v, y, x): 2025 values for 5 x 5 x 9 x 9.
+// Tikhonov weight of pinv_matrix by default: lambda = sigma^2 / tau^2 for noise sigma 0.01
+// and a light-field prior of standard deviation tau = 0.3 (values in [0, 1]), at the scale
+// every Phi is normalised to (a white light field measures 1 on average).
+constexpr double kDefaultPinvLambda = 1e-3;
+
+// A linear coded-capture operator. Light fields are single-channel (U, V, H, W) tensors, with
+// optional leading batch dimensions (..., U, V, H, W) (e.g. colour channels); sensor images are
+// (..., N, H, W): N measurement channels per pixel. float32 and float64 are supported.
+// A patch's measurement vector is the (N, h, w) crop of the sensor image, flattened row-major
+// (n, y, x): 81 N values for 9 x 9 patches; a light-field patch is flattened (u, v, y, x):
+// 2025 values for 5 x 5 x 9 x 9.
 class Phi {
  public:
   virtual ~Phi() = default;
 
   const PhiSpec& spec() const { return spec_; }
   int64_t measurements() const { return spec_.n; }
+  int64_t rows() const { return spec_.rows; }
+  int64_t cols() const { return spec_.cols; }
 
-  // Sensor image (N, H, W) of a light field (U, V, H, W), no sensor effects.
+  // Sensor image (..., N, H, W) of a light field (..., U, V, H, W), no sensor effects.
   virtual torch::Tensor forward(const torch::Tensor& lf) const = 0;
-  // The exact adjoint: (N, H, W) -> (U, V, H, W), so <forward(x), y> = <x, adjoint(y)>.
+  // The exact adjoint: (..., N, H, W) -> (..., U, V, H, W), so <forward(x), y> = <x, adjoint(y)>.
   virtual torch::Tensor adjoint(const torch::Tensor& y) const = 0;
 
   // The operator restricted to the (h, w) patch at origin (y0, x0): a (N h w, U V h w) matrix
-  // with patch_matrix(y0, x0) * vec(lf patch) = vec(forward(lf) crop). Throws when no such
-  // matrix exists (random projections at origins that are not block-aligned).
-  virtual torch::Tensor patch_matrix(int64_t y0, int64_t x0, int64_t h, int64_t w) const = 0;
+  // with patch_matrix(y0, x0) * vec(lf patch) = vec(forward(lf) crop). Origins need not be
+  // multiples of period(). Throws ConfigError when no such matrix exists (random projections
+  // off the block grid, or patch sizes that are not multiples of the block).
+  virtual torch::Tensor patch_matrix(int64_t y0, int64_t x0, int64_t h, int64_t w,
+                                     torch::ScalarType dtype = torch::kFloat32) const = 0;
 
-  // Patch matrices repeat with this period in y0 and x0 (1 when the same at every pixel).
+  // Patch matrices of consistent origins that agree modulo period() are equal: 1 when the
+  // same at every pixel (asp, aperture, random), the tile period for mask and lenslet.
   virtual int64_t period() const { return 1; }
 
   // Whether a patch at (y0, x0) has measurements that depend on that patch alone (false for
   // random projections off the block grid).
-  virtual bool patch_consistent(int64_t y0, int64_t x0) const { return true; }
+  virtual bool patch_consistent(int64_t /*y0*/, int64_t /*x0*/) const { return true; }
+
+  // Whether every measurement at a pixel depends on that pixel's rays alone (all models but
+  // random). Local models are described completely by pixel_weights().
+  virtual bool local() const { return true; }
+
+  // Side of the operator's smallest self-contained piece: 1 for local models (a pixel), the
+  // block size for random.
+  virtual int64_t block() const { return 1; }
+
+  // The weights M_n(u, v) of the pixels of the (h, w) patch at (y0, x0): (N, U, V, h, w).
+  // Local models only (throws otherwise).
+  virtual torch::Tensor pixel_weights(int64_t y0, int64_t x0, int64_t h, int64_t w,
+                                      torch::ScalarType dtype = torch::kFloat32) const;
+
+  // Tikhonov-regularised pseudo-inverse of the patch matrix, (A^T A + lambda I)^-1 A^T, a
+  // (U V h w, N h w) matrix computed in float64 through the SVD (per pixel for local models):
+  // V diag(s / (s^2 + lambda)) U^T. At lambda = 0 singular values below 1e-12 s_max count as
+  // zero (the Moore-Penrose pseudo-inverse).
+  virtual torch::Tensor pinv_matrix(int64_t y0, int64_t x0, int64_t h, int64_t w,
+                                    double lambda = kDefaultPinvLambda,
+                                    torch::ScalarType dtype = torch::kFloat32) const;
 
  protected:
   explicit Phi(PhiSpec spec) : spec_(std::move(spec)) {}
   PhiSpec spec_;
 };
 
-// Builds a Phi from its spec. Unknown names throw ConfigError listing the known ones.
+// Builds a Phi from its spec; the result's spec() has every parameter resolved. Unknown names
+// throw ConfigError listing the known ones; bad parameters throw ConfigError naming the path.
 std::unique_ptr<Phi> make_phi(const PhiSpec& spec);
 
-// Names of every registered model.
+// Names of every registered model, sorted.
 std::vector<std::string> phi_names();
+
+// A factory of one model.
+using PhiFactory = std::function<std::unique_ptr<Phi>(const PhiSpec& spec)>;
+
+// Adds a model to the registry, replacing one of the same name (built-ins included).
+void register_phi(const std::string& name, PhiFactory factory);
+
+// Registers asp, mask, aperture, random and lenslet, once (later calls do nothing).
+// make_phi, phi_names and register_phi call it first, so nobody needs to.
+void register_builtin_phis();
+
+// Singular values of a Phi's self-contained pieces: how much each camera can recover.
+struct PhiConditioning {
+  std::string piece;              // "pixel" (local models) or "block" (random)
+  int64_t piece_rows = 0;         // rows of each piece's matrix: N (pixel) or N b^2 (block)
+  int64_t piece_cols = 0;         // columns: U V or U V b^2
+  torch::Tensor singular_values;  // (pieces, min(rows, cols)) float64, descending; one piece
+                                  // per pixel phase of a period (period^2) or one block
+  torch::Tensor condition;        // (pieces,) s_max / s_min; inf when a piece is rank-deficient
+  torch::Tensor rank;             // (pieces,) int64, singular values above 1e-10 s_max
+};
+PhiConditioning conditioning(const Phi& phi);
 
 }  // namespace lfnet::optics
