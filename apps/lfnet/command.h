@@ -8,6 +8,9 @@
 
 namespace lfnet::app {
 
+// The program's version, recorded in every output it writes.
+constexpr const char* kVersion = "0.1.0";
+
 // Settings every subcommand shares.
 struct GlobalOptions {
   int threads = 0;                 // 0: every core
@@ -18,5 +21,6 @@ struct GlobalOptions {
 using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& global)>;
 
 void add_info_command(CLI::App& app, const GlobalOptions& global);
+void add_simulate_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app

@@ -1,0 +1,157 @@
+// lfnet simulate: the acquisition folder contract (docs/acquisition.md).
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+
+#include "lfnet/core/json.h"
+#include "lfnet/core/patches.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/optics/phi.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+
+namespace {
+
+// A 7 x 7-view colour light field of 20 x 24 pixels, written as 16-bit PNGs.
+lfnet::LightField write_test_light_field(const std::string& dir) {
+  torch::manual_seed(1);
+  lfnet::LightField lf(torch::rand({3, 7, 7, 20, 24}));
+  lfnet::io::write_light_field(lf, dir, {"png", 16});
+  return lfnet::LightField(lfnet::io::read_light_field(dir).data());
+}
+
+std::string simulate(const std::string& args) {
+  return lfnet_binary() + " --threads 1 --log-level warn simulate " + args;
+}
+
+}  // namespace
+
+TEST_CASE("simulate writes a sensor image that is the forward model of the central views",
+          "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  auto lf = write_test_light_field(tmp / "lf");
+  std::string out;
+  REQUIRE(run_command(simulate("--lf " + (tmp / "lf") + " --phi mask:3 --out " + (tmp / "acq")),
+                      out) == 0);
+  auto acq = lfnet::io::read_acquisition(tmp / "acq");
+  CHECK(acq.meta.at("mode") == "sensor");
+  CHECK(acq.meta.at("phi").at("name") == "mask");
+  CHECK(acq.meta.at("phi").at("params").at("period") == 9);
+  CHECK(acq.meta.at("views").at("rows") == nlohmann::json({2, 6}));
+  CHECK(acq.meta.at("color") == false);
+  CHECK(acq.meta.at("noise_sigma") == 0.0);
+  CHECK(acq.meta.at("lfnet_version") == "0.1.0");
+  CHECK(fs::exists(tmp / "acq/preview.png"));
+  REQUIRE(acq.sensor.sizes() == torch::IntArrayRef({1, 3, 20, 24}));
+  auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::from_json(acq.meta.at("phi")));
+  auto want = phi->forward(lf.central(5).grey().data());
+  lfnet::test::require_close(acq.sensor, want, 1e-6);
+  // Nothing but the folder itself is left beside it.
+  CHECK(std::distance(fs::directory_iterator(tmp.path()), fs::directory_iterator()) == 2);
+}
+
+TEST_CASE("simulate in colour, with noise and a Phi spec file", "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  auto lf = write_test_light_field(tmp / "lf");
+  lfnet::optics::PhiSpec spec;
+  spec.name = "aperture";
+  spec.n = 2;
+  spec.rows = 3;
+  spec.cols = 3;
+  spec.seed = 4;
+  lfnet::write_json_file(tmp / "phi.json", spec.to_json());
+  std::string out;
+  REQUIRE(
+      run_command(simulate("--lf " + (tmp / "lf") + " --phi " + (tmp / "phi.json") +
+                           " --views 1:3,2:4 --color --noise 0.1 --seed 3 --out " + (tmp / "acq")),
+                  out) == 0);
+  auto acq = lfnet::io::read_acquisition(tmp / "acq");
+  CHECK(fs::exists(tmp / "acq/sensor_g.tif"));
+  CHECK(acq.meta.at("color") == true);
+  CHECK(acq.meta.at("effects").at("gaussian").at("sigma") == 0.1);
+  CHECK(acq.meta.at("seed") == 3);
+  REQUIRE(acq.sensor.sizes() == torch::IntArrayRef({3, 2, 20, 24}));
+  auto phi = lfnet::optics::make_phi(spec);
+  auto clean = phi->forward(lf.window({0, 3}, {1, 4}).data());
+  CHECK((acq.sensor - clean).std().item<double>() == Approx(0.1).epsilon(0.1));
+  // The same seed gives the same image.
+  REQUIRE(run_command(
+              simulate("--lf " + (tmp / "lf") + " --phi " + (tmp / "phi.json") +
+                       " --views 1:3,2:4 --color --noise 0.1 --seed 3 --out " + (tmp / "again")),
+              out) == 0);
+  CHECK(torch::equal(lfnet::io::read_acquisition(tmp / "again").sensor, acq.sensor));
+  // A spec for another window is an error.
+  CHECK(run_command(simulate("--lf " + (tmp / "lf") + " --phi " + (tmp / "phi.json") + " --out " +
+                             (tmp / "bad")),
+                    out) != 0);
+  CHECK(out.find("3x3 views") != std::string::npos);
+}
+
+TEST_CASE("simulate per_patch writes every patch's measurements", "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  auto lf = write_test_light_field(tmp / "lf");
+  std::string out;
+  REQUIRE(run_command(simulate("--lf " + (tmp / "lf") + " --phi random:2 --mode per_patch " +
+                               "--stride 4 --out " + (tmp / "acq")),
+                      out) == 0);
+  auto acq = lfnet::io::read_acquisition(tmp / "acq");
+  const lfnet::PatchGrid grid(20, 24, 9, 9, 4);
+  CHECK(acq.meta.at("grid").at("stride") == 4);
+  CHECK(acq.meta.at("grid").at("patch") == 9);
+  REQUIRE(acq.measurements.sizes() == torch::IntArrayRef({1, grid.size(), 162}));
+  auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::from_json(acq.meta.at("phi")));
+  auto want = lfnet::optics::measure_patches(*phi, lf.central(5).grey().data(), grid,
+                                             lfnet::optics::SimulationMode::kPerPatch);
+  lfnet::test::require_close(acq.measurements[0], want.values, 1e-5);
+}
+
+TEST_CASE("simulate never overwrites a folder unless forced", "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  write_test_light_field(tmp / "lf");
+  fs::create_directories(tmp / "acq");
+  { std::ofstream(tmp / "acq/keep.txt") << "mine"; }
+  std::string out;
+  const std::string cmd = simulate("--lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"));
+  CHECK(run_command(cmd, out) != 0);
+  CHECK(out.rfind("lfnet: error: ", 0) == 0);
+  CHECK(out.find("--force") != std::string::npos);
+  CHECK(fs::exists(tmp / "acq/keep.txt"));
+  REQUIRE(run_command(cmd + " --force", out) == 0);
+  CHECK_FALSE(fs::exists(tmp / "acq/keep.txt"));
+  CHECK(fs::exists(tmp / "acq/sensor.json"));
+  // A failing simulation leaves neither a folder nor a temporary one behind.
+  CHECK(run_command(simulate("--lf " + (tmp / "lf") + " --phi random:2 --effects " +
+                             (tmp / "missing.json") + " --out " + (tmp / "none")),
+                    out) != 0);
+  CHECK_FALSE(fs::exists(tmp / "none"));
+  CHECK(std::distance(fs::directory_iterator(tmp.path()), fs::directory_iterator()) == 2);
+}
+
+TEST_CASE("simulate describes a Phi and plots its weights", "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  REQUIRE(run_command(simulate("--phi asp:25 --describe"), out) == 0);
+  CHECK(out.find("condition:  25.46") != std::string::npos);
+  CHECK(out.find("rank 25 of 25") != std::string::npos);
+  CHECK(out.find("quadrature") != std::string::npos);
+  REQUIRE(run_command(simulate("--phi mask:2 --describe"), out) == 0);
+  CHECK(out.find("81 pixel matrices of 2 x 25") != std::string::npos);
+  REQUIRE(run_command(simulate("--phi lenslet:4 --plot-weights " + (tmp / "plots")), out) == 0);
+  auto image = lfnet::io::read_image(tmp / "plots/lenslet-n4.png");
+  CHECK(image.size(0) == 3);
+  CHECK(image.size(1) == 4 * (5 * 16 + 3) - 3);  // 4 pixels down
+  CHECK(image.size(2) == 4 * (5 * 16 + 3) - 3);  // 4 measurements across
+  // Pixel 0 of the sensor sees view 0 in measurement 0: the top-left view is white, the next
+  // view black.
+  CHECK(image[0][0][0].item<float>() == 1.0f);
+  CHECK(image[0][0][16].item<float>() == 0.0f);
+  CHECK(run_command(simulate("--phi prism:2 --describe"), out) != 0);
+  CHECK(out.find("known: aperture, asp, lenslet, mask, random") != std::string::npos);
+  CHECK(run_command(simulate("--phi asp:2"), out) != 0);
+  CHECK(out.find("nothing to do") != std::string::npos);
+}
