@@ -18,5 +18,6 @@ struct GlobalOptions {
 using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& global)>;
 
 void add_info_command(CLI::App& app, const GlobalOptions& global);
+void add_render_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app
