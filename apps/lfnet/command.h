@@ -22,5 +22,6 @@ using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& gl
 
 void add_info_command(CLI::App& app, const GlobalOptions& global);
 void add_simulate_command(CLI::App& app, const GlobalOptions& global);
+void add_render_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app

@@ -1,0 +1,239 @@
+// lfnet render: a procedural scene (or a random one) into a light-field folder with its true
+// disparity map, previews and the resolved spec.
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <regex>
+#include <set>
+
+#include "command.h"
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/scene/scene.h"
+
+namespace lfnet::app {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RenderArgs {
+  std::string scene;
+  int64_t random_seed = -1;
+  std::string random_options;
+  std::string size;
+  std::string views;
+  std::string disparity_range;
+  bool grey = false;
+  std::string out;
+  bool force = false;
+  int bits = 16;
+};
+
+// Parses "AxB" into two positive integers.
+std::pair<int64_t, int64_t> parse_pair(const std::string& text, char sep, const std::string& flag) {
+  const auto at = text.find(sep);
+  try {
+    if (at == std::string::npos) throw std::invalid_argument(text);
+    size_t used = 0;
+    const int64_t a = std::stoll(text.substr(0, at), &used);
+    if (used != at) throw std::invalid_argument(text);
+    const std::string rest = text.substr(at + 1);
+    const int64_t b = std::stoll(rest, &used);
+    if (used != rest.size()) throw std::invalid_argument(text);
+    return {a, b};
+  } catch (const std::exception&) {
+    throw ConfigError(flag + " '" + text + "': expected two integers separated by '" +
+                      std::string(1, sep) + "'");
+  }
+}
+
+std::pair<double, double> parse_range(const std::string& text) {
+  const auto at = text.find(':');
+  try {
+    if (at == std::string::npos) throw std::invalid_argument(text);
+    size_t used = 0;
+    const double a = std::stod(text.substr(0, at), &used);
+    if (used != at) throw std::invalid_argument(text);
+    const std::string rest = text.substr(at + 1);
+    const double b = std::stod(rest, &used);
+    if (used != rest.size()) throw std::invalid_argument(text);
+    return {a, b};
+  } catch (const std::exception&) {
+    throw ConfigError("--disparity-range '" + text + "': expected MIN:MAX, e.g. -3:3");
+  }
+}
+
+// What `render` writes besides other files the folder may hold.
+bool is_render_output(const std::string& name) {
+  static const std::regex view(R"(lf_\d+_\d+\.(png|tif|tiff|exr))");
+  static const std::set<std::string> names = {"disparity.pfm", "grid.png",    "epi_h.png",
+                                              "epi_v.png",     "preview.png", "scene.json"};
+  return names.count(name) > 0 || std::regex_match(name, view);
+}
+
+void prepare_output(const std::string& dir, bool force) {
+  if (fs::exists(dir)) {
+    if (!fs::is_directory(dir)) throw IoError("--out " + dir + " exists and is not a folder");
+    if (!fs::is_empty(dir)) {
+      if (!force) {
+        throw IoError("output folder " + dir + " is not empty; pass --force to overwrite it");
+      }
+      for (const auto& entry : fs::directory_iterator(dir)) {
+        if (entry.is_regular_file() && is_render_output(entry.path().filename().string())) {
+          fs::remove(entry.path());
+        }
+      }
+    }
+  }
+  fs::create_directories(dir);
+}
+
+// Viridis-like ramp for disparity maps: far (small) is dark blue, near (large) is yellow.
+torch::Tensor colour_map(const torch::Tensor& disparity) {
+  static const float anchors[5][3] = {{0.267f, 0.005f, 0.329f},
+                                      {0.230f, 0.322f, 0.546f},
+                                      {0.128f, 0.567f, 0.551f},
+                                      {0.369f, 0.789f, 0.383f},
+                                      {0.993f, 0.906f, 0.144f}};
+  const float lo = disparity.min().item<float>();
+  const float hi = disparity.max().item<float>();
+  auto t = hi > lo ? (disparity - lo) / (hi - lo) : torch::full_like(disparity, 0.5f);
+  auto pos = t.clamp(0.0, 1.0) * 4.0f;
+  auto k = pos.floor().clamp(0, 3).to(torch::kLong);
+  auto f = pos - k.to(torch::kFloat32);
+  auto table = torch::from_blob(const_cast<float*>(&anchors[0][0]), {5, 3}).clone();
+  auto c0 = table.index({k}).permute({2, 0, 1});
+  auto c1 = table.index({k + 1}).permute({2, 0, 1});
+  return c0 * (1 - f).unsqueeze(0) + c1 * f.unsqueeze(0);
+}
+
+// A small image to look at: [centre view | disparity map] over [horizontal EPI | vertical EPI],
+// area-downscaled to at most 480 px wide.
+torch::Tensor preview_image(const LightField& lf, const torch::Tensor& disparity) {
+  const int64_t gap = 4;
+  const int64_t w = lf.width();
+  const int64_t h = lf.height();
+  const int64_t factor = std::max<int64_t>(1, (2 * w + gap + 479) / 480);
+  const int64_t epi_scale = 8 * factor;
+  auto colour = [&](torch::Tensor x) {
+    return x.size(0) == 3 ? x : x.expand({3, x.size(1), x.size(2)});
+  };
+  auto centre = colour(lf.view(lf.rows() / 2, lf.cols() / 2));
+  auto disp = colour_map(disparity);
+  auto epi_h = colour(io::horizontal_epi(lf, -1, epi_scale));
+  auto epi_v = colour(io::vertical_epi(lf, -1, epi_scale));
+  const int64_t top = h;
+  const int64_t bottom = std::max(epi_h.size(1), epi_v.size(1));
+  const int64_t width = w + gap + std::max(w, epi_v.size(2));
+  auto canvas = torch::ones({3, top + gap + bottom, width});
+  auto put = [&](const torch::Tensor& img, int64_t y, int64_t x) {
+    canvas.slice(1, y, y + img.size(1)).slice(2, x, x + img.size(2)).copy_(img);
+  };
+  put(centre, 0, 0);
+  put(disp, 0, w + gap);
+  put(epi_h, top + gap, 0);
+  put(epi_v, top + gap, w + gap);
+  if (factor > 1) canvas = torch::avg_pool2d(canvas.unsqueeze(0), factor).squeeze(0);
+  return canvas.clamp(0.0, 1.0);
+}
+
+void run_render(const RenderArgs& args) {
+  const bool random = args.random_seed >= 0;
+  if (random == !args.scene.empty()) {
+    throw ConfigError("give exactly one of --scene SCENE.json and --random SEED");
+  }
+  if (!random && (!args.random_options.empty() || !args.size.empty() || !args.views.empty() ||
+                  !args.disparity_range.empty())) {
+    throw ConfigError(
+        "--random-options, --size, --views and --disparity-range apply to --random only");
+  }
+  scene::SceneSpec spec;
+  scene::RandomSceneOptions options;
+  if (random) {
+    if (!args.random_options.empty()) {
+      const auto doc = read_json_file(args.random_options);
+      JsonReader reader(doc, args.random_options + ":$");
+      options = scene::RandomSceneOptions::from_json(reader);
+    }
+    if (!args.size.empty())
+      std::tie(options.height, options.width) = parse_pair(args.size, 'x', "--size");
+    if (!args.views.empty())
+      std::tie(options.rows, options.cols) = parse_pair(args.views, 'x', "--views");
+    if (!args.disparity_range.empty()) {
+      std::tie(options.min_disparity, options.max_disparity) = parse_range(args.disparity_range);
+    }
+    if (args.grey) options.color = false;
+    options.validate("options");
+    spec = scene::random_scene(static_cast<uint64_t>(args.random_seed), options);
+  } else {
+    try {
+      spec = scene::load_scene(args.scene);
+    } catch (const ConfigError& e) {
+      throw ConfigError(args.scene + ": " + e.what());
+    }
+    if (args.grey) spec.color = false;
+  }
+  prepare_output(args.out, args.force);
+
+  scene::RenderOptions render_options;
+  render_options.image_loader = [](const std::string& path) { return io::read_image(path); };
+  if (!random) render_options.base_dir = fs::path(args.scene).parent_path().string();
+  const auto start = std::chrono::steady_clock::now();
+  const scene::RenderResult result = scene::render_scene(spec, render_options);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  io::write_light_field(result.light_field, args.out, {"png", args.bits});
+  io::write_pfm((fs::path(args.out) / "disparity.pfm").string(), result.disparity);
+  io::write_previews(result.light_field, args.out);
+  io::write_image((fs::path(args.out) / "preview.png").string(),
+                  preview_image(result.light_field, result.disparity), 8);
+  nlohmann::json record = spec.to_json();
+  record["rendered"] = {
+      {"effects_run", result.effects_run},
+      {"seconds", seconds},
+      {"threads", torch::get_num_threads()},
+      {"source", random ? "random " + std::to_string(args.random_seed) : args.scene}};
+  if (random) record["rendered"]["random_options"] = options.to_json();
+  write_json_file((fs::path(args.out) / "scene.json").string(), record);
+
+  std::string effects;
+  for (const auto& e : result.effects_run) effects += (effects.empty() ? "" : ", ") + e;
+  spdlog::info("rendered {} ({} C x U x V x H x W) in {:.3f} s on {} threads; effects: {}",
+               spec.name.empty() ? "scene" : spec.name, result.light_field.shape_string(), seconds,
+               torch::get_num_threads(), effects.empty() ? "none" : effects);
+  const auto& d = result.disparity;
+  spdlog::info("disparity {:.3f} .. {:.3f} px per view; written to {}", d.min().item<double>(),
+               d.max().item<double>(), args.out);
+}
+
+}  // namespace
+
+void add_render_command(CLI::App& app, const GlobalOptions& global) {
+  auto* cmd = app.add_subcommand(
+      "render", "Render a procedural scene into a light field folder with its true disparity map");
+  auto args = std::make_shared<RenderArgs>();
+  cmd->add_option("--scene", args->scene, "scene spec (JSON); see docs/scenes.md");
+  cmd->add_option("--random", args->random_seed, "render the random training scene of this seed")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--random-options", args->random_options,
+                  "RandomSceneOptions as JSON (with --random)");
+  cmd->add_option("--size", args->size, "HxW of a random scene (default 256x256)");
+  cmd->add_option("--views", args->views, "RxC angular grid of a random scene (default 5x5)");
+  cmd->add_option("--disparity-range", args->disparity_range,
+                  "MIN:MAX disparity of a random scene in px per view (default -3:3)");
+  cmd->add_flag("--grey", args->grey, "render one luma channel");
+  cmd->add_option("--out", args->out,
+                  "output folder: lf_R_C.png, disparity.pfm, previews, scene.json")
+      ->required();
+  cmd->add_flag("--force", args->force, "overwrite the outputs in a non-empty folder");
+  cmd->add_option("--bits", args->bits, "bits per PNG sample, 8 or 16")
+      ->check(CLI::IsMember({8, 16}));
+  cmd->callback([args] { run_render(*args); });
+}
+
+}  // namespace lfnet::app

@@ -1,0 +1,43 @@
+// Random scene specs for training data: varied layers, textures, shapes, disparities and effects.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+
+#include "lfnet/core/json.h"
+#include "lfnet/scene/scene_spec.h"
+
+namespace lfnet::scene {
+
+// What random_scene draws from. Probabilities are per scene.
+struct RandomSceneOptions {
+  int64_t height = 256;  // view size in px
+  int64_t width = 256;
+  int64_t rows = 5;  // angular grid
+  int64_t cols = 5;
+  bool color = true;            // false: grey scenes
+  double min_disparity = -3.0;  // px per view step; layer disparities are drawn
+  double max_disparity = 3.0;   // uniformly in this range (nearer layers in front)
+  int64_t min_layers = 3;       // layers including the background
+  int64_t max_layers = 10;
+  double thin_occluder_probability = 0.35;  // a fence, bars or branches in front
+  double slanted_probability = 0.3;         // the background is a slanted plane
+  double specular_probability = 0.15;       // effects
+  double vignetting_probability = 0.15;
+  double defocus_probability = 0.1;
+
+  static RandomSceneOptions from_json(JsonReader& reader);
+  nlohmann::json to_json() const;
+  // Throws ConfigError naming the bad key under `json_path`.
+  void validate(const std::string& json_path = "$") const;
+};
+
+// A random scene, a pure function of (seed, options): the same arguments give the same spec
+// on every platform. The background layer is full (fronto-parallel or slanted); the layers in
+// front of it are natural blobs, rectangles, disks and thin occluders at larger disparities, with
+// textures of varied statistics: 1/f^beta fractals with beta in [1.6, 3], smooth noise, stripes,
+// checkers, gradients and flat colours in natural palettes of varied contrast.
+SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& options = {});
+
+}  // namespace lfnet::scene

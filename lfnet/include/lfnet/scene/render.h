@@ -1,0 +1,41 @@
+// Rendering a scene spec into its true light field and the centre view's true disparity map.
+#pragma once
+
+#include <torch/types.h>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/light_field.h"
+#include "lfnet/scene/scene_spec.h"
+
+namespace lfnet::scene {
+
+// Loads an image file as (C, H, W) float32 in [0, 1], C = 1 or 3 (or 4: alpha is dropped).
+// The scene library has no image I/O of its own; the program passes lfnet::io::read_image.
+using ImageLoader = std::function<torch::Tensor(const std::string& path)>;
+
+// Options of render_scene.
+struct RenderOptions {
+  ImageLoader image_loader;  // needed only by scenes with image textures
+  std::string base_dir;      // relative image paths are resolved against it (the scene's folder)
+};
+
+// What the renderer produced.
+struct RenderResult {
+  LightField light_field;                // (C, U, V, H, W) in [0, 1]
+  torch::Tensor disparity;               // (H, W) float32: px per view step, centre view
+  std::vector<std::string> effects_run;  // in the order run: occlusion, specular, defocus,
+                                         // vignetting; only those the scene names
+};
+
+// Renders every view: each layer's texture and alpha are generated once on a canvas larger than
+// the image by the layer's largest shift, then shifted into every view (pure integer shifts
+// for integer shifts, Catmull-Rom cubic interpolation otherwise; a general affine warp for
+// slanted layers) and composited back to front with premultiplied alpha. Deterministic: the
+// same spec gives bit-identical output for any thread count. Throws ConfigError for image
+// textures without a loader.
+RenderResult render_scene(const SceneSpec& spec, const RenderOptions& options = {});
+
+}  // namespace lfnet::scene

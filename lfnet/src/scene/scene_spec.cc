@@ -1,0 +1,634 @@
+#include "lfnet/scene/scene_spec.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "json_read.h"
+#include "lfnet/core/error.h"
+
+namespace lfnet::scene {
+namespace {
+
+using nlohmann::json;
+using namespace detail;  // NOLINT: the typed JSON readers
+
+Point parse_point(const json& v, const std::string& path) {
+  if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number()) {
+    fail(path, "expected a point [x, y], got " + v.dump());
+  }
+  return Point{v[0].get<double>(), v[1].get<double>()};
+}
+
+bool read_point(JsonReader& r, const std::string& key, Point& out) {
+  json v;
+  if (!read_raw(r, key, v)) return false;
+  out = parse_point(v, r.path_of(key));
+  return true;
+}
+
+Rgb parse_color(const json& v, const std::string& path) {
+  Rgb c{};
+  if (v.is_number()) {
+    c.fill(v.get<double>());
+  } else if (v.is_array() && v.size() == 3 && v[0].is_number() && v[1].is_number() &&
+             v[2].is_number()) {
+    for (int i = 0; i < 3; ++i) c[i] = v[i].get<double>();
+  } else {
+    fail(path, "expected a colour [r, g, b] or a grey number, got " + v.dump());
+  }
+  return c;
+}
+
+json color_json(const Rgb& c) {
+  if (c[0] == c[1] && c[1] == c[2]) return c[0];
+  return json::array({c[0], c[1], c[2]});
+}
+
+json point_json(const Point& p) { return json::array({p.x, p.y}); }
+
+void check_color(const Rgb& c, const std::string& path) {
+  for (double x : c) {
+    if (!(x >= 0.0 && x <= 1.0)) fail(path, "colour components must lie in [0, 1]");
+  }
+}
+
+void check_positive(double value, const std::string& path) {
+  if (!(value > 0.0) || !std::isfinite(value)) {
+    fail(path, "must be a positive number, got " + std::to_string(value));
+  }
+}
+
+void check_range(double value, double lo, double hi, const std::string& path) {
+  if (!(value >= lo && value <= hi)) {
+    fail(path, "must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                   std::to_string(value));
+  }
+}
+
+template <typename Kind, size_t N>
+Kind kind_from_string(const std::string& name, const std::array<Kind, N>& kinds,
+                      const std::string& what, const std::string& path) {
+  std::string known;
+  for (Kind k : kinds) {
+    if (to_string(k) == name) return k;
+    known += (known.empty() ? "" : ", ") + to_string(k);
+  }
+  fail(path, "unknown " + what + " kind '" + name + "' (known: " + known + ")");
+}
+
+constexpr std::array<TextureKind, 7> kTextureKinds = {
+    TextureKind::kConstant, TextureKind::kNoise,    TextureKind::kFractal, TextureKind::kStripes,
+    TextureKind::kChecker,  TextureKind::kGradient, TextureKind::kImage};
+constexpr std::array<ShapeKind, 5> kShapeKinds = {ShapeKind::kFull, ShapeKind::kRectangle,
+                                                  ShapeKind::kDisk, ShapeKind::kPolygon,
+                                                  ShapeKind::kBars};
+
+}  // namespace
+
+std::string to_string(TextureKind kind) {
+  switch (kind) {
+    case TextureKind::kConstant:
+      return "constant";
+    case TextureKind::kNoise:
+      return "noise";
+    case TextureKind::kFractal:
+      return "fractal";
+    case TextureKind::kStripes:
+      return "stripes";
+    case TextureKind::kChecker:
+      return "checker";
+    case TextureKind::kGradient:
+      return "gradient";
+    case TextureKind::kImage:
+      return "image";
+  }
+  return "?";
+}
+
+std::string to_string(ShapeKind kind) {
+  switch (kind) {
+    case ShapeKind::kFull:
+      return "full";
+    case ShapeKind::kRectangle:
+      return "rectangle";
+    case ShapeKind::kDisk:
+      return "disk";
+    case ShapeKind::kPolygon:
+      return "polygon";
+    case ShapeKind::kBars:
+      return "bars";
+  }
+  return "?";
+}
+
+// ---- TextureSpec ----------------------------------------------------------------------------
+
+TextureSpec TextureSpec::defaults(TextureKind kind) {
+  TextureSpec t;
+  t.kind = kind;
+  if (kind == TextureKind::kFractal) t.scale = 128.0;
+  if (kind == TextureKind::kGradient) t.profile = "linear";
+  if (kind == TextureKind::kConstant) t.colors = {Rgb{0.5, 0.5, 0.5}};
+  return t;
+}
+
+TextureSpec TextureSpec::from_json(JsonReader& r) {
+  std::string kind_name;
+  if (!read_string(r, "kind", kind_name)) fail(r.path_of("kind"), "required key is missing");
+  TextureSpec t =
+      defaults(kind_from_string(kind_name, kTextureKinds, "texture", r.path_of("kind")));
+  if (t.kind != TextureKind::kImage) {
+    json colors;
+    if (read_raw(r, "colors", colors)) {
+      if (!colors.is_array() || colors.empty()) {
+        fail(r.path_of("colors"), "expected a non-empty list of colours, got " + colors.dump());
+      }
+      t.colors.clear();
+      for (size_t i = 0; i < colors.size(); ++i) {
+        t.colors.push_back(
+            parse_color(colors[i], r.path_of("colors") + "[" + std::to_string(i) + "]"));
+      }
+    }
+  }
+  uint64_t seed = 0;
+  switch (t.kind) {
+    case TextureKind::kConstant:
+      break;
+    case TextureKind::kNoise:
+    case TextureKind::kFractal:
+      read_double(r, "scale", t.scale);
+      read_double(r, "contrast", t.contrast);
+      if (t.kind == TextureKind::kFractal) read_double(r, "beta", t.beta);
+      if (read_seed(r, "seed", seed)) t.seed = seed;
+      break;
+    case TextureKind::kStripes:
+      read_double(r, "period", t.period);
+      read_double(r, "duty", t.duty);
+      read_string(r, "profile", t.profile);
+      read_double(r, "phase", t.phase);
+      read_double(r, "angle", t.angle);
+      break;
+    case TextureKind::kChecker:
+      read_double(r, "size", t.size);
+      read_double(r, "angle", t.angle);
+      break;
+    case TextureKind::kGradient: {
+      read_string(r, "profile", t.profile);
+      read_double(r, "angle", t.angle);
+      Point c;
+      if (read_point(r, "center", c)) t.center = c;
+      double length = 0;
+      if (read_double(r, "length", length)) t.length = length;
+      break;
+    }
+    case TextureKind::kImage:
+      if (!read_string(r, "path", t.path)) fail(r.path_of("path"), "required key is missing");
+      read_string(r, "fit", t.fit);
+      break;
+  }
+  r.finish();
+  t.validate(r.path());
+  return t;
+}
+
+json TextureSpec::to_json() const {
+  json j;
+  j["kind"] = to_string(kind);
+  if (kind != TextureKind::kImage) {
+    j["colors"] = json::array();
+    for (const auto& c : colors) j["colors"].push_back(color_json(c));
+  }
+  switch (kind) {
+    case TextureKind::kConstant:
+      break;
+    case TextureKind::kNoise:
+    case TextureKind::kFractal:
+      j["scale"] = scale;
+      j["contrast"] = contrast;
+      if (kind == TextureKind::kFractal) j["beta"] = beta;
+      if (seed) j["seed"] = *seed;
+      break;
+    case TextureKind::kStripes:
+      j["period"] = period;
+      j["duty"] = duty;
+      j["profile"] = profile;
+      j["phase"] = phase;
+      j["angle"] = angle;
+      break;
+    case TextureKind::kChecker:
+      j["size"] = size;
+      j["angle"] = angle;
+      break;
+    case TextureKind::kGradient:
+      j["profile"] = profile;
+      j["angle"] = angle;
+      if (center) j["center"] = point_json(*center);
+      if (length) j["length"] = *length;
+      break;
+    case TextureKind::kImage:
+      j["path"] = path;
+      j["fit"] = fit;
+      break;
+  }
+  return j;
+}
+
+void TextureSpec::validate(const std::string& json_path) const {
+  if (kind != TextureKind::kImage) {
+    if (colors.empty()) fail(json_path + ".colors", "needs at least one colour");
+    for (size_t i = 0; i < colors.size(); ++i) {
+      check_color(colors[i], json_path + ".colors[" + std::to_string(i) + "]");
+    }
+  }
+  switch (kind) {
+    case TextureKind::kConstant:
+      break;
+    case TextureKind::kNoise:
+    case TextureKind::kFractal:
+      check_range(scale, 0.5, 1e5, json_path + ".scale");
+      check_range(contrast, 0.0, 100.0, json_path + ".contrast");
+      check_range(beta, 0.0, 6.0, json_path + ".beta");
+      break;
+    case TextureKind::kStripes:
+      check_range(period, 1.0, 1e6, json_path + ".period");
+      check_range(duty, 0.0, 1.0, json_path + ".duty");
+      if (profile != "square" && profile != "sine") {
+        fail(json_path + ".profile",
+             "stripes profile must be 'square' or 'sine', got '" + profile + "'");
+      }
+      break;
+    case TextureKind::kChecker:
+      check_range(size, 0.5, 1e6, json_path + ".size");
+      break;
+    case TextureKind::kGradient:
+      if (profile != "linear" && profile != "radial") {
+        fail(json_path + ".profile",
+             "gradient profile must be 'linear' or 'radial', got '" + profile + "'");
+      }
+      if (length) check_positive(*length, json_path + ".length");
+      break;
+    case TextureKind::kImage:
+      if (path.empty()) fail(json_path + ".path", "image texture needs a file path");
+      if (fit != "cover" && fit != "stretch") {
+        fail(json_path + ".fit", "image fit must be 'cover' or 'stretch', got '" + fit + "'");
+      }
+      break;
+  }
+}
+
+// ---- ShapeSpec ------------------------------------------------------------------------------
+
+ShapeSpec ShapeSpec::defaults(ShapeKind kind) {
+  ShapeSpec s;
+  s.kind = kind;
+  return s;
+}
+
+ShapeSpec ShapeSpec::from_json(JsonReader& r) {
+  std::string kind_name = "full";
+  read_string(r, "kind", kind_name);
+  ShapeSpec s = defaults(kind_from_string(kind_name, kShapeKinds, "shape", r.path_of("kind")));
+  auto require = [&](bool found, const std::string& key) {
+    if (!found) fail(r.path_of(key), "required key for a " + kind_name + " shape is missing");
+  };
+  Point c;
+  switch (s.kind) {
+    case ShapeKind::kFull:
+      break;
+    case ShapeKind::kRectangle: {
+      if (read_point(r, "center", c)) s.center = c;
+      json size;
+      require(read_raw(r, "size", size), "size");
+      const Point wh = parse_point(size, r.path_of("size"));
+      s.width = wh.x;
+      s.height = wh.y;
+      read_double(r, "angle", s.angle);
+      break;
+    }
+    case ShapeKind::kDisk:
+      if (read_point(r, "center", c)) s.center = c;
+      require(read_double(r, "radius", s.radius), "radius");
+      break;
+    case ShapeKind::kPolygon: {
+      json points;
+      require(read_raw(r, "points", points), "points");
+      if (!points.is_array()) fail(r.path_of("points"), "expected a list of [x, y] points");
+      for (size_t i = 0; i < points.size(); ++i) {
+        s.points.push_back(
+            parse_point(points[i], r.path_of("points") + "[" + std::to_string(i) + "]"));
+      }
+      break;
+    }
+    case ShapeKind::kBars:
+      if (read_point(r, "center", c)) s.center = c;
+      require(read_double(r, "width", s.width), "width");
+      require(read_double(r, "period", s.period), "period");
+      read_double(r, "angle", s.angle);
+      read_int(r, "count", s.count);
+      break;
+  }
+  if (s.kind != ShapeKind::kFull) {
+    read_double(r, "softness", s.softness);
+    read_bool(r, "invert", s.invert);
+  }
+  r.finish();
+  s.validate(r.path());
+  return s;
+}
+
+json ShapeSpec::to_json() const {
+  json j;
+  j["kind"] = to_string(kind);
+  switch (kind) {
+    case ShapeKind::kFull:
+      return j;
+    case ShapeKind::kRectangle:
+      if (center) j["center"] = point_json(*center);
+      j["size"] = json::array({width, height});
+      j["angle"] = angle;
+      break;
+    case ShapeKind::kDisk:
+      if (center) j["center"] = point_json(*center);
+      j["radius"] = radius;
+      break;
+    case ShapeKind::kPolygon:
+      j["points"] = json::array();
+      for (const auto& p : points) j["points"].push_back(point_json(p));
+      break;
+    case ShapeKind::kBars:
+      if (center) j["center"] = point_json(*center);
+      j["width"] = width;
+      j["period"] = period;
+      j["angle"] = angle;
+      j["count"] = count;
+      break;
+  }
+  j["softness"] = softness;
+  j["invert"] = invert;
+  return j;
+}
+
+void ShapeSpec::validate(const std::string& path) const {
+  switch (kind) {
+    case ShapeKind::kFull:
+      return;
+    case ShapeKind::kRectangle:
+      check_positive(width, path + ".size");
+      check_positive(height, path + ".size");
+      break;
+    case ShapeKind::kDisk:
+      check_positive(radius, path + ".radius");
+      break;
+    case ShapeKind::kPolygon:
+      if (points.size() < 3) fail(path + ".points", "a polygon needs at least 3 points");
+      break;
+    case ShapeKind::kBars:
+      check_positive(width, path + ".width");
+      check_positive(period, path + ".period");
+      if (width >= period) fail(path + ".width", "bars must be narrower than their period");
+      if (count < 0) fail(path + ".count", "must be >= 0 (0: unlimited)");
+      break;
+  }
+  check_range(softness, 0.05, 1e4, path + ".softness");
+}
+
+// ---- LayerSpec ------------------------------------------------------------------------------
+
+LayerSpec LayerSpec::from_json(JsonReader& r) {
+  LayerSpec layer;
+  read_string(r, "name", layer.name);
+  {
+    JsonReader tex = r.child("texture");
+    layer.texture = TextureSpec::from_json(tex);
+  }
+  json shape;
+  if (read_raw(r, "shape", shape)) {
+    JsonReader sr(shape, r.path_of("shape"));
+    layer.shape = ShapeSpec::from_json(sr);
+  }
+  read_double(r, "disparity", layer.disparity);
+  json gradient;
+  if (read_raw(r, "disparity_gradient", gradient)) {
+    layer.disparity_gradient = parse_point(gradient, r.path_of("disparity_gradient"));
+  }
+  read_double(r, "opacity", layer.opacity);
+  read_double(r, "gloss", layer.gloss);
+  r.finish();
+  layer.validate(r.path());
+  return layer;
+}
+
+json LayerSpec::to_json() const {
+  json j;
+  if (!name.empty()) j["name"] = name;
+  j["texture"] = texture.to_json();
+  j["shape"] = shape.to_json();
+  j["disparity"] = disparity;
+  if (slanted()) j["disparity_gradient"] = point_json(disparity_gradient);
+  j["opacity"] = opacity;
+  j["gloss"] = gloss;
+  return j;
+}
+
+void LayerSpec::validate(const std::string& path) const {
+  texture.validate(path + ".texture");
+  shape.validate(path + ".shape");
+  if (!std::isfinite(disparity)) fail(path + ".disparity", "must be finite");
+  check_range(opacity, 0.0, 1.0, path + ".opacity");
+  check_range(gloss, 0.0, 10.0, path + ".gloss");
+}
+
+// ---- Effects --------------------------------------------------------------------------------
+
+SpecularSpec SpecularSpec::from_json(JsonReader& r) {
+  SpecularSpec s;
+  read_int(r, "count", s.count);
+  read_double(r, "strength", s.strength);
+  read_double(r, "sigma", s.sigma);
+  read_double(r, "lobe", s.lobe);
+  read_double(r, "disparity_offset", s.disparity_offset);
+  json color;
+  if (read_raw(r, "color", color)) s.color = parse_color(color, r.path_of("color"));
+  uint64_t seed = 0;
+  if (read_seed(r, "seed", seed)) s.seed = seed;
+  r.finish();
+  s.validate(r.path());
+  return s;
+}
+
+json SpecularSpec::to_json() const {
+  json j = {{"count", count},
+            {"strength", strength},
+            {"sigma", sigma},
+            {"lobe", lobe},
+            {"disparity_offset", disparity_offset},
+            {"color", color_json(color)}};
+  if (seed) j["seed"] = *seed;
+  return j;
+}
+
+void SpecularSpec::validate(const std::string& path) const {
+  if (count < 0 || count > 1000) fail(path + ".count", "must lie in [0, 1000]");
+  check_range(strength, 0.0, 10.0, path + ".strength");
+  check_range(sigma, 0.1, 1e4, path + ".sigma");
+  check_range(lobe, 0.05, 1e3, path + ".lobe");
+  if (!std::isfinite(disparity_offset)) fail(path + ".disparity_offset", "must be finite");
+  check_color(color, path + ".color");
+}
+
+VignettingSpec VignettingSpec::from_json(JsonReader& r) {
+  VignettingSpec v;
+  read_double(r, "strength", v.strength);
+  read_double(r, "power", v.power);
+  read_double(r, "angular", v.angular);
+  read_double(r, "shift", v.shift);
+  r.finish();
+  v.validate(r.path());
+  return v;
+}
+
+json VignettingSpec::to_json() const {
+  return {{"strength", strength}, {"power", power}, {"angular", angular}, {"shift", shift}};
+}
+
+void VignettingSpec::validate(const std::string& path) const {
+  check_range(strength, 0.0, 1.0, path + ".strength");
+  check_range(power, 0.1, 16.0, path + ".power");
+  check_range(angular, 0.0, 1.0, path + ".angular");
+  check_range(shift, -1.0, 1.0, path + ".shift");
+}
+
+DefocusSpec DefocusSpec::from_json(JsonReader& r) {
+  DefocusSpec d;
+  read_double(r, "focus_disparity", d.focus_disparity);
+  read_double(r, "blur", d.blur);
+  read_double(r, "max_sigma", d.max_sigma);
+  r.finish();
+  d.validate(r.path());
+  return d;
+}
+
+json DefocusSpec::to_json() const {
+  return {{"focus_disparity", focus_disparity}, {"blur", blur}, {"max_sigma", max_sigma}};
+}
+
+void DefocusSpec::validate(const std::string& path) const {
+  if (!std::isfinite(focus_disparity)) fail(path + ".focus_disparity", "must be finite");
+  check_range(blur, 0.0, 100.0, path + ".blur");
+  check_range(max_sigma, 0.0, 64.0, path + ".max_sigma");
+}
+
+// ---- SceneSpec ------------------------------------------------------------------------------
+
+SceneSpec SceneSpec::from_json(const json& doc) {
+  JsonReader r(doc, "$");
+  SceneSpec s;
+  read_string(r, "name", s.name);
+  read_string(r, "description", s.description);
+  if (!read_int(r, "height", s.height)) fail("$.height", "required key is missing");
+  if (!read_int(r, "width", s.width)) fail("$.width", "required key is missing");
+  read_int(r, "rows", s.rows);
+  read_int(r, "cols", s.cols);
+  read_bool(r, "color", s.color);
+  read_seed(r, "seed", s.seed);
+  json layers;
+  if (!read_raw(r, "layers", layers)) fail("$.layers", "required key is missing");
+  if (!layers.is_array() || layers.empty()) fail("$.layers", "expected a non-empty list of layers");
+  for (size_t i = 0; i < layers.size(); ++i) {
+    JsonReader lr(layers[i], "$.layers[" + std::to_string(i) + "]");
+    s.layers.push_back(LayerSpec::from_json(lr));
+  }
+  if (r.has("effects")) {
+    JsonReader er = r.child("effects");
+    if (er.has("specular")) {
+      JsonReader x = er.child("specular");
+      s.specular = SpecularSpec::from_json(x);
+    }
+    if (er.has("vignetting")) {
+      JsonReader x = er.child("vignetting");
+      s.vignetting = VignettingSpec::from_json(x);
+    }
+    if (er.has("defocus")) {
+      JsonReader x = er.child("defocus");
+      s.defocus = DefocusSpec::from_json(x);
+    }
+    er.finish();
+  }
+  json sensor;
+  if (read_raw(r, "sensor", sensor)) {
+    if (!sensor.is_object()) fail("$.sensor", "expected a JSON object, got " + sensor.dump());
+    s.sensor = sensor;
+  }
+  json rendered;
+  read_raw(r, "rendered", rendered);  // a record written by `lfnet render`, not an input
+  r.finish();
+  s.validate();
+  return s;
+}
+
+json SceneSpec::to_json() const {
+  json j;
+  if (!name.empty()) j["name"] = name;
+  if (!description.empty()) j["description"] = description;
+  j["height"] = height;
+  j["width"] = width;
+  j["rows"] = rows;
+  j["cols"] = cols;
+  j["color"] = color;
+  j["seed"] = seed;
+  j["layers"] = json::array();
+  for (const auto& layer : layers) j["layers"].push_back(layer.to_json());
+  if (specular || vignetting || defocus) {
+    json effects = json::object();
+    if (specular) effects["specular"] = specular->to_json();
+    if (vignetting) effects["vignetting"] = vignetting->to_json();
+    if (defocus) effects["defocus"] = defocus->to_json();
+    j["effects"] = effects;
+  }
+  if (sensor) j["sensor"] = *sensor;
+  return j;
+}
+
+void SceneSpec::validate() const {
+  if (height < 1 || height > 16384) fail("$.height", "must lie in [1, 16384]");
+  if (width < 1 || width > 16384) fail("$.width", "must lie in [1, 16384]");
+  if (rows < 1 || rows > 64) fail("$.rows", "must lie in [1, 64]");
+  if (cols < 1 || cols > 64) fail("$.cols", "must lie in [1, 64]");
+  if (layers.empty()) fail("$.layers", "a scene needs at least one layer");
+  const double umax = (rows - 1) / 2.0;
+  const double vmax = (cols - 1) / 2.0;
+  for (size_t i = 0; i < layers.size(); ++i) {
+    const std::string path = "$.layers[" + std::to_string(i) + "]";
+    layers[i].validate(path);
+    const auto& g = layers[i].disparity_gradient;
+    // The inverse warp of a slanted plane divides by 1 + g . s; keep it well away from zero.
+    if (std::abs(g.x) * vmax + std::abs(g.y) * umax > 0.5) {
+      fail(path + ".disparity_gradient",
+           "too steep: |gx| (cols-1)/2 + |gy| (rows-1)/2 must stay <= 0.5");
+    }
+  }
+  const double max_shift = max_abs_disparity() * std::max(umax, vmax);
+  if (max_shift > 1024.0) {
+    fail("$.layers", "disparities shift views by up to " + std::to_string(max_shift) +
+                         " px; the limit is 1024");
+  }
+  if (specular) specular->validate("$.effects.specular");
+  if (vignetting) vignetting->validate("$.effects.vignetting");
+  if (defocus) defocus->validate("$.effects.defocus");
+  if (sensor && !sensor->is_object()) fail("$.sensor", "expected a JSON object");
+}
+
+double SceneSpec::max_abs_disparity() const {
+  double m = 0.0;
+  for (const auto& layer : layers) {
+    const double d = std::abs(layer.disparity) +
+                     std::abs(layer.disparity_gradient.x) * (width - 1) / 2.0 +
+                     std::abs(layer.disparity_gradient.y) * (height - 1) / 2.0;
+    m = std::max(m, d);
+  }
+  return m;
+}
+
+SceneSpec load_scene(const std::string& path) { return SceneSpec::from_json(read_json_file(path)); }
+
+}  // namespace lfnet::scene

@@ -1,0 +1,108 @@
+// lfnet render: the light field folder, disparity map, previews and resolved spec it writes.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <fstream>
+
+#include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/scene/scene.h"
+#include "support/test_support.h"
+
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+namespace fs = std::filesystem;
+
+namespace {
+
+const char* kScene = R"({"name": "cli", "height": 24, "width": 32, "rows": 3, "cols": 5, "seed": 4,
+  "layers": [{"texture": {"kind": "fractal", "scale": 16}, "disparity": -1},
+             {"texture": {"kind": "image", "path": "tex.png", "fit": "stretch"},
+              "shape": {"kind": "rectangle", "center": [16, 12], "size": [12, 8]}, "disparity": 1.5}],
+  "effects": {"vignetting": {}}, "sensor": {"gaussian": {"sigma": 0.01}}})";
+
+}  // namespace
+
+TEST_CASE("lfnet render writes the light field, disparity, previews and resolved spec",
+          "[app][scene]") {
+  lfnet::test::TempDir tmp;
+  // The image texture is loaded by the program, relative to the scene file.
+  const auto texture = torch::rand({3, 10, 14});
+  lfnet::io::write_image(tmp / "tex.png", texture, 16);
+  lfnet::write_json_file(tmp / "scene.json", nlohmann::json::parse(kScene));
+  std::string out;
+  const std::string cmd = lfnet_binary() + " --threads 1 render --scene " + (tmp / "scene.json") +
+                          " --out " + (tmp / "out");
+  REQUIRE(run_command(cmd, out) == 0);
+  CHECK(out.find("rendered cli") != std::string::npos);
+  for (const char* name : {"lf_1_1.png", "lf_3_5.png", "disparity.pfm", "grid.png", "epi_h.png",
+                           "epi_v.png", "preview.png", "scene.json"}) {
+    INFO(name);
+    CHECK(fs::exists(tmp / "out/" + std::string(name)));
+  }
+
+  // The files hold what the library renders (16-bit PNG quantisation aside).
+  lfnet::scene::RenderOptions options;
+  options.base_dir = tmp.path().string();
+  options.image_loader = [](const std::string& path) { return lfnet::io::read_image(path); };
+  const auto spec = lfnet::scene::load_scene(tmp / "scene.json");
+  const auto want = lfnet::scene::render_scene(spec, options);
+  const auto lf = lfnet::io::read_light_field(tmp / "out", 1);
+  REQUIRE(lf.shape_string() == "3x3x5x24x32");
+  lfnet::test::require_close(lf.data(), want.light_field.data(), 1.0 / 65535.0);
+  const auto disparity = lfnet::io::read_pfm(tmp / "out/disparity.pfm");
+  lfnet::test::require_close(disparity[0], want.disparity, 0.0);
+
+  // scene.json is the resolved spec plus a record of the run; it renders the same scene again.
+  const auto record = lfnet::read_json_file(tmp / "out/scene.json");
+  CHECK(record["rendered"]["effects_run"] == nlohmann::json({"occlusion", "vignetting"}));
+  CHECK(record["sensor"] == nlohmann::json::parse(R"({"gaussian": {"sigma": 0.01}})"));
+  CHECK(record["effects"]["vignetting"]["strength"] == 0.35);
+  CHECK(lfnet::scene::SceneSpec::from_json(record).to_json() == spec.to_json());
+}
+
+TEST_CASE("lfnet render refuses a non-empty folder unless forced", "[app][scene]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "out");
+  { std::ofstream(tmp / "out/notes.txt") << "keep me"; }
+  const std::string base =
+      lfnet_binary() + " --threads 1 render --random 3 --size 16x20 --out " + (tmp / "out");
+  std::string out;
+  CHECK(run_command(base, out) != 0);
+  CHECK(out.rfind("lfnet: error: ", 0) == 0);
+  CHECK(out.find("--force") != std::string::npos);
+  CHECK(std::count(out.begin(), out.end(), '\n') == 1);
+  REQUIRE(run_command(base + " --force", out) == 0);
+  REQUIRE(run_command(base + " --force --views 3x3", out) == 0);  // overwrites a 5 x 5 render
+  CHECK(fs::exists(tmp / "out/notes.txt"));                       // other files are left alone
+  CHECK(lfnet::io::read_light_field(tmp / "out", 1).shape_string() == "3x3x3x16x20");
+
+  // The random scene is the library's random_scene(3) with the options given.
+  lfnet::scene::RandomSceneOptions options;
+  options.height = 16;
+  options.width = 20;
+  options.rows = options.cols = 3;
+  const auto record = lfnet::read_json_file(tmp / "out/scene.json");
+  CHECK(lfnet::scene::SceneSpec::from_json(record).to_json() ==
+        lfnet::scene::random_scene(3, options).to_json());
+  CHECK(record["rendered"]["source"] == "random 3");
+}
+
+TEST_CASE("lfnet render reports bad scenes with their path", "[app][scene]") {
+  lfnet::test::TempDir tmp;
+  auto doc = nlohmann::json::parse(kScene);
+  doc["layers"][1]["texture"]["kind"] = "wood";
+  lfnet::write_json_file(tmp / "bad.json", doc);
+  std::string out;
+  CHECK(run_command(
+            lfnet_binary() + " render --scene " + (tmp / "bad.json") + " --out " + (tmp / "out"),
+            out) != 0);
+  CHECK(out.rfind("lfnet: error: ", 0) == 0);
+  CHECK(out.find("bad.json") != std::string::npos);
+  CHECK(out.find("$.layers[1].texture.kind") != std::string::npos);
+  CHECK(run_command(lfnet_binary() + " render --out " + (tmp / "o"), out) != 0);
+  CHECK(out.find("exactly one of --scene") != std::string::npos);
+  CHECK(run_command(lfnet_binary() + " render --random 1 --size 10by10 --out " + (tmp / "o"),
+                    out) != 0);
+  CHECK(out.find("--size") != std::string::npos);
+}
