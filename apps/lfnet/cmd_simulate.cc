@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include "command.h"
 #include "lfnet/core/error.h"
@@ -21,6 +22,8 @@
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
 #include "lfnet/optics/weights_image.h"
+#include "lfnet/scene/render.h"
+#include "lfnet/scene/scene_spec.h"
 
 namespace fs = std::filesystem;
 
@@ -30,6 +33,7 @@ namespace {
 
 struct SimulateArgs {
   std::string lf;             // light-field folder
+  std::string scene;          // or a scene spec to render
   std::string phi = "asp:2";  // NAME[:N] or PHI.json
   std::string mode = "sensor";
   double noise = -1;  // < 0: not given
@@ -50,13 +54,31 @@ struct Input {
   LightField lf;
   nlohmann::json source;
   nlohmann::json views;  // the angular window in the source grid, 1-based inclusive
+  std::optional<nlohmann::json> scene_effects;  // a scene's own sensor block, if it names one
 };
 
 // The light field to code: read, windowed, grey unless --color. The one step that a scene
 // renderer (--scene SCENE.json) replaces.
 Input load_input(const SimulateArgs& args) {
   Input in;
-  LightField lf = io::read_light_field(args.lf);
+  LightField lf;
+  if (!args.scene.empty()) {
+    scene::SceneSpec spec;
+    try {
+      spec = scene::load_scene(args.scene);
+    } catch (const ConfigError& e) {
+      throw ConfigError(args.scene + ": " + e.what());
+    }
+    scene::RenderOptions render;
+    render.image_loader = [](const std::string& path) { return io::read_image(path); };
+    render.base_dir = fs::path(args.scene).parent_path().string();
+    lf = scene::render_scene(spec, render).light_field;
+    in.scene_effects = spec.sensor;
+    in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}};
+  } else {
+    lf = io::read_light_field(args.lf);
+    in.source = {{"kind", "light_field"}, {"path", fs::absolute(args.lf).string()}};
+  }
   AngularRange ru, rv;
   if (args.views.empty()) {
     const int64_t n = 5;
@@ -78,7 +100,6 @@ Input load_input(const SimulateArgs& args) {
     spdlog::warn("--color given but {} is grey: simulating one channel", args.lf);
   }
   in.lf = lf;
-  in.source = {{"kind", "light_field"}, {"path", fs::absolute(args.lf).string()}};
   return in;
 }
 
@@ -106,8 +127,11 @@ optics::PhiSpec resolve_phi(const std::string& arg, int64_t rows, int64_t cols) 
   return spec;
 }
 
-optics::SensorOptions resolve_effects(const SimulateArgs& args) {
+optics::SensorOptions resolve_effects(const SimulateArgs& args, const Input& input) {
   optics::SensorOptions effects;
+  if (args.effects.empty() && input.scene_effects) {
+    effects = optics::SensorOptions::from_json(*input.scene_effects, args.scene + ":$.sensor");
+  }
   if (!args.effects.empty()) {
     effects = optics::SensorOptions::from_json(read_json_file(args.effects), args.effects + ":$");
   }
@@ -247,11 +271,14 @@ void run_simulate(const SimulateArgs& args) {
   const auto mode = optics::parse_simulation_mode(args.mode);
   LFNET_CHECK_AS(ConfigError, args.patch >= 1 && args.stride >= 1,
                  "--patch and --stride must be >= 1");
-  const bool simulate = !args.lf.empty() || !args.out.empty();
+  const bool simulate = !args.lf.empty() || !args.scene.empty() || !args.out.empty();
+  LFNET_CHECK_AS(ConfigError, args.lf.empty() || args.scene.empty(),
+                 "give either --lf DIR or --scene SCENE.json, not both");
   LFNET_CHECK_AS(ConfigError, simulate || args.describe || !args.plot_weights.empty(),
                  "nothing to do: give --lf and --out to simulate, or --describe / "
                  "--plot-weights DIR");
-  LFNET_CHECK_AS(ConfigError, !simulate || !args.lf.empty(), "--lf DIR is required to simulate");
+  LFNET_CHECK_AS(ConfigError, !simulate || !args.lf.empty() || !args.scene.empty(),
+                 "--lf DIR or --scene SCENE.json is required to simulate");
   LFNET_CHECK_AS(ConfigError, !simulate || !args.out.empty(), "--out DIR is required to simulate");
 
   Input input;
@@ -277,7 +304,7 @@ void run_simulate(const SimulateArgs& args) {
   }
   if (!simulate) return;
 
-  const auto effects = resolve_effects(args);
+  const auto effects = resolve_effects(args, input);
   const auto& lf = input.lf;
   nlohmann::json meta = {
       {"format", io::kAcquisitionFormat},
@@ -351,6 +378,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
       "simulate", "Simulate coded capture of a light field with a Phi model and sensor effects");
   auto args = std::make_shared<SimulateArgs>();
   cmd->add_option("--lf", args->lf, "light field folder of sub-aperture images");
+  cmd->add_option("--scene", args->scene, "procedural scene spec to render and simulate (configs/scenes)");
   cmd->add_option("--phi", args->phi,
                   "Phi model NAME[:N] (asp, mask, aperture, random, lenslet) or a PHI.json spec")
       ->capture_default_str();

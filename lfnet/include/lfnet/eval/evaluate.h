@@ -1,0 +1,46 @@
+// Simulate-then-reconstruct evaluation of a method on a light field with known truth.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <torch/types.h>
+
+#include <cstdint>
+#include <string>
+
+#include "lfnet/core/light_field.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/optics/sensor.h"
+#include "lfnet/recon/reconstruct.h"
+
+namespace lfnet::eval {
+
+// Options of one evaluation.
+struct EvalOptions {
+  // sensor: crops of one sensor image; per_patch: the paper's protocol.
+  optics::SimulationMode mode = optics::SimulationMode::kSensor;
+  optics::SensorOptions effects;  // noise and other sensor effects; none by default
+  uint64_t seed = 0;              // noise seed
+  recon::ReconstructOptions reconstruct;  // stride, patch size, batch, window
+};
+
+// The outcome of one evaluation, as `lfnet evaluate --json` writes it.
+struct EvalResult {
+  torch::Tensor estimate;  // (1, U, V, H, W)
+  nlohmann::json record;   // psnr_db, ssim, seconds, patches, per_view_psnr_db, ...
+};
+
+// Simulates measurements of the grey light field `truth` with `phi`, reconstructs them with
+// `solver` and scores the result. `method` names the solver in the record.
+EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::string& method,
+                    const recon::PatchSolver& solver, const EvalOptions& options,
+                    const recon::ProgressCallback& progress = {});
+
+// The no-parallax baseline: every view set to the angular mean of the truth.
+EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
+                                const EvalOptions& options);
+
+// The metric fields of a record: psnr_db, ssim, per_view_psnr_db (U x V).
+nlohmann::json score(const LightField& estimate, const LightField& truth);
+
+}  // namespace lfnet::eval
