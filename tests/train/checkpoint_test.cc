@@ -224,4 +224,9 @@ TEST_CASE("a default-sized checkpoint with Adam state stays under 10 MB", "[trai
   auto ck = lfnet::train::load_checkpoint(path);
   CHECK(ck.optimizer.size() == 3 * net->parameters().size());
   CHECK(torch::equal(ck.model.at("phi"), net->phi));
+  // best.ckpt keeps the model only.
+  const auto best = lfnet::train::best_checkpoint_path(dir.path().string());
+  CHECK(std::filesystem::file_size(best) < 4'000'000);
+  CHECK(lfnet::train::load_checkpoint(best).optimizer.empty());
+  CHECK_THROWS_WITH(trainer.resume(best), Catch::Contains("no optimizer state"));
 }

@@ -381,3 +381,36 @@ TEST_CASE("Phi switching carries the autoencoder's first layer to the new Phi",
   CHECK_THROWS_WITH(fourth.init_from(lfnet::train::last_checkpoint_path(dir.path().string())),
                     Catch::Contains("ae.fc3.weight"));
 }
+
+// Not run by default: train_tests "[experiment]" prints the validation PSNR of each residual
+// base next to the pseudo-inverse alone, on the synthetic patches (docs/training.md).
+TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
+  auto patches = lfnet::test::smooth_patches(3000, lfnet::test::small_net_options().patch, 40);
+  for (const int64_t n : {1, 2}) {
+    auto base = lfnet::test::small_net_options("net");
+    base.measurements = n;
+    auto phi = lfnet::test::gaussian_phi(1, base.measurement_size(), base.patch.size(), 41);
+    auto source = lfnet::test::make_source(patches, phi, 42);
+    {
+      // The pseudo-inverse alone: a net whose branches output zero, plus the pinv base.
+      auto o = lfnet::test::small_net_options("ae");
+      o.measurements = n;
+      o.residual = "pinv";
+      auto net = make_net(o, phi, 43);
+      torch::NoGradGuard no_grad;
+      for (auto& p : net->ae->parameters()) p.zero_();
+      Trainer t(net, quick_options("ae", "", 1),
+                run_info(lfnet::test::synthetic_phi_spec("random", n, 41)));
+      WARN("N = " << n << ": pinv alone " << t.evaluate(*source).psnr_db << " dB");
+    }
+    for (const std::string residual : {"none", "pinv", "adjoint"}) {
+      auto o = base;
+      o.residual = residual;
+      Trainer t(make_net(o, phi, 44), quick_options("joint", "", 12),
+                run_info(lfnet::test::synthetic_phi_spec("random", n, 41)));
+      auto records = t.fit(*source);
+      WARN("N = " << n << ": residual " << residual << ": " << records.back().val_psnr_db
+                  << " dB after 12 epochs");
+    }
+  }
+}

@@ -4,6 +4,7 @@
 #include <torch/torch.h>
 
 #include <cmath>
+#include <vector>
 
 #include "lfnet/core/error.h"
 
@@ -130,9 +131,14 @@ torch::Tensor fused_input(const torch::Tensor& x, const torch::Tensor& weight,
   return conv3d(cols, wk, bias, p).view(out_shape);
 }
 
+// oneDNN's Conv3d is efficient when both channel counts are moderate and poor when one side
+// has a single channel; stacking the u-offsets onto that side (K channels) is what helps
+// there. Measured on a 2-core AVX-512 CPU (docs/training.md, section 2).
 Conv4dAlgorithm resolve(Conv4dAlgorithm algorithm, int64_t cin, int64_t cout) {
   if (algorithm != Conv4dAlgorithm::kAuto) return algorithm;
-  return Conv4dAlgorithm::kFusedInput;
+  if (cin == 1) return Conv4dAlgorithm::kFusedInput;
+  if (cout == 1) return Conv4dAlgorithm::kFusedOutput;
+  return Conv4dAlgorithm::kStacked;
 }
 
 }  // namespace

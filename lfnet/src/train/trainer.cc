@@ -348,6 +348,10 @@ void Trainer::resume(const std::string& path) {
     throw CheckpointError(what + " has other Phi matrices than this run although the Phi spec "
                           "is the same (did the Phi implementation change?); finetune with --init");
   }
+  if (ck.optimizer.empty() && ck.training.step > 0) {
+    throw CheckpointError(what + " holds no optimizer state (best.ckpt keeps the model only); "
+                          "resume from last.ckpt, or finetune from it with --init");
+  }
   load_net_state(net_, ck.model, what);
   load_adam_state(*optimizer_, *net_, ck.optimizer, what);
   state_ = ck.training;
@@ -592,7 +596,13 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
       const auto ck = checkpoint();
       save_checkpoint(ck, last_checkpoint_path(options_.out_dir));
       last_written_ = last_checkpoint_path(options_.out_dir);
-      if (r.best) save_checkpoint(ck, best_checkpoint_path(options_.out_dir));
+      if (r.best) {
+        // best.ckpt is the model to use or finetune, which starts a fresh optimizer: without
+        // the Adam moments it is a third of the size. Resuming reads last.ckpt.
+        auto model_only = ck;
+        model_only.optimizer.clear();
+        save_checkpoint(model_only, best_checkpoint_path(options_.out_dir));
+      }
     }
     records.push_back(r);
     if (hooks.on_epoch) hooks.on_epoch(r);

@@ -50,7 +50,9 @@ struct TrainerOptions {
   // batch, at most max_skipped_batches per epoch. Diverged weights always stop.
   std::string on_nonfinite = "stop";
   int64_t max_skipped_batches = 10;
-  std::string out_dir;  // last.ckpt and best.ckpt go here ("" writes none)
+  // last.ckpt (everything, for resume) is written after every epoch, best.ckpt (the model of
+  // the best validation PSNR, without Adam moments) whenever it improves; "" writes none.
+  std::string out_dir;
   bool progress = true;  // a progress bar with ETA and loss on stderr
 
   static TrainerOptions from_json(const nlohmann::json& j, const std::string& path = "$");
