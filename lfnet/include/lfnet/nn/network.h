@@ -1,0 +1,183 @@
+// The two-branch reconstruction network of Gupta et al. 2017 (DESIGN section 4): an
+// autoencoder branch on the measurement vector and a 4D CNN branch on Phi^T y, averaged.
+//
+// The Phi^T step is part of the net: it holds the patch matrices of its Phi as the buffer
+// `phi`, so a saved or exported model is self-contained. Registered names are the checkpoint
+// schema:
+//   phi            (P, N h w, U V h w)  stacked patch matrices, one per phase (buffer)
+//   adjoint_scale  (P)                  scale of Phi^T y per phase (buffer, derived from phi)
+//   base           (P, N h w, U V h w)  Tikhonov pseudo-inverses (buffer, residual "pinv" only)
+//   ae.fc1 .. ae.fc6 (.weight, .bias), ae.conv (.weight, .bias)
+//   cnn.conv1 .. cnn.conv<depth> (.weight, .bias)
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <torch/nn/module.h>
+#include <torch/nn/modules/linear.h>
+#include <torch/nn/pimpl.h>
+#include <torch/types.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/json.h"
+#include "lfnet/nn/conv4d.h"
+
+namespace lfnet::nn {
+
+// The size of a light-field patch (U, V, h, w) = (rows, cols, height, width).
+struct PatchShape {
+  int64_t rows = 5;    // U: angular rows
+  int64_t cols = 5;    // V: angular columns
+  int64_t height = 9;  // h: pixels
+  int64_t width = 9;   // w: pixels
+
+  int64_t pixels() const { return height * width; }
+  int64_t size() const { return rows * cols * height * width; }  // 2025 by default
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+  bool operator==(const PatchShape& o) const {
+    return rows == o.rows && cols == o.cols && height == o.height && width == o.width;
+  }
+};
+
+struct AutoencoderOptions {
+  // Output widths of fc1 .. fc5, alternately expanding and contracting; fc6 maps the last to
+  // U V h w. The paper does not give widths. These keep the whole default checkpoint (model
+  // and Adam moments, 3 x 4 bytes per parameter) under 10 MB: fc6 alone is 256 x 2025.
+  std::vector<int64_t> hidden = {256, 128, 256, 128, 256};
+  // What fc1 reads. "measurements": the measurement vector y (N h w values), as in the paper.
+  // "adjoint": the scaled Phi^T y (U V h w values), which carries the patch's phase (periodic
+  // masks) and does not change width when N does.
+  std::string input = "measurements";
+
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+};
+
+struct CnnOptions {
+  int64_t channels = 16;  // hidden channels of the 4D CNN (1 in, 1 out)
+  int64_t depth = 5;      // Conv4d layers, ReLU between (the paper's five)
+
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+};
+
+struct NetworkOptions {
+  PatchShape patch;               // the patch the net reconstructs
+  int64_t measurements = 2;       // N: measurement channels per pixel
+  std::string branches = "net";   // net (both branches, averaged), ae or cnn (one branch)
+  int64_t kernel = 3;             // Conv4d kernel size (odd)
+  std::string conv_algorithm = "auto";  // Conv4d algorithm: auto, stacked, fused_output, fused_input
+  AutoencoderOptions ae;
+  CnnOptions cnn;
+  // Weights of the (ae, cnn) outputs in the two-branch head; they apply to "net" only.
+  std::vector<double> head_weights = {0.5, 0.5};
+  // A fixed linear estimate added to the output, so the branches learn a correction:
+  // "none" (the paper), "pinv" (Tikhonov pseudo-inverse, lambda = pinv_lambda) or "adjoint"
+  // (the scaled Phi^T y). Off by default: DESIGN section 9 saw no gain from it.
+  std::string residual = "none";
+  double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
+
+  // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
+  static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+  // Throws ConfigError naming the bad field.
+  void validate() const;
+
+  bool has_ae() const { return branches == "net" || branches == "ae"; }
+  bool has_cnn() const { return branches == "net" || branches == "cnn"; }
+  int64_t measurement_size() const { return measurements * patch.pixels(); }  // N h w
+  // Width of the autoencoder's input: N h w or U V h w.
+  int64_t ae_input_size() const;
+};
+
+// Autoencoder branch: six fully connected layers with ReLU between, reshaped to a patch, then
+// one Conv4d (1 -> 1 channel). No ReLU after fc6: its output is a light-field estimate.
+class AutoencoderBranchImpl : public torch::nn::Module {
+ public:
+  explicit AutoencoderBranchImpl(const NetworkOptions& options);
+  // (B, ae_input_size) -> (B, 1, U, V, h, w).
+  torch::Tensor forward(const torch::Tensor& input);
+
+  std::vector<torch::nn::Linear> fc;  // fc1 .. fc6
+  Conv4d conv{nullptr};
+
+ private:
+  PatchShape patch_;
+};
+TORCH_MODULE(AutoencoderBranch);
+
+// 4D CNN branch: `depth` Conv4d layers 1 -> C -> ... -> C -> 1 with ReLU between, run in the
+// u-major layout so stacked layers need no transposes.
+class CnnBranchImpl : public torch::nn::Module {
+ public:
+  explicit CnnBranchImpl(const NetworkOptions& options);
+  // (B, 1, U, V, h, w) -> (B, 1, U, V, h, w).
+  torch::Tensor forward(const torch::Tensor& x);
+
+  std::vector<Conv4d> convs;  // conv1 .. conv<depth>
+};
+TORCH_MODULE(CnnBranch);
+
+// Everything one forward pass computes, for analysis and tests.
+struct NetworkOutputs {
+  torch::Tensor output;  // (B, 1, U, V, h, w): the reconstruction
+  torch::Tensor ae;      // the autoencoder branch's output (undefined without the branch)
+  torch::Tensor cnn;     // the CNN branch's output (undefined without the branch)
+  torch::Tensor base;    // the residual base (undefined when residual is "none")
+};
+
+// The reconstruction network. Construct, then set_phi() with the Phi's patch matrices
+// (until then `phi` is a zero matrix of one phase).
+class LightFieldNetImpl : public torch::nn::Module {
+ public:
+  explicit LightFieldNetImpl(NetworkOptions options);
+
+  // y: (B, N h w) measurement vectors; phase: (B) int64 indices into the phi stack, may be
+  // undefined when there is one phase. Returns (B, 1, U, V, h, w).
+  torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {});
+  NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase = {});
+
+  // Replaces the Phi: `stack` is (P, N h w, U V h w) for any P >= 1. Recomputes the derived
+  // buffers (adjoint_scale, base). Parameters are left alone (see remap_phi for fc1).
+  void set_phi(const torch::Tensor& stack);
+
+  // The scaled adjoint s_p Phi_p^T y as (B, U V h w), s_p the least-squares scale that maps
+  // Phi_p^T Phi_p 1 closest to 1 (so a flat grey patch comes back near its own level).
+  torch::Tensor adjoint(const torch::Tensor& y, const torch::Tensor& phase = {}) const;
+
+  int64_t phases() const { return phi.size(0); }
+  const NetworkOptions& options() const { return options_; }
+
+  AutoencoderBranch ae{nullptr};
+  CnnBranch cnn{nullptr};
+  torch::Tensor phi, adjoint_scale, base;
+
+ private:
+  torch::Tensor check_phase(const torch::Tensor& y, const torch::Tensor& phase) const;
+  NetworkOptions options_;
+};
+TORCH_MODULE(LightFieldNet);
+
+// y (B, M) times the phase's matrix of `stack` (P, M, D): (B, D). Groups the batch by phase.
+torch::Tensor apply_phase_stack(const torch::Tensor& y, const torch::Tensor& phase,
+                                const torch::Tensor& stack);
+
+// Tikhonov pseudo-inverses in the layout of the stack: (P, M, D) -> (P, M, D) with
+// base_p = (Phi_p Phi_p^T + lambda I)^-1 Phi_p, so y base_p = (Phi_p^+ y)^T. Float64 inside.
+torch::Tensor pinv_stack(const torch::Tensor& stack, double lambda);
+
+// Weights of a layer that reads measurements of Phi A, carried over to Phi B (Phi switching):
+// W_B = W_A Phi_A Phi_B^+ with Phi_B^+ = Phi_B^T (Phi_B Phi_B^T + lambda I)^-1, so that
+// W_B Phi_B l = W_A Phi_A l for every light-field patch l in the row space of Phi_B.
+// weight (H, M_A), phi_a (M_A, D), phi_b (M_B, D) -> (H, M_B).
+torch::Tensor map_measurement_weights(const torch::Tensor& weight, const torch::Tensor& phi_a,
+                                      const torch::Tensor& phi_b, double lambda);
+
+// Number of trainable parameters.
+int64_t parameter_count(const torch::nn::Module& module);
+
+}  // namespace lfnet::nn

@@ -1,0 +1,185 @@
+// The training loop (DESIGN section 4, STYLE item 7): Adam with a learning-rate schedule,
+// validation PSNR every epoch, last/best checkpoints, exact resume, finetuning with Phi
+// switching, and detection of non-finite numbers. Logging plugs in through hooks.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <torch/optim/adam.h>
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/json.h"
+#include "lfnet/nn/loss.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/train/batch_source.h"
+#include "lfnet/train/checkpoint.h"
+
+namespace lfnet::train {
+
+struct LrScheduleOptions {
+  std::string name = "cosine";  // constant, step or cosine (evaluated every step)
+  int64_t step_epochs = 20;     // step: multiply by gamma every step_epochs epochs
+  double gamma = 0.1;           // step: the factor
+  double min_factor = 0.01;     // cosine: the last learning rate as a fraction of lr
+  int64_t warmup_epochs = 0;    // linear warm-up from lr / steps over this many epochs
+
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+  void validate() const;  // ConfigError naming the field
+};
+
+struct TrainerOptions {
+  std::string stage = "joint";  // ae, cnn or joint: must match the net's branches (ae, cnn, net)
+  int64_t epochs = 60;          // total epochs (the paper: about 60)
+  int64_t batch_size = 64;      // patches per step
+  // Adam. The paper used 1e-5 in Caffe; 1e-3 with the cosine decay converges within a CPU
+  // budget of a few epochs (docs/training.md).
+  double lr = 1e-3;
+  double beta1 = 0.9;
+  double beta2 = 0.999;
+  double eps = 1e-8;
+  double weight_decay = 0.0;  // L2 penalty added to the gradient (torch's Adam)
+  LrScheduleOptions schedule;
+  nn::LossOptions loss;           // weighted_l2 by default (the paper's)
+  double clip_grad_norm = 0.0;    // clip the global gradient norm to this (0: off)
+  // What a non-finite loss or gradient does: "stop" throws NumericalError; "skip" drops the
+  // batch, at most max_skipped_batches per epoch. Diverged weights always stop.
+  std::string on_nonfinite = "stop";
+  int64_t max_skipped_batches = 10;
+  // last.ckpt (everything, for resume) is written after every epoch, best.ckpt (the model of
+  // the best validation PSNR, without Adam moments) whenever it improves; "" writes none.
+  std::string out_dir;
+  bool progress = true;  // a progress bar with ETA and loss on stderr
+
+  static TrainerOptions from_json(const nlohmann::json& j, const std::string& path = "$");
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+  void validate() const;  // ConfigError naming the field
+};
+
+// The learning rate at batch `batch` of epoch `epoch` (0-based) of `batches` per epoch. A pure
+// function of its arguments, so resumed runs follow the same schedule.
+double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch,
+                     int64_t batches);
+
+// One completed epoch, given to the on_epoch hook and kept in the checkpoint's history.
+struct EpochRecord {
+  int64_t epoch = 0;            // 1-based
+  int64_t step = 0;             // optimizer steps so far
+  double lr = 0;                // learning rate at the epoch's last step
+  double train_loss = 0;        // mean loss over the epoch's trained batches
+  double val_loss = 0;          // loss over the validation set
+  double val_psnr_db = 0;       // PSNR of the validation patches, predictions clipped to [0, 1]
+  double seconds = 0;           // wall time of the epoch, validation included
+  double patches_per_s = 0;     // training throughput (forward, backward and step)
+  int64_t skipped_batches = 0;  // batches dropped for non-finite numbers
+  bool best = false;            // a new best validation PSNR (written to best.ckpt)
+
+  nlohmann::json to_json() const;
+  static EpochRecord from_json(const nlohmann::json& j);
+};
+
+// One optimizer step, for the on_step hook.
+struct StepRecord {
+  int64_t epoch = 0;  // 1-based
+  int64_t batch = 0;  // 0-based within the epoch
+  int64_t step = 0;   // optimizer steps so far
+  double loss = 0;
+  double lr = 0;
+};
+
+struct TrainerHooks {
+  std::function<void(const EpochRecord&)> on_epoch;  // after each epoch's checkpoints
+  std::function<void(const StepRecord&)> on_step;    // after each optimizer step
+  std::function<bool()> stop_requested;              // checked after each epoch
+};
+
+// Validation loss and PSNR.
+struct Evaluation {
+  double loss = 0;
+  double psnr_db = 0;
+  int64_t patches = 0;
+};
+
+// What the run is, stored in every checkpoint it writes.
+struct RunInfo {
+  nlohmann::json config = nlohmann::json::object();  // the resolved config of the run
+  nlohmann::json phi = nlohmann::json::object();     // the Phi spec of the measurements
+  std::string command_line;
+};
+
+// What initialising from a checkpoint did, parameter by parameter.
+struct InitReport {
+  std::vector<std::string> copied;         // taken as they were
+  std::vector<std::string> mapped;         // carried over to the new Phi (ae.fc1.weight)
+  std::vector<std::string> reinitialised;  // left at their fresh initialisation
+  nlohmann::json to_json() const;
+};
+
+class Trainer {
+ public:
+  // `net` must already hold the Phi of the measurements (set_phi).
+  Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run);
+
+  // Continues an interrupted run from `path` (usually last.ckpt): weights, Adam moments,
+  // schedule position, RNG and history. The architecture, Phi and stage must match; anything
+  // else is a CheckpointError.
+  void resume(const std::string& path);
+
+  // Finetuning: starts from the weights of any checkpoint (another stage, another Phi) with a
+  // fresh optimizer and history. Only parameters whose names start with `prefix` are taken
+  // ("ae." or "cnn." to take one branch). The net keeps its own Phi; when the checkpoint's Phi
+  // differs, ae.fc1.weight (which reads measurements) is mapped to the new Phi when both Phis
+  // have one phase, and re-initialised otherwise (docs/training.md). Other shape mismatches
+  // are a CheckpointError.
+  InitReport init_from(const std::string& path, const std::string& prefix = "");
+
+  // The joint stage's start: the autoencoder from one checkpoint, the CNN from another.
+  InitReport init_branches(const std::string& ae_path, const std::string& cnn_path);
+
+  // Trains until options.epochs epochs are complete (or stop_requested). Returns the records
+  // of the epochs it ran. Throws NumericalError on non-finite numbers (per on_nonfinite); the
+  // last checkpoint written stays intact.
+  std::vector<EpochRecord> fit(BatchSource& source, const TrainerHooks& hooks = {});
+
+  // Loss and PSNR on the source's validation batches.
+  Evaluation evaluate(BatchSource& source);
+
+  // The complete current state as a checkpoint.
+  Checkpoint checkpoint() const;
+
+  const TrainingState& state() const { return state_; }
+  nn::LightFieldNet net() const { return net_; }
+  const TrainerOptions& options() const { return options_; }
+
+ private:
+  void check_batch(const Batch& batch, const std::string& where) const;
+  void apply_lr(double lr);
+  [[noreturn]] void fail_nonfinite(const std::string& what, const Batch& batch, int64_t epoch,
+                                   int64_t index, double lr) const;
+  bool weights_finite() const;
+
+  nn::LightFieldNet net_;
+  TrainerOptions options_;
+  RunInfo run_;
+  std::unique_ptr<torch::optim::Adam> optimizer_;
+  nn::ReconstructionLoss loss_;
+  TrainingState state_;
+  std::string last_written_;  // the last checkpoint this run wrote, for error messages
+};
+
+// "<dir>/last.ckpt" and "<dir>/best.ckpt".
+std::string last_checkpoint_path(const std::string& dir);
+std::string best_checkpoint_path(const std::string& dir);
+
+// Adam moments by parameter name ("<name>/exp_avg", "<name>/exp_avg_sq", "<name>/step"), and
+// back. Loading checks names and shapes (CheckpointError).
+TensorMap adam_state(const torch::optim::Adam& adam, const torch::nn::Module& module);
+void load_adam_state(torch::optim::Adam& adam, const torch::nn::Module& module,
+                     const TensorMap& state, const std::string& what);
+
+}  // namespace lfnet::train

@@ -1,0 +1,105 @@
+#include "lfnet/nn/loss.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "lfnet/core/error.h"
+
+namespace lfnet::nn {
+
+torch::Tensor view_weights(int64_t rows, int64_t cols) {
+  LFNET_CHECK_AS(ConfigError, rows > 0 && cols > 0, "view_weights: the angular size must be ",
+                 "positive, got ", rows, " x ", cols);
+  const double uc = 0.5 * static_cast<double>(rows - 1);
+  const double vc = 0.5 * static_cast<double>(cols - 1);
+  auto dist = [&](int64_t u, int64_t v) {
+    return std::abs(static_cast<double>(u) - uc) + std::abs(static_cast<double>(v) - vc);
+  };
+  double d0 = std::numeric_limits<double>::infinity();
+  for (int64_t u = 0; u < rows; ++u) {
+    for (int64_t v = 0; v < cols; ++v) d0 = std::min(d0, dist(u, v));
+  }
+  auto w = torch::empty({rows, cols}, torch::kFloat64);
+  auto acc = w.accessor<double, 2>();
+  for (int64_t u = 0; u < rows; ++u) {
+    for (int64_t v = 0; v < cols; ++v) acc[u][v] = std::sqrt(1.0 + dist(u, v) - d0);
+  }
+  return w.to(torch::kFloat32);
+}
+
+LossOptions LossOptions::from_json(const nlohmann::json& j, const std::string& path) {
+  LossOptions options;
+  JsonReader reader(j, path);
+  options.read(reader);
+  reader.finish();
+  return options;
+}
+
+void LossOptions::read(JsonReader& reader) {
+  reader.get("name", name);
+  reader.get("reduction", reduction);
+  try {
+    kind();
+  } catch (const ConfigError& e) {
+    throw ConfigError(reader.path_of("name") + ": " + e.what());
+  }
+  try {
+    reduction_kind();
+  } catch (const ConfigError& e) {
+    throw ConfigError(reader.path_of("reduction") + ": " + e.what());
+  }
+}
+
+nlohmann::json LossOptions::to_json() const {
+  return {{"name", name}, {"reduction", reduction}};
+}
+
+void LossOptions::validate() const {
+  kind();
+  reduction_kind();
+}
+
+LossKind LossOptions::kind() const {
+  if (name == "weighted_l2") return LossKind::kWeightedL2;
+  if (name == "l2") return LossKind::kL2;
+  if (name == "l1") return LossKind::kL1;
+  throw ConfigError("loss name '" + name + "' is unknown (known: weighted_l2, l2, l1)");
+}
+
+LossReduction LossOptions::reduction_kind() const {
+  if (reduction == "mean") return LossReduction::kMean;
+  if (reduction == "sum") return LossReduction::kSum;
+  throw ConfigError("loss reduction '" + reduction + "' is unknown (known: mean, sum)");
+}
+
+ReconstructionLoss::ReconstructionLoss(const LossOptions& options, int64_t rows, int64_t cols)
+    : options_(options),
+      kind_(options.kind()),
+      reduction_(options.reduction_kind()),
+      rows_(rows),
+      cols_(cols) {
+  weights_ = kind_ == LossKind::kWeightedL2 ? view_weights(rows, cols)
+                                            : torch::ones({rows, cols}, torch::kFloat32);
+  weights_ = weights_.view({rows, cols, 1, 1});
+}
+
+torch::Tensor ReconstructionLoss::operator()(const torch::Tensor& prediction,
+                                             const torch::Tensor& target) const {
+  LFNET_CHECK(prediction.sizes() == target.sizes(), "loss: prediction ", prediction.sizes(),
+              " and target ", target.sizes(), " differ in shape");
+  LFNET_CHECK(prediction.dim() >= 5 && prediction.size(-4) == rows_ &&
+                  prediction.size(-3) == cols_,
+              "loss: expected patches (B, ..., ", rows_, ", ", cols_, ", h, w), got ",
+              prediction.sizes());
+  auto diff = prediction - target;
+  auto err = kind_ == LossKind::kL1 ? diff.abs() : diff.square();
+  if (kind_ == LossKind::kWeightedL2) err = err * weights_.to(err.options());
+  auto total = err.sum();
+  if (reduction_ == LossReduction::kMean) return total / static_cast<double>(err.numel());
+  return total / static_cast<double>(prediction.size(0));
+}
+
+}  // namespace lfnet::nn

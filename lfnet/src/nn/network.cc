@@ -1,0 +1,339 @@
+#include "lfnet/nn/network.h"
+
+#include <torch/torch.h>
+
+#include <cmath>
+
+#include "lfnet/core/error.h"
+
+namespace lfnet::nn {
+
+namespace {
+
+// Runs `fn`; a ConfigError it throws gets the reader's path in front ("$.network.ae: ...").
+template <typename Fn>
+void with_path(const JsonReader& reader, Fn&& fn) {
+  try {
+    fn();
+  } catch (const ConfigError& e) {
+    throw ConfigError(reader.path() + "." + e.what());
+  }
+}
+
+}  // namespace
+
+// ---- options -------------------------------------------------------------------------------
+
+void PatchShape::read(JsonReader& reader) {
+  reader.get("rows", rows);
+  reader.get("cols", cols);
+  reader.get("height", height);
+  reader.get("width", width);
+}
+
+nlohmann::json PatchShape::to_json() const {
+  return {{"rows", rows}, {"cols", cols}, {"height", height}, {"width", width}};
+}
+
+void AutoencoderOptions::read(JsonReader& reader) {
+  reader.get("hidden", hidden);
+  reader.get("input", input);
+}
+
+nlohmann::json AutoencoderOptions::to_json() const {
+  return {{"hidden", hidden}, {"input", input}};
+}
+
+void CnnOptions::read(JsonReader& reader) {
+  reader.get("channels", channels);
+  reader.get("depth", depth);
+}
+
+nlohmann::json CnnOptions::to_json() const { return {{"channels", channels}, {"depth", depth}}; }
+
+NetworkOptions NetworkOptions::from_json(const nlohmann::json& j, const std::string& path) {
+  NetworkOptions options;
+  JsonReader reader(j, path);
+  options.read(reader);
+  reader.finish();
+  return options;
+}
+
+void NetworkOptions::read(JsonReader& reader) {
+  if (reader.has("patch")) {
+    auto child = reader.child("patch");
+    patch.read(child);
+    child.finish();
+  }
+  reader.get("measurements", measurements);
+  reader.get("branches", branches);
+  reader.get("kernel", kernel);
+  reader.get("conv_algorithm", conv_algorithm);
+  if (reader.has("ae")) {
+    auto child = reader.child("ae");
+    ae.read(child);
+    child.finish();
+  }
+  if (reader.has("cnn")) {
+    auto child = reader.child("cnn");
+    cnn.read(child);
+    child.finish();
+  }
+  reader.get("head_weights", head_weights);
+  reader.get("residual", residual);
+  reader.get("pinv_lambda", pinv_lambda);
+  with_path(reader, [&] { validate(); });
+}
+
+nlohmann::json NetworkOptions::to_json() const {
+  return {{"patch", patch.to_json()},
+          {"measurements", measurements},
+          {"branches", branches},
+          {"kernel", kernel},
+          {"conv_algorithm", conv_algorithm},
+          {"ae", ae.to_json()},
+          {"cnn", cnn.to_json()},
+          {"head_weights", head_weights},
+          {"residual", residual},
+          {"pinv_lambda", pinv_lambda}};
+}
+
+void NetworkOptions::validate() const {
+  auto fail = [](const std::string& field, const std::string& what) {
+    throw ConfigError(field + ": " + what);
+  };
+  if (patch.rows < 1 || patch.cols < 1 || patch.height < 1 || patch.width < 1) {
+    fail("patch", "every size must be positive, got " + patch.to_json().dump());
+  }
+  if (measurements < 1) fail("measurements", "must be >= 1, got " + std::to_string(measurements));
+  if (branches != "net" && branches != "ae" && branches != "cnn") {
+    fail("branches", "'" + branches + "' is unknown (known: net, ae, cnn)");
+  }
+  if (kernel < 1 || kernel % 2 == 0) {
+    fail("kernel", "must be odd and positive, got " + std::to_string(kernel));
+  }
+  try {
+    parse_conv4d_algorithm(conv_algorithm);
+  } catch (const ConfigError& e) {
+    fail("conv_algorithm", e.what());
+  }
+  if (ae.hidden.size() != 5) {
+    fail("ae.hidden", "needs the 5 widths of fc1 .. fc5, got " + std::to_string(ae.hidden.size()));
+  }
+  for (auto w : ae.hidden) {
+    if (w < 1) fail("ae.hidden", "widths must be positive, got " + std::to_string(w));
+  }
+  if (ae.input != "measurements" && ae.input != "adjoint") {
+    fail("ae.input", "'" + ae.input + "' is unknown (known: measurements, adjoint)");
+  }
+  if (cnn.channels < 1) fail("cnn.channels", "must be positive");
+  if (cnn.depth < 1) fail("cnn.depth", "must be >= 1");
+  if (head_weights.size() != 2 || !std::isfinite(head_weights[0]) ||
+      !std::isfinite(head_weights[1])) {
+    fail("head_weights", "needs two finite weights (ae, cnn)");
+  }
+  if (residual != "none" && residual != "pinv" && residual != "adjoint") {
+    fail("residual", "'" + residual + "' is unknown (known: none, pinv, adjoint)");
+  }
+  if (!(pinv_lambda > 0) || !std::isfinite(pinv_lambda)) {
+    fail("pinv_lambda", "must be positive and finite");
+  }
+}
+
+int64_t NetworkOptions::ae_input_size() const {
+  return ae.input == "adjoint" ? patch.size() : measurement_size();
+}
+
+// ---- branches ------------------------------------------------------------------------------
+
+AutoencoderBranchImpl::AutoencoderBranchImpl(const NetworkOptions& options)
+    : patch_(options.patch) {
+  std::vector<int64_t> widths{options.ae_input_size()};
+  widths.insert(widths.end(), options.ae.hidden.begin(), options.ae.hidden.end());
+  widths.push_back(options.patch.size());
+  for (size_t i = 0; i + 1 < widths.size(); ++i) {
+    fc.push_back(register_module("fc" + std::to_string(i + 1),
+                                 torch::nn::Linear(widths[i], widths[i + 1])));
+  }
+  Conv4dOptions conv_options;
+  conv_options.kernel = options.kernel;
+  conv_options.algorithm = parse_conv4d_algorithm(options.conv_algorithm);
+  conv = register_module("conv", Conv4d(conv_options));
+}
+
+torch::Tensor AutoencoderBranchImpl::forward(const torch::Tensor& input) {
+  auto x = input;
+  for (size_t i = 0; i < fc.size(); ++i) {
+    x = fc[i]->forward(x);
+    if (i + 1 < fc.size()) x = torch::relu(x);
+  }
+  x = x.view({input.size(0), 1, patch_.rows, patch_.cols, patch_.height, patch_.width});
+  return conv->forward(x);
+}
+
+CnnBranchImpl::CnnBranchImpl(const NetworkOptions& options) {
+  const auto algorithm = parse_conv4d_algorithm(options.conv_algorithm);
+  for (int64_t i = 0; i < options.cnn.depth; ++i) {
+    Conv4dOptions conv_options;
+    conv_options.in_channels = i == 0 ? 1 : options.cnn.channels;
+    conv_options.out_channels = i + 1 == options.cnn.depth ? 1 : options.cnn.channels;
+    conv_options.kernel = options.kernel;
+    conv_options.algorithm = algorithm;
+    convs.push_back(register_module("conv" + std::to_string(i + 1), Conv4d(conv_options)));
+  }
+}
+
+torch::Tensor CnnBranchImpl::forward(const torch::Tensor& x) {
+  LFNET_CHECK(x.dim() == 6 && x.size(1) == 1, "CNN branch: expected (B, 1, U, V, h, w), got ",
+              x.sizes());
+  auto z = x.transpose(1, 2);  // (B, U, 1, V, h, w): u-major, free for one channel
+  for (size_t i = 0; i < convs.size(); ++i) {
+    z = convs[i]->forward_u_major(z);
+    if (i + 1 < convs.size()) z = torch::relu_(z);
+  }
+  return z.transpose(1, 2).contiguous();
+}
+
+// ---- Phi stacks ----------------------------------------------------------------------------
+
+torch::Tensor apply_phase_stack(const torch::Tensor& y, const torch::Tensor& phase,
+                                const torch::Tensor& stack) {
+  const int64_t p = stack.size(0);
+  if (p == 1) return y.matmul(stack[0]);
+  LFNET_CHECK(phase.defined(), "a Phi with ", p, " phases needs the phase of every patch");
+  // Sort the batch by phase, multiply each run by its matrix, and undo the sort.
+  auto order = std::get<1>(phase.sort(/*stable=*/true, /*dim=*/0, /*descending=*/false));
+  auto counts = torch::bincount(phase, {}, p).to(torch::kCPU);
+  auto sorted = y.index_select(0, order);
+  std::vector<torch::Tensor> parts;
+  int64_t offset = 0;
+  auto count = counts.accessor<int64_t, 1>();
+  for (int64_t i = 0; i < p; ++i) {
+    if (count[i] == 0) continue;
+    parts.push_back(sorted.narrow(0, offset, count[i]).matmul(stack[i]));
+    offset += count[i];
+  }
+  auto inverse = torch::empty_like(order);
+  inverse.index_put_({order}, torch::arange(order.size(0), order.options()));
+  return torch::cat(parts, 0).index_select(0, inverse);
+}
+
+torch::Tensor pinv_stack(const torch::Tensor& stack, double lambda) {
+  LFNET_CHECK(stack.dim() == 3, "pinv_stack: expected (P, M, D), got ", stack.sizes());
+  auto a = stack.to(torch::kFloat64);
+  auto gram = torch::matmul(a, a.transpose(1, 2));
+  gram = gram + lambda * torch::eye(a.size(1), a.options()).unsqueeze(0);
+  return at::linalg_solve(gram, a).to(stack.scalar_type());
+}
+
+torch::Tensor map_measurement_weights(const torch::Tensor& weight, const torch::Tensor& phi_a,
+                                      const torch::Tensor& phi_b, double lambda) {
+  LFNET_CHECK(weight.dim() == 2 && phi_a.dim() == 2 && phi_b.dim() == 2 &&
+                  weight.size(1) == phi_a.size(0) && phi_a.size(1) == phi_b.size(1),
+              "map_measurement_weights: shapes do not chain: weight ", weight.sizes(), ", Phi A ",
+              phi_a.sizes(), ", Phi B ", phi_b.sizes());
+  auto b = phi_b.to(torch::kFloat64);
+  auto gram = b.matmul(b.t()) + lambda * torch::eye(b.size(0), b.options());
+  auto pinv_t = at::linalg_solve(gram, b);  // (M_B, D) = (Phi_B^+)^T
+  auto mapped = weight.to(torch::kFloat64).matmul(phi_a.to(torch::kFloat64)).matmul(pinv_t.t());
+  return mapped.to(weight.scalar_type());
+}
+
+int64_t parameter_count(const torch::nn::Module& module) {
+  int64_t n = 0;
+  for (const auto& p : module.parameters()) n += p.numel();
+  return n;
+}
+
+// ---- the network ---------------------------------------------------------------------------
+
+LightFieldNetImpl::LightFieldNetImpl(NetworkOptions options) : options_(std::move(options)) {
+  options_.validate();
+  const int64_t m = options_.measurement_size(), d = options_.patch.size();
+  phi = register_buffer("phi", torch::zeros({1, m, d}));
+  adjoint_scale = register_buffer("adjoint_scale", torch::ones({1}));
+  if (options_.residual == "pinv") base = register_buffer("base", torch::zeros({1, m, d}));
+  if (options_.has_ae()) ae = register_module("ae", AutoencoderBranch(options_));
+  if (options_.has_cnn()) cnn = register_module("cnn", CnnBranch(options_));
+}
+
+void LightFieldNetImpl::set_phi(const torch::Tensor& stack) {
+  const int64_t m = options_.measurement_size(), d = options_.patch.size();
+  LFNET_CHECK(stack.dim() == 3 && stack.size(0) >= 1 && stack.size(1) == m && stack.size(2) == d,
+              "set_phi: expected patch matrices (P, ", m, ", ", d, ") for N = ",
+              options_.measurements, " and a ", options_.patch.rows, "x", options_.patch.cols,
+              "x", options_.patch.height, "x", options_.patch.width, " patch, got ",
+              stack.sizes());
+  LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
+                 "set_phi: the patch matrices contain NaN or inf");
+  torch::NoGradGuard no_grad;
+  auto a = stack.to(torch::kFloat64).contiguous();
+  // s_p = <t, 1> / <t, t> with t = Phi_p^T Phi_p 1: least squares for s t ~ 1.
+  auto t = torch::matmul(a.sum(2).unsqueeze(1), a).squeeze(1);
+  auto tt = t.square().sum(1);
+  auto scale = torch::where(tt > 0, t.sum(1) / tt, torch::ones_like(tt));
+  auto opts = phi.options();
+  phi.set_(stack.to(opts).contiguous().clone());
+  adjoint_scale.set_(scale.to(opts).contiguous());
+  if (base.defined()) base.set_(pinv_stack(a, options_.pinv_lambda).to(opts).contiguous());
+}
+
+torch::Tensor LightFieldNetImpl::check_phase(const torch::Tensor& y,
+                                             const torch::Tensor& phase) const {
+  const int64_t m = options_.measurement_size();
+  LFNET_CHECK(y.dim() == 2 && y.size(1) == m, "LightFieldNet: expected measurements (B, ", m,
+              ") (N = ", options_.measurements, " times ", options_.patch.pixels(),
+              " pixels), got ", y.sizes());
+  if (!phase.defined()) {
+    LFNET_CHECK(phases() == 1, "LightFieldNet: this net's Phi has ", phases(),
+                " phases; give the phase of every patch");
+    return {};
+  }
+  LFNET_CHECK(phase.dim() == 1 && phase.size(0) == y.size(0) &&
+                  phase.scalar_type() == torch::kInt64,
+              "LightFieldNet: phase must be (", y.size(0), ") int64, got ", phase.sizes(), " ",
+              phase.scalar_type());
+  if (phase.numel() > 0) {
+    const auto lo = phase.min().item<int64_t>(), hi = phase.max().item<int64_t>();
+    LFNET_CHECK(lo >= 0 && hi < phases(), "LightFieldNet: phases must lie in [0, ", phases(),
+                "), got [", lo, ", ", hi, "]");
+  }
+  return phase;
+}
+
+torch::Tensor LightFieldNetImpl::adjoint(const torch::Tensor& y, const torch::Tensor& phase) const {
+  auto ph = check_phase(y, phase);
+  auto x = apply_phase_stack(y, ph, phi);
+  if (phases() == 1) return x * adjoint_scale[0];
+  return x * adjoint_scale.index_select(0, ph).unsqueeze(1);
+}
+
+NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torch::Tensor& phase) {
+  auto ph = check_phase(y, phase);
+  const auto& p = options_.patch;
+  const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
+  const bool need_adjoint =
+      options_.has_cnn() || options_.ae.input == "adjoint" || options_.residual == "adjoint";
+  torch::Tensor x0 = need_adjoint ? adjoint(y, ph) : torch::Tensor();
+
+  NetworkOutputs out;
+  if (options_.has_ae()) out.ae = ae->forward(options_.ae.input == "adjoint" ? x0 : y);
+  if (options_.has_cnn()) out.cnn = cnn->forward(x0.view(shape));
+  if (out.ae.defined() && out.cnn.defined()) {
+    const double a = options_.head_weights[0], b = options_.head_weights[1];
+    // One fused kernel: lerp(cnn, ae, a) = (1 - a) cnn + a ae when the weights sum to 1.
+    out.output = a + b == 1.0 ? torch::lerp(out.cnn, out.ae, a) : torch::add(out.cnn * b, out.ae, a);
+  } else {
+    out.output = out.ae.defined() ? out.ae : out.cnn;
+  }
+  if (options_.residual == "pinv") out.base = apply_phase_stack(y, ph, base).view(shape);
+  if (options_.residual == "adjoint") out.base = x0.view(shape);
+  if (out.base.defined()) out.output = out.output + out.base;
+  return out;
+}
+
+torch::Tensor LightFieldNetImpl::forward(const torch::Tensor& y, const torch::Tensor& phase) {
+  return forward_all(y, phase).output;
+}
+
+}  // namespace lfnet::nn

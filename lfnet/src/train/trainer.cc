@@ -1,0 +1,614 @@
+#include "lfnet/train/trainer.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <filesystem>
+#include <optional>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/progress.h"
+
+namespace lfnet::train {
+
+namespace {
+
+nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+double number_or(const nlohmann::json& j, double fallback) {
+  return j.is_number() ? j.get<double>() : fallback;
+}
+
+template <typename Fn>
+void with_path(const JsonReader& reader, Fn&& fn) {
+  try {
+    fn();
+  } catch (const ConfigError& e) {
+    throw ConfigError(reader.path() + "." + e.what());
+  }
+}
+
+std::string param_key(const torch::Tensor& p) {
+  return c10::guts::to_string(p.unsafeGetTensorImpl());
+}
+
+std::string branches_of_stage(const std::string& stage) {
+  return stage == "joint" ? "net" : stage;
+}
+
+// The global L2 norm of the gradients (NaN or inf when any is).
+double gradient_norm(const torch::nn::Module& module) {
+  torch::NoGradGuard no_grad;
+  auto total = torch::zeros({}, torch::kFloat64);
+  for (const auto& p : module.parameters()) {
+    if (p.grad().defined()) total += p.grad().to(torch::kFloat64).square().sum();
+  }
+  return std::sqrt(total.item<double>());
+}
+
+bool all_finite(const torch::Tensor& t) { return !t.defined() || torch::isfinite(t).all().item<bool>(); }
+
+std::string format_double(double v) {
+  std::ostringstream out;
+  out << v;
+  return out.str();
+}
+
+}  // namespace
+
+// ---- options -------------------------------------------------------------------------------
+
+void LrScheduleOptions::read(JsonReader& reader) {
+  reader.get("name", name);
+  reader.get("step_epochs", step_epochs);
+  reader.get("gamma", gamma);
+  reader.get("min_factor", min_factor);
+  reader.get("warmup_epochs", warmup_epochs);
+}
+
+nlohmann::json LrScheduleOptions::to_json() const {
+  return {{"name", name},
+          {"step_epochs", step_epochs},
+          {"gamma", gamma},
+          {"min_factor", min_factor},
+          {"warmup_epochs", warmup_epochs}};
+}
+
+void LrScheduleOptions::validate() const {
+  if (name != "constant" && name != "step" && name != "cosine") {
+    throw ConfigError("name: '" + name + "' is unknown (known: constant, step, cosine)");
+  }
+  if (step_epochs < 1) throw ConfigError("step_epochs: must be >= 1");
+  if (!(gamma > 0) || !std::isfinite(gamma)) throw ConfigError("gamma: must be positive");
+  if (!(min_factor >= 0 && min_factor <= 1)) throw ConfigError("min_factor: must lie in [0, 1]");
+  if (warmup_epochs < 0) throw ConfigError("warmup_epochs: must be >= 0");
+}
+
+TrainerOptions TrainerOptions::from_json(const nlohmann::json& j, const std::string& path) {
+  TrainerOptions options;
+  JsonReader reader(j, path);
+  options.read(reader);
+  reader.finish();
+  return options;
+}
+
+void TrainerOptions::read(JsonReader& reader) {
+  reader.get("stage", stage);
+  reader.get("epochs", epochs);
+  reader.get("batch_size", batch_size);
+  reader.get("lr", lr);
+  reader.get("beta1", beta1);
+  reader.get("beta2", beta2);
+  reader.get("eps", eps);
+  reader.get("weight_decay", weight_decay);
+  if (reader.has("schedule")) {
+    auto child = reader.child("schedule");
+    schedule.read(child);
+    child.finish();
+  }
+  if (reader.has("loss")) {
+    auto child = reader.child("loss");
+    loss.read(child);
+    child.finish();
+  }
+  reader.get("clip_grad_norm", clip_grad_norm);
+  reader.get("on_nonfinite", on_nonfinite);
+  reader.get("max_skipped_batches", max_skipped_batches);
+  reader.get("out_dir", out_dir);
+  reader.get("progress", progress);
+  with_path(reader, [&] { validate(); });
+}
+
+nlohmann::json TrainerOptions::to_json() const {
+  return {{"stage", stage},
+          {"epochs", epochs},
+          {"batch_size", batch_size},
+          {"lr", lr},
+          {"beta1", beta1},
+          {"beta2", beta2},
+          {"eps", eps},
+          {"weight_decay", weight_decay},
+          {"schedule", schedule.to_json()},
+          {"loss", loss.to_json()},
+          {"clip_grad_norm", clip_grad_norm},
+          {"on_nonfinite", on_nonfinite},
+          {"max_skipped_batches", max_skipped_batches},
+          {"out_dir", out_dir},
+          {"progress", progress}};
+}
+
+void TrainerOptions::validate() const {
+  auto fail = [](const std::string& field, const std::string& what) {
+    throw ConfigError(field + ": " + what);
+  };
+  if (stage != "ae" && stage != "cnn" && stage != "joint") {
+    fail("stage", "'" + stage + "' is unknown (known: ae, cnn, joint)");
+  }
+  if (epochs < 1) fail("epochs", "must be >= 1");
+  if (batch_size < 1) fail("batch_size", "must be >= 1");
+  if (!(lr > 0) || !std::isfinite(lr)) fail("lr", "must be positive and finite");
+  if (!(beta1 >= 0 && beta1 < 1)) fail("beta1", "must lie in [0, 1)");
+  if (!(beta2 >= 0 && beta2 < 1)) fail("beta2", "must lie in [0, 1)");
+  if (!(eps >= 0)) fail("eps", "must be >= 0");
+  if (!(weight_decay >= 0)) fail("weight_decay", "must be >= 0");
+  try {
+    schedule.validate();
+  } catch (const ConfigError& e) {
+    throw ConfigError(std::string("schedule.") + e.what());
+  }
+  try {
+    loss.kind();
+  } catch (const ConfigError& e) {
+    fail("loss.name", e.what());
+  }
+  try {
+    loss.reduction_kind();
+  } catch (const ConfigError& e) {
+    fail("loss.reduction", e.what());
+  }
+  if (!(clip_grad_norm >= 0)) fail("clip_grad_norm", "must be >= 0");
+  if (on_nonfinite != "stop" && on_nonfinite != "skip") {
+    fail("on_nonfinite", "'" + on_nonfinite + "' is unknown (known: stop, skip)");
+  }
+  if (max_skipped_batches < 0) fail("max_skipped_batches", "must be >= 0");
+}
+
+double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch,
+                     int64_t batches) {
+  const auto& s = options.schedule;
+  const double progress = (static_cast<double>(epoch) +
+                           static_cast<double>(batch) / static_cast<double>(batches)) /
+                          static_cast<double>(options.epochs);
+  double factor = 1.0;
+  if (s.name == "step") {
+    factor = std::pow(s.gamma, static_cast<double>(epoch / s.step_epochs));
+  } else if (s.name == "cosine") {
+    factor = s.min_factor + (1 - s.min_factor) * 0.5 * (1 + std::cos(M_PI * progress));
+  }
+  const int64_t warmup = s.warmup_epochs * batches, global = epoch * batches + batch;
+  if (global < warmup) factor *= static_cast<double>(global + 1) / static_cast<double>(warmup);
+  return options.lr * factor;
+}
+
+// ---- records -------------------------------------------------------------------------------
+
+nlohmann::json EpochRecord::to_json() const {
+  return {{"epoch", epoch},
+          {"step", step},
+          {"lr", lr},
+          {"train_loss", number(train_loss)},
+          {"val_loss", number(val_loss)},
+          {"val_psnr_db", number(val_psnr_db)},
+          {"seconds", seconds},
+          {"patches_per_s", patches_per_s},
+          {"skipped_batches", skipped_batches},
+          {"best", best}};
+}
+
+EpochRecord EpochRecord::from_json(const nlohmann::json& j) {
+  EpochRecord r;
+  r.epoch = j.at("epoch").get<int64_t>();
+  r.step = j.at("step").get<int64_t>();
+  r.lr = j.at("lr").get<double>();
+  r.train_loss = number_or(j.at("train_loss"), NAN);
+  r.val_loss = number_or(j.at("val_loss"), NAN);
+  r.val_psnr_db = number_or(j.at("val_psnr_db"), INFINITY);
+  r.seconds = j.at("seconds").get<double>();
+  r.patches_per_s = j.at("patches_per_s").get<double>();
+  r.skipped_batches = j.at("skipped_batches").get<int64_t>();
+  r.best = j.at("best").get<bool>();
+  return r;
+}
+
+nlohmann::json InitReport::to_json() const {
+  return {{"copied", copied.size()}, {"mapped", mapped}, {"reinitialised", reinitialised}};
+}
+
+std::string last_checkpoint_path(const std::string& dir) {
+  return (std::filesystem::path(dir) / "last.ckpt").string();
+}
+
+std::string best_checkpoint_path(const std::string& dir) {
+  return (std::filesystem::path(dir) / "best.ckpt").string();
+}
+
+// ---- Adam state by name --------------------------------------------------------------------
+
+TensorMap adam_state(const torch::optim::Adam& adam, const torch::nn::Module& module) {
+  TensorMap out;
+  const auto& state = adam.state();
+  for (const auto& p : module.named_parameters()) {
+    auto it = state.find(param_key(p.value()));
+    if (it == state.end()) continue;
+    const auto& s = static_cast<const torch::optim::AdamParamState&>(*it->second);
+    out[p.key() + "/exp_avg"] = s.exp_avg().detach().contiguous().clone();
+    out[p.key() + "/exp_avg_sq"] = s.exp_avg_sq().detach().contiguous().clone();
+    out[p.key() + "/step"] = torch::tensor(s.step(), torch::kInt64);
+  }
+  return out;
+}
+
+void load_adam_state(torch::optim::Adam& adam, const torch::nn::Module& module,
+                     const TensorMap& state, const std::string& what) {
+  auto& target = adam.state();
+  target.clear();
+  size_t used = 0;
+  for (const auto& p : module.named_parameters()) {
+    auto m = state.find(p.key() + "/exp_avg"), v = state.find(p.key() + "/exp_avg_sq"),
+         step = state.find(p.key() + "/step");
+    if (m == state.end() && v == state.end() && step == state.end()) continue;
+    if (m == state.end() || v == state.end() || step == state.end() ||
+        m->second.sizes() != p.value().sizes() || v->second.sizes() != p.value().sizes()) {
+      throw CheckpointError(what + ": the Adam state of " + p.key() +
+                            " is incomplete or has the wrong shape");
+    }
+    auto s = std::make_unique<torch::optim::AdamParamState>();
+    s->step(step->second.item<int64_t>());
+    s->exp_avg(m->second.clone());
+    s->exp_avg_sq(v->second.clone());
+    target[param_key(p.value())] = std::move(s);
+    used += 3;
+  }
+  if (used != state.size()) {
+    throw CheckpointError(what + ": its Adam state names parameters this network lacks");
+  }
+}
+
+// ---- trainer -------------------------------------------------------------------------------
+
+namespace {
+
+std::unique_ptr<torch::optim::Adam> make_adam(const nn::LightFieldNet& net,
+                                              const TrainerOptions& o) {
+  torch::optim::AdamOptions adam(o.lr);
+  adam.betas({o.beta1, o.beta2}).eps(o.eps).weight_decay(o.weight_decay);
+  return std::make_unique<torch::optim::Adam>(net->parameters(), adam);
+}
+
+}  // namespace
+
+Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
+    : net_(std::move(net)),
+      options_(std::move(options)),
+      run_(std::move(run)),
+      loss_(options_.loss, net_->options().patch.rows, net_->options().patch.cols) {
+  options_.validate();
+  const auto& branches = net_->options().branches;
+  LFNET_CHECK_AS(ConfigError, branches_of_stage(options_.stage) == branches, "stage '",
+                 options_.stage, "' trains a net with branches '",
+                 branches_of_stage(options_.stage), "', but this net has branches '", branches,
+                 "'");
+  LFNET_CHECK_AS(ConfigError, run_.phi.is_object() && !run_.phi.empty(),
+                 "the run needs the Phi spec of its measurements (RunInfo::phi)");
+  LFNET_CHECK(net_->phi.abs().sum().item<double>() > 0,
+              "the net's Phi is not set: call set_phi with the patch matrices first");
+  optimizer_ = make_adam(net_, options_);
+  state_.stage = options_.stage;
+}
+
+void Trainer::apply_lr(double lr) {
+  for (auto& group : optimizer_->param_groups()) group.options().set_lr(lr);
+}
+
+Checkpoint Trainer::checkpoint() const {
+  Checkpoint ck;
+  ck.config = run_.config;
+  ck.network = net_->options().to_json();
+  ck.phi = run_.phi;
+  ck.command_line = run_.command_line;
+  ck.model = module_state(*net_);
+  ck.optimizer = adam_state(*optimizer_, *net_);
+  ck.optimizer_options = {{"type", "adam"},
+                          {"lr", options_.lr},
+                          {"beta1", options_.beta1},
+                          {"beta2", options_.beta2},
+                          {"eps", options_.eps},
+                          {"weight_decay", options_.weight_decay}};
+  ck.training = state_;
+  auto gen = at::detail::getDefaultCPUGenerator();
+  {
+    std::lock_guard<std::mutex> lock(gen.mutex());
+    ck.training.rng_state = gen.get_state();
+  }
+  return ck;
+}
+
+void Trainer::resume(const std::string& path) {
+  const std::string what = "checkpoint " + path;
+  auto ck = load_checkpoint(path);
+  check_phi(ck, run_.phi, what);
+  if (ck.training.stage != options_.stage) {
+    throw CheckpointError(what + " is from stage '" + ck.training.stage +
+                          "'; resume it with that stage, or start stage '" + options_.stage +
+                          "' from it with --init");
+  }
+  check_architecture(net_, ck.model, what);
+  if (!torch::equal(ck.model.at("phi"), net_->phi)) {
+    throw CheckpointError(what + " has other Phi matrices than this run although the Phi spec "
+                          "is the same (did the Phi implementation change?); finetune with --init");
+  }
+  if (ck.optimizer.empty() && ck.training.step > 0) {
+    throw CheckpointError(what + " holds no optimizer state (best.ckpt keeps the model only); "
+                          "resume from last.ckpt, or finetune from it with --init");
+  }
+  load_net_state(net_, ck.model, what);
+  load_adam_state(*optimizer_, *net_, ck.optimizer, what);
+  state_ = ck.training;
+  if (state_.rng_state.defined()) {
+    auto gen = at::detail::getDefaultCPUGenerator();
+    std::lock_guard<std::mutex> lock(gen.mutex());
+    gen.set_state(state_.rng_state);
+  }
+  last_written_ = path;
+}
+
+InitReport Trainer::init_from(const std::string& path, const std::string& prefix) {
+  const std::string what = "checkpoint " + path;
+  auto ck = load_checkpoint(path);
+  const auto old_phi = ck.model.count("phi") ? ck.model.at("phi") : torch::Tensor();
+  const bool phi_changed = ck.phi != run_.phi || !old_phi.defined() ||
+                           old_phi.sizes() != net_->phi.sizes() || !torch::equal(old_phi, net_->phi);
+  const bool fc1_reads_measurements = net_->options().ae.input == "measurements";
+  InitReport report;
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : net_->named_parameters()) {
+      const std::string& name = p.key();
+      if (name.rfind(prefix, 0) != 0) continue;
+      auto it = ck.model.find(name);
+      if (it == ck.model.end()) {
+        report.reinitialised.push_back(name);
+        continue;
+      }
+      const auto& src = it->second;
+      if (name == "ae.fc1.weight" && fc1_reads_measurements && phi_changed) {
+        // fc1 reads the measurements of the old Phi: carry it over, or start it afresh.
+        if (old_phi.defined() && old_phi.size(0) == 1 && net_->phases() == 1 &&
+            src.dim() == 2 && src.size(0) == p.value().size(0) &&
+            src.size(1) == old_phi.size(1)) {
+          p.value().copy_(nn::map_measurement_weights(src, old_phi[0], net_->phi[0],
+                                                      net_->options().pinv_lambda));
+          report.mapped.push_back(name);
+        } else {
+          report.reinitialised.push_back(name);
+        }
+        continue;
+      }
+      if (src.sizes() != p.value().sizes()) {
+        std::ostringstream m;
+        m << what << ": " << name << " is " << src.sizes() << " there but " << p.value().sizes()
+          << " here; finetuning needs the same architecture apart from the autoencoder's first "
+             "layer";
+        throw CheckpointError(m.str());
+      }
+      p.value().copy_(src);
+      report.copied.push_back(name);
+    }
+  }
+  if (report.copied.empty() && report.mapped.empty()) {
+    throw CheckpointError(what + " shares no parameters" +
+                          (prefix.empty() ? "" : " named " + prefix + "*") +
+                          " with this network");
+  }
+  optimizer_ = make_adam(net_, options_);
+  auto origin = state_.origin;
+  state_ = TrainingState{};
+  state_.stage = options_.stage;
+  state_.origin = origin;
+  state_.origin[prefix.empty() ? "all" : prefix.substr(0, prefix.size() - 1)] = {
+      {"checkpoint", path}, {"phi", ck.phi}, {"stage", ck.training.stage},
+      {"epoch", ck.training.epoch}, {"report", report.to_json()}};
+  last_written_.clear();
+  return report;
+}
+
+InitReport Trainer::init_branches(const std::string& ae_path, const std::string& cnn_path) {
+  LFNET_CHECK_AS(ConfigError, net_->options().has_ae() && net_->options().has_cnn(),
+                 "init_branches needs the two-branch net (branches 'net')");
+  auto report = init_from(ae_path, "ae.");
+  auto cnn = init_from(cnn_path, "cnn.");
+  for (auto* list : {&report.copied, &report.mapped, &report.reinitialised}) {
+    list->erase(std::remove_if(list->begin(), list->end(),
+                               [](const std::string& n) { return n.rfind("cnn.", 0) == 0; }),
+                list->end());
+  }
+  report.copied.insert(report.copied.end(), cnn.copied.begin(), cnn.copied.end());
+  report.mapped.insert(report.mapped.end(), cnn.mapped.begin(), cnn.mapped.end());
+  report.reinitialised.insert(report.reinitialised.end(), cnn.reinitialised.begin(),
+                              cnn.reinitialised.end());
+  return report;
+}
+
+void Trainer::check_batch(const Batch& batch, const std::string& where) const {
+  const auto& o = net_->options();
+  const auto& p = o.patch;
+  LFNET_CHECK(batch.y.defined() && batch.y.dim() == 2 && batch.y.size(0) >= 1 &&
+                  batch.y.size(1) == o.measurement_size(),
+              where, ": y must be (B, ", o.measurement_size(), "), got ",
+              batch.y.defined() ? batch.y.sizes() : torch::IntArrayRef{});
+  const std::vector<int64_t> shape{batch.y.size(0), 1, p.rows, p.cols, p.height, p.width};
+  LFNET_CHECK(batch.target.defined() && batch.target.sizes() == torch::IntArrayRef(shape), where,
+              ": target must be ", torch::IntArrayRef(shape), ", got ",
+              batch.target.defined() ? batch.target.sizes() : torch::IntArrayRef{});
+}
+
+bool Trainer::weights_finite() const {
+  for (const auto& p : net_->parameters()) {
+    if (!all_finite(p)) return false;
+  }
+  return true;
+}
+
+void Trainer::fail_nonfinite(const std::string& what, const Batch& batch, int64_t epoch,
+                             int64_t index, double lr) const {
+  std::ostringstream m;
+  m << "training stopped at epoch " << epoch + 1 << ", batch " << index + 1 << " (step "
+    << state_.step + 1 << "): " << what << ". ";
+  if (!all_finite(batch.y)) {
+    m << "The batch's measurements y contain NaN or inf: check the data source. ";
+  } else if (!all_finite(batch.target)) {
+    m << "The batch's target patches contain NaN or inf: check the data source. ";
+  } else {
+    m << "The batch is finite, so training diverged: lower the learning rate (now " << lr
+      << ") or set clip_grad_norm. ";
+  }
+  if (last_written_.empty()) {
+    m << "No checkpoint was written by this run.";
+  } else {
+    m << "The last good checkpoint is " << last_written_ << " (epoch " << state_.epoch
+      << "); resume from it.";
+  }
+  throw NumericalError(m.str());
+}
+
+Evaluation Trainer::evaluate(BatchSource& source) {
+  torch::NoGradGuard no_grad;
+  net_->eval();
+  double loss_sum = 0, squared = 0;
+  int64_t patches = 0, elements = 0;
+  for (const auto& batch : source.validation()) {
+    check_batch(batch, "validation batch");
+    auto pred = net_->forward(batch.y, batch.phase);
+    loss_sum += loss_(pred, batch.target).item<double>() * static_cast<double>(batch.size());
+    squared += (pred.clamp(0, 1) - batch.target).to(torch::kFloat64).square().sum().item<double>();
+    patches += batch.size();
+    elements += batch.target.numel();
+  }
+  net_->train();
+  LFNET_CHECK(patches > 0, "the batch source has no validation patches");
+  Evaluation e;
+  e.patches = patches;
+  e.loss = loss_sum / static_cast<double>(patches);
+  const double mse = squared / static_cast<double>(elements);
+  e.psnr_db = mse > 0 ? 10 * std::log10(1.0 / mse) : INFINITY;
+  return e;
+}
+
+std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& hooks) {
+  std::vector<EpochRecord> records;
+  const bool skip = options_.on_nonfinite == "skip";
+  for (int64_t epoch = state_.epoch; epoch < options_.epochs; ++epoch) {
+    Stopwatch clock;
+    source.start_epoch(epoch, options_.batch_size);
+    const int64_t batches = source.train_batches_per_epoch();
+    LFNET_CHECK(batches > 0, "the batch source has no training batches");
+    std::optional<ProgressBar> bar;
+    if (options_.progress) {
+      bar.emplace("epoch " + std::to_string(epoch + 1) + "/" + std::to_string(options_.epochs),
+                  batches, "batches");
+    }
+    net_->train();
+    double loss_sum = 0, lr = options_.lr;
+    int64_t seen = 0, skipped = 0;
+    for (int64_t i = 0; i < batches; ++i) {
+      Batch batch = source.next_train();
+      check_batch(batch, "training batch " + std::to_string(i + 1) + " of epoch " +
+                             std::to_string(epoch + 1));
+      lr = learning_rate(options_, epoch, i, batches);
+      apply_lr(lr);
+      optimizer_->zero_grad();
+      auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target);
+      const double value = loss.item<double>();
+      std::string problem;
+      if (!std::isfinite(value)) {
+        problem = "the loss is " + format_double(value);
+      } else {
+        loss.backward();
+        const double norm =
+            options_.clip_grad_norm > 0
+                ? torch::nn::utils::clip_grad_norm_(net_->parameters(), options_.clip_grad_norm)
+                : gradient_norm(*net_);
+        if (!std::isfinite(norm)) problem = "the gradient norm is " + format_double(norm);
+      }
+      if (!problem.empty()) {
+        // A bad batch can be dropped; weights that are no longer finite cannot be saved.
+        if (skip && skipped < options_.max_skipped_batches && weights_finite()) {
+          ++skipped;
+          optimizer_->zero_grad();
+          if (bar) bar->advance();
+          continue;
+        }
+        if (skip && skipped >= options_.max_skipped_batches) {
+          problem += " (and " + std::to_string(skipped) + " batches were skipped already)";
+        }
+        fail_nonfinite(problem, batch, epoch, i, lr);
+      }
+      optimizer_->step();
+      ++state_.step;
+      loss_sum += value * static_cast<double>(batch.size());
+      seen += batch.size();
+      if (bar) {
+        bar->set_note("loss " + format_double(loss_sum / static_cast<double>(seen)));
+        bar->advance();
+      }
+      if (hooks.on_step) hooks.on_step({epoch + 1, i, state_.step, value, lr});
+    }
+    const double train_seconds = clock.seconds();
+    if (bar) bar->finish();
+    if (!weights_finite()) {
+      fail_nonfinite("the weights are no longer finite", Batch{}, epoch, batches - 1, lr);
+    }
+    const auto eval = evaluate(source);
+    if (!std::isfinite(eval.loss)) {
+      fail_nonfinite("the validation loss is " + format_double(eval.loss), Batch{}, epoch,
+                     batches - 1, lr);
+    }
+    EpochRecord r;
+    r.epoch = epoch + 1;
+    r.step = state_.step;
+    r.lr = lr;
+    r.train_loss = seen > 0 ? loss_sum / static_cast<double>(seen) : NAN;
+    r.val_loss = eval.loss;
+    r.val_psnr_db = eval.psnr_db;
+    r.patches_per_s = train_seconds > 0 ? static_cast<double>(seen) / train_seconds : 0;
+    r.skipped_batches = skipped;
+    r.best = eval.psnr_db > state_.best_metric;
+    if (r.best) {
+      state_.best_metric = eval.psnr_db;
+      state_.best_epoch = r.epoch;
+    }
+    state_.epoch = epoch + 1;
+    r.seconds = clock.seconds();
+    state_.history.push_back(r.to_json());
+    if (!options_.out_dir.empty()) {
+      std::filesystem::create_directories(options_.out_dir);
+      const auto ck = checkpoint();
+      save_checkpoint(ck, last_checkpoint_path(options_.out_dir));
+      last_written_ = last_checkpoint_path(options_.out_dir);
+      if (r.best) {
+        // best.ckpt is the model to use or finetune, which starts a fresh optimizer: without
+        // the Adam moments it is a third of the size. Resuming reads last.ckpt.
+        auto model_only = ck;
+        model_only.optimizer.clear();
+        save_checkpoint(model_only, best_checkpoint_path(options_.out_dir));
+      }
+    }
+    records.push_back(r);
+    if (hooks.on_epoch) hooks.on_epoch(r);
+    if (hooks.stop_requested && hooks.stop_requested()) break;
+  }
+  return records;
+}
+
+}  // namespace lfnet::train

@@ -1,0 +1,247 @@
+#include "lfnet/nn/network.h"
+
+#include <catch2/catch.hpp>
+#include <torch/torch.h>
+
+#include <set>
+
+#include "lfnet/core/error.h"
+#include "support/test_support.h"
+
+using lfnet::nn::LightFieldNet;
+using lfnet::nn::NetworkOptions;
+
+namespace {
+
+// A small geometry that keeps the tests fast: 3 x 3 views of 5 x 5 pixels, N = 2.
+NetworkOptions small_options(const std::string& branches = "net") {
+  NetworkOptions o;
+  o.patch = {3, 3, 5, 5};
+  o.measurements = 2;
+  o.branches = branches;
+  o.ae.hidden = {40, 20, 40, 20, 40};
+  o.cnn.channels = 4;
+  o.cnn.depth = 3;
+  return o;
+}
+
+torch::Tensor random_phi(const NetworkOptions& o, int64_t phases, uint64_t seed) {
+  auto gen = torch::make_generator<at::CPUGeneratorImpl>(seed);
+  return torch::rand({phases, o.measurement_size(), o.patch.size()}, gen) /
+         static_cast<double>(o.patch.rows * o.patch.cols);
+}
+
+}  // namespace
+
+TEST_CASE("each branch and the two-branch net give (B, 1, U, V, h, w)", "[nn][network]") {
+  torch::manual_seed(0);
+  for (const std::string branches : {"ae", "cnn", "net"}) {
+    INFO(branches);
+    NetworkOptions o;  // defaults: 5 x 5 x 9 x 9 patches, N = 2
+    o.branches = branches;
+    LightFieldNet net(o);
+    net->set_phi(random_phi(o, 1, 1));
+    auto y = torch::rand({3, 162});
+    auto out = net->forward_all(y);
+    CHECK(out.output.sizes() == torch::IntArrayRef({3, 1, 5, 5, 9, 9}));
+    CHECK(out.ae.defined() == (branches != "cnn"));
+    CHECK(out.cnn.defined() == (branches != "ae"));
+    if (out.ae.defined()) CHECK(out.ae.sizes() == out.output.sizes());
+    if (out.cnn.defined()) CHECK(out.cnn.sizes() == out.output.sizes());
+  }
+}
+
+TEST_CASE("the default net has the documented parameter count and names", "[nn][network]") {
+  LightFieldNet net(NetworkOptions{});
+  const int64_t ae = (162 * 256 + 256) + (256 * 128 + 128) + (128 * 256 + 256) +
+                     (256 * 128 + 128) + (128 * 256 + 256) + (256 * 2025 + 2025) + (81 + 1);
+  const int64_t cnn = (16 * 81 + 16) + 3 * (16 * 16 * 81 + 16) + (16 * 81 + 1);
+  CHECK(lfnet::nn::parameter_count(*net->ae) == ae);
+  CHECK(lfnet::nn::parameter_count(*net->cnn) == cnn);
+  CHECK(lfnet::nn::parameter_count(*net) == ae + cnn);
+  std::set<std::string> names;
+  for (const auto& p : net->named_parameters()) names.insert(p.key());
+  for (const auto& b : net->named_buffers()) names.insert(b.key());
+  std::set<std::string> want = {"phi", "adjoint_scale", "ae.conv.weight", "ae.conv.bias"};
+  for (int i = 1; i <= 6; ++i) {
+    want.insert("ae.fc" + std::to_string(i) + ".weight");
+    want.insert("ae.fc" + std::to_string(i) + ".bias");
+  }
+  for (int i = 1; i <= 5; ++i) {
+    want.insert("cnn.conv" + std::to_string(i) + ".weight");
+    want.insert("cnn.conv" + std::to_string(i) + ".bias");
+  }
+  CHECK(names == want);
+}
+
+TEST_CASE("the head averages the branch outputs with the configured weights", "[nn][network]") {
+  for (auto weights : std::vector<std::vector<double>>{{0.5, 0.5}, {0.3, 0.9}, {1.0, 0.0}}) {
+    INFO(weights[0] << ", " << weights[1]);
+    torch::manual_seed(1);
+    auto o = small_options("net");
+    o.head_weights = weights;
+    LightFieldNet net(o);
+    net->set_phi(random_phi(o, 1, 2));
+    auto y = torch::rand({4, o.measurement_size()});
+    auto out = net->forward_all(y);
+    // The branches evaluated on their own, independently of the head.
+    auto ae = net->ae->forward(y);
+    auto cnn = net->cnn->forward(net->adjoint(y).view({4, 1, 3, 3, 5, 5}));
+    lfnet::test::require_close(out.ae, ae, 0);
+    lfnet::test::require_close(out.cnn, cnn, 0);
+    lfnet::test::require_close(out.output, weights[0] * ae + weights[1] * cnn, 1e-6);
+    CHECK((ae - cnn).abs().max().item<double>() > 1e-3);  // the weights are visible
+  }
+}
+
+TEST_CASE("the phi buffer drives the CNN branch; the measurement AE ignores it",
+          "[nn][network]") {
+  torch::manual_seed(2);
+  auto o = small_options("net");
+  LightFieldNet net(o);
+  auto y = torch::rand({5, o.measurement_size()});
+  net->set_phi(random_phi(o, 1, 3));
+  auto first = net->forward_all(y);
+  net->set_phi(random_phi(o, 1, 4));
+  auto second = net->forward_all(y);
+  CHECK((first.cnn - second.cnn).abs().max().item<double>() > 1e-4);
+  lfnet::test::require_close(first.ae, second.ae, 0);
+
+  o.ae.input = "adjoint";  // then the AE reads Phi^T y and changes too
+  LightFieldNet net2(o);
+  net2->set_phi(random_phi(o, 1, 3));
+  auto a = net2->forward_all(y).ae;
+  net2->set_phi(random_phi(o, 1, 4));
+  CHECK((a - net2->forward_all(y).ae).abs().max().item<double>() > 1e-5);
+}
+
+TEST_CASE("the scaled adjoint is s_p Phi_p^T y for each patch's phase", "[nn][network]") {
+  torch::manual_seed(3);
+  auto o = small_options("cnn");
+  LightFieldNet net(o);
+  auto stack = random_phi(o, 4, 5);
+  net->set_phi(stack);
+  REQUIRE(net->phases() == 4);
+  auto y = torch::rand({9, o.measurement_size()});
+  auto phase = torch::tensor({3, 0, 1, 3, 2, 2, 0, 3, 1}, torch::kInt64);
+  auto got = net->adjoint(y, phase);
+  for (int64_t i = 0; i < 9; ++i) {
+    const int64_t p = phase[i].item<int64_t>();
+    auto a = stack[p].to(torch::kFloat64);
+    auto t = a.t().matmul(a.sum(1));  // Phi^T Phi 1
+    const double s = t.sum().item<double>() / t.square().sum().item<double>();
+    lfnet::test::require_close(got[i], s * y[i].to(torch::kFloat64).matmul(a), 1e-5, 1e-5);
+  }
+  CHECK_THROWS_WITH(net->forward(y), Catch::Contains("4 phases"));
+  CHECK_THROWS_WITH(net->forward(y, phase + 1), Catch::Contains("[0, 4)"));
+}
+
+TEST_CASE("the adjoint of a flat patch under a view-averaging Phi is the flat patch",
+          "[nn][network]") {
+  auto o = small_options("cnn");
+  o.measurements = 1;
+  // One measurement per pixel: the mean of its 9 views.
+  const int64_t views = 9, pixels = 25;
+  auto phi = torch::zeros({1, pixels, views * pixels});
+  for (int64_t px = 0; px < pixels; ++px) {
+    for (int64_t v = 0; v < views; ++v) phi[0][px][v * pixels + px] = 1.0 / views;
+  }
+  LightFieldNet net(o);
+  net->set_phi(phi);
+  auto lf = torch::full({1, views * pixels}, 0.7);
+  auto y = lf.matmul(phi[0].t());
+  lfnet::test::require_close(net->adjoint(y), lf, 1e-6);
+}
+
+TEST_CASE("the pinv residual adds the Tikhonov pseudo-inverse estimate", "[nn][network]") {
+  torch::manual_seed(4);
+  auto o = small_options("ae");
+  o.residual = "pinv";
+  o.pinv_lambda = 1e-2;
+  LightFieldNet net(o);
+  auto stack = random_phi(o, 2, 6);
+  net->set_phi(stack);
+  auto y = torch::rand({3, o.measurement_size()});
+  auto phase = torch::tensor({1, 0, 1}, torch::kInt64);
+  auto out = net->forward_all(y, phase);
+  for (int64_t i = 0; i < 3; ++i) {
+    // (Phi^T Phi + lambda I)^-1 Phi^T y, solved in the light-field space (D x D).
+    auto a = stack[phase[i].item<int64_t>()].to(torch::kFloat64);
+    auto d = a.size(1);
+    auto want = torch::linalg_solve(a.t().matmul(a) + 1e-2 * torch::eye(d, torch::kFloat64),
+                                    a.t().matmul(y[i].to(torch::kFloat64)));
+    lfnet::test::require_close(out.base[i].reshape({-1}), want, 1e-4, 1e-4);
+  }
+  lfnet::test::require_close(out.output, out.ae + out.base, 1e-6);
+}
+
+TEST_CASE("Phi switching maps measurement weights through the new Phi's pseudo-inverse",
+          "[nn][network]") {
+  torch::manual_seed(5);
+  const int64_t m = 6, d = 20, hidden = 4;
+  auto phi_a = torch::randn({m, d}, torch::kFloat64);
+  auto w = torch::randn({hidden, m}, torch::kFloat64);
+  // The same measurements in another order: the mapped weights are the permuted columns.
+  auto perm = torch::tensor({2, 0, 5, 1, 4, 3}, torch::kInt64);
+  auto phi_b = phi_a.index_select(0, perm);
+  auto mapped = lfnet::nn::map_measurement_weights(w, phi_a, phi_b, 1e-9);
+  lfnet::test::require_close(mapped, w.index_select(1, perm), 1e-6);
+  // Another Phi with more measurements: W_B Phi_B l = W_A Phi_A l for l in Phi_B's row space.
+  auto phi_c = torch::randn({9, d}, torch::kFloat64);
+  auto mapped_c = lfnet::nn::map_measurement_weights(w, phi_a, phi_c, 1e-9);
+  REQUIRE(mapped_c.sizes() == torch::IntArrayRef({hidden, 9}));
+  auto l = phi_c.t().matmul(torch::randn({9}, torch::kFloat64));  // in the row space
+  lfnet::test::require_close(mapped_c.matmul(phi_c.matmul(l)), w.matmul(phi_a.matmul(l)), 1e-6,
+                             1e-6);
+}
+
+TEST_CASE("network options parse strictly, round-trip and validate", "[nn][network]") {
+  auto j = nlohmann::json::parse(R"({"patch": {"rows": 3, "cols": 3, "height": 7, "width": 7},
+      "measurements": 4, "branches": "cnn", "ae": {"hidden": [10, 5, 10, 5, 10]},
+      "cnn": {"channels": 8, "depth": 2}, "head_weights": [0.25, 0.75], "residual": "pinv"})");
+  auto o = NetworkOptions::from_json(j);
+  CHECK(o.patch.size() == 3 * 3 * 7 * 7);
+  CHECK(o.measurement_size() == 4 * 49);
+  CHECK(o.cnn.channels == 8);
+  CHECK(o.head_weights[1] == 0.75);
+  CHECK(NetworkOptions::from_json(o.to_json()).to_json() == o.to_json());
+
+  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"cnn": {"chanels": 3}})"),
+                                              "$.network"),
+                    Catch::Contains("$.network.cnn.chanels"));
+  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"branches": "both"})")),
+                    Catch::Contains("$.branches") && Catch::Contains("net, ae, cnn"));
+  CHECK_THROWS_WITH(
+      NetworkOptions::from_json(nlohmann::json::parse(R"({"ae": {"hidden": [1, 2]}})")),
+      Catch::Contains("$.ae.hidden"));
+  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"kernel": 2})")),
+                    Catch::Contains("$.kernel"));
+  CHECK_THROWS_AS(NetworkOptions::from_json(nlohmann::json::parse(R"({"measurements": "2"})")),
+                  lfnet::ConfigError);
+}
+
+TEST_CASE("the net rejects measurement vectors and Phi stacks of the wrong size",
+          "[nn][network]") {
+  auto o = small_options("net");
+  LightFieldNet net(o);
+  CHECK_THROWS_WITH(net->forward(torch::rand({2, 7})), Catch::Contains("(B, 50)"));
+  CHECK_THROWS_WITH(net->set_phi(torch::rand({1, 50, 80})), Catch::Contains("(P, 50, 225)"));
+  auto bad = random_phi(o, 1, 1);
+  bad[0][0][0] = std::nan("");
+  CHECK_THROWS_AS(net->set_phi(bad), lfnet::NumericalError);
+}
+
+TEST_CASE("the net trains: gradients reach every parameter", "[nn][network]") {
+  torch::manual_seed(6);
+  auto o = small_options("net");
+  LightFieldNet net(o);
+  net->set_phi(random_phi(o, 1, 7));
+  auto y = torch::rand({4, o.measurement_size()});
+  net->forward(y).square().sum().backward();
+  for (const auto& p : net->named_parameters()) {
+    INFO(p.key());
+    REQUIRE(p.value().grad().defined());
+    CHECK(p.value().grad().abs().sum().item<double>() > 0);
+  }
+  for (const auto& b : net->named_buffers()) CHECK_FALSE(b.value().requires_grad());
+}
