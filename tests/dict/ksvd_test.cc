@@ -36,8 +36,8 @@ int64_t recovered_atoms(const torch::Tensor& learned, const torch::Tensor& truth
 TEST_CASE("K-SVD recovers a planted dictionary", "[dict][ksvd]") {
   // Aharon et al. 2006, section V: 20-dimensional signals, 50 atoms, 3 per signal, here with
   // N(0, 1) coefficients and noise 0.01 per entry (about 31 dB). K-SVD finds a local minimum:
-  // over data seeds 5..12 it recovered 43..50 atoms (approximate update) and 46..50 (exact);
-  // the paper reports 92-96 % on average. Seed 11 is one where both recover all 50.
+  // over data seeds 5..12 it recovered 43..50 atoms (approximate update) and 46..50 (exact).
+  // Seed 11 is one where both recover all 50.
   torch::manual_seed(11);
   auto d0 = unit_columns(torch::randn({20, 50}, torch::kFloat64));
   auto y = planted_signals(d0, 3000, 3, 0.01);
