@@ -361,9 +361,11 @@ KsvdResult ksvd(const torch::Tensor& signals, const KsvdOptions& options,
     if (options.replace_atoms && width > 0) {
       report.replaced = replace_atoms(options, users, x, x_norms_sq, dt, r, values);
     }
-    prev_indices = indices;
-    prev_values = values;
-    prev_r = r;
+    if (options.keep_better_codes) {
+      prev_indices = indices;
+      prev_values = values;
+      prev_r = r;
+    }
     report.seconds = watch.seconds();
     result.history.push_back(report);
     const bool go_on = callback ? callback(report) : true;

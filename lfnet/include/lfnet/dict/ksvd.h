@@ -80,8 +80,8 @@ struct KsvdResult {
 // with `seed`. Each iteration: Batch-OMP codes every signal, then every atom is refitted in a
 // random order (seeded) against the running residual, then (with `replace_atoms`) atoms used
 // by fewer than `min_uses` signals or nearly duplicating another are replaced by the training
-// signals with the largest residuals. Memory: three (N, d) float64 matrices (signals,
-// residual, and the previous residual while coding).
+// signals with the largest residuals. Memory: two (N, d) float64 matrices (signals and
+// residual; three with keep_better_codes, which keeps the previous residual).
 KsvdResult ksvd(const torch::Tensor& signals, const KsvdOptions& options,
                 const KsvdCallback& callback = {}, const torch::Tensor& initial = {});
 
