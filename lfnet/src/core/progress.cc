@@ -65,7 +65,7 @@ void ProgressBar::draw(bool force) {
   } else {
     const int decile = static_cast<int>(frac * 10);
     if (!force && decile == last_decile_) return;
-    if (force && decile == last_decile_ && done_ < total_) return;
+    if (force && decile == last_decile_) return;  // this state is already on screen
     last_decile_ = decile;
   }
   last_draw_ = now;

@@ -15,7 +15,8 @@ void ReconstructOptions::validate() const {
 
 namespace {
 
-// Applies `fn(rows, phase)` to each group of rows that share a phase and scatters the results.
+}  // namespace
+
 torch::Tensor by_phase(const torch::Tensor& x, const torch::Tensor& phase, int64_t out_dim,
                        const std::function<torch::Tensor(const torch::Tensor&, int64_t)>& fn) {
   auto out = torch::empty({x.size(0), out_dim}, x.options());
@@ -28,6 +29,8 @@ torch::Tensor by_phase(const torch::Tensor& x, const torch::Tensor& phase, int64
   }
   return out;
 }
+
+namespace {
 
 torch::Tensor hann_window(int64_t h, int64_t w) {
   auto wy = torch::sin(M_PI * (torch::arange(h, torch::kFloat64) + 0.5) / h);

@@ -54,6 +54,11 @@ torch::Tensor reconstruct_patches(const optics::Phi& phi, const PatchGrid& grid,
                                   const ReconstructOptions& options,
                                   const ProgressCallback& progress = {});
 
+// Applies `fn(rows, phase)` to each group of rows of `x` (B, ...) that share a phase and
+// gathers the (rows, out_dim) results in the original order.
+torch::Tensor by_phase(const torch::Tensor& x, const torch::Tensor& phase, int64_t out_dim,
+                       const std::function<torch::Tensor(const torch::Tensor&, int64_t)>& fn);
+
 // The linear baselines, as solvers over the stack of patch matrices (optics::patch_matrix_stack).
 // adjoint: A^T y, divided elementwise by A^T A 1 so a white patch maps to white.
 PatchSolver adjoint_solver(const torch::Tensor& matrices);

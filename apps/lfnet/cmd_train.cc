@@ -1,0 +1,150 @@
+// lfnet train / lfnet experiment: train the stages of a config, then (experiment) evaluate.
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+
+#include "command.h"
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/recon/methods.h"
+#include "lfnet/train/checkpoint.h"
+#include "workflow.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::app {
+
+namespace {
+
+struct TrainArgs {
+  std::string config;
+  std::string out;
+  std::string scale;
+  std::string resume;
+  std::string init;
+  std::string stage;  // train only this stage
+  bool force = false;
+};
+
+std::string command_line_of(const TrainArgs& a, const std::string& verb) {
+  std::string s = "lfnet " + verb + " " + a.config;
+  if (!a.out.empty()) s += " --out " + a.out;
+  if (!a.scale.empty()) s += " --scale " + a.scale;
+  if (!a.resume.empty()) s += " --resume " + a.resume;
+  if (!a.init.empty()) s += " --init " + a.init;
+  if (!a.stage.empty()) s += " --stage " + a.stage;
+  return s;
+}
+
+// Trains the selected stages; returns the config and the checkpoint of the last stage.
+std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
+                                                      const std::string& verb) {
+  ExperimentConfig config = ExperimentConfig::load(args.config, args.scale);
+  const std::string out = args.out.empty() ? "out/" + config.name : args.out;
+  LFNET_CHECK_AS(ConfigError, args.resume.empty() || args.init.empty(),
+                 "give --resume or --init, not both");
+  std::vector<StageConfig> stages;
+  for (const auto& s : config.stages) {
+    if (args.stage.empty() || s.name == args.stage) stages.push_back(s);
+  }
+  LFNET_CHECK_AS(ConfigError, !stages.empty(), args.config, " has no stage '", args.stage, "'");
+  LFNET_CHECK_AS(ConfigError, args.resume.empty() || stages.size() == 1,
+                 "--resume continues one stage: name it with --stage");
+  // Resuming writes into the run folder it continues; anything else needs a fresh one.
+  prepare_run_dir(out, args.force || !args.resume.empty());
+  nlohmann::json resolved = config.raw;
+  resolved["scale"] = config.scale;
+  write_json_file((fs::path(out) / "config.json").string(), resolved);
+
+  const auto phi = optics::make_phi(config.phi);
+  spdlog::info("{}: Phi {}, {} stage(s), output in {}", config.name, config.phi.label(),
+               stages.size(), out);
+  auto dataset = make_dataset(config, *phi);
+  spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
+               dataset->measurement_mean());
+  std::string last;
+  for (size_t i = 0; i < stages.size(); ++i) {
+    // --init applies to the first stage trained; later stages follow the usual chain.
+    last = train_stage(config, stages[i], *dataset, out, i == 0 ? args.init : "", args.resume,
+                       command_line_of(args, verb));
+    spdlog::info("stage {} done: {}", stages[i].name, last);
+  }
+  config.raw = resolved;
+  return {config, last};
+}
+
+void add_train_args(CLI::App* cmd, TrainArgs& a) {
+  cmd->add_option("config", a.config, "experiment config (JSON), e.g. configs/quickstart.json")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--out", a.out, "run folder (default out/<config name>)");
+  cmd->add_option("--scale", a.scale, "config scale: quick or paper (default: the config's)");
+  cmd->add_flag("--force", a.force, "write into an existing non-empty run folder");
+}
+
+}  // namespace
+
+void add_train_command(CLI::App& app, const GlobalOptions&) {
+  auto* cmd = app.add_subcommand("train", "Train the stages of a config (ae, cnn, joint)");
+  auto args = std::make_shared<TrainArgs>();
+  add_train_args(cmd, *args);
+  cmd->add_option("--resume", args->resume, "continue an interrupted stage from its last.ckpt");
+  cmd->add_option("--init", args->init,
+                  "start from a checkpoint: finetuning, or Phi switching when its Phi differs");
+  cmd->add_option("--stage", args->stage, "train only this stage of the config");
+  cmd->callback([args] { run_training(*args, "train"); });
+}
+
+void add_experiment_command(CLI::App& app, const GlobalOptions&) {
+  auto* cmd = app.add_subcommand(
+      "experiment", "Train a config's stages, then run its evaluations into results.jsonl");
+  auto args = std::make_shared<TrainArgs>();
+  add_train_args(cmd, *args);
+  cmd->add_option("--init", args->init, "start the first stage from a checkpoint");
+  cmd->callback([args] {
+    auto [config, last] = run_training(*args, "experiment");
+    const std::string out = args->out.empty() ? "out/" + config.name : args->out;
+    const auto& ev = config.evaluation;
+    if (ev.data.empty()) {
+      spdlog::warn("the config names no evaluation data ($.evaluation.data): nothing evaluated");
+      return;
+    }
+    const auto phi = optics::make_phi(config.phi);
+    MethodContext context;
+    context.phi = phi.get();
+    std::string model = last;
+    if (!ev.model_stage.empty()) model = (fs::path(out) / "models" / (ev.model_stage + ".ckpt")).string();
+    context.net = train::build_net(train::load_checkpoint(model), model);
+    const auto truths = load_sources(ev.data, phi->rows(), phi->cols());
+    const std::string results = (fs::path(out) / "results.jsonl").string();
+    for (const auto& truth : truths) {
+      for (const auto& method : ev.methods) {
+        for (int64_t stride : ev.strides) {
+          for (const auto& mode : ev.modes) {
+            for (double noise : ev.noise) {
+              eval::EvalOptions o;
+              o.mode = optics::parse_simulation_mode(mode);
+              if (noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{noise};
+              o.reconstruct.stride = stride;
+              o.reconstruct.patch_h = config.dataset.patch_h;
+              o.reconstruct.patch_w = config.dataset.patch_w;
+              auto record = evaluate_method(truth, method, context, o);
+              record["experiment"] = config.name;
+              record["scale"] = config.scale;
+              record["model"] = recon::needs_network(method) ? model : "";
+              append_jsonl(results, record);
+              spdlog::info("{:<12} {:<14} stride {} {:<9} noise {:.2f}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s",
+                           method, truth.name, stride, mode, noise,
+                           record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>(),
+                           record["ssim"].get<double>(), record["seconds"].get<double>());
+            }
+          }
+        }
+      }
+    }
+    spdlog::info("results in {}", results);
+  });
+}
+
+}  // namespace lfnet::app

@@ -1,0 +1,121 @@
+// Experiments: a JSON config that names the Phi, the data, the network, the training stages
+// and the evaluations; shared by `lfnet train`, `lfnet experiment` and `lfnet evaluate`.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/light_field.h"
+#include "lfnet/data/patch_dataset.h"
+#include "lfnet/eval/evaluate.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/train/trainer.h"
+
+namespace lfnet::app {
+
+// Light fields named in a config: real folders, scene specs and random scenes.
+struct LightFieldSources {
+  std::vector<std::string> light_fields;  // folders of sub-aperture images
+  std::vector<std::string> scenes;        // scene spec files (configs/scenes)
+  int64_t random_scenes = 0;              // procedural random scenes
+  uint64_t random_seed = 1;               // seed of the first random scene
+  nlohmann::json random_options = nlohmann::json::object();  // scene::RandomSceneOptions
+  std::string views;                      // R0:R1,C0:C1 (1-based); "" = central U x V
+
+  void read(JsonReader& r);
+  nlohmann::json to_json() const;
+  bool empty() const { return light_fields.empty() && scenes.empty() && random_scenes == 0; }
+};
+
+// A named grey light field with its angular window applied.
+struct NamedLightField {
+  std::string name;
+  LightField lf;
+};
+
+// Loads every source as a grey light field of rows x cols views, with a progress bar.
+std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
+                                          int64_t cols);
+
+// One training stage of an experiment.
+struct StageConfig {
+  std::string name;          // ae, cnn, joint or joint_scratch
+  nlohmann::json training = nlohmann::json::object();  // overrides of the common training options
+};
+
+// What to evaluate after training.
+struct EvaluationConfig {
+  LightFieldSources data;                       // held-out light fields
+  std::vector<std::string> methods = {"net", "no-parallax"};
+  std::vector<int64_t> strides = {5};
+  std::vector<std::string> modes = {"sensor"};
+  std::vector<double> noise = {0.0};
+  std::string model_stage;  // stage whose model net/ae/cnn use ("" = the last)
+
+  void read(JsonReader& r);
+  nlohmann::json to_json() const;
+};
+
+// The resolved experiment config.
+struct ExperimentConfig {
+  std::string name = "experiment";
+  std::string scale;  // the scale applied (its overrides are merged in)
+  optics::PhiSpec phi;
+  LightFieldSources train_data;
+  data::DatasetOptions dataset;
+  nn::NetworkOptions network;
+  nlohmann::json training = nlohmann::json::object();  // common train::TrainerOptions
+  std::vector<StageConfig> stages;
+  EvaluationConfig evaluation;
+  nlohmann::json raw;  // the config after merging the scale, as written to config.json
+
+  // Reads a config file; `scale` picks one of its "scales" (merge patches) or, when empty,
+  // its "default_scale".
+  static ExperimentConfig load(const std::string& path, const std::string& scale = "");
+  static ExperimentConfig from_json(const nlohmann::json& j, const std::string& source);
+
+  // The trainer options of one stage: common options, then the stage's overrides.
+  train::TrainerOptions stage_options(const StageConfig& stage) const;
+  // The network options of a stage (branches ae, cnn or net).
+  nn::NetworkOptions stage_network(const StageConfig& stage) const;
+};
+
+// Creates DIR (and DIR/models). An existing non-empty DIR is an error unless `force`.
+void prepare_run_dir(const std::string& dir, bool force);
+
+// Trains one stage; returns the path of its best checkpoint, copied to DIR/models/<stage>.ckpt.
+// `init` (optional) starts from a checkpoint (finetuning, Phi switching); `resume` continues.
+std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
+                        data::PatchDataset& dataset, const std::string& run_dir,
+                        const std::string& init, const std::string& resume,
+                        const std::string& command_line);
+
+// The dataset of a config.
+std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
+                                                 const optics::Phi& phi);
+
+// Appends one JSON record as a line to `path`.
+void append_jsonl(const std::string& path, const nlohmann::json& record);
+
+}  // namespace lfnet::app
+
+namespace lfnet::app {
+
+// What a method needs besides the measurements.
+struct MethodContext {
+  const optics::Phi* phi = nullptr;
+  nn::LightFieldNet net{nullptr};  // for net, ae, cnn
+  std::string dictionary;          // for dict: a dictionary file
+  std::string dict_method = "omp";  // for dict: omp or admm
+};
+
+// Evaluates `method` on one grey light field; the record names the light field and method.
+nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
+                               const MethodContext& context, eval::EvalOptions options,
+                               torch::Tensor* estimate = nullptr);
+
+}  // namespace lfnet::app

@@ -1,0 +1,80 @@
+// Training patches: random (U, V, h, w) patches of light fields, simulated on the fly.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <torch/types.h>
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/json.h"
+#include "lfnet/core/light_field.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/optics/sensor.h"
+#include "lfnet/train/batch_source.h"
+
+namespace lfnet::data {
+
+// Options of the patch data set.
+struct DatasetOptions {
+  int64_t patch_h = 9;                 // spatial patch height
+  int64_t patch_w = 9;                 // spatial patch width
+  int64_t train_patches = 50000;       // patches drawn per training epoch (paper: 50,000)
+  int64_t validation_patches = 4000;   // fixed validation patches, drawn once
+  double validation_fraction = 0.15;   // share of every light field's rows kept for validation
+  bool augment = true;                 // flips and transposes that keep angular axes consistent
+  double min_std = 0.0;                // drop training patches flatter than this (0: keep all)
+  uint64_t seed = 1;                   // patch draws, augmentation and noise
+  optics::SensorOptions effects;       // sensor effects on the measurements (none by default)
+
+  static DatasetOptions from_json(JsonReader& r);
+  nlohmann::json to_json() const;
+  void validate() const;
+};
+
+// Random patches of grey light fields with an 85:15 split that shares no pixel: the bottom
+// `validation_fraction` of every light field's rows is kept for validation, and training
+// patches never reach into it. Measurements are simulated per patch with the patch matrix of
+// the patch's origin, which for every local Phi equals cropping a simulated sensor image
+// (noise aside: here every patch draws its own). Deterministic: the batches of an epoch follow
+// from (seed, epoch) alone, so resumed training is exact.
+class PatchDataset : public train::BatchSource {
+ public:
+  PatchDataset(std::vector<LightField> light_fields, const optics::Phi& phi,
+               DatasetOptions options, int64_t validation_batch_size = 256);
+
+  void start_epoch(int64_t epoch, int64_t batch_size) override;
+  int64_t train_batches_per_epoch() const override;
+  train::Batch next_train() override;
+  const std::vector<train::Batch>& validation() override { return validation_; }
+
+  // Mean of simulated training measurements: real measurements are scaled to it.
+  double measurement_mean() const { return measurement_mean_; }
+  int64_t light_fields() const { return static_cast<int64_t>(lfs_.size()); }
+
+ private:
+  struct Draw {
+    std::vector<int64_t> lf, y0, x0;
+    std::vector<int> aug;
+  };
+  Draw draw(bool validation, int64_t count, std::mt19937_64& rng) const;
+  train::Batch make_batch(const Draw& d, uint64_t noise_seed) const;
+
+  std::vector<LightField> lfs_;
+  const optics::Phi& phi_;
+  DatasetOptions options_;
+  torch::Tensor weights_;           // local Phi: (P, N, U, V, h, w) per-pixel weights
+  torch::Tensor matrix_;            // block Phi: (N h w, U V h w)
+  std::vector<int64_t> split_row_;  // first validation row of every light field
+  std::vector<double> train_weight_;
+  std::mt19937_64 rng_;
+  int64_t epoch_ = 0, batch_size_ = 64, served_ = 0;
+  std::vector<train::Batch> validation_;
+  double measurement_mean_ = 0;
+};
+
+}  // namespace lfnet::data

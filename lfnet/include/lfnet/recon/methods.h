@@ -1,0 +1,34 @@
+// Reconstruction methods by name (DESIGN section 5), as patch solvers.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "lfnet/dict/dictionary.h"
+#include "lfnet/dict/sparse_coding.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/recon/reconstruct.h"
+
+namespace lfnet::recon {
+
+// Every method `lfnet evaluate --method` knows.
+const std::vector<std::string>& method_names();
+// Methods that need a trained network.
+bool needs_network(const std::string& method);
+
+// The network (`net`) or one of its branches (`ae`, `cnn`; the branch alone, plus the
+// network's residual base if it has one), run in inference mode.
+PatchSolver network_solver(nn::LightFieldNet net, const std::string& method);
+
+// `adjoint` or `pinv` for `phi` at the given patch size.
+PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,
+                          int64_t patch_w);
+
+// `dict`: sparse coding of y = A D alpha per patch with the dictionary (OMP or ADMM-LASSO, by
+// the options), one prepared operator per distinct patch matrix.
+PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& dictionary,
+                              const dict::SparseCodingOptions& options, int64_t patch_h,
+                              int64_t patch_w);
+
+}  // namespace lfnet::recon

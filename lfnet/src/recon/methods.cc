@@ -1,0 +1,68 @@
+#include "lfnet/recon/methods.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+
+#include "lfnet/core/error.h"
+#include "lfnet/optics/measure.h"
+
+namespace lfnet::recon {
+
+const std::vector<std::string>& method_names() {
+  static const std::vector<std::string> kNames = {"net",  "ae",      "cnn",        "dict",
+                                                  "pinv", "adjoint", "no-parallax"};
+  return kNames;
+}
+
+bool needs_network(const std::string& method) {
+  return method == "net" || method == "ae" || method == "cnn";
+}
+
+PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
+  LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
+                 "' is not a network method (net, ae, cnn)");
+  const auto& o = net->options();
+  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches == "net" || o.branches == method,
+                 "the model was trained as '", o.branches, "' and has no '", method, "' branch");
+  net->eval();
+  return [net, method](const torch::Tensor& y, const torch::Tensor& phase) mutable {
+    torch::InferenceMode guard;
+    auto out = net->forward_all(y, phase);
+    torch::Tensor patch = out.output;
+    if (method == "ae" && net->options().branches == "net") {
+      patch = out.base.defined() ? out.ae + out.base : out.ae;
+    } else if (method == "cnn" && net->options().branches == "net") {
+      patch = out.base.defined() ? out.cnn + out.base : out.cnn;
+    }
+    return patch.reshape({y.size(0), -1});
+  };
+}
+
+PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,
+                          int64_t patch_w) {
+  if (method == "adjoint") return adjoint_solver(optics::patch_matrix_stack(phi, patch_h, patch_w));
+  if (method == "pinv") return pinv_solver(optics::pinv_matrix_stack(phi, patch_h, patch_w));
+  throw ConfigError("method '" + method + "' is not a linear method (adjoint, pinv)");
+}
+
+PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& dictionary,
+                              const dict::SparseCodingOptions& options, int64_t patch_h,
+                              int64_t patch_w) {
+  dictionary.validate();
+  const std::array<int64_t, 4> shape{phi.rows(), phi.cols(), patch_h, patch_w};
+  LFNET_CHECK_AS(ConfigError, dictionary.patch_shape == shape,
+                 "the dictionary's atoms are ", dictionary.patch_shape[0], "x",
+                 dictionary.patch_shape[1], "x", dictionary.patch_shape[2], "x",
+                 dictionary.patch_shape[3], " patches, but the reconstruction uses ", phi.rows(),
+                 "x", phi.cols(), "x", patch_h, "x", patch_w);
+  auto matrices = optics::patch_matrix_stack(phi, patch_h, patch_w);
+  auto coder = std::make_shared<dict::SparseCoder>(dictionary.atoms, options);
+  return [matrices, coder](const torch::Tensor& y, const torch::Tensor& phase) {
+    return by_phase(y, phase, matrices.size(2), [&](const torch::Tensor& rows, int64_t p) {
+      return coder->code(matrices[p], rows).patches.to(torch::kFloat32);
+    });
+  };
+}
+
+}  // namespace lfnet::recon
