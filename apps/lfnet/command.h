@@ -6,6 +6,8 @@
 #include <functional>
 #include <string>
 
+#include "lfnet/scene/render.h"
+
 namespace lfnet::app {
 
 // Settings every subcommand shares.
@@ -19,5 +21,10 @@ using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& gl
 
 void add_info_command(CLI::App& app, const GlobalOptions& global);
 void add_render_command(CLI::App& app, const GlobalOptions& global);
+
+// Render options for a scene file: image textures are read with lfnet::io::read_image, relative
+// to the scene file's folder ("" for none). Defined in cmd_render.cc; any subcommand that renders
+// a scene (e.g. simulate --scene) uses it.
+scene::RenderOptions scene_render_options(const std::string& scene_file);
 
 }  // namespace lfnet::app
