@@ -31,6 +31,7 @@ struct RenderArgs {
   std::string out;
   bool force = false;
   int bits = 16;
+  int64_t epi_row = -1;
 };
 
 // Parses "AxB" into two positive integers.
@@ -111,33 +112,40 @@ torch::Tensor colour_map(const torch::Tensor& disparity) {
   return c0 * (1 - f).unsqueeze(0) + c1 * f.unsqueeze(0);
 }
 
-// A small image to look at: [centre view | disparity map] over [horizontal EPI | vertical EPI],
-// area-downscaled to at most 480 px wide.
-torch::Tensor preview_image(const LightField& lf, const torch::Tensor& disparity) {
+// A small image to look at: the centre view and the disparity map side by side, area-downscaled
+// to at most 640 px wide, over a full-resolution crop of the horizontal EPI through the centre
+// row or `epi_row` (8 rows per view), whose ends are ticked in red on the centre view.
+torch::Tensor preview_image(const LightField& lf, const torch::Tensor& disparity, int64_t epi_row) {
   const int64_t gap = 4;
   const int64_t w = lf.width();
   const int64_t h = lf.height();
-  const int64_t factor = std::max<int64_t>(1, (2 * w + gap + 479) / 480);
-  const int64_t epi_scale = 8 * factor;
+  const int64_t factor = std::max<int64_t>(1, (2 * w + gap + 639) / 640);
   auto colour = [&](torch::Tensor x) {
     return x.size(0) == 3 ? x : x.expand({3, x.size(1), x.size(2)});
   };
-  auto centre = colour(lf.view(lf.rows() / 2, lf.cols() / 2));
-  auto disp = colour_map(disparity);
-  auto epi_h = colour(io::horizontal_epi(lf, -1, epi_scale));
-  auto epi_v = colour(io::vertical_epi(lf, -1, epi_scale));
-  const int64_t top = h;
-  const int64_t bottom = std::max(epi_h.size(1), epi_v.size(1));
-  const int64_t width = w + gap + std::max(w, epi_v.size(2));
-  auto canvas = torch::ones({3, top + gap + bottom, width});
-  auto put = [&](const torch::Tensor& img, int64_t y, int64_t x) {
-    canvas.slice(1, y, y + img.size(1)).slice(2, x, x + img.size(2)).copy_(img);
-  };
-  put(centre, 0, 0);
-  put(disp, 0, w + gap);
-  put(epi_h, top + gap, 0);
-  put(epi_v, top + gap, w + gap);
-  if (factor > 1) canvas = torch::avg_pool2d(canvas.unsqueeze(0), factor).squeeze(0);
+  auto top = torch::ones({3, h, 2 * w + gap});
+  top.slice(2, 0, w).copy_(colour(lf.view(lf.rows() / 2, lf.cols() / 2)));
+  top.slice(2, w + gap, 2 * w + gap).copy_(colour_map(disparity));
+  if (factor > 1) top = torch::avg_pool2d(top.unsqueeze(0), factor).squeeze(0);
+  const int64_t width = top.size(2);
+  const int64_t crop = std::min(width, w);
+  const int64_t x0 = (w - crop) / 2;
+  if (epi_row < 0 || epi_row >= h) epi_row = h / 2;
+  const auto epi = colour(io::horizontal_epi(lf, epi_row, 8)).slice(2, x0, x0 + crop);
+  // Ticks above and below the EPI's row at the ends of its crop.
+  const int64_t row = epi_row / factor;
+  for (const int64_t x : {x0 / factor, std::min((x0 + crop - 1) / factor, top.size(2) - 1)}) {
+    for (const int64_t y : {row - 6, row + 2}) {
+      if (y < 0 || y + 4 > top.size(1)) continue;
+      auto tick = top.slice(1, y, y + 4).slice(2, x, x + 1);
+      tick.select(0, 0).fill_(1.0f);
+      tick.select(0, 1).fill_(0.0f);
+      tick.select(0, 2).fill_(0.0f);
+    }
+  }
+  auto canvas = torch::ones({3, top.size(1) + gap + epi.size(1), width});
+  canvas.slice(1, 0, top.size(1)).copy_(top);
+  canvas.slice(1, top.size(1) + gap).slice(2, 0, crop).copy_(epi);
   return canvas.clamp(0.0, 1.0);
 }
 
@@ -177,11 +185,13 @@ void run_render(const RenderArgs& args) {
     }
     if (args.grey) spec.color = false;
   }
+  if (args.epi_row >= spec.height) {
+    throw ConfigError("--epi-row " + std::to_string(args.epi_row) + " is outside the " +
+                      std::to_string(spec.height) + "-row view");
+  }
   prepare_output(args.out, args.force);
 
-  scene::RenderOptions render_options;
-  render_options.image_loader = [](const std::string& path) { return io::read_image(path); };
-  if (!random) render_options.base_dir = fs::path(args.scene).parent_path().string();
+  const scene::RenderOptions render_options = scene_render_options(random ? "" : args.scene);
   const auto start = std::chrono::steady_clock::now();
   const scene::RenderResult result = scene::render_scene(spec, render_options);
   const double seconds =
@@ -191,7 +201,7 @@ void run_render(const RenderArgs& args) {
   io::write_pfm((fs::path(args.out) / "disparity.pfm").string(), result.disparity);
   io::write_previews(result.light_field, args.out);
   io::write_image((fs::path(args.out) / "preview.png").string(),
-                  preview_image(result.light_field, result.disparity), 8);
+                  preview_image(result.light_field, result.disparity, args.epi_row), 8);
   nlohmann::json record = spec.to_json();
   record["rendered"] = {
       {"effects_run", result.effects_run},
@@ -213,6 +223,13 @@ void run_render(const RenderArgs& args) {
 
 }  // namespace
 
+scene::RenderOptions scene_render_options(const std::string& scene_file) {
+  scene::RenderOptions options;
+  options.image_loader = [](const std::string& path) { return io::read_image(path); };
+  if (!scene_file.empty()) options.base_dir = fs::path(scene_file).parent_path().string();
+  return options;
+}
+
 void add_render_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand(
       "render", "Render a procedural scene into a light field folder with its true disparity map");
@@ -233,6 +250,9 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_flag("--force", args->force, "overwrite the outputs in a non-empty folder");
   cmd->add_option("--bits", args->bits, "bits per PNG sample, 8 or 16")
       ->check(CLI::IsMember({8, 16}));
+  cmd->add_option("--epi-row", args->epi_row,
+                  "spatial row of the EPI in preview.png (default: the centre row)")
+      ->check(CLI::NonNegativeNumber);
   cmd->callback([args] { run_render(*args); });
 }
 

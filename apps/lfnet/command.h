@@ -6,6 +6,8 @@
 #include <functional>
 #include <string>
 
+#include "lfnet/scene/render.h"
+
 namespace lfnet::app {
 
 // The program's version, recorded in every output it writes.
@@ -26,5 +28,10 @@ void add_render_command(CLI::App& app, const GlobalOptions& global);
 void add_train_command(CLI::App& app, const GlobalOptions& global);
 void add_experiment_command(CLI::App& app, const GlobalOptions& global);
 void add_evaluate_command(CLI::App& app, const GlobalOptions& global);
+
+// Render options for a scene file: image textures are read with lfnet::io::read_image, relative
+// to the scene file's folder ("" for none). Defined in cmd_render.cc; any subcommand that renders
+// a scene (e.g. simulate --scene) uses it.
+scene::RenderOptions scene_render_options(const std::string& scene_file);
 
 }  // namespace lfnet::app

@@ -112,9 +112,15 @@ TEST_CASE("vignetting darkens the image corners and the outer views as specified
       const double cx = (w - 1) / 2 + shift * nv * w / 2, cy = (h - 1) / 2 + shift * nu * h / 2;
       const auto r = ((xs - cx).pow(2) + (ys - cy).pow(2)).sqrt() / std::hypot(w / 2, h / 2);
       const auto factor = (1.0 - angular * 0.5 * (nu * nu + nv * nv)) * (1.0 - strength * r.pow(2));
-      const auto want = base.light_field.view(u, v).to(torch::kFloat64) * factor;
+      const auto before = base.light_field.view(u, v).to(torch::kFloat64);
+      const auto after = dark.light_field.view(u, v).to(torch::kFloat64);
+      // Where the plain render was clipped (cubic overshoot at sharp edges), the vignetted one
+      // is clipped after the factor: compare the rest.
+      const auto unclipped = (before > 0.0) & (before < 1.0);
+      CHECK(unclipped.to(torch::kFloat64).mean().item<double>() > 0.95);
       INFO("view (" << u << ", " << v << ")");
-      lfnet::test::require_close(dark.light_field.view(u, v).to(torch::kFloat64), want, 1e-6);
+      lfnet::test::require_close(after.masked_select(unclipped),
+                                 (before * factor).masked_select(unclipped), 1e-6);
     }
   }
   // Corner views are darker than the centre view overall.

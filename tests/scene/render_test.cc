@@ -310,3 +310,19 @@ TEST_CASE("textures do not change when the canvas does", "[scene][render]") {
     CHECK(torch::equal(a, b));
   }
 }
+
+TEST_CASE("a grey scene is the luma of the colour scene", "[scene][render]") {
+  auto spec = scene(R"({"height": 40, "width": 56, "seed": 8, "layers": [
+      {"texture": {"kind": "fractal", "colors": [[0.9, 0.1, 0.2], [0.1, 0.8, 0.3]]},
+       "disparity": -0.6, "disparity_gradient": [0.004, 0]},
+      {"texture": {"kind": "stripes", "period": 7, "colors": [[0.2, 0.3, 0.8], [0.9, 0.85, 0.1]]},
+       "shape": {"kind": "disk", "radius": 11}, "disparity": 1.3}],
+      "effects": {"vignetting": {}}})");
+  const auto colour = render_scene(spec).light_field;
+  spec.color = false;
+  const auto grey = render_scene(spec).light_field;
+  REQUIRE(grey.channels() == 1);
+  // Rendering is linear in colour: equal up to float rounding (the colours keep every value
+  // inside [0, 1], so the final clip does not act).
+  lfnet::test::require_close(grey.data(), colour.grey().data(), 1e-5);
+}

@@ -1,8 +1,10 @@
 // Rasterising textures and shapes onto a layer's canvas (internal to the scene library).
 #pragma once
 
+#include <ATen/Parallel.h>
 #include <torch/types.h>
 
+#include <algorithm>
 #include <cstdint>
 
 #include "lfnet/scene/render.h"
@@ -49,6 +51,16 @@ torch::Tensor render_alpha(const ShapeSpec& shape, const Canvas& canvas);
 // B-spline. Added times `amplitude` into `field` (Hc, Wc).
 void add_value_noise(torch::Tensor& field, const Canvas& canvas, double spacing, double offset_x,
                      double offset_y, uint64_t seed, double amplitude);
+
+// Runs fn(begin, end) over items [0, n), in parallel only when the work (n items of about
+// `cost` elementary operations each) pays for waking threads: small scenes and small layers run
+// many short loops, and on a busy machine a thread wake-up costs more than they do.
+template <typename Fn>
+void parallel_items(int64_t n, int64_t cost, const Fn& fn) {
+  constexpr int64_t kMinWork = int64_t{1} << 18;
+  const int64_t grain = std::max<int64_t>(1, kMinWork / std::max<int64_t>(1, cost));
+  at::parallel_for(0, n, grain, fn);
+}
 
 // Rec. 601 luma of a colour.
 inline double luma(const Rgb& c) { return 0.299 * c[0] + 0.587 * c[1] + 0.114 * c[2]; }

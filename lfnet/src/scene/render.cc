@@ -103,7 +103,7 @@ void gaussian_blur(torch::Tensor& planes, double sigma) {
   auto tmp = torch::empty_like(planes);
   float* src = planes.data_ptr<float>();
   float* mid = tmp.data_ptr<float>();
-  at::parallel_for(0, k * h, 8, [&](int64_t b, int64_t e) {
+  detail::parallel_items(k * h, wd * (2 * radius + 1), [&](int64_t b, int64_t e) {
     for (int64_t r = b; r < e; ++r) {
       const float* in = src + r * wd;
       float* out = mid + r * wd;
@@ -116,7 +116,7 @@ void gaussian_blur(torch::Tensor& planes, double sigma) {
       }
     }
   });
-  at::parallel_for(0, k * h, 8, [&](int64_t b, int64_t e) {
+  detail::parallel_items(k * h, wd * (2 * radius + 1), [&](int64_t b, int64_t e) {
     for (int64_t r = b; r < e; ++r) {
       const int64_t plane = r / h;
       const int64_t y = r % h;
@@ -194,7 +194,7 @@ Box support(const torch::Tensor& alpha) {
   const float* a = alpha.data_ptr<float>();
   std::vector<int64_t> first(static_cast<size_t>(h), w);
   std::vector<int64_t> last(static_cast<size_t>(h), -1);
-  at::parallel_for(0, h, 16, [&](int64_t b, int64_t e) {
+  detail::parallel_items(h, w, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       const float* row = a + i * w;
       int64_t j = 0;
@@ -218,7 +218,9 @@ Box support(const torch::Tensor& alpha) {
 }
 
 // "Over" for columns [x0, x1) of one row: `planes` holds the layer's premultiplied colour rows
-// then its alpha row, each `t.width` long, already resampled into view (u, v).
+// then its alpha row, each `t.width` long, already resampled into view (u, v). Alpha is clipped
+// to [0, 1]; colour is not, so that rendering stays linear in colour (a grey scene is the luma
+// of the colour one) and only the finished light field is clipped.
 void blend_row(const Target& t, int64_t u, int64_t v, int64_t y, const float* planes,
                const Highlights& hl, int64_t x0, int64_t x1) {
   const int64_t w = t.width;
@@ -234,12 +236,12 @@ void blend_row(const Target& t, int64_t u, int64_t v, int64_t y, const float* pl
     if (spot == nullptr) {
       for (int64_t x = x0; x < x1; ++x) {
         const float a = std::min(std::max(alpha[x], 0.0f), 1.0f);
-        o[x] = std::min(std::max(p[x], 0.0f), a) + (1.0f - a) * o[x];
+        o[x] = p[x] + (1.0f - a) * o[x];
       }
     } else {
       for (int64_t x = x0; x < x1; ++x) {
         const float a = std::min(std::max(alpha[x], 0.0f), 1.0f);
-        o[x] = std::min(std::max(p[x], 0.0f), a) + a * spot[x] * light + (1.0f - a) * o[x];
+        o[x] = p[x] + a * spot[x] * light + (1.0f - a) * o[x];
       }
     }
   }
@@ -272,7 +274,7 @@ void composite_fronto(const torch::Tensor& planes, const Canvas& canvas, double 
   const int64_t r1 = std::min<int64_t>(hc, box.i1 + 4);
   const int64_t nr = r1 - r0;
   std::unique_ptr<float[]> hx(new float[static_cast<size_t>(g.cols * k * hc * w)]);
-  at::parallel_for(0, g.cols * k * nr, 16, [&](int64_t b, int64_t e) {
+  detail::parallel_items(g.cols * k * nr, 4 * w, [&](int64_t b, int64_t e) {
     for (int64_t r = b; r < e; ++r) {
       const int64_t v = r / (k * nr);
       const int64_t plane = (r / nr) % k;
@@ -293,35 +295,37 @@ void composite_fronto(const torch::Tensor& planes, const Canvas& canvas, double 
     }
   });
 
-  at::parallel_for(0, g.rows * g.cols * t.height, 8, [&](int64_t b, int64_t e) {
-    std::vector<float> rows(static_cast<size_t>(k * w));
-    for (int64_t r = b; r < e; ++r) {
-      const int64_t view = r / t.height;
-      const int64_t y = r % t.height;
-      const int64_t u = view / g.cols;
-      const int64_t v = view % g.cols;
-      const Shift& s = sy[u];
-      const auto [y0, y1] = reach(s, box.i0, box.i1, t.height);
-      if (y < y0 || y >= y1) continue;
-      const auto [x0, x1] = reach(sx[v], box.j0, box.j1, w);
-      if (x1 <= x0) continue;
-      const float* base = hx.get() + v * k * hc * w;
-      for (int64_t plane = 0; plane < k; ++plane) {
-        const float* q1 = base + (plane * hc + y + s.base) * w;
-        float* o = rows.data() + plane * w;
-        if (s.integer) {
-          std::copy(q1 + x0, q1 + x1, o + x0);
-          continue;
-        }
-        const float* q0 = q1 - w;
-        const float* q2 = q1 + w;
-        const float* q3 = q2 + w;
-        const float w0 = s.w[0], w1 = s.w[1], w2 = s.w[2], w3 = s.w[3];
-        for (int64_t x = x0; x < x1; ++x) o[x] = w0 * q0[x] + w1 * q1[x] + w2 * q2[x] + w3 * q3[x];
-      }
-      blend_row(t, u, v, y, rows.data(), hl, x0, x1);
-    }
-  });
+  detail::parallel_items(g.rows * g.cols * t.height, (4 * k + 3 * t.channels) * w,
+                         [&](int64_t b, int64_t e) {
+                           std::vector<float> rows(static_cast<size_t>(k * w));
+                           for (int64_t r = b; r < e; ++r) {
+                             const int64_t view = r / t.height;
+                             const int64_t y = r % t.height;
+                             const int64_t u = view / g.cols;
+                             const int64_t v = view % g.cols;
+                             const Shift& s = sy[u];
+                             const auto [y0, y1] = reach(s, box.i0, box.i1, t.height);
+                             if (y < y0 || y >= y1) continue;
+                             const auto [x0, x1] = reach(sx[v], box.j0, box.j1, w);
+                             if (x1 <= x0) continue;
+                             const float* base = hx.get() + v * k * hc * w;
+                             for (int64_t plane = 0; plane < k; ++plane) {
+                               const float* q1 = base + (plane * hc + y + s.base) * w;
+                               float* o = rows.data() + plane * w;
+                               if (s.integer) {
+                                 std::copy(q1 + x0, q1 + x1, o + x0);
+                                 continue;
+                               }
+                               const float* q0 = q1 - w;
+                               const float* q2 = q1 + w;
+                               const float* q3 = q2 + w;
+                               const float w0 = s.w[0], w1 = s.w[1], w2 = s.w[2], w3 = s.w[3];
+                               for (int64_t x = x0; x < x1; ++x)
+                                 o[x] = w0 * q0[x] + w1 * q1[x] + w2 * q2[x] + w3 * q3[x];
+                             }
+                             blend_row(t, u, v, y, rows.data(), hl, x0, x1);
+                           }
+                         });
 }
 
 // A slanted layer: every view is an affine warp of the canvas, sampled with 2D Catmull-Rom.
@@ -343,7 +347,7 @@ void composite_slanted(const torch::Tensor& planes, const Canvas& canvas, const 
   interleaved.slice(2, 0, k).copy_(planes.permute({1, 2, 0}));
   const auto* src = reinterpret_cast<const Float4*>(interleaved.data_ptr<float>());
   const auto m = static_cast<double>(canvas.margin);
-  at::parallel_for(0, g.rows * g.cols * t.height, 4, [&](int64_t b, int64_t e) {
+  detail::parallel_items(g.rows * g.cols * t.height, 100 * w, [&](int64_t b, int64_t e) {
     std::vector<float> colour(static_cast<size_t>(k * w));
     for (int64_t r = b; r < e; ++r) {
       const int64_t view = r / t.height;
@@ -444,35 +448,36 @@ void apply_vignetting(const VignettingSpec& spec, const Target& t) {
   const double half_w = 0.5 * static_cast<double>(t.width);
   const double half_h = 0.5 * static_cast<double>(t.height);
   const double radius = std::hypot(half_w, half_h);
-  at::parallel_for(0, g.rows * g.cols * t.height, 16, [&](int64_t b, int64_t e) {
-    std::vector<float> factor(static_cast<size_t>(t.width));
-    for (int64_t r = b; r < e; ++r) {
-      const int64_t view = r / t.height;
-      const int64_t y = r % t.height;
-      const int64_t u = view / g.cols;
-      const int64_t v = view % g.cols;
-      // Normalised view offsets in [-1, 1]; rho is 1 at the corner views.
-      const double nu = g.uc > 0 ? g.du(u) / g.uc : 0.0;
-      const double nv = g.vc > 0 ? g.dv(v) / g.vc : 0.0;
-      const double rho2 = 0.5 * (nu * nu + nv * nv);
-      const double angular = 1.0 - spec.angular * rho2;
-      const double cx = (static_cast<double>(t.width) - 1.0) / 2.0 + spec.shift * nv * half_w;
-      const double cy = (static_cast<double>(t.height) - 1.0) / 2.0 + spec.shift * nu * half_h;
-      const double dy = static_cast<double>(y) - cy;
-      const double half_power = 0.5 * spec.power;
-      for (int64_t x = 0; x < t.width; ++x) {
-        const double dx = static_cast<double>(x) - cx;
-        const double r2 = (dx * dx + dy * dy) / (radius * radius);
-        const double falloff = half_power == 1.0 ? r2 : std::pow(r2, half_power);
-        factor[x] =
-            static_cast<float>(std::clamp(angular * (1.0 - spec.strength * falloff), 0.0, 1.0));
-      }
-      for (int64_t c = 0; c < t.channels; ++c) {
-        float* o = t.row(c, u, v, y);
-        for (int64_t x = 0; x < t.width; ++x) o[x] *= factor[x];
-      }
-    }
-  });
+  detail::parallel_items(
+      g.rows * g.cols * t.height, (12 + t.channels) * t.width, [&](int64_t b, int64_t e) {
+        std::vector<float> factor(static_cast<size_t>(t.width));
+        for (int64_t r = b; r < e; ++r) {
+          const int64_t view = r / t.height;
+          const int64_t y = r % t.height;
+          const int64_t u = view / g.cols;
+          const int64_t v = view % g.cols;
+          // Normalised view offsets in [-1, 1]; rho is 1 at the corner views.
+          const double nu = g.uc > 0 ? g.du(u) / g.uc : 0.0;
+          const double nv = g.vc > 0 ? g.dv(v) / g.vc : 0.0;
+          const double rho2 = 0.5 * (nu * nu + nv * nv);
+          const double angular = 1.0 - spec.angular * rho2;
+          const double cx = (static_cast<double>(t.width) - 1.0) / 2.0 + spec.shift * nv * half_w;
+          const double cy = (static_cast<double>(t.height) - 1.0) / 2.0 + spec.shift * nu * half_h;
+          const double dy = static_cast<double>(y) - cy;
+          const double half_power = 0.5 * spec.power;
+          for (int64_t x = 0; x < t.width; ++x) {
+            const double dx = static_cast<double>(x) - cx;
+            const double r2 = (dx * dx + dy * dy) / (radius * radius);
+            const double falloff = half_power == 1.0 ? r2 : std::pow(r2, half_power);
+            factor[x] =
+                static_cast<float>(std::clamp(angular * (1.0 - spec.strength * falloff), 0.0, 1.0));
+          }
+          for (int64_t c = 0; c < t.channels; ++c) {
+            float* o = t.row(c, u, v, y);
+            for (int64_t x = 0; x < t.width; ++x) o[x] *= factor[x];
+          }
+        }
+      });
 }
 
 // Writes colour * alpha (the texture window over `box`) and alpha into `planes` (C + 1, Hc, Wc).
@@ -486,7 +491,7 @@ void premultiply(const torch::Tensor& colour, const torch::Tensor& alpha, const 
   const float* col = colour.data_ptr<float>();
   const float* a = alpha.data_ptr<float>();
   float* out = planes.data_ptr<float>();
-  at::parallel_for(0, bh, 16, [&](int64_t b, int64_t e) {
+  detail::parallel_items(bh, (channels + 1) * bw, [&](int64_t b, int64_t e) {
     for (int64_t r = b; r < e; ++r) {
       const float* arow = a + (box.i0 + r) * wc + box.j0;
       for (int64_t c = 0; c < channels; ++c) {
@@ -509,7 +514,7 @@ void update_disparity(torch::Tensor& disparity, const torch::Tensor& alpha, cons
   float* d = disparity.data_ptr<float>();
   const float* a = alpha.data_ptr<float>();
   const int64_t wc = canvas.width();
-  at::parallel_for(0, h, 16, [&](int64_t b, int64_t e) {
+  detail::parallel_items(h, 4 * w, [&](int64_t b, int64_t e) {
     for (int64_t y = b; y < e; ++y) {
       const float* arow = a + (y + canvas.margin) * wc + canvas.margin;
       for (int64_t x = 0; x < w; ++x) {

@@ -32,7 +32,7 @@ torch::Tensor alpha_from(const Canvas& canvas, const ShapeSpec& shape, Fn sd) {
   const int64_t w = canvas.width();
   const auto my = static_cast<double>(canvas.origin_y());
   const auto mx = static_cast<double>(canvas.origin_x());
-  at::parallel_for(0, canvas.height(), 16, [&](int64_t b, int64_t e) {
+  parallel_items(canvas.height(), 20 * w, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       const double y = static_cast<double>(i) - my;
       for (int64_t j = 0; j < w; ++j) {
@@ -64,7 +64,7 @@ torch::Tensor polygon_alpha(const ShapeSpec& shape, const Canvas& canvas) {
   const double reach = 0.5 * shape.softness + 1.0;
   auto alpha = torch::empty({hc, wc}, torch::kFloat32);
   float* out = alpha.data_ptr<float>();
-  at::parallel_for(0, hc, 8, [&](int64_t b, int64_t e) {
+  parallel_items(hc, 10 * wc + 10 * n, [&](int64_t b, int64_t e) {
     std::vector<double> xs;
     std::vector<double> dist(static_cast<size_t>(wc));
     for (int64_t i = b; i < e; ++i) {

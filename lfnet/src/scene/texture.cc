@@ -59,7 +59,7 @@ inline float normal_cdf(float z) { return 0.5f * (1.0f + std::erf(z * 0.70710678
 void to_uniform(torch::Tensor& field, double contrast) {
   float* f = field.data_ptr<float>();
   const auto c = static_cast<float>(contrast);
-  at::parallel_for(0, field.numel(), 1 << 14, [&](int64_t b, int64_t e) {
+  parallel_items(field.numel(), 20, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) f[i] = normal_cdf(c * f[i]);
   });
 }
@@ -84,7 +84,7 @@ torch::Tensor field_from(const Canvas& canvas, Fn fn) {
   const int64_t w = canvas.width();
   const auto my = static_cast<double>(canvas.origin_y());
   const auto mx = static_cast<double>(canvas.origin_x());
-  at::parallel_for(0, canvas.height(), 16, [&](int64_t b, int64_t e) {
+  parallel_items(canvas.height(), 20 * w, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       const double y = static_cast<double>(i) - my;
       for (int64_t j = 0; j < w; ++j) {
@@ -113,7 +113,7 @@ torch::Tensor apply_palette(const torch::Tensor& t, const std::vector<Rgb>& colo
   const float* tp = t.data_ptr<float>();
   float* op = out.data_ptr<float>();
   const auto segments = static_cast<int64_t>(ramp.size()) - 1;
-  at::parallel_for(0, n, 1 << 14, [&](int64_t b, int64_t e) {
+  parallel_items(n, 4 * channels, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       if (segments == 0) {
         for (int64_t c = 0; c < channels; ++c) op[c * n + i] = ramp[0][c];
@@ -245,7 +245,7 @@ torch::Tensor image_texture(const TextureSpec& t, const Canvas& canvas, bool col
   const int64_t wc = canvas.width();
   const auto my = static_cast<double>(canvas.origin_y());
   const auto mx = static_cast<double>(canvas.origin_x());
-  at::parallel_for(0, hc, 8, [&](int64_t b, int64_t e) {
+  parallel_items(hc, 20 * wc * channels, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       const double y = static_cast<double>(i) - my;
       const double py = reflect((y + 0.5 - out_h / 2.0) * sy + ih / 2.0 - 0.5, ih);
@@ -283,7 +283,7 @@ void add_value_noise(torch::Tensor& field, const Canvas& canvas, double spacing,
   // Lattice values, uniform with unit variance, hashed from the node's integer coordinates so
   // that they do not depend on the canvas.
   std::vector<float> lattice(static_cast<size_t>(lh * lw));
-  at::parallel_for(0, lh, 8, [&](int64_t b, int64_t e) {
+  parallel_items(lh, 20 * lw, [&](int64_t b, int64_t e) {
     for (int64_t r = b; r < e; ++r) {
       const uint64_t row_seed = derive_seed(seed, static_cast<uint64_t>(ay.lo + r));
       for (int64_t c = 0; c < lw; ++c) {
@@ -294,7 +294,7 @@ void add_value_noise(torch::Tensor& field, const Canvas& canvas, double spacing,
   });
   // Along x for every lattice row, then along y.
   std::vector<float> rows(static_cast<size_t>(lh * wc));
-  at::parallel_for(0, lh, 8, [&](int64_t b, int64_t e) {
+  parallel_items(lh, 8 * wc, [&](int64_t b, int64_t e) {
     for (int64_t r = b; r < e; ++r) {
       const float* g = lattice.data() + r * lw;
       float* o = rows.data() + r * wc;
@@ -307,7 +307,7 @@ void add_value_noise(torch::Tensor& field, const Canvas& canvas, double spacing,
   });
   float* f = field.data_ptr<float>();
   const auto amp = static_cast<float>(amplitude);
-  at::parallel_for(0, hc, 8, [&](int64_t b, int64_t e) {
+  parallel_items(hc, 8 * wc, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       const int64_t k = ay.index[i] - 1 - ay.lo;
       const auto& w = ay.weights[i];

@@ -26,8 +26,9 @@ struct RenderOptions {
 struct RenderResult {
   LightField light_field;                // (C, U, V, H, W) in [0, 1]
   torch::Tensor disparity;               // (H, W) float32: px per view step, centre view
-  std::vector<std::string> effects_run;  // in the order run: occlusion, specular, defocus,
-                                         // vignetting; only those the scene names
+  // What ran, in this order: "occlusion" (more than one layer), then "defocus", "specular",
+  // "vignetting" for those the scene names and no others.
+  std::vector<std::string> effects_run;
 };
 
 // Renders every view: each layer's texture and alpha are generated once on a canvas larger than
