@@ -69,10 +69,7 @@ Input load_input(const SimulateArgs& args) {
     } catch (const ConfigError& e) {
       throw ConfigError(args.scene + ": " + e.what());
     }
-    scene::RenderOptions render;
-    render.image_loader = [](const std::string& path) { return io::read_image(path); };
-    render.base_dir = fs::path(args.scene).parent_path().string();
-    lf = scene::render_scene(spec, render).light_field;
+    lf = scene::render_scene(spec, scene_render_options(args.scene)).light_field;
     in.scene_effects = spec.sensor;
     in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}};
   } else {

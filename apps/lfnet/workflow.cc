@@ -1,5 +1,7 @@
 #include "workflow.h"
 
+#include "command.h"
+
 #include <spdlog/spdlog.h>
 
 #include <filesystem>
@@ -69,8 +71,6 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     out.push_back({fs::path(dir).filename().string(), select_views(lf, sources.views, rows, cols, dir)});
     bar.advance();
   }
-  scene::RenderOptions render;
-  render.image_loader = [](const std::string& path) { return io::read_image(path); };
   for (const auto& path : sources.scenes) {
     scene::SceneSpec spec;
     try {
@@ -79,8 +79,7 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
       throw ConfigError(path + ": " + e.what());
     }
     spec.color = false;
-    render.base_dir = fs::path(path).parent_path().string();
-    auto lf = scene::render_scene(spec, render).light_field;
+    auto lf = scene::render_scene(spec, scene_render_options(path)).light_field;
     out.push_back({fs::path(path).stem().string(), select_views(lf, "", rows, cols, path)});
     bar.advance();
   }
@@ -92,7 +91,8 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     options.color = false;
     for (int64_t i = 0; i < sources.random_scenes; ++i) {
       const uint64_t seed = sources.random_seed + static_cast<uint64_t>(i);
-      auto lf = scene::render_scene(scene::random_scene(seed, options), render).light_field;
+      auto lf = scene::render_scene(scene::random_scene(seed, options), scene_render_options(""))
+                    .light_field;
       out.push_back({"random-" + std::to_string(seed), lf.grey()});
       bar.advance();
     }
