@@ -7,6 +7,6 @@ scripts/install-deps.sh
 scripts/build.sh
 built=$(date +%s)
 cd build
-ctest --output-on-failure --timeout 1500 "$@"
+ctest --output-on-failure --timeout 1500 -j"$(nproc)" "$@"
 end=$(date +%s)
 echo "test.sh: install+build $((built - start)) s, tests $((end - built)) s"

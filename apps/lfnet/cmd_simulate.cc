@@ -11,6 +11,7 @@
 #include <optional>
 
 #include "command.h"
+#include "workflow.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
@@ -224,44 +225,6 @@ void describe(const optics::Phi& phi) {
     }
     std::printf("%s\n", line.c_str());
   }
-}
-
-// Writes into a temporary sibling of `out`, then renames it into place, so `out` is never
-// half-written. An existing non-empty `out` is an error unless `force`.
-template <typename Writer>
-void write_folder(const std::string& out, bool force, Writer&& write) {
-  fs::path target = fs::absolute(out).lexically_normal();
-  if (target.filename().empty()) target = target.parent_path();
-  std::error_code ec;
-  const bool exists = fs::exists(target, ec);
-  if (exists) {
-    LFNET_CHECK_AS(ConfigError, fs::is_directory(target), "--out ", out,
-                   " exists and is not a folder");
-    LFNET_CHECK_AS(ConfigError, force || fs::is_empty(target), "--out ", out,
-                   " exists and is not empty: choose another folder or pass --force to "
-                   "replace it");
-  }
-  fs::create_directories(target.parent_path(), ec);
-  const std::string tag = std::to_string(::getpid());
-  const fs::path tmp = target.parent_path() / ("." + target.filename().string() + ".tmp" + tag);
-  fs::remove_all(tmp, ec);
-  fs::create_directories(tmp, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot create ", tmp.string(), ": ", ec.message());
-  try {
-    write(tmp.string());
-  } catch (...) {
-    fs::remove_all(tmp, ec);
-    throw;
-  }
-  fs::path old;
-  if (exists) {
-    old = target.parent_path() / ("." + target.filename().string() + ".old" + tag);
-    fs::rename(target, old, ec);
-    LFNET_CHECK_AS(IoError, !ec, "cannot replace ", out, ": ", ec.message());
-  }
-  fs::rename(tmp, target, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot move the result into ", out, ": ", ec.message());
-  if (exists) fs::remove_all(old, ec);
 }
 
 void run_simulate(const SimulateArgs& args) {

@@ -187,6 +187,8 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   } catch (const ConfigError& e) {
     throw ConfigError(source + ": " + e.what());
   }
+  // The resolved spec (every parameter filled in) is what models and results record.
+  c.phi = optics::make_phi(c.phi)->spec();
   c.network.measurements = c.phi.n;
   c.network.patch.rows = c.phi.rows;
   c.network.patch.cols = c.phi.cols;
@@ -242,6 +244,7 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   train::RunInfo run;
   run.config = config.raw;
   run.config["resolved_stage"] = stage.name;
+  run.config["measurement_mean"] = dataset.measurement_mean();
   run.phi = config.phi.to_json();
   run.command_line = command_line;
   train::Trainer trainer(net, options, run);

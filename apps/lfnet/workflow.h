@@ -4,10 +4,14 @@
 
 #include <nlohmann/json.hpp>
 
+#include <unistd.h>
+
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "lfnet/core/error.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/data/patch_dataset.h"
 #include "lfnet/eval/evaluate.h"
@@ -97,6 +101,45 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
 // The dataset of a config.
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi);
+
+// Writes into a temporary sibling of `out`, then renames it into place, so `out` is never
+// half-written. An existing non-empty `out` is an error unless `force`.
+template <typename Writer>
+void write_folder(const std::string& out, bool force, Writer&& write) {
+  namespace fs = std::filesystem;
+  fs::path target = fs::absolute(out).lexically_normal();
+  if (target.filename().empty()) target = target.parent_path();
+  std::error_code ec;
+  const bool exists = fs::exists(target, ec);
+  if (exists) {
+    LFNET_CHECK_AS(ConfigError, fs::is_directory(target), "--out ", out,
+                   " exists and is not a folder");
+    LFNET_CHECK_AS(ConfigError, force || fs::is_empty(target), "--out ", out,
+                   " exists and is not empty: choose another folder or pass --force to "
+                   "replace it");
+  }
+  fs::create_directories(target.parent_path(), ec);
+  const std::string tag = std::to_string(::getpid());
+  const fs::path tmp = target.parent_path() / ("." + target.filename().string() + ".tmp" + tag);
+  fs::remove_all(tmp, ec);
+  fs::create_directories(tmp, ec);
+  LFNET_CHECK_AS(IoError, !ec, "cannot create ", tmp.string(), ": ", ec.message());
+  try {
+    write(tmp.string());
+  } catch (...) {
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+  fs::path old;
+  if (exists) {
+    old = target.parent_path() / ("." + target.filename().string() + ".old" + tag);
+    fs::rename(target, old, ec);
+    LFNET_CHECK_AS(IoError, !ec, "cannot replace ", out, ": ", ec.message());
+  }
+  fs::rename(tmp, target, ec);
+  LFNET_CHECK_AS(IoError, !ec, "cannot move the result into ", out, ": ", ec.message());
+  if (exists) fs::remove_all(old, ec);
+}
 
 // Appends one JSON record as a line to `path`.
 void append_jsonl(const std::string& path, const nlohmann::json& record);

@@ -1,0 +1,87 @@
+// The training and reconstruction commands end to end on a tiny config.
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+
+#include "support/test_support.h"
+
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+namespace fs = std::filesystem;
+
+namespace {
+const char* kTinyConfig = R"({
+  "name": "tiny", "phi": "asp:2",
+  "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
+  "dataset": {"train_patches": 128, "validation_patches": 64, "seed": 2},
+  "network": {"residual": "pinv", "cnn": {"channels": 4}},
+  "training": {"epochs": 1, "batch_size": 32, "progress": false},
+  "stages": ["cnn"],
+  "evaluation": {"data": {"random_scenes": 1, "random_seed": 99,
+                          "random_options": {"height": 40, "width": 40}},
+                 "methods": ["net", "pinv", "no-parallax"], "strides": [9]}
+})";
+
+nlohmann::json read_lines(const std::string& path) {
+  nlohmann::json lines = nlohmann::json::array();
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+}  // namespace
+
+TEST_CASE("experiment trains, evaluates and writes its outputs, and evaluate and reconstruct use the model",
+          "[app][slow]") {
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "tiny.json") << kTinyConfig;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  std::string out;
+  REQUIRE(run_command(lfnet + "experiment " + (tmp / "tiny.json") + " --out " + (tmp / "run"), out) == 0);
+  CHECK(fs::exists(tmp / "run/config.json"));
+  CHECK(fs::exists(tmp / "run/models/cnn.ckpt"));
+  auto results = read_lines(tmp / "run/results.jsonl");
+  REQUIRE(results.size() == 3);
+  for (const auto& r : results) {
+    for (const char* key : {"psnr_db", "ssim", "seconds", "patches", "per_view_psnr_db", "method",
+                            "stride", "phi", "measurements", "noise_sigma", "mode", "threads",
+                            "device"}) {
+      INFO(key);
+      CHECK(r.contains(key));
+    }
+    CHECK(r["per_view_psnr_db"].size() == 5);
+    CHECK(r["mode"] == "sensor");
+  }
+  // A second run into the same folder is refused without --force; the first one stays.
+  CHECK(run_command(lfnet + "experiment " + (tmp / "tiny.json") + " --out " + (tmp / "run"), out) != 0);
+  CHECK(out.find("lfnet: error:") != std::string::npos);
+  CHECK(fs::exists(tmp / "run/models/cnn.ckpt"));
+
+  // evaluate --json with the model; a --phi that contradicts the model is an error.
+  const std::string model = tmp / "run/models/cnn.ckpt";
+  REQUIRE(run_command(lfnet + "render --random 7 --size 40x40 --out " + (tmp / "lf"), out) == 0);
+  REQUIRE(run_command(lfnet + "evaluate --model " + model + " --lf " + (tmp / "lf") +
+                          " --stride 9 --json " + (tmp / "eval.json"),
+                      out) == 0);
+  auto record = nlohmann::json::parse(std::ifstream(tmp / "eval.json"));
+  CHECK(record["method"] == "net");
+  CHECK(record["psnr_db"].get<double>() > 10.0);
+  CHECK(run_command(lfnet + "evaluate --model " + model + " --lf " + (tmp / "lf") + " --phi mask:2", out) != 0);
+  CHECK(out.find("does not match") != std::string::npos);
+
+  // reconstruct reads what simulate writes, and refuses another Phi's measurements.
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"), out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acq") +
+                          " --out " + (tmp / "rec"),
+                      out) == 0);
+  CHECK(fs::exists(tmp / "rec/lf_3_3.png"));
+  CHECK(fs::exists(tmp / "rec/grid.png"));
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm"), out) == 0);
+  CHECK(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acqm") +
+                        " --out " + (tmp / "recm"),
+                    out) != 0);
+  CHECK(out.find("trained for Phi") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "recm"));
+}
