@@ -170,7 +170,8 @@ void describe(const optics::Phi& phi) {
   std::printf("spec:       %s\n", spec.to_json().dump().c_str());
   if (spec.name == "asp") {
     const auto table =
-        optics::asp_table(spec.rows, spec.cols, spec.n, spec.params.value("layout", "") == "pairs");
+        optics::asp_table(spec.rows, spec.cols, spec.n, spec.params.value("layout", "") == "pairs",
+                          spec.params.value("pair_gamma", 0.0), spec.params.value("pair_alpha", 0.0));
     std::printf("asp table:\n   n   beta (rad)  gamma (deg)  alpha (deg)  k (theta, phi)  role\n");
     for (size_t i = 0; i < table.size(); ++i) {
       const auto& r = table[i];

@@ -346,3 +346,24 @@ TEST_CASE("bad Phi specs are ConfigErrors that say what is wrong", "[optics][spe
   CHECK_THROWS_WITH(phi->forward(torch::zeros({3, 3, 8, 8})), Catch::Contains("5x5"));
   CHECK_THROWS_WITH(phi->adjoint(torch::zeros({3, 8, 8})), Catch::Contains("2 measurements"));
 }
+
+TEST_CASE("an ASP quadrature pair is odd in the view angle and still sums to a pixel", "[optics]") {
+  lfnet::optics::PhiSpec even = lfnet::optics::PhiSpec::parse("asp:2");
+  lfnet::optics::PhiSpec odd = even;
+  odd.params = {{"pair_alpha", 90.0}};
+  auto we = lfnet::optics::make_phi(even)->pixel_weights(0, 0, 1, 1).squeeze(-1).squeeze(-1);
+  auto wo = lfnet::optics::make_phi(odd)->pixel_weights(0, 0, 1, 1).squeeze(-1).squeeze(-1);
+  // (N, U, V): the difference of the pair flips sign when theta does for the odd pair only.
+  auto de = (we[0] - we[1]).to(torch::kFloat64), dodd = (wo[0] - wo[1]).to(torch::kFloat64);
+  CHECK(torch::allclose(de, de.flip({0}), 1e-6, 1e-6));
+  CHECK(torch::allclose(dodd, -dodd.flip({0}), 1e-6, 1e-6));
+  CHECK(dodd.abs().max().item<double>() > 0.01);
+  // Both pairs add up to the same conventional pixel.
+  CHECK(torch::allclose(we.sum(0), wo.sum(0), 1e-6, 1e-6));
+  // The same rows, reordered: at N = 25 both tables span the same space.
+  auto full_even = lfnet::optics::asp_table(5, 5, 25);
+  auto full_odd = lfnet::optics::asp_table(5, 5, 25, false, 0.0, 90.0);
+  REQUIRE(full_odd.size() == full_even.size());
+  CHECK(full_odd[0].alpha != full_even[0].alpha);
+  CHECK_THROWS_AS(lfnet::optics::asp_table(5, 5, 2, false, 10.0, 0.0), lfnet::ConfigError);
+}

@@ -80,7 +80,8 @@ AspRow row_of(const Frequency& f, double alpha, const char* role) {
 
 }  // namespace
 
-std::vector<AspRow> asp_table(int64_t rows, int64_t cols, int64_t n, bool pairs) {
+std::vector<AspRow> asp_table(int64_t rows, int64_t cols, int64_t n, bool pairs,
+                              double pair_gamma, double pair_alpha) {
   LFNET_CHECK_AS(ConfigError, rows >= 1 && cols >= 1, "asp needs at least one view, got ", rows,
                  "x", cols);
   LFNET_CHECK_AS(ConfigError, n >= 1 && n <= rows * cols, "asp on ", rows, "x", cols,
@@ -112,9 +113,22 @@ std::vector<AspRow> asp_table(int64_t rows, int64_t cols, int64_t n, bool pairs)
     table.push_back(r);
     return table;
   }
+  // The pair's row: the first row of the sequence at the requested orientation and phase.
+  size_t first = sequence.size();
+  for (size_t i = 0; i < sequence.size() && first == sequence.size(); ++i) {
+    if (std::abs(sequence[i].gamma * 180.0 / kPi - pair_gamma) < 1e-6 &&
+        std::abs(sequence[i].alpha * 180.0 / kPi - pair_alpha) < 1e-6) {
+      first = i;
+    }
+  }
+  LFNET_CHECK_AS(ConfigError, first < sequence.size(), "asp on ", rows, "x", cols,
+                 " views has no row at orientation ", pair_gamma, " and phase ", pair_alpha,
+                 " degrees for its complementary pair (orientations 0/45/90/135..., phases 0/90)");
+  std::rotate(sequence.begin(), sequence.begin() + static_cast<std::ptrdiff_t>(first),
+              sequence.begin() + static_cast<std::ptrdiff_t>(first) + 1);
   sequence[0].role = "pair";
   AspRow partner = sequence[0];
-  partner.alpha = kPi;
+  partner.alpha += kPi;
   table.push_back(sequence[0]);
   table.push_back(partner);
   for (size_t i = 1; i < sequence.size() && static_cast<int64_t>(table.size()) < n; ++i) {
@@ -139,6 +153,8 @@ AspParams AspParams::read(JsonReader& r) {
   r.get("radius", p.radius);
   r.get("edge", p.edge);
   r.get("layout", p.layout);
+  r.get("pair_gamma", p.pair_gamma);
+  r.get("pair_alpha", p.pair_alpha);
   r.finish();
   LFNET_CHECK_AS(ConfigError, p.depth > 0 && p.depth <= 1, r.path_of("depth"),
                  ": the modulation depth m must be in (0, 1], got ", p.depth);
@@ -156,12 +172,15 @@ nlohmann::json AspParams::to_json() const {
           {"aperture", aperture},
           {"radius", radius},
           {"edge", edge},
-          {"layout", layout}};
+          {"layout", layout},
+          {"pair_gamma", pair_gamma},
+          {"pair_alpha", pair_alpha}};
 }
 
 torch::Tensor asp_weights(const PhiSpec& spec, const AspParams& params) {
   const int64_t u_n = spec.rows, v_n = spec.cols;
-  const auto table = asp_table(u_n, v_n, spec.n, params.layout == "pairs");
+  const auto table = asp_table(u_n, v_n, spec.n, params.layout == "pairs", params.pair_gamma,
+                               params.pair_alpha);
   auto angle = [](int64_t i, int64_t count) {
     return count > 1 ? -1.0 + 2.0 * static_cast<double>(i) / static_cast<double>(count - 1) : 0.0;
   };
