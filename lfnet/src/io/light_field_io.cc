@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "lfnet/core/error.h"
+#include "lfnet/io/sensor_io.h"
 
 namespace fs = std::filesystem;
 
@@ -155,30 +156,15 @@ FolderLayout scan_folder(const std::string& dir) {
 }
 
 torch::Tensor read_image(const std::string& path) {
-  // Keep alpha as stored: colour channels are read as they are, never premultiplied.
-  OIIO::ImageSpec config;
-  config.attribute("oiio:UnassociatedAlpha", 1);
-  auto input = OIIO::ImageInput::open(path, &config);
-  if (!input) {
-    throw IoError("cannot read image " + path + ": " + OIIO::geterror());
-  }
-  const OIIO::ImageSpec& spec = input->spec();
-  const int64_t h = spec.height, w = spec.width, nc = spec.nchannels;
-  LFNET_CHECK_AS(IoError, h > 0 && w > 0 && nc > 0, "image ", path, " is empty");
-  auto pixels = torch::empty({h, w, nc}, torch::kFloat32);
-  if (!input->read_image(0, 0, 0, static_cast<int>(nc), OIIO::TypeDesc::FLOAT,
-                         pixels.data_ptr<float>())) {
-    std::string err = input->geterror();
-    throw IoError("cannot decode image " + path + " (truncated or corrupt?): " + err);
-  }
-  input->close();
+  auto chw = read_image_channels(path);
+  const int64_t nc = chw.size(0);
   // Alpha is dropped: grey+alpha -> grey, RGBA -> RGB.
   int64_t keep = nc;
   if (nc == 2) keep = 1;
   if (nc >= 4) keep = 3;
   LFNET_CHECK_AS(IoError, keep == 1 || keep == 3, "image ", path, " has ", nc,
                  " channels; lfnet reads grey, grey+alpha, RGB and RGBA");
-  auto chw = pixels.slice(2, 0, keep).permute({2, 0, 1}).contiguous();
+  chw = chw.slice(0, 0, keep).contiguous();
   LFNET_CHECK_AS(IoError, torch::isfinite(chw).all().item<bool>(), "image ", path,
                  " holds NaN or infinite values");
   return chw;

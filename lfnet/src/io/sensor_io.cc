@@ -47,7 +47,10 @@ void write_sensor_images(const std::string& dir, const torch::Tensor& sensor) {
 }
 
 torch::Tensor read_image_channels(const std::string& path) {
-  auto input = OIIO::ImageInput::open(path);
+  // Keep alpha as stored: colour channels are read as they are, never premultiplied.
+  OIIO::ImageSpec config;
+  config.attribute("oiio:UnassociatedAlpha", 1);
+  auto input = OIIO::ImageInput::open(path, &config);
   if (!input) throw IoError("cannot read image " + path + ": " + OIIO::geterror());
   const OIIO::ImageSpec& spec = input->spec();
   const int64_t h = spec.height, w = spec.width, nc = spec.nchannels;
