@@ -94,7 +94,7 @@ TEST_CASE("the head averages the branch outputs with the configured weights", "[
   }
 }
 
-TEST_CASE("the phi buffer drives the CNN branch; the measurement AE ignores it",
+TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it",
           "[nn][network]") {
   torch::manual_seed(2);
   auto o = small_options("net");

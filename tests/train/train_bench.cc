@@ -206,25 +206,44 @@ int main(int argc, char** argv) {
                                   {"patches_per_s", static_cast<double>(batch) / per_step}});
 
     if (branches == "net") {
-      // A full checkpoint of the default net: model, Adam moments, training state.
-      lfnet::train::Checkpoint ck;
-      ck.network = options.to_json();
-      ck.phi = {{"name", "random"}, {"n", 2}};
-      ck.model = lfnet::train::module_state(*net);
-      ck.optimizer = lfnet::train::adam_state(adam, *net);
-      const auto path = (std::filesystem::temp_directory_path() / "lfnet_bench.ckpt").string();
-      auto t1 = Clock::now();
-      lfnet::train::save_checkpoint(ck, path);
-      const double save_s = seconds_since(t1);
-      t1 = Clock::now();
-      lfnet::train::load_checkpoint(path);
-      const double load_s = seconds_since(t1);
-      const auto bytes = std::filesystem::file_size(path);
-      std::filesystem::remove(path);
-      std::printf("\ncheckpoint of the default net with a dense Phi: %.2f MB (save %.3f s, load "
-                  "%.3f s)\n",
-                  static_cast<double>(bytes) / 1e6, save_s, load_s);
-      report["checkpoint_bytes_dense_phi"] = bytes;
+      // Checkpoints of the default net after these steps: full (last.ckpt: model, Adam
+      // moments, training state) and model-only (best.ckpt), with the dense Phi used above
+      // (like random) and with a per-pixel Phi (like asp, mask, aperture: 1 non-zero in 81).
+      auto per_pixel = torch::zeros({1, options.measurement_size(), options.patch.size()});
+      const int64_t pixels = options.patch.pixels(), views = 25;
+      for (int64_t k = 0; k < options.measurements; ++k) {
+        for (int64_t v = 0; v < views; ++v) {
+          auto rows = torch::arange(pixels) + k * pixels, cols = torch::arange(pixels) + v * pixels;
+          per_pixel[0].index_put_({rows, cols}, torch::rand({pixels}) * (2.0 / views));
+        }
+      }
+      for (const auto& [label, stack] : {std::pair<std::string, torch::Tensor>{"dense", phi},
+                                         {"per-pixel", per_pixel}}) {
+        net->set_phi(stack);
+        lfnet::train::Checkpoint ck;
+        ck.network = options.to_json();
+        ck.phi = {{"name", label}, {"n", options.measurements}};
+        ck.model = lfnet::train::module_state(*net);
+        ck.optimizer = lfnet::train::adam_state(adam, *net);
+        const auto path = (std::filesystem::temp_directory_path() / "lfnet_bench.ckpt").string();
+        auto t1 = Clock::now();
+        lfnet::train::save_checkpoint(ck, path);
+        const double save_s = seconds_since(t1);
+        t1 = Clock::now();
+        lfnet::train::load_checkpoint(path);
+        const double load_s = seconds_since(t1);
+        const auto full = std::filesystem::file_size(path);
+        ck.optimizer.clear();
+        lfnet::train::save_checkpoint(ck, path);
+        const auto model_only = std::filesystem::file_size(path);
+        std::filesystem::remove(path);
+        std::printf("checkpoint, %s Phi: full %.2f MB (save %.3f s, load %.3f s), model only "
+                    "%.2f MB\n",
+                    label.c_str(), static_cast<double>(full) / 1e6, save_s, load_s,
+                    static_cast<double>(model_only) / 1e6);
+        report["checkpoint"].push_back(
+            {{"phi", label}, {"full_bytes", full}, {"model_only_bytes", model_only}});
+      }
     }
   }
   if (!json_path.empty()) {

@@ -232,7 +232,7 @@ TEST_CASE("resume refuses another Phi, stage or architecture", "[train][trainer]
   CHECK_THROWS_WITH(other_stage.resume(last), Catch::Contains("stage 'cnn'"));
 }
 
-TEST_CASE("a poisoned batch stops training with a clear message; the last checkpoint loads",
+TEST_CASE("a poisoned batch stops training with a clear message and the last checkpoint loads",
           "[train][trainer]") {
   lfnet::test::TempDir dir;
   auto o = lfnet::test::small_net_options("net");
@@ -281,7 +281,7 @@ TEST_CASE("with on_nonfinite = skip a poisoned batch is dropped", "[train][train
   CHECK(std::isfinite(records[1].val_loss));
 }
 
-TEST_CASE("a far too large learning rate is detected; the last good checkpoint stays intact",
+TEST_CASE("a far too large learning rate is detected and the last good checkpoint stays intact",
           "[train][trainer]") {
   lfnet::test::TempDir dir;
   auto o = lfnet::test::small_net_options("net");

@@ -302,10 +302,14 @@ torch::Tensor LightFieldNetImpl::check_phase(const torch::Tensor& y,
 }
 
 torch::Tensor LightFieldNetImpl::adjoint(const torch::Tensor& y, const torch::Tensor& phase) const {
-  auto ph = check_phase(y, phase);
-  auto x = apply_phase_stack(y, ph, phi);
+  return scaled_adjoint(y, check_phase(y, phase));
+}
+
+torch::Tensor LightFieldNetImpl::scaled_adjoint(const torch::Tensor& y,
+                                                const torch::Tensor& phase) const {
+  auto x = apply_phase_stack(y, phase, phi);
   if (phases() == 1) return x * adjoint_scale[0];
-  return x * adjoint_scale.index_select(0, ph).unsqueeze(1);
+  return x * adjoint_scale.index_select(0, phase).unsqueeze(1);
 }
 
 NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torch::Tensor& phase) {
@@ -314,7 +318,7 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
   const bool need_adjoint =
       options_.has_cnn() || options_.ae.input == "adjoint" || options_.residual == "adjoint";
-  torch::Tensor x0 = need_adjoint ? adjoint(y, ph) : torch::Tensor();
+  torch::Tensor x0 = need_adjoint ? scaled_adjoint(y, ph) : torch::Tensor();
 
   NetworkOutputs out;
   if (options_.has_ae()) out.ae = ae->forward(options_.ae.input == "adjoint" ? x0 : y);

@@ -447,6 +447,11 @@ void Trainer::check_batch(const Batch& batch, const std::string& where) const {
                   batch.y.size(1) == o.measurement_size(),
               where, ": y must be (B, ", o.measurement_size(), "), got ",
               batch.y.defined() ? batch.y.sizes() : torch::IntArrayRef{});
+  LFNET_CHECK(batch.y.scalar_type() == net_->phi.scalar_type() &&
+                  batch.target.defined() && batch.target.scalar_type() == net_->phi.scalar_type(),
+              where, ": y and target must be ", net_->phi.scalar_type(), " like the net, got ",
+              batch.y.scalar_type(), " and ",
+              batch.target.defined() ? c10::toString(batch.target.scalar_type()) : "nothing");
   const std::vector<int64_t> shape{batch.y.size(0), 1, p.rows, p.cols, p.height, p.width};
   LFNET_CHECK(batch.target.defined() && batch.target.sizes() == torch::IntArrayRef(shape), where,
               ": target must be ", torch::IntArrayRef(shape), ", got ",

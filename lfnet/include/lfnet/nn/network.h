@@ -157,7 +157,9 @@ class LightFieldNetImpl : public torch::nn::Module {
   torch::Tensor phi, adjoint_scale, base;
 
  private:
+  // Checks y and phase; returns phase (undefined for one phase).
   torch::Tensor check_phase(const torch::Tensor& y, const torch::Tensor& phase) const;
+  torch::Tensor scaled_adjoint(const torch::Tensor& y, const torch::Tensor& phase) const;
   NetworkOptions options_;
 };
 TORCH_MODULE(LightFieldNet);
