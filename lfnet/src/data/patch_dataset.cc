@@ -162,8 +162,13 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
   return {y.contiguous(), phase, target.unsqueeze(1)};
 }
 
+PatchDataset::~PatchDataset() {
+  if (prefetch_.valid()) prefetch_.wait();
+}
+
 void PatchDataset::start_epoch(int64_t epoch, int64_t batch_size) {
   LFNET_CHECK_AS(ConfigError, batch_size >= 1, "batch size must be >= 1");
+  if (prefetch_.valid()) prefetch_.get();  // a batch of the previous epoch, not used
   epoch_ = epoch;
   batch_size_ = batch_size;
   served_ = 0;
@@ -175,6 +180,14 @@ int64_t PatchDataset::train_batches_per_epoch() const {
 }
 
 train::Batch PatchDataset::next_train() {
+  train::Batch batch = prefetch_.valid() ? prefetch_.get() : prepare_next();
+  if (served_ < options_.train_patches) {
+    prefetch_ = std::async(std::launch::async, [this] { return prepare_next(); });
+  }
+  return batch;
+}
+
+train::Batch PatchDataset::prepare_next() {
   const int64_t n = std::min(batch_size_, options_.train_patches - served_);
   LFNET_CHECK(n > 0, "the epoch's training batches are used up");
   const uint64_t noise_seed = options_.seed * 0x100000001b3ULL +

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <future>
 #include <memory>
 #include <random>
 #include <string>
@@ -46,6 +47,7 @@ class PatchDataset : public train::BatchSource {
  public:
   PatchDataset(std::vector<LightField> light_fields, const optics::Phi& phi,
                DatasetOptions options, int64_t validation_batch_size = 256);
+  ~PatchDataset() override;
 
   void start_epoch(int64_t epoch, int64_t batch_size) override;
   int64_t train_batches_per_epoch() const override;
@@ -63,6 +65,8 @@ class PatchDataset : public train::BatchSource {
   };
   Draw draw(bool validation, int64_t count, std::mt19937_64& rng) const;
   train::Batch make_batch(const Draw& d, uint64_t noise_seed) const;
+  // Draws and simulates the epoch's next batch (the rng advances in batch order).
+  train::Batch prepare_next();
 
   std::vector<LightField> lfs_;
   const optics::Phi& phi_;
@@ -75,6 +79,9 @@ class PatchDataset : public train::BatchSource {
   int64_t epoch_ = 0, batch_size_ = 64, served_ = 0;
   std::vector<train::Batch> validation_;
   double measurement_mean_ = 0;
+  // The batch after the one being trained on, prepared on another thread while the network
+  // trains; batches come out in the same order either way, so results do not change.
+  std::future<train::Batch> prefetch_;
 };
 
 }  // namespace lfnet::data
