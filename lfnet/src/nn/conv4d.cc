@@ -1,6 +1,5 @@
 #include "lfnet/nn/conv4d.h"
 
-#include <torch/nn/functional/conv.h>
 #include <torch/torch.h>
 
 #include <cmath>
