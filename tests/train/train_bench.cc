@@ -41,9 +41,11 @@ double cpu_seconds() {
 
 bool g_cpu_time = false;
 int g_reps = 2;
+double g_util = 0;  // CPU seconds / (threads x wall seconds) of the best repetition
 
 // Best of g_reps timings of fn() after one warm-up call: wall seconds, or CPU seconds divided
-// by the thread count with --cpu-time.
+// by the thread count with --cpu-time. g_util below about 0.9 means other processes took
+// cores during the timing: the figure is then pessimistic.
 template <typename Fn>
 double best_time(Fn&& fn) {
   fn();
@@ -52,9 +54,13 @@ double best_time(Fn&& fn) {
     auto t0 = Clock::now();
     const double c0 = cpu_seconds();
     fn();
-    const double t = g_cpu_time ? (cpu_seconds() - c0) / torch::get_num_threads()
-                                : seconds_since(t0);
-    best = std::min(best, t);
+    const double wall = seconds_since(t0);
+    const double cpu = (cpu_seconds() - c0) / torch::get_num_threads();
+    const double t = g_cpu_time ? cpu : wall;
+    if (t < best) {
+      best = t;
+      g_util = cpu / wall;
+    }
   }
   return best;
 }
@@ -116,8 +122,8 @@ int main(int argc, char** argv) {
   if (!skip_conv) {
     std::printf("\nConv4d, %lld patches of 5x5x9x9, kernel 3^4\n",
                 static_cast<long long>(conv_batch));
-    std::printf("%-8s %-13s %10s %10s %12s %12s\n", "Cin->Cout", "algorithm", "fwd s", "fwd GF/s",
-                "fwd+bwd s", "f+b GF/s");
+    std::printf("%-8s %-13s %10s %10s %12s %12s %6s\n", "Cin->Cout", "algorithm", "fwd s",
+                "fwd GF/s", "fwd+bwd s", "f+b GF/s", "util");
     std::vector<std::pair<int64_t, int64_t>> shapes;
     for (auto c : channels) shapes.emplace_back(c, c);
     if (thin) {
@@ -146,10 +152,10 @@ int main(int argc, char** argv) {
         const double both = best_time([&] {
           lfnet::nn::conv4d_u_major(x, w, b, algorithm).sum().backward();
         });
-        std::printf("%3lld->%-3lld %-13s %10.3f %10.1f %12.3f %12.1f\n",
+        std::printf("%3lld->%-3lld %-13s %10.3f %10.1f %12.3f %12.1f %6.2f\n",
                     static_cast<long long>(cin), static_cast<long long>(cout),
                     lfnet::nn::to_string(algorithm).c_str(), fwd, flops / fwd / 1e9, both,
-                    3 * flops / both / 1e9);
+                    3 * flops / both / 1e9, g_util);
         report["conv4d"].push_back({{"in_channels", cin},
                                     {"out_channels", cout},
                                     {"batch", conv_batch},
@@ -157,7 +163,8 @@ int main(int argc, char** argv) {
                                     {"forward_s", fwd},
                                     {"forward_gflops", flops / fwd / 1e9},
                                     {"forward_backward_s", both},
-                                    {"forward_backward_gflops", 3 * flops / both / 1e9}});
+                                    {"forward_backward_gflops", 3 * flops / both / 1e9},
+                                    {"util", g_util}});
       }
     }
   }
@@ -168,8 +175,8 @@ int main(int argc, char** argv) {
   }
   std::printf("\nTraining steps (forward, weighted L2, backward, Adam), batch %lld, default sizes\n",
               static_cast<long long>(batch));
-  std::printf("%-5s %12s %10s %12s %14s\n", "net", "parameters", "step s", "patches/s",
-              "CNN GF/s");
+  std::printf("%-5s %12s %10s %12s %14s %6s\n", "net", "parameters", "step s", "patches/s",
+              "CNN GF/s", "util");
   lfnet::nn::NetworkOptions options;
   auto phi = torch::randn({1, options.measurement_size(), options.patch.size()}) / 45.0;
   for (const std::string branches : {"ae", "cnn", "net"}) {
@@ -196,14 +203,15 @@ int main(int argc, char** argv) {
                          : 3 * (lfnet::nn::conv4d_flops(batch, 1, c, 5, 5, 9, 9, 3) +
                                 3 * lfnet::nn::conv4d_flops(batch, c, c, 5, 5, 9, 9, 3) +
                                 lfnet::nn::conv4d_flops(batch, c, 1, 5, 5, 9, 9, 3));
-    std::printf("%-5s %12lld %10.4f %12.1f %14.1f\n", branches.c_str(),
+    std::printf("%-5s %12lld %10.4f %12.1f %14.1f %6.2f\n", branches.c_str(),
                 static_cast<long long>(lfnet::nn::parameter_count(*net)), per_step,
-                static_cast<double>(batch) / per_step, cnn_flops / per_step / 1e9);
+                static_cast<double>(batch) / per_step, cnn_flops / per_step / 1e9, g_util);
     report["training"].push_back({{"branches", branches},
                                   {"batch", batch},
                                   {"parameters", lfnet::nn::parameter_count(*net)},
                                   {"step_s", per_step},
-                                  {"patches_per_s", static_cast<double>(batch) / per_step}});
+                                  {"patches_per_s", static_cast<double>(batch) / per_step},
+                                  {"util", g_util}});
 
     if (branches == "net") {
       // Checkpoints of the default net after these steps: full (last.ckpt: model, Adam

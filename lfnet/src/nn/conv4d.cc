@@ -1,6 +1,5 @@
 #include "lfnet/nn/conv4d.h"
 
-#include <torch/nn/functional/conv.h>
 #include <torch/torch.h>
 
 #include <cmath>
@@ -136,8 +135,8 @@ torch::Tensor fused_input(const torch::Tensor& x, const torch::Tensor& weight,
 // there. Measured on a 2-core AVX-512 CPU (docs/training.md, section 2).
 Conv4dAlgorithm resolve(Conv4dAlgorithm algorithm, int64_t cin, int64_t cout) {
   if (algorithm != Conv4dAlgorithm::kAuto) return algorithm;
-  if (cin == 1) return Conv4dAlgorithm::kFusedInput;
   if (cout == 1) return Conv4dAlgorithm::kFusedOutput;
+  if (cin == 1) return Conv4dAlgorithm::kFusedInput;
   return Conv4dAlgorithm::kStacked;
 }
 

@@ -42,6 +42,7 @@ torch::Tensor conv4d_u_major(const torch::Tensor& x, const torch::Tensor& weight
 double conv4d_flops(int64_t batch, int64_t in_channels, int64_t out_channels, int64_t u,
                     int64_t v, int64_t h, int64_t w, int64_t kernel);
 
+// The shape of a Conv4d layer.
 struct Conv4dOptions {
   int64_t in_channels = 1;   // Cin
   int64_t out_channels = 1;  // Cout

@@ -20,17 +20,20 @@ namespace lfnet::nn {
 // (0, 2) and (1, 1) both weigh sqrt3.) Returns (U, V) float32.
 torch::Tensor view_weights(int64_t rows, int64_t cols);
 
+// The losses by kind.
 enum class LossKind {
   kWeightedL2,  // sum over views of W(u, v) * ||l - l_hat||^2 (the paper's)
   kL2,          // squared error, every view alike
   kL1,          // absolute error
 };
 
+// How element losses become one number.
 enum class LossReduction {
   kMean,  // divided by the number of elements: a weighted mean squared (or absolute) error
   kSum,   // summed over views and pixels of each patch, averaged over the batch (the paper's)
 };
 
+// Which loss and how it is reduced; strict JSON (LossOptions::from_json).
 struct LossOptions {
   std::string name = "weighted_l2";  // weighted_l2, l2 or l1
   std::string reduction = "mean";    // mean or sum (see LossReduction)

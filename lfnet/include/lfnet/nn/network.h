@@ -42,6 +42,7 @@ struct PatchShape {
   }
 };
 
+// The autoencoder branch's sizes and input.
 struct AutoencoderOptions {
   // Output widths of fc1 .. fc5, alternately expanding and contracting; fc6 maps the last to
   // U V h w. The paper does not give widths. These keep the whole default checkpoint (model
@@ -56,6 +57,7 @@ struct AutoencoderOptions {
   nlohmann::json to_json() const;
 };
 
+// The 4D CNN branch's width and depth.
 struct CnnOptions {
   int64_t channels = 16;  // hidden channels of the 4D CNN (1 in, 1 out)
   int64_t depth = 5;      // Conv4d layers, ReLU between (the paper's five)
@@ -64,6 +66,7 @@ struct CnnOptions {
   nlohmann::json to_json() const;
 };
 
+// Everything that defines a LightFieldNet; stored in every checkpoint as "network".
 struct NetworkOptions {
   PatchShape patch;               // the patch the net reconstructs
   int64_t measurements = 2;       // N: measurement channels per pixel

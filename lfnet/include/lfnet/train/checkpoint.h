@@ -42,6 +42,7 @@ struct TrainingState {
   static TrainingState from_json(const nlohmann::json& j);
 };
 
+// The contents of one checkpoint file.
 struct Checkpoint {
   uint32_t format_version = kCheckpointFormatVersion;
   nlohmann::json config = nlohmann::json::object();  // the resolved config of the run

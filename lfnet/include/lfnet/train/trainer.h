@@ -20,6 +20,7 @@
 
 namespace lfnet::train {
 
+// The learning-rate schedule: a factor on TrainerOptions::lr per step.
 struct LrScheduleOptions {
   std::string name = "cosine";  // constant, step or cosine (evaluated every step)
   int64_t step_epochs = 20;     // step: multiply by gamma every step_epochs epochs
@@ -32,6 +33,7 @@ struct LrScheduleOptions {
   void validate() const;  // ConfigError naming the field
 };
 
+// Everything the Trainer does, with strict JSON (TrainerOptions::from_json).
 struct TrainerOptions {
   std::string stage = "joint";  // ae, cnn or joint: must match the net's branches (ae, cnn, net)
   int64_t epochs = 60;          // total epochs (the paper: about 60)
@@ -92,6 +94,7 @@ struct StepRecord {
   double lr = 0;
 };
 
+// Optional callbacks: logging, metrics, time budgets.
 struct TrainerHooks {
   std::function<void(const EpochRecord&)> on_epoch;  // after each epoch's checkpoints
   std::function<void(const StepRecord&)> on_step;    // after each optimizer step
@@ -120,6 +123,7 @@ struct InitReport {
   nlohmann::json to_json() const;
 };
 
+// Trains one LightFieldNet for one stage; owns its Adam optimizer and training state.
 class Trainer {
  public:
   // `net` must already hold the Phi of the measurements (set_phi).
