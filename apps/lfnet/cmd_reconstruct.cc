@@ -12,7 +12,6 @@
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/methods.h"
-#include "lfnet/train/checkpoint.h"
 #include "workflow.h"
 
 namespace fs = std::filesystem;
@@ -43,13 +42,12 @@ void run_reconstruct(const ReconstructArgs& a) {
   double train_mean = 0;
   if (recon::needs_network(a.method)) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(), "method '", a.method, "' needs --model");
-    const auto ckpt = train::load_checkpoint(a.model);
-    train::check_phi(ckpt, spec.to_json(), a.model);
-    auto net = train::build_net(ckpt, a.model);
-    o.patch_h = net->options().patch.height;
-    o.patch_w = net->options().patch.width;
-    solver = recon::network_solver(net, a.method);
-    if (ckpt.config.contains("measurement_mean")) train_mean = ckpt.config["measurement_mean"].get<double>();
+    const auto model = load_model(a.model, /*network=*/true);
+    model.check_phi(spec.to_json());
+    o.patch_h = model.network.patch.height;
+    o.patch_w = model.network.patch.width;
+    solver = model.solver(a.method);
+    train_mean = model.measurement_mean();
   } else if (a.method == "pinv" || a.method == "adjoint") {
     solver = recon::linear_solver(*phi, a.method, o.patch_h, o.patch_w);
   } else {
@@ -110,7 +108,7 @@ void run_reconstruct(const ReconstructArgs& a) {
 void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd = app.add_subcommand("reconstruct", "Reconstruct a light field from coded measurements (the folder lfnet simulate writes)");
   auto a = std::make_shared<ReconstructArgs>();
-  cmd->add_option("--model", a->model, "trained model (checkpoint)");
+  cmd->add_option("--model", a->model, "trained model: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--sensor", a->sensor, "acquisition folder: sensor.json with sensor.tif or measurements.f32")->required();
   cmd->add_option("--out", a->out, "output light-field folder (views, grid.png, EPIs)")->required();
   cmd->add_option("--stride", a->stride, "patch stride (sensor mode; default 5)")->check(CLI::PositiveNumber);

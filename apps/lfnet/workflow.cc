@@ -294,6 +294,46 @@ void append_jsonl(const std::string& path, const nlohmann::json& record) {
 
 namespace lfnet::app {
 
+ModelFile load_model(const std::string& path, bool network) {
+  ModelFile model;
+  model.path = path;
+  model.scripted = nn::is_script_file(path);
+  if (model.scripted) {
+    model.script = std::make_shared<nn::ScriptedNetwork>(nn::load_script(path));
+    model.phi = model.script->meta.phi;
+    model.config = model.script->meta.config;
+    model.network = model.script->network;
+    return model;
+  }
+  const auto ckpt = train::load_checkpoint(path);
+  model.phi = ckpt.phi;
+  model.config = ckpt.config;
+  try {
+    model.network = nn::NetworkOptions::from_json(ckpt.network, "$.network");
+  } catch (const ConfigError& e) {
+    throw CheckpointError(path + " has invalid network options: " + e.what());
+  }
+  if (network) model.net = train::build_net(ckpt, path);
+  return model;
+}
+
+void ModelFile::check_phi(const nlohmann::json& phi_spec) const {
+  if (script) return nn::check_script_phi(*script, phi_spec);
+  train::Checkpoint ckpt;
+  ckpt.phi = phi;
+  train::check_phi(ckpt, phi_spec, path);
+}
+
+recon::PatchSolver ModelFile::solver(const std::string& method) const {
+  if (script) return recon::script_solver(*script, method);
+  LFNET_CHECK(!net.is_empty(), "the network of ", path, " was not loaded");
+  return recon::network_solver(net, method);
+}
+
+double ModelFile::measurement_mean() const {
+  return config.contains("measurement_mean") ? config["measurement_mean"].get<double>() : 0.0;
+}
+
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, eval::EvalOptions options,
                                torch::Tensor* estimate) {
@@ -307,9 +347,10 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   } else {
     recon::PatchSolver solver;
     if (recon::needs_network(method)) {
-      LFNET_CHECK_AS(ConfigError, !context.net.is_empty(), "method '", method,
+      LFNET_CHECK_AS(ConfigError, context.script || !context.net.is_empty(), "method '", method,
                      "' needs a trained model: give --model");
-      solver = recon::network_solver(context.net, method);
+      solver = context.script ? recon::script_solver(*context.script, method)
+                              : recon::network_solver(context.net, method);
     } else if (method == "dict") {
       LFNET_CHECK_AS(ConfigError, !context.dictionary.empty(),
                      "method 'dict' needs a dictionary: give --dictionary FILE (e.g. models/dictionary.ckpt)");
