@@ -95,7 +95,7 @@ def _apply_stack(self, y: Tensor, phase: Optional[Tensor], stack: Tensor) -> Ten
     if phase is None:
         raise ValueError("a Phi with {} phases needs the phase of every patch".format(p))
     if y.size(0) == 0:
-        return torch.zeros([0, stack.size(2)], dtype=y.dtype)
+        return torch.zeros([0, stack.size(2)], dtype=y.dtype, device=y.device)
     order = torch.sort(phase, stable=True, dim=0, descending=False)[1]
     counts = torch.bincount(phase, None, p)
     ordered = y.index_select(0, order)
@@ -107,7 +107,7 @@ def _apply_stack(self, y: Tensor, phase: Optional[Tensor], stack: Tensor) -> Ten
             parts.append(ordered.narrow(0, offset, c).matmul(stack[i]))
             offset += c
     inverse = torch.empty_like(order)
-    inverse[order] = torch.arange(order.size(0), dtype=order.dtype)
+    inverse[order] = torch.arange(order.size(0), dtype=order.dtype, device=order.device)
     return torch.cat(parts, 0).index_select(0, inverse)
 
 def _check(self, y: Tensor, phase: Optional[Tensor]) -> Tuple[Tensor, Optional[Tensor]]:
@@ -192,24 +192,25 @@ def reconstruct(self, sensor: Tensor, stride: int = 5, batch: int = 2048, window
         if o % blk != 0:
             raise ValueError("a patch at {} is off the {}-pixel block grid, so its measurements are not a crop of the sensor image; use a stride that is a multiple of {} on an image whose sides are multiples of {}".format(o, blk, blk, blk))
     t = self.period
-    xs_t = torch.tensor(xs, dtype=torch.int64)
+    dev = sensor.device
+    xs_t = torch.tensor(xs, dtype=torch.int64, device=dev)
     nx = len(xs)
-    cols_idx = (xs_t.unsqueeze(1) + torch.arange(w).unsqueeze(0)).reshape([-1])
-    x_pix = xs_t.view([1, -1, 1, 1]) + torch.arange(w).view([1, 1, 1, w])
-    weight = torch.ones([h * w], dtype=torch.float64)
+    cols_idx = (xs_t.unsqueeze(1) + torch.arange(w, device=dev).unsqueeze(0)).reshape([-1])
+    x_pix = xs_t.view([1, -1, 1, 1]) + torch.arange(w, device=dev).view([1, 1, 1, w])
+    weight = torch.ones([h * w], dtype=torch.float64, device=dev)
     if window:
-        wy = torch.sin(3.141592653589793 * (torch.arange(h, dtype=torch.float64) + 0.5) / h)
-        wx = torch.sin(3.141592653589793 * (torch.arange(w, dtype=torch.float64) + 0.5) / w)
+        wy = torch.sin(3.141592653589793 * (torch.arange(h, dtype=torch.float64, device=dev) + 0.5) / h)
+        wx = torch.sin(3.141592653589793 * (torch.arange(w, dtype=torch.float64, device=dev) + 0.5) / w)
         weight = (wy.unsqueeze(1) * wx.unsqueeze(0)).reshape([-1])
-    total = torch.zeros([nu, nv, H * W], dtype=torch.float64)
-    count = torch.zeros([H * W], dtype=torch.float64)
+    total = torch.zeros([nu, nv, H * W], dtype=torch.float64, device=dev)
+    count = torch.zeros([H * W], dtype=torch.float64, device=dev)
     band = max(1, batch // max(1, nx))
     r0 = 0
     while r0 < len(ys):
         r1 = min(len(ys), r0 + band)
         ny = r1 - r0
-        ys_t = torch.tensor(ys[r0:r1], dtype=torch.int64)
-        rows_idx = (ys_t.unsqueeze(1) + torch.arange(h).unsqueeze(0)).reshape([-1])
+        ys_t = torch.tensor(ys[r0:r1], dtype=torch.int64, device=dev)
+        rows_idx = (ys_t.unsqueeze(1) + torch.arange(h, device=dev).unsqueeze(0)).reshape([-1])
         crop = sensor.index_select(1, rows_idx).index_select(2, cols_idx)
         n = ny * nx
         y = crop.view([nm, ny, h, nx, w]).permute([1, 3, 0, 2, 4]).reshape([n, nm * h * w]).to(torch.float32)
@@ -223,7 +224,7 @@ def reconstruct(self, sensor: Tensor, stride: int = 5, batch: int = 2048, window
         est = torch.cat(parts, 0).reshape([n, nu, nv, h, w])
         if not bool(torch.isfinite(est).all()):
             raise ValueError("the reconstruction produced NaN or infinite values in patch rows {}..{}".format(r0, r1 - 1))
-        y_pix = ys_t.view([-1, 1, 1, 1]) + torch.arange(h).view([1, 1, h, 1])
+        y_pix = ys_t.view([-1, 1, 1, 1]) + torch.arange(h, device=dev).view([1, 1, h, 1])
         idx = (y_pix * W + x_pix).reshape([-1])
         src = est.to(torch.float64).view([n, nu, nv, h * w]).mul(weight).permute([1, 2, 0, 3]).reshape([nu, nv, -1])
         total.index_add_(2, idx, src)
@@ -252,7 +253,7 @@ def simulate(self, lf: Tensor) -> Tensor:
         # The first pixel of the patch at origin (py, px) has the weights of every pixel of
         # that phase.
         g = stack[:, ::hw, ::hw]
-        out = torch.zeros([nm, H, W], dtype=torch.float32)
+        out = torch.zeros([nm, H, W], dtype=torch.float32, device=lf.device)
         for py in range(t):
             for px in range(t):
                 sub = lf[:, :, py::t, px::t]
@@ -264,10 +265,10 @@ def simulate(self, lf: Tensor) -> Tensor:
     if t != 1 or H % blk != 0 or W % blk != 0:
         raise ValueError("simulate needs an image whose sides are multiples of the {}-pixel block, got {}x{}".format(blk, H, W))
     w = s[3]
-    i = torch.arange(blk)
+    i = torch.arange(blk, device=lf.device)
     pix = (i.unsqueeze(1) * w + i.unsqueeze(0)).reshape([-1])
-    rows = (torch.arange(nm).unsqueeze(1) * hw + pix.unsqueeze(0)).reshape([-1])
-    cols = (torch.arange(nu * nv).unsqueeze(1) * hw + pix.unsqueeze(0)).reshape([-1])
+    rows = (torch.arange(nm, device=lf.device).unsqueeze(1) * hw + pix.unsqueeze(0)).reshape([-1])
+    cols = (torch.arange(nu * nv, device=lf.device).unsqueeze(1) * hw + pix.unsqueeze(0)).reshape([-1])
     g = stack[0].index_select(0, rows).index_select(1, cols)
     by = H // blk
     bx = W // blk
@@ -371,9 +372,11 @@ std::string register_stack(jit::Module& m, const std::string& name, const std::s
   m.register_attribute(name + "_cache", c10::OptionalType::create(c10::TensorType::get()),
                        c10::IValue());
   s << "    cached = self." << name << "_cache\n"
-    << "    if cached is not None:\n        return cached\n"
+    << "    if cached is not None and cached.device == self." << name << "_values.device:\n"
+    << "        return cached\n"
     << "    n = 1\n    for d in self." << name << "_shape:\n        n = n * d\n"
-    << "    dense = torch.zeros([n], dtype=self." << name << "_values.dtype)\n"
+    << "    dense = torch.zeros([n], dtype=self." << name << "_values.dtype, device=self." << name
+    << "_values.device)\n"
     << "    dense[self." << name << "_index.to(torch.int64)] = self." << name << "_values\n"
     << "    dense = dense.view(self." << name << "_shape)\n"
     << "    self." << name << "_cache = dense\n"
