@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -16,7 +17,6 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/recon/methods.h"
-#include "lfnet/train/checkpoint.h"
 #include "workflow.h"
 
 namespace fs = std::filesystem;
@@ -150,12 +150,15 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
   std::vector<NamedLightField> truths;
   MethodContext context;
   std::unique_ptr<optics::Phi> phi;
+  std::array<int64_t, 2> patch{9, 9};
   try {
     optics::PhiSpec spec;
     if (!a.model.empty()) {
-      const auto ckpt = train::load_checkpoint(a.model);
-      spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
-      context.net = train::build_net(ckpt, a.model);
+      const auto model = load_model(a.model, /*network=*/true);
+      spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
+      context.net = model.net;
+      context.script = model.script;
+      patch = {model.network.patch.height, model.network.patch.width};
     } else {
       LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
                      "evaluating light-field folders needs --model or --phi");
@@ -181,9 +184,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
       o.reconstruct.stride = a.stride;
       o.reconstruct.batch = a.batch;
       o.reconstruct.window = a.window;
-      if (context.net) {
-        o.reconstruct.patch_h = context.net->options().patch.height;
-        o.reconstruct.patch_w = context.net->options().patch.width;
+      if (!a.model.empty()) {
+        o.reconstruct.patch_h = patch[0];
+        o.reconstruct.patch_w = patch[1];
       }
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
@@ -294,7 +297,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
       ->required();
   cmd->add_option("--methods", a->methods,
                   "comma-separated methods (default net with --model, pinv without)");
-  cmd->add_option("--model", a->model, "trained model (checkpoint) for net, ae and cnn");
+  cmd->add_option("--model", a->model, "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for dict");
   cmd->add_option("--dict-method", a->dict_method, "sparse coding for dict: omp or admm")
       ->check(CLI::IsMember({"omp", "admm"}));

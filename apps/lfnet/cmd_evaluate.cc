@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "command.h"
 #include "lfnet/core/error.h"
@@ -11,7 +12,6 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/methods.h"
-#include "lfnet/train/checkpoint.h"
 #include "workflow.h"
 
 namespace fs = std::filesystem;
@@ -35,16 +35,21 @@ void run_evaluate(const EvaluateArgs& a) {
   const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
   MethodContext context;
   optics::PhiSpec spec;
+  std::optional<nn::PatchShape> network_patch;  // the patch size of net, ae and cnn
   if (!a.model.empty()) {
-    const auto ckpt = train::load_checkpoint(a.model);
-    spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
+    const auto model = load_model(a.model, recon::needs_network(method));
+    spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
     if (!a.phi.empty()) {
       auto given = optics::PhiSpec::parse(a.phi);
       LFNET_CHECK_AS(ConfigError, given.name == spec.name && given.n == spec.n, "--phi ", a.phi,
                      " does not match the model ", a.model, ", which was trained for ",
                      spec.label());
     }
-    if (recon::needs_network(method)) context.net = train::build_net(ckpt, a.model);
+    if (recon::needs_network(method)) {
+      context.net = model.net;
+      context.script = model.script;
+      network_patch = model.network.patch;
+    }
   } else {
     LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
                    "' needs --model");
@@ -74,9 +79,9 @@ void run_evaluate(const EvaluateArgs& a) {
   o.reconstruct.stride = a.stride;
   o.reconstruct.batch = a.batch;
   o.reconstruct.window = a.window;
-  if (context.net) {
-    o.reconstruct.patch_h = context.net->options().patch.height;
-    o.reconstruct.patch_w = context.net->options().patch.width;
+  if (network_patch) {
+    o.reconstruct.patch_h = network_patch->height;
+    o.reconstruct.patch_w = network_patch->width;
   }
   torch::Tensor estimate;
   auto record = evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
@@ -99,7 +104,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd = app.add_subcommand(
       "evaluate", "Simulate a light field's measurements, reconstruct them and report PSNR/SSIM");
   auto a = std::make_shared<EvaluateArgs>();
-  cmd->add_option("--model", a->model, "trained model (checkpoint) for net, ae and cnn");
+  cmd->add_option("--model", a->model, "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--lf", a->lf, "light field folder with the truth");
   cmd->add_option("--scene", a->scene, "or a procedural scene spec");
   cmd->add_option("--phi", a->phi, "NAME[:N]: needed without --model; must match the model");

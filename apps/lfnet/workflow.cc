@@ -355,6 +355,46 @@ void append_jsonl(const std::string& path, const nlohmann::json& record) {
 
 namespace lfnet::app {
 
+ModelFile load_model(const std::string& path, bool network) {
+  ModelFile model;
+  model.path = path;
+  model.scripted = nn::is_script_file(path);
+  if (model.scripted) {
+    model.script = std::make_shared<nn::ScriptedNetwork>(nn::load_script(path));
+    model.phi = model.script->meta.phi;
+    model.config = model.script->meta.config;
+    model.network = model.script->network;
+    return model;
+  }
+  const auto ckpt = train::load_checkpoint(path);
+  model.phi = ckpt.phi;
+  model.config = ckpt.config;
+  try {
+    model.network = nn::NetworkOptions::from_json(ckpt.network, "$.network");
+  } catch (const ConfigError& e) {
+    throw CheckpointError(path + " has invalid network options: " + e.what());
+  }
+  if (network) model.net = train::build_net(ckpt, path);
+  return model;
+}
+
+void ModelFile::check_phi(const nlohmann::json& phi_spec) const {
+  if (script) return nn::check_script_phi(*script, phi_spec);
+  train::Checkpoint ckpt;
+  ckpt.phi = phi;
+  train::check_phi(ckpt, phi_spec, path);
+}
+
+recon::PatchSolver ModelFile::solver(const std::string& method) const {
+  if (script) return recon::script_solver(*script, method);
+  LFNET_CHECK(!net.is_empty(), "the network of ", path, " was not loaded");
+  return recon::network_solver(net, method);
+}
+
+double ModelFile::measurement_mean() const {
+  return config.contains("measurement_mean") ? config["measurement_mean"].get<double>() : 0.0;
+}
+
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, eval::EvalOptions options,
                                torch::Tensor* estimate, bool show_progress) {
@@ -368,9 +408,10 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   } else {
     recon::PatchSolver solver;
     if (recon::needs_network(method)) {
-      LFNET_CHECK_AS(ConfigError, !context.net.is_empty(), "method '", method,
+      LFNET_CHECK_AS(ConfigError, context.script || !context.net.is_empty(), "method '", method,
                      "' needs a trained model: give --model");
-      solver = recon::network_solver(context.net, method);
+      solver = context.script ? recon::script_solver(*context.script, method)
+                              : recon::network_solver(context.net, method);
     } else if (method == "dict") {
       LFNET_CHECK_AS(ConfigError, !context.dictionary.empty(),
                      "method 'dict' needs a dictionary: give --dictionary FILE (e.g. models/dictionary.ckpt)");
@@ -452,11 +493,11 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   const std::string method = a.method;
   LFNET_CHECK_AS(ConfigError, method != "no-parallax",
                  "no-parallax needs the true light field: it is a method of lfnet evaluate");
-  // The checkpoint first: its Phi is the default for plain sensor images.
-  std::optional<train::Checkpoint> ckpt;
+  // The model first: its Phi is the default for plain sensor images.
+  std::optional<ModelFile> model;
   if (recon::needs_network(method)) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(), "method '", method, "' needs --model");
-    ckpt = train::load_checkpoint(a.model);
+    model = load_model(a.model, /*network=*/true);
   }
   const bool folder = fs::is_directory(a.sensor);
   io::Acquisition acq;
@@ -470,9 +511,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   } else {
     LFNET_CHECK_AS(IoError, fs::exists(a.sensor) || a.sensor.find(',') != std::string::npos,
                    "--sensor ", a.sensor, " does not exist");
-    LFNET_CHECK_AS(ConfigError, !a.phi.empty() || ckpt,
+    LFNET_CHECK_AS(ConfigError, !a.phi.empty() || model,
                    "a plain sensor image needs --phi (or a --model, whose Phi is then used)");
-    spec = a.phi.empty() ? optics::PhiSpec::from_json(ckpt->phi, a.model + ":$.phi")
+    spec = a.phi.empty() ? optics::PhiSpec::from_json(model->phi, a.model + ":$.phi")
                          : parse_phi_argument(a.phi);
     spec = optics::make_phi(spec)->spec();
     acq = plain_sensor_acquisition(a.sensor, spec);
@@ -481,15 +522,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   recon::ReconstructOptions o = a.options;
   recon::PatchSolver solver;
   double train_mean = 0;
-  if (ckpt) {
-    train::check_phi(*ckpt, spec.to_json(), a.model);
-    auto net = train::build_net(*ckpt, a.model);
-    o.patch_h = net->options().patch.height;
-    o.patch_w = net->options().patch.width;
-    solver = recon::network_solver(net, method);
-    if (ckpt->config.contains("measurement_mean")) {
-      train_mean = ckpt->config["measurement_mean"].get<double>();
-    }
+  if (model) {
+    model->check_phi(spec.to_json());
+    o.patch_h = model->network.patch.height;
+    o.patch_w = model->network.patch.width;
+    solver = model->solver(method);
+    train_mean = model->measurement_mean();
   } else if (method == "pinv" || method == "adjoint") {
     solver = recon::linear_solver(*phi, method, o.patch_h, o.patch_w);
   } else if (method == "dict") {

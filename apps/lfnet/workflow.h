@@ -18,6 +18,7 @@
 #include "lfnet/dict/patch_sampling.h"
 #include "lfnet/eval/evaluate.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/reconstruct.h"
 #include "lfnet/train/trainer.h"
@@ -162,10 +163,33 @@ void append_jsonl(const std::string& path, const nlohmann::json& record);
 
 namespace lfnet::app {
 
+// A trained model given as --model: an lfnet checkpoint or a file `lfnet export` wrote
+// (told apart by content).
+struct ModelFile {
+  std::string path;
+  bool scripted = false;                        // an exported TorchScript file
+  nlohmann::json phi;                           // the Phi spec it was trained for
+  nlohmann::json config;                        // the resolved config of its training run
+  nn::NetworkOptions network;
+  nn::LightFieldNet net{nullptr};               // checkpoints (when the network was asked for)
+  std::shared_ptr<nn::ScriptedNetwork> script;  // exported files
+
+  // Throws CheckpointError unless the model was trained for `phi_spec` (equal JSON).
+  void check_phi(const nlohmann::json& phi_spec) const;
+  // The model's solver for method net, ae or cnn.
+  recon::PatchSolver solver(const std::string& method) const;
+  // The training measurement mean its config records, or 0.
+  double measurement_mean() const;
+};
+
+// Loads --model; `network`: build the checkpoint's network too (exported files always are).
+ModelFile load_model(const std::string& path, bool network);
+
 // What a method needs besides the measurements.
 struct MethodContext {
   const optics::Phi* phi = nullptr;
   nn::LightFieldNet net{nullptr};  // for net, ae, cnn
+  std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported net (used when set)
   std::string dictionary;          // for dict: a dictionary file
   std::string dict_method = "omp";  // for dict: omp or admm
 };

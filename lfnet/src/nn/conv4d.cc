@@ -130,22 +130,23 @@ torch::Tensor fused_input(const torch::Tensor& x, const torch::Tensor& weight,
   return conv3d(cols, wk, bias, p).view(out_shape);
 }
 
+}  // namespace
+
 // oneDNN's Conv3d is efficient when both channel counts are moderate and poor when one side
 // has a single channel; stacking the u-offsets onto that side (K channels) is what helps
 // there. Measured on a 2-core AVX-512 CPU (docs/training.md, section 2).
-Conv4dAlgorithm resolve(Conv4dAlgorithm algorithm, int64_t cin, int64_t cout) {
+Conv4dAlgorithm resolve_conv4d_algorithm(Conv4dAlgorithm algorithm, int64_t in_channels,
+                                         int64_t out_channels) {
   if (algorithm != Conv4dAlgorithm::kAuto) return algorithm;
-  if (cout == 1) return Conv4dAlgorithm::kFusedOutput;
-  if (cin == 1) return Conv4dAlgorithm::kFusedInput;
+  if (out_channels == 1) return Conv4dAlgorithm::kFusedOutput;
+  if (in_channels == 1) return Conv4dAlgorithm::kFusedInput;
   return Conv4dAlgorithm::kStacked;
 }
-
-}  // namespace
 
 torch::Tensor conv4d_u_major(const torch::Tensor& x, const torch::Tensor& weight,
                              const torch::Tensor& bias, Conv4dAlgorithm algorithm) {
   check_arguments(x, weight, bias);
-  switch (resolve(algorithm, weight.size(1), weight.size(0))) {
+  switch (resolve_conv4d_algorithm(algorithm, weight.size(1), weight.size(0))) {
     case Conv4dAlgorithm::kStacked: return stacked(x, weight, bias);
     case Conv4dAlgorithm::kFusedOutput: return fused_output(x, weight, bias);
     default: return fused_input(x, weight, bias);

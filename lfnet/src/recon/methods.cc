@@ -39,6 +39,17 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
   };
 }
 
+PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& method) {
+  LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
+                 "' is not a network method (net, ae, cnn)");
+  const auto& branches = net.network.branches;
+  LFNET_CHECK_AS(ConfigError, method == "net" || branches == "net" || branches == method,
+                 "the model was trained as '", branches, "' and has no '", method, "' branch");
+  return [net, method](const torch::Tensor& y, const torch::Tensor& phase) {
+    return net.forward(y, phase, method).reshape({y.size(0), -1});
+  };
+}
+
 PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,
                           int64_t patch_w) {
   if (method == "adjoint") return adjoint_solver(optics::patch_matrix_stack(phi, patch_h, patch_w));

@@ -24,6 +24,10 @@ enum class Conv4dAlgorithm {
 Conv4dAlgorithm parse_conv4d_algorithm(const std::string& name);
 std::string to_string(Conv4dAlgorithm algorithm);
 
+// The algorithm a layer of Cin -> Cout channels runs: `algorithm` itself unless kAuto.
+Conv4dAlgorithm resolve_conv4d_algorithm(Conv4dAlgorithm algorithm, int64_t in_channels,
+                                         int64_t out_channels);
+
 // 4D convolution, stride 1, same padding (kernel / 2 zeros on every side of every axis).
 // x: (B, Cin, U, V, h, w); weight: (Cout, Cin, K, K, K, K) with K odd; bias: (Cout) or
 // undefined. Returns (B, Cout, U, V, h, w). Differentiable in x, weight and bias.

@@ -7,6 +7,7 @@
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/dict/sparse_coding.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/reconstruct.h"
 
@@ -20,6 +21,9 @@ bool needs_network(const std::string& method);
 // The network (`net`) or one of its branches (`ae`, `cnn`; the branch alone, plus the
 // network's residual base if it has one), run in inference mode.
 PatchSolver network_solver(nn::LightFieldNet net, const std::string& method);
+
+// The same for an exported network (nn::load_script): its forward_branch, without autograd.
+PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& method);
 
 // `adjoint` or `pinv` for `phi` at the given patch size.
 PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,

@@ -1,0 +1,87 @@
+// TorchScript export of a LightFieldNet (docs/export.md): one file that LibTorch
+// (torch::jit::load) and Python (torch.jit.load) run without lfnet.
+//
+// The module is built in C++ (torch::nn modules cannot be scripted): the net's parameters and
+// buffers become parameters and buffers of nested script modules under their registered names
+// (ae.fc1.weight, cnn.conv3.bias, ...), and the methods are compiled from TorchScript source
+// that repeats network.cc and conv4d.cc op for op, each Conv4d layer with the algorithm the
+// C++ net resolves for it, so both give the same numbers to float rounding.
+//
+// Methods of the exported module (B patches, N measurements, a U x V x h x w patch):
+//   forward(y, phase=None)            y (B, N h w) or (B, N, h, w) -> (B, U, V, h, w)
+//   forward_branch(y, phase, branch)  branch "net", "ae" or "cnn" (a branch plus the residual)
+//   reconstruct(sensor, stride=5, batch=2048, window=False, clamp=True)
+//                                     sensor (N, H, W) -> light field (U, V, H, W)
+//   simulate(lf)                      lf (U, V, H, W) -> noiseless sensor image (N, H, W)
+//   phi_stack()                       the patch matrices (P, N h w, U V h w)
+// Attributes: format_version, metadata (the JSON below), phi_spec (JSON), patch_shape
+// [U, V, h, w], measurements, period, block. The same JSON is the extra file "lfnet.json".
+// The Phi stack (and the pinv base) is stored as flat indices and values when that halves its
+// size (per-pixel Phis have 1 / (h w) non-zeros): buffers phi_index / phi_values instead of
+// phi; the module rebuilds the dense stack on first use.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <torch/csrc/jit/api/module.h>
+#include <torch/types.h>
+
+#include <cstdint>
+#include <string>
+
+#include "lfnet/nn/network.h"
+
+namespace lfnet::nn {
+
+// Bumped whenever the methods, attributes or metadata of exported files change meaning.
+constexpr int64_t kScriptFormatVersion = 1;
+// The extra file in the archive that holds the metadata JSON.
+constexpr const char* kScriptMetadataFile = "lfnet.json";
+
+// What an exported network carries besides its tensors.
+struct ScriptMetadata {
+  nlohmann::json phi = nlohmann::json::object();     // the Phi spec the net was trained for
+  nlohmann::json config = nlohmann::json::object();  // the resolved config of the training run
+  int64_t period = 1;  // Phi::period(): a patch at (y0, x0) has phase (y0 mod T) T + (x0 mod T)
+  int64_t block = 1;   // Phi::block(): patch origins and sizes must be multiples of it
+  bool local = true;   // Phi::local(): measurements at a pixel see only that pixel's rays
+  nlohmann::json source = nlohmann::json::object();  // where the weights came from
+
+  // The metadata JSON of a file exported from a net with these options and phases.
+  nlohmann::json to_json(const NetworkOptions& network, int64_t phases) const;
+};
+
+// The TorchScript module of `net` (its parameters copied, detached). Throws ConfigError when
+// the metadata does not fit the net (phases != period^2, a block that does not divide the
+// patch).
+torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata& meta);
+
+// script_network, written to `path` atomically (a temporary file, then rename).
+void export_network(const LightFieldNet& net, const ScriptMetadata& meta,
+                    const std::string& path);
+
+// Whether `path` is a TorchScript archive (a zip file) rather than an lfnet checkpoint.
+// IoError when the file cannot be read.
+bool is_script_file(const std::string& path);
+
+// An exported network, loaded.
+struct ScriptedNetwork {
+  std::string path;
+  torch::jit::Module module;
+  nlohmann::json metadata;  // the full metadata JSON
+  NetworkOptions network;   // parsed from metadata["network"]
+  ScriptMetadata meta;      // parsed from the metadata
+
+  // forward_branch(y, phase, branch) without autograd: (B, U, V, h, w). `phase` may be
+  // undefined for a one-phase Phi.
+  torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {},
+                        const std::string& branch = "net") const;
+};
+
+// Loads an exported file on the CPU. A missing file is an IoError; a TorchScript file without
+// lfnet metadata, another format version or inconsistent metadata is a CheckpointError.
+ScriptedNetwork load_script(const std::string& path);
+
+// Throws CheckpointError unless the exported net was trained for `phi_spec` (equal JSON).
+void check_script_phi(const ScriptedNetwork& net, const nlohmann::json& phi_spec);
+
+}  // namespace lfnet::nn

@@ -1,0 +1,255 @@
+// lfnet export, and reconstruct/evaluate with the exported file (docs/export.md): the file
+// runs in LibTorch and in Debian's python3-torch with the checkpoint's results.
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/nn/script.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/recon/methods.h"
+#include "lfnet/recon/reconstruct.h"
+#include "lfnet/train/checkpoint.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+
+namespace {
+
+// A randomly initialised asp:2 net with a pinv residual, saved as a checkpoint.
+void write_checkpoint(const std::string& path) {
+  auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
+  lfnet::nn::NetworkOptions o;
+  o.ae.hidden = {64, 32, 64, 32, 64};
+  o.cnn.channels = 4;
+  o.cnn.depth = 3;
+  o.residual = "pinv";
+  torch::manual_seed(3);
+  lfnet::nn::LightFieldNet net(o);
+  net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
+  lfnet::train::Checkpoint ck;
+  ck.network = o.to_json();
+  ck.phi = phi->spec().to_json();
+  ck.config = {{"measurement_mean", 0.3}};
+  ck.model = lfnet::train::module_state(*net);
+  ck.training.stage = "joint";
+  lfnet::train::save_checkpoint(ck, path);
+}
+
+void write_raw(const std::string& path, const torch::Tensor& t) {
+  auto c = t.contiguous();
+  std::ofstream out(path, std::ios::binary);
+  out.write(static_cast<const char*>(c.data_ptr()), static_cast<std::streamsize>(c.nbytes()));
+}
+
+double max_abs_diff(const torch::Tensor& a, const torch::Tensor& b) {
+  return (a - b).abs().max().item<double>();
+}
+
+nlohmann::json read_json(const std::string& path) { return nlohmann::json::parse(std::ifstream(path)); }
+
+}  // namespace
+
+TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch and Python "
+          "run like the checkpoint",
+          "[app][export]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  const std::string ckpt = tmp / "net.ckpt", pt = tmp / "net.pt";
+  write_checkpoint(ckpt);
+  std::string out;
+  REQUIRE(run_command(lfnet + "export --model " + ckpt + " --out " + pt, out) == 0);
+  CHECK(out.find("max |exported - checkpoint| on 256 patches") != std::string::npos);
+  // An existing file is kept unless --force; a TorchScript file is not a checkpoint.
+  CHECK(run_command(lfnet + "export --model " + ckpt + " --out " + pt, out) != 0);
+  CHECK(out.find("--force") != std::string::npos);
+  REQUIRE(run_command(lfnet + "export --model " + ckpt + " --out " + pt + " --force", out) == 0);
+  CHECK(run_command(lfnet + "export --model " + pt + " --out " + (tmp / "again.pt"), out) != 0);
+  CHECK(out.find("already an exported file") != std::string::npos);
+
+  // LibTorch: the file against the checkpoint's net on realistic patches.
+  const auto ck = lfnet::train::load_checkpoint(ckpt);
+  auto net = lfnet::train::build_net(ck, ckpt);
+  net->eval();
+  const auto scripted = lfnet::nn::load_script(pt);
+  CHECK(scripted.meta.phi == ck.phi);
+  CHECK(scripted.meta.config == ck.config);
+  auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::from_json(ck.phi));
+  torch::manual_seed(11);
+  auto patches = torch::rand({300, 2025});
+  auto y = patches.matmul(net->phi[0].t());
+  auto phase = torch::zeros({300}, torch::kInt64);
+  torch::Tensor want, got;
+  {
+    torch::NoGradGuard no_grad;
+    want = net->forward(y, phase).reshape({300, 5, 5, 9, 9});
+    got = scripted.forward(y, phase);
+  }
+  const double cpp_diff = max_abs_diff(got, want);
+  CHECK(cpp_diff <= 1e-5);
+
+  // reconstruct and evaluate take the file as --model and give the checkpoint's results.
+  REQUIRE(run_command(lfnet + "render --random 7 --size 40x40 --out " + (tmp / "lf"), out) == 0);
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"), out) == 0);
+  for (const auto& [model, name] : {std::pair{ckpt, "rec_ck"}, std::pair{pt, "rec_pt"}}) {
+    REQUIRE(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acq") +
+                            " --stride 4 --out " + (tmp / name),
+                        out) == 0);
+  }
+  auto rec_ck = lfnet::io::read_light_field(tmp / "rec_ck").data();
+  auto rec_pt = lfnet::io::read_light_field(tmp / "rec_pt").data();
+  CHECK(rec_ck.std().item<double>() > 1e-3);
+  CHECK(max_abs_diff(rec_ck, rec_pt) <= 1.0 / 65535 + 1e-7);  // 16-bit PNGs: at most one step
+  CHECK(read_json(tmp / "rec_pt/reconstruction.json").at("model") == pt);
+  for (const std::string method : {"net", "ae"}) {
+    INFO(method);
+    for (const auto& [model, name] : {std::pair{ckpt, "ck.json"}, std::pair{pt, "pt.json"}}) {
+      REQUIRE(run_command(lfnet + "evaluate --model " + model + " --method " + method +
+                              " --lf " + (tmp / "lf") + " --stride 9 --json " + (tmp / name),
+                          out) == 0);
+    }
+    const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
+    CHECK(std::abs(a["psnr_db"].get<double>() - b["psnr_db"].get<double>()) < 1e-4);
+    CHECK(std::abs(a["ssim"].get<double>() - b["ssim"].get<double>()) < 1e-6);
+  }
+  // Another Phi's measurements are refused as for the checkpoint.
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm"), out) == 0);
+  CHECK(run_command(lfnet + "reconstruct --model " + pt + " --sensor " + (tmp / "acqm") +
+                        " --out " + (tmp / "recm"),
+                    out) != 0);
+  CHECK(out.find("trained for Phi") != std::string::npos);
+  CHECK(run_command(lfnet + "evaluate --model " + pt + " --lf " + (tmp / "lf") + " --phi mask:2", out) != 0);
+  CHECK(out.find("does not match") != std::string::npos);
+
+  // Python: Debian's python3-torch loads the file and gives the same numbers.
+  const std::string python = lfnet::test::python_with("torch");
+  const auto file_bytes = fs::file_size(pt);
+  std::printf("export: %s is %.3f MB; max |C++ TorchScript - C++ checkpoint| = %.3g\n",
+              pt.c_str(), static_cast<double>(file_bytes) / 1e6, cpp_diff);
+  if (python.empty()) {
+    WARN("python3 with torch not found: the Python half of the export test is skipped");
+    return;
+  }
+  auto lf = lfnet::io::read_light_field(tmp / "lf").central(5).grey().data()[0];
+  auto sensor = phi->forward(lf);
+  lfnet::recon::ReconstructOptions o;
+  o.stride = 4;
+  o.clamp = false;
+  auto recon = lfnet::recon::reconstruct_sensor(*phi, sensor, lfnet::recon::network_solver(net, "net"), o)[0];
+  const std::string dir = tmp / "reference";
+  fs::create_directories(dir);
+  write_raw(dir + "/y.f32", y);
+  write_raw(dir + "/phase.i64", phase);
+  write_raw(dir + "/want.f32", want);
+  write_raw(dir + "/sensor.f32", sensor);
+  write_raw(dir + "/recon.f32", recon);
+  write_raw(dir + "/lf.f32", lf);
+  write_raw(dir + "/simulated.f32", sensor);
+  lfnet::write_json_file(dir + "/reference.json",
+                         {{"stride", 4},
+                          {"shapes", {{"y", y.sizes().vec()},
+                                      {"phase", phase.sizes().vec()},
+                                      {"want", want.sizes().vec()},
+                                      {"sensor", sensor.sizes().vec()},
+                                      {"recon", recon.sizes().vec()},
+                                      {"lf", lf.sizes().vec()},
+                                      {"simulated", sensor.sizes().vec()}}}});
+  REQUIRE(run_command(python + " " + LFNET_SOURCE_DIR + "/tests/apps/check_export.py " + pt + " " + dir,
+                      out) == 0);
+  INFO(out);
+  const auto result = nlohmann::json::parse(out.substr(out.rfind("\n{") + 1));
+  CHECK(result["forward_max_diff"].get<double>() <= 1e-5);
+  CHECK(result["reconstruct_max_diff"].get<double>() <= 1e-5);
+  CHECK(result["simulate_max_diff"].get<double>() <= 1e-5);
+  CHECK(result["output_shape"] == nlohmann::json({300, 5, 5, 9, 9}));
+  CHECK(result["phi_spec"] == ck.phi);
+  CHECK(result["metadata_phi"] == ck.phi);
+  CHECK(result["metadata_matches_attribute"] == true);
+  CHECK(result["format_version"] == lfnet::nn::kScriptFormatVersion);
+  CHECK(result["patch_shape"] == nlohmann::json({5, 5, 9, 9}));
+  // The example of docs/export.md runs as it is.
+  std::ifstream doc(std::string(LFNET_SOURCE_DIR) + "/docs/export.md");
+  const std::string text((std::istreambuf_iterator<char>(doc)), std::istreambuf_iterator<char>());
+  const auto begin = text.find("```python\n");
+  REQUIRE(begin != std::string::npos);
+  const auto end = text.find("```", begin + 10);
+  std::ofstream(tmp / "example.py") << text.substr(begin + 10, end - begin - 10);
+  REQUIRE(run_command(python + " " + (tmp / "example.py") + " " + pt, out) == 0);
+  INFO(out);
+  CHECK(out.find("Phi asp, N = 2, 5x5 views, 9x9 patches, 1 phase(s), trained by net.ckpt") !=
+        std::string::npos);
+  CHECK(out.find("sensor (2, 64, 64) -> light field (5, 5, 64, 64), PSNR") != std::string::npos);
+  CHECK(out.find("one patch -> (1, 5, 5, 9, 9)") != std::string::npos);
+  std::printf("export: max |Python TorchScript - C++ checkpoint| = %.3g (forward), %.3g "
+              "(reconstruct), %.3g (simulate vs Phi::forward); Python torch %s\n",
+              result["forward_max_diff"].get<double>(), result["reconstruct_max_diff"].get<double>(),
+              result["simulate_max_diff"].get<double>(),
+              result["torch_version"].get<std::string>().c_str());
+}
+
+TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[app][export]") {
+  std::vector<fs::path> models;
+  const fs::path dir = fs::path(LFNET_SOURCE_DIR) / "models";
+  if (fs::is_directory(dir)) {
+    for (const auto& entry : fs::directory_iterator(dir)) {
+      if (entry.path().extension() == ".ckpt") models.push_back(entry.path());
+    }
+  }
+  if (models.empty()) {
+    WARN("no models/*.ckpt in the source tree: nothing to export");
+    return;
+  }
+  std::sort(models.begin(), models.end());
+  lfnet::test::TempDir tmp;
+  for (const auto& model : models) {
+    INFO(model.string());
+    const std::string pt = tmp / (model.stem().string() + ".pt");
+    std::string out;
+    // export compares the file with the checkpoint on 256 patches and fails above 1e-5.
+    REQUIRE(run_command(lfnet_binary() + " --threads 2 --log-level warn export --model " +
+                            model.string() + " --out " + pt,
+                        out) == 0);
+    std::printf("%s", out.c_str());
+    CHECK(out.find("max |exported - checkpoint| on 256 patches") != std::string::npos);
+    const auto loaded = lfnet::nn::load_script(pt);
+    CHECK(loaded.meta.phi == lfnet::train::load_checkpoint(model.string()).phi);
+  }
+}
+
+// A measurement, not a test (hidden): the sizes of exported default nets next to their
+// checkpoints. Run: build/tests/apps/app_tests "[export-sizes]"
+TEST_CASE("sizes of exported default nets", "[.][export-sizes]") {
+  lfnet::test::TempDir tmp;
+  for (const std::string name : {"asp:2", "asp:25", "mask:2", "random:2"}) {
+    auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(name));
+    lfnet::nn::NetworkOptions o;  // the defaults: 5 x 5 x 9 x 9 patches, 16-channel CNN
+    o.measurements = phi->measurements();
+    lfnet::nn::LightFieldNet net(o);
+    net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
+    lfnet::train::Checkpoint ck;
+    ck.network = o.to_json();
+    ck.phi = phi->spec().to_json();
+    ck.model = lfnet::train::module_state(*net);
+    lfnet::train::save_checkpoint(ck, tmp / "m.ckpt");
+    lfnet::nn::ScriptMetadata meta;
+    meta.phi = ck.phi;
+    meta.period = phi->period();
+    meta.block = phi->block();
+    meta.local = phi->local();
+    lfnet::nn::export_network(net, meta, tmp / "m.pt");
+    std::printf("%-9s phases %3lld  parameters %lld  checkpoint (weights only) %.2f MB  "
+                "exported %.2f MB\n",
+                name.c_str(), static_cast<long long>(net->phases()),
+                static_cast<long long>(lfnet::nn::parameter_count(*net)),
+                static_cast<double>(fs::file_size(tmp / "m.ckpt")) / 1e6,
+                static_cast<double>(fs::file_size(tmp / "m.pt")) / 1e6);
+  }
+}
