@@ -51,16 +51,27 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   LFNET_CHECK_AS(ConfigError, !stages.empty(), args.config, " has no stage '", args.stage, "'");
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || stages.size() == 1,
                  "--resume continues one stage: name it with --stage");
+  LFNET_CHECK_AS(ConfigError, !config.train_data.empty(), args.config,
+                 ": the config names no training data ($.data)");
   // Resuming writes into the run folder it continues; anything else needs a fresh one.
+  std::error_code ec;
+  const bool fresh = !fs::exists(out, ec);
   prepare_run_dir(out, args.force || !args.resume.empty());
   nlohmann::json resolved = config.raw;
   resolved["scale"] = config.scale;
-  write_json_file((fs::path(out) / "config.json").string(), resolved);
-
   const auto phi = optics::make_phi(config.phi);
   spdlog::info("{}: Phi {}, {} stage(s), output in {}", config.name, config.phi.label(),
                stages.size(), out);
-  auto dataset = make_dataset(config, *phi);
+  std::unique_ptr<data::PatchDataset> dataset;
+  try {
+    write_json_file((fs::path(out) / "config.json").string(), resolved);
+    dataset = make_dataset(config, *phi);
+  } catch (...) {
+    // Nothing was trained: a run folder this command created goes again, so the same command
+    // can be repeated once the data is fixed.
+    if (fresh) fs::remove_all(out, ec);
+    throw;
+  }
   spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
                dataset->measurement_mean());
   std::string last;
