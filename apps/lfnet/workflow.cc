@@ -3,6 +3,7 @@
 #include "command.h"
 
 #include <spdlog/spdlog.h>
+#include <torch/utils.h>
 
 #include <filesystem>
 #include <fstream>
@@ -262,6 +263,10 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   auto options = config.stage_options(stage);
   const std::string stage_dir = (fs::path(run_dir) / "models" / stage.name).string();
   options.out_dir = stage_dir;
+  // LibTorch seeds its default generator from the OS: seed it from the config, so the same
+  // config gives the same initial weights and a run is reproducible (docs/robustness.md).
+  const uint64_t stage_code = stage.name == "ae" ? 1 : stage.name == "cnn" ? 2 : stage.name == "joint" ? 3 : 4;
+  torch::manual_seed(config.dataset.seed * 16 + stage_code);
   nn::LightFieldNet net(config.stage_network(stage));
   net->set_phi(optics::patch_matrix_stack(*phi, config.dataset.patch_h, config.dataset.patch_w));
   train::RunInfo run;

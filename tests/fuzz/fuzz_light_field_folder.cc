@@ -33,6 +33,9 @@ std::string view_name(int scheme, int64_t u, int64_t v, int64_t cols, const char
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 3 || size > 65536) return 0;
+  // Headers claiming huge images are refused before allocation either way; a low limit keeps
+  // the search from spending its time allocating and filling gigabytes.
+  lfnet::io::set_image_value_limit(int64_t{1} << 22);
   static const fs::path dir = fs::temp_directory_path() /
                               ("lfnet-fuzz-folder-" + std::to_string(::getpid()));
   std::error_code ec;

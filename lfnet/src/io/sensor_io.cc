@@ -2,6 +2,7 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <atomic>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -46,7 +47,16 @@ void check_png_complete(const std::string& path) {
                  ": the PNG file is truncated (it does not end with an IEND chunk)");
 }
 
+std::atomic<int64_t> g_image_value_limit{int64_t{1} << 30};
+
 }  // namespace
+
+void set_image_value_limit(int64_t values) {
+  LFNET_CHECK(values > 0, "the image value limit must be positive, got ", values);
+  g_image_value_limit = values;
+}
+
+int64_t image_value_limit() { return g_image_value_limit; }
 
 std::vector<std::string> sensor_file_names(int64_t channels) {
   if (channels == 1) return {"sensor.tif"};
@@ -74,8 +84,8 @@ torch::Tensor read_image_channels(const std::string& path) {
   const int64_t h = spec.height, w = spec.width, nc = spec.nchannels;
   LFNET_CHECK_AS(IoError, h > 0 && w > 0 && nc > 0, "image ", path, " is empty");
   // A corrupt header can claim any size: refuse what no light field view needs before
-  // allocating it (2^30 values = 4 GiB as float32).
-  LFNET_CHECK_AS(IoError, nc <= 64 && h * w <= (int64_t{1} << 30) / nc, "image ", path,
+  // allocating it.
+  LFNET_CHECK_AS(IoError, nc <= 64 && h * w <= image_value_limit() / nc, "image ", path,
                  " claims ", w, "x", h, " pixels with ", nc,
                  " channels, more than lfnet reads (corrupt header?)");
   auto pixels = torch::empty({h, w, nc}, torch::kFloat32);
