@@ -1,6 +1,7 @@
 // lfnet train / lfnet experiment: train the stages of a config, then (experiment) evaluate.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 
@@ -62,17 +63,34 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   LFNET_CHECK_AS(ConfigError, !stages.empty(), args.config, " has no stage '", args.stage, "'");
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || stages.size() == 1,
                  "--resume continues one stage: name it with --stage");
+  LFNET_CHECK_AS(ConfigError, !config.train_data.empty(), args.config,
+                 ": the config names no training data ($.data)");
   // Resuming writes into the run folder it continues; anything else needs a fresh one.
+  std::error_code ec;
+  const bool fresh = !fs::exists(out, ec);
   prepare_run_dir(out, args.force || !args.resume.empty());
   nlohmann::json resolved = config.raw;
   resolved["scale"] = config.scale;
-  write_json_file((fs::path(out) / "config.json").string(), resolved);
-
   const auto phi = optics::make_phi(config.phi);
   spdlog::info("{}: Phi {}, {} stage(s), output in {}", config.name, config.phi.label(),
                stages.size(), out);
   // The patch dataset (simulated measurements) is built only when a network is trained.
   std::unique_ptr<data::PatchDataset> dataset;
+  const bool networks = std::any_of(stages.begin(), stages.end(),
+                                    [](const StageConfig& s) { return is_network_stage(s.name); });
+  try {
+    write_json_file((fs::path(out) / "config.json").string(), resolved);
+    if (networks) dataset = make_dataset(config, *phi);
+  } catch (...) {
+    // Nothing was trained: a run folder this command created goes again, so the same command
+    // can be repeated once the data is fixed.
+    if (fresh) fs::remove_all(out, ec);
+    throw;
+  }
+  if (dataset) {
+    spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
+                 dataset->measurement_mean());
+  }
   std::string last;
   for (size_t i = 0; i < stages.size(); ++i) {
     if (!is_network_stage(stages[i].name)) {
@@ -80,11 +98,6 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
                      "--resume and --init apply to network stages, not to '", stages[i].name, "'");
       last = train_dictionary_stage(config, out, command_line_of(args, verb));
       continue;
-    }
-    if (!dataset) {
-      dataset = make_dataset(config, *phi);
-      spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
-                   dataset->measurement_mean());
     }
     // --init applies to the first stage trained; later stages follow the usual chain.
     last = train_stage(config, stages[i], *dataset, out, i == 0 ? args.init : "", args.resume,

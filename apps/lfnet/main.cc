@@ -6,6 +6,7 @@
 
 #include "command.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 
 namespace {
@@ -34,6 +35,8 @@ int main(int argc, char** argv) {
   app.preparse_callback([&](size_t) {});
   app.parse_complete_callback([&] {
     spdlog::set_level(spdlog::level::from_str(global.log_level));
+    // Quiet means quiet: on failure the error line is then the only output.
+    lfnet::set_progress_enabled(global.log_level != "off" && global.log_level != "error");
     spdlog::set_pattern("[%H:%M:%S] %^%l%$ %v");
     int n = lfnet::configure_threads(global.threads);
     spdlog::debug("using {} threads", n);

@@ -3,6 +3,7 @@
 #include "command.h"
 
 #include <spdlog/spdlog.h>
+#include <torch/utils.h>
 
 #include <filesystem>
 #include <fstream>
@@ -126,11 +127,26 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
   auto j = read_json_file(path);
   LFNET_CHECK_AS(ConfigError, j.is_object(), path, ": a config is a JSON object");
   std::string chosen = scale;
-  if (chosen.empty() && j.contains("default_scale")) chosen = j["default_scale"].get<std::string>();
+  if (chosen.empty() && j.contains("default_scale")) {
+    LFNET_CHECK_AS(ConfigError, j["default_scale"].is_string(), path,
+                   ": $.default_scale: expected the name of a scale, got ",
+                   j["default_scale"].dump());
+    chosen = j["default_scale"].get<std::string>();
+  }
+  if (j.contains("scales")) {
+    LFNET_CHECK_AS(ConfigError, j["scales"].is_object(), path,
+                   ": $.scales: expected an object of named config patches");
+    // Every scale is merged into the config when chosen, so each must be an object.
+    for (const auto& [name, patch] : j["scales"].items()) {
+      LFNET_CHECK_AS(ConfigError, patch.is_object(), path, ": $.scales.", name,
+                     ": expected an object (a patch merged into the config)");
+    }
+  }
   if (!chosen.empty()) {
     LFNET_CHECK_AS(ConfigError, j.contains("scales") && j["scales"].contains(chosen), path,
                    ": $.scales has no scale '", chosen, "'");
-    j.merge_patch(j["scales"][chosen]);
+    const nlohmann::json patch = j["scales"][chosen];
+    j.merge_patch(patch);
   }
   j.erase("scales");
   j.erase("default_scale");
@@ -177,6 +193,8 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
         sr.require("name", s.name);
         sr.get("training", s.training);
         sr.finish();
+        LFNET_CHECK_AS(ConfigError, s.training.is_object(), path,
+                       ".training: expected an object of training options");
       }
       LFNET_CHECK_AS(ConfigError,
                      s.name == "ae" || s.name == "cnn" || s.name == "joint" ||
@@ -186,6 +204,12 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
       LFNET_CHECK_AS(ConfigError, s.name != "dict" || s.training.empty(), path,
                      ": the dict stage takes its options from $.dictionary, not 'training'");
       c.stages.push_back(s);
+      // Values (not only keys and types) are checked before any work starts.
+      try {
+        c.stage_options(s).validate();
+      } catch (const ConfigError& e) {
+        throw ConfigError("$.training (stage " + s.name + "): " + e.what());
+      }
     }
     if (r.has("dictionary")) {
       auto d = r.child("dictionary");
@@ -256,6 +280,10 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   auto options = config.stage_options(stage);
   const std::string stage_dir = (fs::path(run_dir) / "models" / stage.name).string();
   options.out_dir = stage_dir;
+  // LibTorch seeds its default generator from the OS: seed it from the config, so the same
+  // config gives the same initial weights and a run is reproducible (docs/robustness.md).
+  const uint64_t stage_code = stage.name == "ae" ? 1 : stage.name == "cnn" ? 2 : stage.name == "joint" ? 3 : 4;
+  torch::manual_seed(config.dataset.seed * 16 + stage_code);
   nn::LightFieldNet net(config.stage_network(stage));
   net->set_phi(optics::patch_matrix_stack(*phi, config.dataset.patch_h, config.dataset.patch_w));
   train::RunInfo run;
@@ -401,6 +429,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   LFNET_CHECK(context.phi != nullptr, "evaluation without a Phi");
   const auto& phi = *context.phi;
   eval::EvalResult result;
+  std::shared_ptr<recon::SolverReport> report;  // iterative methods: non-convergence
   const std::string label = method + " " + truth.name + " stride " +
                             std::to_string(options.reconstruct.stride);
   if (method == "no-parallax") {
@@ -418,8 +447,9 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       const auto dictionary = dict::load_dictionary(context.dictionary);
       dict::SparseCodingOptions coding;
       coding.method = context.dict_method;
+      report = std::make_shared<recon::SolverReport>();
       solver = recon::dictionary_solver(phi, dictionary, coding, options.reconstruct.patch_h,
-                                        options.reconstruct.patch_w);
+                                        options.reconstruct.patch_w, report);
     } else if (method == "adjoint" || method == "pinv") {
       solver = recon::linear_solver(phi, method, options.reconstruct.patch_h, options.reconstruct.patch_w);
     } else {
@@ -443,6 +473,13 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     });
   }
   result.record["light_field"] = truth.name;
+  if (report) {
+    result.record["unconverged_patches"] = report->unconverged.load();
+    if (report->unconverged > 0) {
+      spdlog::warn("{}: {} of {} patches did not converge (finite, best estimate kept)", label,
+                   report->unconverged.load(), report->patches.load());
+    }
+  }
   if (estimate) *estimate = result.estimate;
   return result.record;
 }

@@ -138,7 +138,7 @@ void write_folder(const std::string& out, bool force, Writer&& write) {
   const fs::path tmp = target.parent_path() / ("." + target.filename().string() + ".tmp" + tag);
   fs::remove_all(tmp, ec);
   fs::create_directories(tmp, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot create ", tmp.string(), ": ", ec.message());
+  LFNET_CHECK_AS(IoError, !ec, "cannot create the output folder ", out, ": ", ec.message());
   try {
     write(tmp.string());
   } catch (...) {

@@ -36,6 +36,9 @@ nlohmann::json parse_json(const std::string& text, const std::string& source) {
   } catch (const nlohmann::json::parse_error& e) {
     throw ConfigError(source + ": malformed JSON at byte " + std::to_string(e.byte) + ": " +
                       e.what());
+  } catch (const nlohmann::json::exception& e) {
+    // Well-formed text the parser still refuses, e.g. a number too large for a double.
+    throw ConfigError(source + ": malformed JSON: " + e.what());
   }
 }
 

@@ -269,8 +269,8 @@ namespace {
 // = Theta^T y per row, in T, overwritten. Writes z per patch into `alpha` (B, K) float64.
 template <typename T>
 void admm_iterations(const AdmmOptions& o, const torch::Tensor& theta, const torch::Tensor& p,
-                     torch::Tensor q0, std::vector<double> kappa, torch::Tensor& alpha,
-                     torch::Tensor& iterations, torch::Tensor& converged) {
+                     torch::Tensor q0, std::vector<double> kappa, std::vector<double> tol_scale,
+                     torch::Tensor& alpha, torch::Tensor& iterations, torch::Tensor& converged) {
   const int64_t k = theta.size(1), b = q0.size(0);
   const T rho = static_cast<T>(o.rho), inv_rho = static_cast<T>(1.0 / o.rho);
   const T relax = static_cast<T>(o.relaxation);
@@ -316,6 +316,7 @@ void admm_iterations(const AdmmOptions& o, const torch::Tensor& theta, const tor
         T* zi = pz + i * k;
         T* ui = pu + i * k;
         const T kap = static_cast<T>(kappa[i]);
+        const double eps_abs_i = eps_abs * tol_scale[i];
         double r2 = 0, s2 = 0, x2 = 0, z2 = 0, u2 = 0;
         for (int64_t j = 0; j < k; ++j) {
           const T x = (qi[j] - ti[j]) * inv_rho;
@@ -333,8 +334,8 @@ void admm_iterations(const AdmmOptions& o, const torch::Tensor& theta, const tor
           qi[j] = qi0[j] + rho * (zn - un);
         }
         // Boyd et al. 2011, 3.3.1: primal and dual residuals against their tolerances.
-        const bool primal = std::sqrt(r2) <= eps_abs + eps_rel * std::sqrt(std::max(x2, z2));
-        const bool dual = o.rho * std::sqrt(s2) <= eps_abs + eps_rel * o.rho * std::sqrt(u2);
+        const bool primal = std::sqrt(r2) <= eps_abs_i + eps_rel * std::sqrt(std::max(x2, z2));
+        const bool dual = o.rho * std::sqrt(s2) <= eps_abs_i + eps_rel * o.rho * std::sqrt(u2);
         done[i] = primal && dual;
       }
     });
@@ -354,6 +355,7 @@ void admm_iterations(const AdmmOptions& o, const torch::Tensor& theta, const tor
         std::copy(pz + i * k, pz + (i + 1) * k, pz + w * k);
         std::copy(pu + i * k, pu + (i + 1) * k, pu + w * k);
         kappa[w] = kappa[i];
+        tol_scale[w] = tol_scale[i];
         ids[w] = ids[i];
       }
       ++w;
@@ -370,19 +372,27 @@ SparseCodingResult SparseCoder::code_admm(const PreparedOperator& op,
   const int64_t k = op.theta.size(1), b = y.size(0);
   auto q0 = y.mm(op.theta);                        // Theta^T y per row, (B, K), float64
   std::vector<double> kappa(b, o.lambda / o.rho);  // soft threshold lambda / rho per patch
+  // With a relative lambda the absolute tolerance follows the patch's scale too, where that
+  // is below 1: otherwise measurements scaled by 1e-6 would meet it in the first iterations
+  // and come back "converged" but unsolved.
+  std::vector<double> tol_scale(b, 1.0);
   if (o.relative_lambda) {
     auto inf = std::get<0>(q0.abs().max(1)).contiguous();
-    for (int64_t i = 0; i < b; ++i) kappa[i] *= inf.data_ptr<double>()[i];
+    for (int64_t i = 0; i < b; ++i) {
+      kappa[i] *= inf.data_ptr<double>()[i];
+      tol_scale[i] = std::min(1.0, inf.data_ptr<double>()[i]);
+    }
   }
   auto alpha = torch::zeros({b, k}, torch::kFloat64);
   auto iterations = torch::full({b}, o.max_iterations, torch::kInt64);
   auto converged = torch::zeros({b}, torch::kBool);
   if (o.double_precision) {
-    admm_iterations<double>(o, op.theta, op.admm_p, q0, std::move(kappa), alpha, iterations,
-                            converged);
+    admm_iterations<double>(o, op.theta, op.admm_p, q0, std::move(kappa), std::move(tol_scale),
+                            alpha, iterations, converged);
   } else {
     admm_iterations<float>(o, op.theta.to(torch::kFloat32), op.admm_p.to(torch::kFloat32),
-                           q0.to(torch::kFloat32), std::move(kappa), alpha, iterations, converged);
+                           q0.to(torch::kFloat32), std::move(kappa), std::move(tol_scale), alpha,
+                           iterations, converged);
   }
   SparseCodingResult r;
   r.residual_sq = (alpha.mm(op.theta.t()) - y).pow(2).sum(1);

@@ -122,16 +122,22 @@ FolderLayout scan_folder(const std::string& dir) {
 
   std::map<NamingScheme, std::vector<Candidate>> found;
   std::smatch m;
+  auto index = [&](const std::string& digits, const std::string& name) {
+    // A view index is small; more digits than that is a foreign file, not a grid of 10^18.
+    LFNET_CHECK_AS(IoError, digits.size() <= 6, "view file ", (fs::path(dir) / name).string(),
+                   " has an index of ", digits.size(), " digits; view indices have at most 6");
+    return static_cast<int64_t>(std::stoll(digits));
+  };
   for (const auto& name : names) {
     const std::string path = (fs::path(dir) / name).string();
     if (std::regex_match(name, m, kHci)) {
-      found[NamingScheme::kHciCam].push_back({std::stoll(m[1]), 0, path});
+      found[NamingScheme::kHciCam].push_back({index(m[1], name), 0, path});
     } else if (std::regex_match(name, m, kRowColRe)) {
-      found[NamingScheme::kRowCol].push_back({std::stoll(m[1]), std::stoll(m[2]), path});
+      found[NamingScheme::kRowCol].push_back({index(m[1], name), index(m[2], name), path});
     } else if (std::regex_match(name, m, kTm)) {
-      found[NamingScheme::kTmRowCol].push_back({std::stoll(m[1]), std::stoll(m[2]), path});
+      found[NamingScheme::kTmRowCol].push_back({index(m[1], name), index(m[2], name), path});
     } else if (std::regex_match(name, m, kMit)) {
-      found[NamingScheme::kMitIndex].push_back({std::stoll(m[2]), 0, path});
+      found[NamingScheme::kMitIndex].push_back({index(m[2], name), 0, path});
     }
   }
   if (found.empty()) {
@@ -313,6 +319,14 @@ torch::Tensor read_pfm(const std::string& path) {
                  "PFM file ", path, " has a malformed header");
   in.get();  // the single whitespace after the scale
   const int64_t c = magic == "PF" ? 3 : 1;
+  // Check the header against the file's size before allocating what it claims.
+  const auto header_end = static_cast<int64_t>(in.tellg());
+  std::error_code ec;
+  const auto file_size = static_cast<int64_t>(fs::file_size(path, ec));
+  LFNET_CHECK_AS(IoError, !ec && w <= file_size && h <= file_size &&
+                              w * h * c * 4 <= file_size - header_end,
+                 "PFM file ", path, " is truncated: its header claims ", w, "x", h, "x", c,
+                 " floats, more than the file holds");
   auto data = torch::empty({h, w, c}, torch::kFloat32);
   const auto bytes = static_cast<std::streamsize>(h * w * c * sizeof(float));
   in.read(reinterpret_cast<char*>(data.data_ptr<float>()), bytes);

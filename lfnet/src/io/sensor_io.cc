@@ -2,7 +2,10 @@
 
 #include <OpenImageIO/imageio.h>
 
+#include <atomic>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -29,7 +32,31 @@ std::vector<int64_t> shape_field(const nlohmann::json& meta, const std::string& 
   }
 }
 
+// libpng reports a PNG cut short on stderr itself before OIIO sees the error, which would add
+// a line to lfnet's one-line errors. A PNG ends with its IEND chunk, so a truncated one is
+// recognised here first.
+void check_png_complete(const std::string& path) {
+  static const unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  static const unsigned char kEnd[12] = {0, 0, 0, 0, 'I', 'E', 'N', 'D', 0xae, 0x42, 0x60, 0x82};
+  std::ifstream in(path, std::ios::binary);
+  unsigned char head[8] = {}, tail[12] = {};
+  if (!in.read(reinterpret_cast<char*>(head), 8) || std::memcmp(head, kSignature, 8) != 0) return;
+  in.seekg(-12, std::ios::end);
+  const bool complete = in.read(reinterpret_cast<char*>(tail), 12) && std::memcmp(tail, kEnd, 12) == 0;
+  LFNET_CHECK_AS(IoError, complete, "cannot read image ", path,
+                 ": the PNG file is truncated (it does not end with an IEND chunk)");
+}
+
+std::atomic<int64_t> g_image_value_limit{int64_t{1} << 30};
+
 }  // namespace
+
+void set_image_value_limit(int64_t values) {
+  LFNET_CHECK(values > 0, "the image value limit must be positive, got ", values);
+  g_image_value_limit = values;
+}
+
+int64_t image_value_limit() { return g_image_value_limit; }
 
 std::vector<std::string> sensor_file_names(int64_t channels) {
   if (channels == 1) return {"sensor.tif"};
@@ -50,11 +77,17 @@ torch::Tensor read_image_channels(const std::string& path) {
   // Keep alpha as stored: colour channels are read as they are, never premultiplied.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
+  check_png_complete(path);
   auto input = OIIO::ImageInput::open(path, &config);
   if (!input) throw IoError("cannot read image " + path + ": " + OIIO::geterror());
   const OIIO::ImageSpec& spec = input->spec();
   const int64_t h = spec.height, w = spec.width, nc = spec.nchannels;
   LFNET_CHECK_AS(IoError, h > 0 && w > 0 && nc > 0, "image ", path, " is empty");
+  // A corrupt header can claim any size: refuse what no light field view needs before
+  // allocating it.
+  LFNET_CHECK_AS(IoError, nc <= 64 && h * w <= image_value_limit() / nc, "image ", path,
+                 " claims ", w, "x", h, " pixels with ", nc,
+                 " channels, more than lfnet reads (corrupt header?)");
   auto pixels = torch::empty({h, w, nc}, torch::kFloat32);
   if (!input->read_image(0, 0, 0, static_cast<int>(nc), OIIO::TypeDesc::FLOAT,
                          pixels.data_ptr<float>())) {

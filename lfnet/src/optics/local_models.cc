@@ -21,6 +21,7 @@ std::unique_ptr<Phi> make_mask(const PhiSpec& spec) {
   LFNET_CHECK_AS(ConfigError, open > 0 && open <= 1, r.path_of("open"),
                  ": the open fraction must be in (0, 1], got ", open);
   const int64_t t = period, cells = t * t;
+  check_code_size(spec, spec.n * spec.rows * spec.cols * cells, "a mask code");
   const auto open_cells = std::max<int64_t>(1, std::llround(open * static_cast<double>(cells)));
 
   // Each exposure's tile: exactly `open_cells` open cells, placed by a seeded Fisher-Yates shuffle.
@@ -99,6 +100,7 @@ std::unique_ptr<Phi> make_lenslet(const PhiSpec& spec) {
   // sees the view n steps further in row-major order, so N = U V records every view.
   const int64_t uv = spec.rows * spec.cols;
   const int64_t t = std::lcm(spec.rows, spec.cols);
+  check_code_size(spec, spec.n * spec.rows * spec.cols * t * t, "a lenslet code");
   auto code = torch::zeros({spec.n, spec.rows, spec.cols, t, t}, torch::kFloat64);
   auto acc = code.accessor<double, 5>();
   for (int64_t n = 0; n < spec.n; ++n) {

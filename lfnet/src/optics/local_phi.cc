@@ -87,6 +87,14 @@ torch::Tensor tikhonov_pinv(const torch::Tensor& a, double lambda) {
   return torch::matmul(vh.transpose(-2, -1) * f.unsqueeze(-2), u.transpose(-2, -1));
 }
 
+void check_code_size(const PhiSpec& spec, int64_t values, const std::string& what) {
+  constexpr int64_t kMaxValues = int64_t{1} << 27;
+  LFNET_CHECK_AS(ConfigError, values <= kMaxValues, "Phi '", spec.label(), "' on ", spec.rows,
+                 "x", spec.cols, " views needs ", what, " of ", values,
+                 " values, more than the 2^27 lfnet builds: use fewer views, measurements or a "
+                 "smaller period");
+}
+
 torch::Tensor normalise_white(const torch::Tensor& code) {
   const double white = code.sum({1, 2}).mean().item<double>();
   LFNET_CHECK_AS(NumericalError, white > 0, "a Phi code measures nothing of a white light field");

@@ -35,6 +35,10 @@ class LocalPhi : public Phi {
   torch::Tensor code32_;  // the same in float32, for the common case
 };
 
+// Throws ConfigError when a model's code would hold more than 2^27 float64 values (1 GiB):
+// specs that ask for that are mistakes, and refusing them beats running out of memory.
+void check_code_size(const PhiSpec& spec, int64_t values, const std::string& what);
+
 // Scales a non-negative code (N, U, V, T, T) so a white light field measures 1 on average
 // over one period (mean over n and the T x T pixels of sum_{u,v} M).
 torch::Tensor normalise_white(const torch::Tensor& code);

@@ -38,8 +38,11 @@ PhiSpec PhiSpec::from_json(const nlohmann::json& j, const std::string& path) {
                    ": expected a JSON object of model parameters");
   }
   r.finish();
-  LFNET_CHECK_AS(ConfigError, spec.rows >= 1 && spec.cols >= 1, path,
-                 ": rows and cols must be >= 1, got ", spec.rows, "x", spec.cols);
+  LFNET_CHECK_AS(ConfigError,
+                 spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews &&
+                     spec.cols <= kMaxViews,
+                 path, ": rows and cols must be in 1..", kMaxViews, ", got ", spec.rows, "x",
+                 spec.cols);
   LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.rows * spec.cols, r.path_of("n"),
                  ": N must be in 1..", spec.rows * spec.cols, " (U V) for ", spec.rows, "x",
                  spec.cols, " views, got ", spec.n);
@@ -54,6 +57,8 @@ PhiSpec PhiSpec::parse(const std::string& text) {
   PhiSpec spec;
   spec.name = m[1];
   if (m[2].matched) {
+    // More digits than an int64 holds is no N either.
+    LFNET_CHECK_AS(ConfigError, m[2].length() <= 9, "Phi '", text, "': N must be in 1..U V");
     spec.n = std::stoll(m[2]);
     LFNET_CHECK_AS(ConfigError, spec.n >= 1, "Phi '", text, "': N must be >= 1");
   }
@@ -140,8 +145,10 @@ std::unique_ptr<Phi> make_phi(const PhiSpec& spec) {
     for (const auto& name : phi_names()) known += (known.empty() ? "" : ", ") + name;
     throw ConfigError("unknown Phi model '" + spec.name + "' (known: " + known + ")");
   }
-  LFNET_CHECK_AS(ConfigError, spec.rows >= 1 && spec.cols >= 1, "Phi '", spec.label(),
-                 "': the angular grid must be at least 1x1, got ", spec.rows, "x", spec.cols);
+  LFNET_CHECK_AS(ConfigError, spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews &&
+                                  spec.cols <= kMaxViews,
+                 "Phi '", spec.label(), "': the angular grid must be 1x1 to ", kMaxViews, "x",
+                 kMaxViews, ", got ", spec.rows, "x", spec.cols);
   LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.rows * spec.cols, "Phi '", spec.label(),
                  "': N must be in 1..", spec.rows * spec.cols, " for ", spec.rows, "x", spec.cols,
                  " views");

@@ -121,6 +121,7 @@ std::unique_ptr<Phi> make_random(const PhiSpec& spec) {
                  r.path_of("distribution"), ": expected \"gaussian\" or \"bernoulli\", got \"",
                  distribution, "\"");
   const int64_t rows = spec.n * block * block, cols = spec.rows * spec.cols * block * block;
+  check_code_size(spec, rows * cols, "a block matrix");
   const CounterRng rng(spec.seed, stream::kRandomMatrix);
   auto m = torch::empty({rows, cols}, torch::kFloat64);
   double* p = m.data_ptr<double>();

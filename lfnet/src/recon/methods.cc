@@ -59,7 +59,7 @@ PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int
 
 PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& dictionary,
                               const dict::SparseCodingOptions& options, int64_t patch_h,
-                              int64_t patch_w) {
+                              int64_t patch_w, std::shared_ptr<SolverReport> report) {
   dictionary.validate();
   const std::array<int64_t, 4> shape{phi.rows(), phi.cols(), patch_h, patch_w};
   LFNET_CHECK_AS(ConfigError, dictionary.patch_shape == shape,
@@ -69,9 +69,14 @@ PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& di
                  "x", phi.cols(), "x", patch_h, "x", patch_w);
   auto matrices = optics::patch_matrix_stack(phi, patch_h, patch_w);
   auto coder = std::make_shared<dict::SparseCoder>(dictionary.atoms, options);
-  return [matrices, coder](const torch::Tensor& y, const torch::Tensor& phase) {
+  return [matrices, coder, report](const torch::Tensor& y, const torch::Tensor& phase) {
     return by_phase(y, phase, matrices.size(2), [&](const torch::Tensor& rows, int64_t p) {
-      return coder->code(matrices[p], rows).patches.to(torch::kFloat32);
+      auto result = coder->code(matrices[p], rows);
+      if (report) {
+        report->patches += rows.size(0);
+        report->unconverged += result.unconverged();
+      }
+      return result.patches.to(torch::kFloat32);
     });
   };
 }

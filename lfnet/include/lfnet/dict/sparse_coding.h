@@ -38,7 +38,9 @@ struct AdmmOptions {
   double rho = 1.0;               // augmented Lagrangian parameter, fixed so that the
                                   // factorisation is cached; best near 10-100 x lambda
   double relaxation = 1.5;        // over-relaxation in [1, 1.8] (Boyd 3.4.3); 1: plain ADMM
-  double abs_tolerance = 1e-4;    // Boyd's ABSTOL
+  double abs_tolerance = 1e-4;    // Boyd's ABSTOL; with relative_lambda it is multiplied by
+                                  // min(1, ||Theta^T y||_inf), so tiny measurements do not meet
+                                  // it before they are solved
   double rel_tolerance = 1e-3;    // Boyd's RELTOL
   int64_t max_iterations = 500;   // per patch
   bool double_precision = false;  // float64 iterations; float32 halves the time of the two

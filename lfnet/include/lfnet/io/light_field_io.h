@@ -47,6 +47,12 @@ LightField read_light_field(const std::string& dir, int threads = 0);
 // Reads one image as (C, H, W) float32: integer formats scaled to [0, 1], floats as stored.
 torch::Tensor read_image(const std::string& path);
 
+// The most values (W x H x C) an image file may claim before it is read: a corrupt or hostile
+// header is refused before lfnet allocates what it claims. 2^30 (4 GiB as float32) by default;
+// programs that read untrusted files (or fuzz the readers) may lower it.
+void set_image_value_limit(int64_t values);
+int64_t image_value_limit();
+
 // Writes a (C, H, W) or (H, W) image in [0, 1]; the extension picks the format. `bits` 8 or
 // 16 for integer formats (PNG, TIFF); EXR and float TIFF (bits 32) store float32. The file is
 // written to a temporary name and renamed, so a failure leaves no partial file.

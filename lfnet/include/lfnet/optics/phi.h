@@ -13,6 +13,10 @@
 
 namespace lfnet::optics {
 
+// The most views a Phi codes along each angular axis (light-field cameras and gantries have
+// at most 17; Phi codes the central window).
+constexpr int64_t kMaxViews = 64;
+
 // Everything that defines a Phi; stored as JSON in every simulation, model and result.
 struct PhiSpec {
   std::string name = "asp";  // asp, mask, aperture, random, lenslet

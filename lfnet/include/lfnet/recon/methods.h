@@ -1,6 +1,8 @@
 // Reconstruction methods by name (DESIGN section 5), as patch solvers.
 #pragma once
 
+#include <atomic>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -29,10 +31,19 @@ PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& met
 PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,
                           int64_t patch_w);
 
+// What an iterative solver reports besides its patches: how many it coded and how many did
+// not converge (OMP stopped on degenerate input, ADMM hit max_iterations). Such patches are
+// still finite (the best estimate so far, or zero), never NaN. Updated by every call.
+struct SolverReport {
+  std::atomic<int64_t> patches{0};
+  std::atomic<int64_t> unconverged{0};
+};
+
 // `dict`: sparse coding of y = A D alpha per patch with the dictionary (OMP or ADMM-LASSO, by
-// the options), one prepared operator per distinct patch matrix.
+// the options), one prepared operator per distinct patch matrix. `report`, when given, counts
+// the patches that did not converge.
 PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& dictionary,
                               const dict::SparseCodingOptions& options, int64_t patch_h,
-                              int64_t patch_w);
+                              int64_t patch_w, std::shared_ptr<SolverReport> report = nullptr);
 
 }  // namespace lfnet::recon

@@ -1,0 +1,284 @@
+// Bad input to the lfnet program (docs/robustness.md): every case gives exactly one
+// `lfnet: error:` line that says what is wrong, a non-zero exit, and leaves every existing file
+// as it was.
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <string>
+
+#include "lfnet/core/light_field.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/train/checkpoint.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+
+namespace {
+
+std::string read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void write_bytes(const std::string& path, const std::string& bytes) {
+  std::ofstream(path, std::ios::binary) << bytes;
+}
+
+// Every file under `dir` with its bytes: a folder is "untouched" when this is unchanged.
+std::map<std::string, std::string> snapshot(const fs::path& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    const auto rel = fs::relative(e.path(), dir).string();
+    files[rel] = e.is_regular_file() ? read_bytes(e.path().string()) : std::string("<dir>");
+  }
+  return files;
+}
+
+int count_lines(const std::string& text) {
+  return static_cast<int>(std::count(text.begin(), text.end(), '\n'));
+}
+
+// The program with quiet logs, so its only output on failure is the error line.
+std::string program(const std::string& args) {
+  return lfnet_binary() + " --threads 1 --log-level off " + args;
+}
+
+// Runs `args`; requires a non-zero exit, one line "lfnet: error: ..." that contains `what`, and
+// no change under `watched`.
+void expect_error(const std::string& args, const std::string& what, const fs::path& watched) {
+  const auto before = snapshot(watched);
+  std::string out;
+  const int rc = run_command(program(args), out);
+  INFO("lfnet " << args << "\n-> " << out);
+  CHECK(rc != 0);
+  CHECK(out.rfind("lfnet: error: ", 0) == 0);
+  CHECK(count_lines(out) == 1);
+  CHECK(out.find(what) != std::string::npos);
+  CHECK(snapshot(watched) == before);
+}
+
+// A 5 x 5-view grey light field of 18 x 18 pixels, written as 8-bit PNGs.
+void write_light_field(const std::string& dir) {
+  torch::manual_seed(2);
+  lfnet::io::write_light_field(lfnet::LightField(torch::rand({1, 5, 5, 18, 18})), dir,
+                               {"png", 8});
+}
+
+// A small untrained model for `phi` written as a checkpoint, as `lfnet train` writes it.
+void write_model(const std::string& path, const std::string& phi_name) {
+  auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(phi_name));
+  lfnet::nn::NetworkOptions o;
+  o.measurements = phi->measurements();
+  o.ae.hidden = {16, 8, 16, 8, 16};
+  o.cnn.channels = 2;
+  o.cnn.depth = 2;
+  lfnet::nn::LightFieldNet net(o);
+  net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
+  lfnet::train::Checkpoint c;
+  c.network = o.to_json();
+  c.phi = phi->spec().to_json();
+  c.config = {{"measurement_mean", 0.5}};
+  c.model = lfnet::train::module_state(*net);
+  lfnet::train::save_checkpoint(c, path);
+}
+
+const char* kTinyConfig = R"({
+  "name": "tiny", "phi": "asp:2",
+  "data": {"random_scenes": 1, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
+  "dataset": {"train_patches": 64, "validation_patches": 32, "seed": 2},
+  "network": {"ae": {"hidden": [16, 8, 16, 8, 16]}, "cnn": {"channels": 2, "depth": 2}},
+  "training": {"epochs": 1, "batch_size": 32, "progress": false},
+  "stages": ["cnn"]
+})";
+
+}  // namespace
+
+TEST_CASE("malformed configs and unknown keys name the file and the JSON path", "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const auto cfg = tmp / "c.json";
+  auto base = nlohmann::json::parse(kTinyConfig);
+  struct Case {
+    std::string text, what;
+  };
+  auto with = [&](const std::string& pointer, const nlohmann::json& value) {
+    auto j = base;
+    j[nlohmann::json::json_pointer(pointer)] = value;
+    return j.dump();
+  };
+  const std::vector<Case> cases = {
+      {"{\"name\": \"x\", ", "malformed JSON at byte"},
+      {"", "malformed JSON"},
+      {"[1, 2]", "JSON object"},
+      {"{\"name\": \"x\" \"phi\": 1}", "malformed JSON at byte"},
+      {with("/trainng", nlohmann::json::object()), "$.trainng: unknown key"},
+      {with("/network/cnn/chanels", 4), "$.network.cnn.chanels: unknown key"},
+      {with("/training/epochs", "ten"), "$.training.epochs"},
+      {with("/training/lr", -1), "lr: must be positive"},
+      {with("/data/random_scenes", -2), "$.data.random_scenes"},
+      {with("/phi", "asp:0"), "N must be"},
+      {with("/phi", "nosuchphi:2"), "unknown Phi model 'nosuchphi'"},
+      {with("/phi", nlohmann::json{{"name", "asp"}, {"n", 2}, {"colour", 1}}), "$.phi.colour"},
+      {with("/stages", nlohmann::json::array({"cnn", "decoder"})), "$.stages[1]"},
+      {with("/default_scale", 3), "$.default_scale"},
+      {with("/scales", nlohmann::json{{"quick", 5}}), "$.scales.quick"},
+      {with("/phi", "asp:99999999999999999999999"), "asp:99999999999999999999999"},
+      {with("/phi", nlohmann::json{{"name", "asp"}, {"rows", 100000}, {"cols", 100000}}), "1..64"},
+      {with("/phi", nlohmann::json{{"name", "random"}, {"n", 25}, {"params", {{"block", 32}}}}), "2^27"},
+      {with("/stages", nlohmann::json::array({{{"name", "cnn"}, {"training", 5}}})), "$.stages[0].training"},
+      {with("/data", nlohmann::json::object()), "no training data"},
+      // Data that cannot be loaded: the run folder this command created is removed again.
+      {with("/data", nlohmann::json{{"light_fields", {"/nonexistent/lf"}}}), "/nonexistent/lf"},
+  };
+  for (const auto& c : cases) {
+    write_bytes(cfg, c.text);
+    expect_error("train " + cfg + " --out " + (tmp / "run"), c.what, tmp.path());
+    CHECK_FALSE(fs::exists(tmp / "run"));
+  }
+}
+
+TEST_CASE("missing, mismatched, truncated and foreign image files are one-line errors",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const fs::path root = tmp.path();
+  auto fresh = [&](const std::string& name) {
+    const std::string dir = tmp / name;
+    write_light_field(dir);
+    return dir;
+  };
+  auto simulate = [&](const std::string& dir) {
+    return "simulate --lf " + dir + " --phi asp:2 --out " + (tmp / "acq");
+  };
+  expect_error(simulate(tmp / "absent"), "absent", root);
+
+  auto gap = fresh("gap");
+  fs::remove(gap + "/lf_3_3.png");
+  expect_error(simulate(gap), "lf_3_3.png", root);
+
+  auto truncated = fresh("truncated");
+  fs::resize_file(truncated + "/lf_2_4.png", 60);
+  expect_error(simulate(truncated), "lf_2_4.png", root);
+
+  auto empty_file = fresh("empty_file");
+  fs::resize_file(empty_file + "/lf_5_5.png", 0);
+  expect_error(simulate(empty_file), "lf_5_5.png", root);
+
+  auto foreign = fresh("foreign");
+  write_bytes(foreign + "/lf_1_1.png", "this is not an image\n");
+  expect_error(simulate(foreign), "lf_1_1.png", root);
+
+  auto sizes = fresh("sizes");
+  lfnet::io::write_image(sizes + "/lf_4_2.png", torch::rand({1, 17, 18}));
+  expect_error(simulate(sizes), "lf_4_2.png", root);
+
+  auto channels = fresh("channels");
+  lfnet::io::write_image(channels + "/lf_2_2.png", torch::rand({3, 18, 18}));
+  expect_error(simulate(channels), "lf_2_2.png", root);
+
+  auto mixed = fresh("mixed");
+  lfnet::io::write_image(mixed + "/input_Cam000.png", torch::rand({1, 18, 18}));
+  expect_error(simulate(mixed), "mixes", root);
+
+  auto small = tmp / "small";
+  lfnet::io::write_light_field(lfnet::LightField(torch::rand({1, 3, 3, 18, 18})), small);
+  expect_error(simulate(small), "3x3 views", root);
+  CHECK_FALSE(fs::exists(tmp / "acq"));
+}
+
+TEST_CASE("truncated and foreign checkpoints, and another Phi's measurements, are refused",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const fs::path root = tmp.path();
+  write_light_field(tmp / "lf");
+  write_model(tmp / "asp.ckpt", "asp:2");
+  std::string out;
+  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")), out) == 0);
+  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm")), out) == 0);
+  // The model works on its own Phi's measurements (so the failures below are the input's).
+  REQUIRE(run_command(program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
+                            (tmp / "acq") + " --out " + (tmp / "ok")), out) == 0);
+  auto reconstruct = [&](const std::string& model, const std::string& sensor) {
+    return "reconstruct --model " + model + " --sensor " + sensor + " --out " + (tmp / "rec");
+  };
+  const auto bytes = read_bytes(tmp / "asp.ckpt");
+  write_bytes(tmp / "half.ckpt", bytes.substr(0, bytes.size() / 2));
+  write_bytes(tmp / "stub.ckpt", bytes.substr(0, 12));
+  write_bytes(tmp / "png.ckpt", read_bytes(tmp / "lf/lf_1_1.png"));
+  write_bytes(tmp / "json.ckpt", "{\"network\": {}}");
+  auto flipped = bytes;
+  flipped[bytes.size() / 3] = static_cast<char>(flipped[bytes.size() / 3] ^ 0x10);
+  write_bytes(tmp / "flipped.ckpt", flipped);
+
+  expect_error(reconstruct(tmp / "half.ckpt", tmp / "acq"), "truncated", root);
+  expect_error(reconstruct(tmp / "stub.ckpt", tmp / "acq"), "stub.ckpt", root);
+  expect_error(reconstruct(tmp / "png.ckpt", tmp / "acq"), "not an lfnet checkpoint", root);
+  expect_error(reconstruct(tmp / "json.ckpt", tmp / "acq"), "not an lfnet checkpoint", root);
+  expect_error(reconstruct(tmp / "flipped.ckpt", tmp / "acq"), "checksum", root);
+  expect_error(reconstruct(tmp / "absent.ckpt", tmp / "acq"), "absent.ckpt", root);
+  expect_error(reconstruct(tmp / "asp.ckpt", tmp / "acqm"), "trained for Phi", root);
+  expect_error("evaluate --model " + (tmp / "asp.ckpt") + " --lf " + (tmp / "lf") + " --phi mask:2",
+               "does not match", root);
+  expect_error("evaluate --method dict --dictionary " + (tmp / "half.ckpt") + " --lf " +
+                   (tmp / "lf") + " --phi asp:2",
+               "half.ckpt", root);
+
+  // A broken acquisition folder: truncated sensor image, bad sidecar, unknown version.
+  fs::copy(tmp / "acq", tmp / "acq_trunc");
+  fs::resize_file(tmp / "acq_trunc/sensor.tif", 100);
+  expect_error(reconstruct(tmp / "asp.ckpt", tmp / "acq_trunc"), "sensor.tif", root);
+  fs::copy(tmp / "acq", tmp / "acq_json");
+  write_bytes(tmp / "acq_json/sensor.json", "{\"format\": ");
+  expect_error(reconstruct(tmp / "asp.ckpt", tmp / "acq_json"), "sensor.json", root);
+  fs::copy(tmp / "acq", tmp / "acq_version");
+  auto meta = nlohmann::json::parse(read_bytes(tmp / "acq_version/sensor.json"));
+  meta["format_version"] = 99;
+  write_bytes(tmp / "acq_version/sensor.json", meta.dump());
+  expect_error(reconstruct(tmp / "asp.ckpt", tmp / "acq_version"), "version", root);
+  fs::copy(tmp / "acq", tmp / "acq_shape");
+  meta = nlohmann::json::parse(read_bytes(tmp / "acq_shape/sensor.json"));
+  meta["light_field"]["width"] = 19;
+  write_bytes(tmp / "acq_shape/sensor.json", meta.dump());
+  expect_error(reconstruct(tmp / "asp.ckpt", tmp / "acq_shape"), "acq_shape", root);
+  CHECK_FALSE(fs::exists(tmp / "rec"));
+}
+
+TEST_CASE("existing and unwritable output folders are never overwritten without --force",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const fs::path root = tmp.path();
+  write_light_field(tmp / "lf");
+  write_model(tmp / "asp.ckpt", "asp:2");
+  std::string out;
+  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")), out) == 0);
+  fs::create_directories(tmp / "taken");
+  write_bytes(tmp / "taken/notes.txt", "keep me");
+  write_bytes(tmp / "file", "a file, not a folder");
+  write_bytes(tmp / "c.json", kTinyConfig);
+  const std::string sim = "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out ";
+  const std::string rec = "reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " + (tmp / "acq") + " --out ";
+  const std::string render = "render --random 3 --size 20x20 --out ";
+  const std::string train = "train " + (tmp / "c.json") + " --out ";
+  for (const auto& cmd : {sim, rec, render, train}) {
+    expect_error(cmd + (tmp / "taken"), "--force", root);
+    expect_error(cmd + (tmp / "file"), "not a folder", root);
+    expect_error(cmd + (tmp / "file/sub"), "file/sub", root);
+  }
+  // An existing acquisition is not replaced by a failing run, even with --force.
+  expect_error(sim + (tmp / "acq") + " --force --effects " + (tmp / "nosuch.json"), "nosuch.json", root);
+  expect_error(rec + (tmp / "taken") + " --force --method nosuch", "nosuch", root);
+  // With --force the folder is replaced.
+  REQUIRE(run_command(program(sim + (tmp / "taken") + " --force"), out) == 0);
+  CHECK_FALSE(fs::exists(tmp / "taken/notes.txt"));
+  CHECK(fs::exists(tmp / "taken/sensor.json"));
+}
