@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include "command.h"
+#include "dist_flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/optics/phi.h"
@@ -25,6 +26,7 @@ struct TrainArgs {
   std::string init;
   std::string stage;  // train only this stage
   bool force = false;
+  dist::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
 };
 
 std::string command_line_of(const TrainArgs& a, const std::string& verb) {
@@ -34,12 +36,16 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
   if (!a.resume.empty()) s += " --resume " + a.resume;
   if (!a.init.empty()) s += " --init " + a.init;
   if (!a.stage.empty()) s += " --stage " + a.stage;
+  if (a.dist.world_size > 1) s += " --world-size " + std::to_string(a.dist.world_size);
   return s;
 }
 
 // Trains the selected stages; returns the config and the checkpoint of the last stage.
 std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
                                                       const std::string& verb) {
+  // Join the job first, so that a rank that cannot reach the others fails before loading data.
+  auto comm = join_job(args.dist);
+  const bool lead = comm->rank() == 0;
   ExperimentConfig config = ExperimentConfig::load(args.config, args.scale);
   const std::string out = args.out.empty() ? "out/" + config.name : args.out;
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || args.init.empty(),
@@ -52,14 +58,19 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || stages.size() == 1,
                  "--resume continues one stage: name it with --stage");
   // Resuming writes into the run folder it continues; anything else needs a fresh one.
-  prepare_run_dir(out, args.force || !args.resume.empty());
   nlohmann::json resolved = config.raw;
   resolved["scale"] = config.scale;
-  write_json_file((fs::path(out) / "config.json").string(), resolved);
+  if (lead) {  // the other ranks write nothing
+    prepare_run_dir(out, args.force || !args.resume.empty());
+    write_json_file((fs::path(out) / "config.json").string(), resolved);
+  }
 
   const auto phi = optics::make_phi(config.phi);
-  spdlog::info("{}: Phi {}, {} stage(s), output in {}", config.name, config.phi.label(),
-               stages.size(), out);
+  spdlog::info("{}: Phi {}, {} stage(s), output in {}{}", config.name, config.phi.label(),
+               stages.size(), out,
+               comm->world_size() > 1
+                   ? " (" + std::to_string(comm->world_size()) + " data-parallel ranks)"
+                   : "");
   auto dataset = make_dataset(config, *phi);
   spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
                dataset->measurement_mean());
@@ -67,9 +78,10 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   for (size_t i = 0; i < stages.size(); ++i) {
     // --init applies to the first stage trained; later stages follow the usual chain.
     last = train_stage(config, stages[i], *dataset, out, i == 0 ? args.init : "", args.resume,
-                       command_line_of(args, verb));
+                       command_line_of(args, verb), comm);
     spdlog::info("stage {} done: {}", stages[i].name, last);
   }
+  comm->barrier();  // leave together: rank 0 hosts the rendezvous
   config.raw = resolved;
   return {config, last};
 }
@@ -93,6 +105,7 @@ void add_train_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--init", args->init,
                   "start from a checkpoint: finetuning, or Phi switching when its Phi differs");
   cmd->add_option("--stage", args->stage, "train only this stage of the config");
+  add_dist_flags(cmd, args->dist);
   cmd->callback([args] { run_training(*args, "train"); });
 }
 

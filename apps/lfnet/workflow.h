@@ -14,6 +14,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/data/patch_dataset.h"
+#include "lfnet/dist/communicator.h"
 #include "lfnet/eval/evaluate.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/phi.h"
@@ -93,10 +94,13 @@ void prepare_run_dir(const std::string& dir, bool force);
 
 // Trains one stage; returns the path of its best checkpoint, copied to DIR/models/<stage>.ckpt.
 // `init` (optional) starts from a checkpoint (finetuning, Phi switching); `resume` continues.
+// With a communicator of several ranks (docs/distributed.md) only rank 0 reads checkpoints,
+// logs and writes; the others receive its state when training starts.
 std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
                         data::PatchDataset& dataset, const std::string& run_dir,
                         const std::string& init, const std::string& resume,
-                        const std::string& command_line);
+                        const std::string& command_line,
+                        std::shared_ptr<dist::Communicator> comm = nullptr);
 
 // The dataset of a config.
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
