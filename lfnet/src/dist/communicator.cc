@@ -45,7 +45,7 @@ void DistOptions::validate() const {
     if (host().empty() || port() < 1 || port() > 65535) {
       throw ConfigError("master: '" + master + "' is not HOST:PORT with a port in 1..65535");
     }
-    if (!(timeout_s > 0)) throw ConfigError("timeout: must be positive");
+    if (!(timeout_s > 0)) throw ConfigError("timeout_s: must be positive");
   }
 }
 

@@ -314,6 +314,7 @@ void Trainer::set_communicator(std::shared_ptr<dist::Communicator> communicator)
 }
 
 void Trainer::synchronise() {
+  // The history stays with rank 0, the only rank that writes checkpoints.
   torch::NoGradGuard no_grad;
   auto position = torch::tensor({state_.epoch, state_.step, state_.best_epoch}, torch::kInt64);
   auto best = torch::tensor({state_.best_metric}, torch::kFloat64);
