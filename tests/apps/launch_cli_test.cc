@@ -39,7 +39,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 
 }  // namespace
 
-TEST_CASE("launch trains on 2 ranks like 1 process, and stops when a rank fails", "[app][dist]") {
+TEST_CASE("launch trains on 2 ranks and stops the job when a rank fails", "[app][dist]") {
   if (!fs::exists("/usr/include/torch/csrc/distributed/c10d/ProcessGroupGloo.hpp")) {
     WARN("no c10d headers: skipped");
     return;
