@@ -2,7 +2,7 @@
 #
 # The numerical core (core, optics, nn, recon) needs LibTorch and header-only nlohmann_json
 # alone, so it builds on any machine that has LibTorch (a CUDA one included). OpenImageIO,
-# CLI11 and spdlog are needed only by the I/O library and the program (LFNET_BUILD_APPS).
+# OpenCV, CLI11 and spdlog are needed only by the I/O library and the program (LFNET_BUILD_APPS).
 
 find_package(Torch REQUIRED)
 find_package(Threads REQUIRED)
@@ -26,6 +26,8 @@ if(LFNET_BUILD_APPS)
   find_package(OpenImageIO REQUIRED)
   find_package(spdlog REQUIRED)
   find_package(CLI11 REQUIRED)
+  # Drawing the figures of `lfnet report` (plots, heatmaps).
+  find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs)
 endif()
 
 if(LFNET_BUILD_TESTS)

@@ -1,6 +1,7 @@
 // lfnet train / lfnet experiment: train the stages of a config, then (experiment) evaluate.
 #include <spdlog/spdlog.h>
 
+#include <cstdio>
 #include <filesystem>
 
 #include "command.h"
@@ -27,6 +28,7 @@ struct TrainArgs {
   std::string stage;  // train only this stage
   bool force = false;
   dist::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
+  bool check = false;  // read and check the config, then stop
 };
 
 std::string command_line_of(const TrainArgs& a, const std::string& verb) {
@@ -48,6 +50,15 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   const bool lead = comm->rank() == 0;
   ExperimentConfig config = ExperimentConfig::load(args.config, args.scale);
   const std::string out = args.out.empty() ? "out/" + config.name : args.out;
+  if (args.check) {
+    for (const auto& s : config.stages) {
+      if (is_network_stage(s.name)) (void)config.stage_network(s), (void)config.stage_options(s);
+    }
+    std::printf("%s: %s, scale '%s', Phi %s, %zu stage(s); the config is valid\n",
+                args.config.c_str(), config.name.c_str(), config.scale.c_str(),
+                config.phi.label().c_str(), config.stages.size());
+    return {config, ""};
+  }
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || args.init.empty(),
                  "give --resume or --init, not both");
   std::vector<StageConfig> stages;
@@ -71,11 +82,24 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
                comm->world_size() > 1
                    ? " (" + std::to_string(comm->world_size()) + " data-parallel ranks)"
                    : "");
-  auto dataset = make_dataset(config, *phi);
-  spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
-               dataset->measurement_mean());
+  // The patch dataset (simulated measurements) is built only when a network is trained.
+  std::unique_ptr<data::PatchDataset> dataset;
   std::string last;
   for (size_t i = 0; i < stages.size(); ++i) {
+    if (!is_network_stage(stages[i].name)) {
+      LFNET_CHECK_AS(ConfigError, args.resume.empty() && args.init.empty(),
+                     "--resume and --init apply to network stages, not to '", stages[i].name, "'");
+      LFNET_CHECK_AS(ConfigError, comm->world_size() == 1, "the '", stages[i].name,
+                     "' stage does not train data-parallel: train it in one process (--stage ",
+                     stages[i].name, ")");
+      last = train_dictionary_stage(config, out, command_line_of(args, verb));
+      continue;
+    }
+    if (!dataset) {
+      dataset = make_dataset(config, *phi);
+      spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
+                   dataset->measurement_mean());
+    }
     // --init applies to the first stage trained; later stages follow the usual chain.
     last = train_stage(config, stages[i], *dataset, out, i == 0 ? args.init : "", args.resume,
                        command_line_of(args, verb), comm);
@@ -93,12 +117,13 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
   cmd->add_option("--out", a.out, "run folder (default out/<config name>)");
   cmd->add_option("--scale", a.scale, "config scale: quick or paper (default: the config's)");
   cmd->add_flag("--force", a.force, "write into an existing non-empty run folder");
+  cmd->add_flag("--check", a.check, "only read and check the config (every stage), then stop");
 }
 
 }  // namespace
 
 void add_train_command(CLI::App& app, const GlobalOptions&) {
-  auto* cmd = app.add_subcommand("train", "Train the stages of a config (ae, cnn, joint)");
+  auto* cmd = app.add_subcommand("train", "Train the stages of a config (ae, cnn, joint, dict)");
   auto args = std::make_shared<TrainArgs>();
   add_train_args(cmd, *args);
   cmd->add_option("--resume", args->resume, "continue an interrupted stage from its last.ckpt");
@@ -116,7 +141,8 @@ void add_experiment_command(CLI::App& app, const GlobalOptions&) {
   add_train_args(cmd, *args);
   cmd->add_option("--init", args->init, "start the first stage from a checkpoint");
   cmd->callback([args] {
-    auto [config, last] = run_training(*args, "experiment");
+    auto config = run_training(*args, "experiment").first;
+    if (args->check) return;
     const std::string out = args->out.empty() ? "out/" + config.name : args->out;
     const auto& ev = config.evaluation;
     if (ev.data.empty()) {
@@ -126,9 +152,16 @@ void add_experiment_command(CLI::App& app, const GlobalOptions&) {
     const auto phi = optics::make_phi(config.phi);
     MethodContext context;
     context.phi = phi.get();
-    std::string model = last;
+    // net, ae and cnn use the last network stage's model (or model_stage); dict uses the
+    // dict stage's dictionary.
+    std::string model;
+    for (const auto& s : config.stages) {
+      if (is_network_stage(s.name)) model = (fs::path(out) / "models" / (s.name + ".ckpt")).string();
+    }
     if (!ev.model_stage.empty()) model = (fs::path(out) / "models" / (ev.model_stage + ".ckpt")).string();
-    context.net = train::build_net(train::load_checkpoint(model), model);
+    if (!model.empty()) context.net = train::build_net(train::load_checkpoint(model), model);
+    const fs::path dictionary = fs::path(out) / "models" / "dict.ckpt";
+    if (fs::exists(dictionary)) context.dictionary = dictionary.string();
     const auto truths = load_sources(ev.data, phi->rows(), phi->cols());
     const std::string results = (fs::path(out) / "results.jsonl").string();
     for (const auto& truth : truths) {
@@ -145,7 +178,9 @@ void add_experiment_command(CLI::App& app, const GlobalOptions&) {
               auto record = evaluate_method(truth, method, context, o);
               record["experiment"] = config.name;
               record["scale"] = config.scale;
-              record["model"] = recon::needs_network(method) ? model : "";
+              record["model"] = recon::needs_network(method) ? model
+                                : method == "dict"               ? context.dictionary
+                                                                 : "";
               append_jsonl(results, record);
               spdlog::info("{:<12} {:<14} stride {} {:<9} noise {:.2f}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s",
                            method, truth.name, stride, mode, noise,

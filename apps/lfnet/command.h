@@ -29,6 +29,8 @@ void add_train_command(CLI::App& app, const GlobalOptions& global);
 void add_experiment_command(CLI::App& app, const GlobalOptions& global);
 void add_evaluate_command(CLI::App& app, const GlobalOptions& global);
 void add_reconstruct_command(CLI::App& app, const GlobalOptions& global);
+void add_batch_command(CLI::App& app, const GlobalOptions& global);
+void add_report_command(CLI::App& app, const GlobalOptions& global);
 void add_launch_command(CLI::App& app, const GlobalOptions& global);
 
 // Render options for a scene file: image textures are read with lfnet::io::read_image, relative

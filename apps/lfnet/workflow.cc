@@ -6,12 +6,16 @@
 
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <sstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/recon/post_filter.h"
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/scene/random_scene.h"
@@ -175,9 +179,22 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
         sr.finish();
       }
       LFNET_CHECK_AS(ConfigError,
-                     s.name == "ae" || s.name == "cnn" || s.name == "joint" || s.name == "joint_scratch",
-                     path, ": unknown stage '", s.name, "' (known: ae, cnn, joint, joint_scratch)");
+                     s.name == "ae" || s.name == "cnn" || s.name == "joint" ||
+                         s.name == "joint_scratch" || s.name == "dict",
+                     path, ": unknown stage '", s.name,
+                     "' (known: ae, cnn, joint, joint_scratch, dict)");
+      LFNET_CHECK_AS(ConfigError, s.name != "dict" || s.training.empty(), path,
+                     ": the dict stage takes its options from $.dictionary, not 'training'");
       c.stages.push_back(s);
+    }
+    if (r.has("dictionary")) {
+      auto d = r.child("dictionary");
+      nlohmann::json sampling = nlohmann::json::object(), ksvd = nlohmann::json::object();
+      d.get("sampling", sampling);
+      d.get("ksvd", ksvd);
+      d.finish();
+      c.dictionary_sampling = dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
+      c.dictionary_ksvd = dict::KsvdOptions::from_json(ksvd, "$.dictionary.ksvd");
     }
     if (r.has("evaluation")) {
       auto e = r.child("evaluation");
@@ -291,6 +308,50 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   return target;
 }
 
+std::string train_dictionary_stage(const ExperimentConfig& config, const std::string& run_dir,
+                                   const std::string& command_line) {
+  auto sampling = config.dictionary_sampling;
+  sampling.views = config.phi.rows;
+  sampling.patch_size = config.dataset.patch_h;
+  LFNET_CHECK_AS(ConfigError, config.phi.rows == config.phi.cols &&
+                                  config.dataset.patch_h == config.dataset.patch_w,
+                 "the dict stage needs square views and patches");
+  const auto named = load_sources(config.train_data, config.phi.rows, config.phi.cols);
+  LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
+  std::vector<LightField> lfs;
+  for (const auto& n : named) lfs.push_back(n.lf);
+  dict::PatchSamplingStats stats;
+  Stopwatch clock;
+  const torch::Tensor patches = dict::sample_patches(lfs, sampling, &stats);
+  spdlog::info("dict: {} training patches ({} drawn, {} flat ones dropped)", patches.size(0),
+               stats.drawn, stats.dropped);
+  const auto& ksvd = config.dictionary_ksvd;
+  ProgressBar bar("K-SVD", ksvd.iterations, "iterations");
+  nlohmann::json history = nlohmann::json::array();
+  auto result = dict::ksvd(patches, ksvd, [&](const dict::KsvdIteration& it) {
+    bar.advance(1);
+    history.push_back({{"iteration", it.iteration}, {"coding_rmse", it.coding_rmse},
+                       {"updated_rmse", it.updated_rmse}});
+    append_jsonl((fs::path(run_dir) / "training.jsonl").string(),
+                 nlohmann::json{{"stage", "dict"}, {"record", history.back()}});
+    return true;
+  });
+  bar.finish();
+  dict::Dictionary d;
+  d.atoms = result.dictionary.to(torch::kFloat32).contiguous();
+  d.patch_shape = {config.phi.rows, config.phi.cols, config.dataset.patch_h, config.dataset.patch_w};
+  nlohmann::json sources = nlohmann::json::array();
+  for (const auto& n : named) sources.push_back(n.name);
+  d.training = {{"ksvd", ksvd.to_json()},     {"sampling", sampling.to_json()},
+                {"light_fields", sources},    {"history", history},
+                {"command_line", command_line}, {"seconds", clock.seconds()}};
+  const std::string target = (fs::path(run_dir) / "models" / "dict.ckpt").string();
+  dict::save_dictionary(d, target);
+  spdlog::info("dict: {} atoms in {:.0f} s, coding RMSE {:.4f}: {}", d.size(), clock.seconds(),
+               history.empty() ? 0.0 : history.back()["coding_rmse"].get<double>(), target);
+  return target;
+}
+
 void append_jsonl(const std::string& path, const nlohmann::json& record) {
   std::ofstream out(path, std::ios::app);
   LFNET_CHECK_AS(IoError, out, "cannot append to ", path);
@@ -304,7 +365,7 @@ namespace lfnet::app {
 
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, eval::EvalOptions options,
-                               torch::Tensor* estimate) {
+                               torch::Tensor* estimate, bool show_progress) {
   LFNET_CHECK(context.phi != nullptr, "evaluation without a Phi");
   const auto& phi = *context.phi;
   eval::EvalResult result;
@@ -333,20 +394,197 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       for (const auto& m : recon::method_names()) known += (known.empty() ? "" : ", ") + m;
       throw ConfigError("unknown method '" + method + "' (known: " + known + ")");
     }
-    ProgressBar patches_bar(label, PatchGrid(truth.lf.height(), truth.lf.width(),
-                                             options.reconstruct.patch_h, options.reconstruct.patch_w,
-                                             options.reconstruct.stride)
-                                       .size(),
-                            "patches");
+    std::unique_ptr<ProgressBar> patches_bar;
+    if (show_progress) {
+      patches_bar = std::make_unique<ProgressBar>(
+          label,
+          PatchGrid(truth.lf.height(), truth.lf.width(), options.reconstruct.patch_h,
+                    options.reconstruct.patch_w, options.reconstruct.stride)
+              .size(),
+          "patches");
+    }
     int64_t shown = 0;
     result = eval::evaluate(truth.lf, phi, method, solver, options, [&](int64_t done, int64_t) {
-      patches_bar.advance(done - shown);
+      if (patches_bar) patches_bar->advance(done - shown);
       shown = done;
     });
   }
   result.record["light_field"] = truth.name;
   if (estimate) *estimate = result.estimate;
   return result.record;
+}
+
+}  // namespace lfnet::app
+
+namespace lfnet::app {
+
+namespace {
+
+// A Phi spec from the command line: NAME[:N] or a JSON file holding a spec object.
+optics::PhiSpec parse_phi_argument(const std::string& text) {
+  if (fs::path(text).extension() == ".json") {
+    return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
+  }
+  return optics::PhiSpec::parse(text);
+}
+
+// A camera's own sensor images, one file of N channels per colour channel, as an acquisition.
+io::Acquisition plain_sensor_acquisition(const std::string& files, const optics::PhiSpec& spec) {
+  std::vector<torch::Tensor> channels;
+  std::stringstream list(files);
+  for (std::string file; std::getline(list, file, ',');) {
+    auto image = io::read_image_channels(file);
+    LFNET_CHECK_AS(ConfigError, image.size(0) == spec.n, file, " has ", image.size(0),
+                   " channel(s) but the Phi ", spec.label(), " measures N = ", spec.n,
+                   " per pixel: give one file of N channels per colour channel");
+    LFNET_CHECK_AS(ConfigError, channels.empty() || image.sizes() == channels[0].sizes(), file,
+                   " is ", image.size(1), "x", image.size(2), " but the first file is ",
+                   channels[0].size(1), "x", channels[0].size(2));
+    channels.push_back(image);
+  }
+  LFNET_CHECK_AS(ConfigError, !channels.empty(), "--sensor names no file");
+  io::Acquisition acq;
+  acq.sensor = torch::stack(channels);
+  acq.meta = {{"phi", spec.to_json()},
+              {"mode", "sensor"},
+              {"light_field",
+               {{"channels", acq.sensor.size(0)}, {"height", acq.sensor.size(2)},
+                {"width", acq.sensor.size(3)}}}};
+  return acq;
+}
+
+}  // namespace
+
+Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
+                                       const recon::ProgressCallback& progress) {
+  const std::string method = a.method;
+  LFNET_CHECK_AS(ConfigError, method != "no-parallax",
+                 "no-parallax needs the true light field: it is a method of lfnet evaluate");
+  // The checkpoint first: its Phi is the default for plain sensor images.
+  std::optional<train::Checkpoint> ckpt;
+  if (recon::needs_network(method)) {
+    LFNET_CHECK_AS(ConfigError, !a.model.empty(), "method '", method, "' needs --model");
+    ckpt = train::load_checkpoint(a.model);
+  }
+  const bool folder = fs::is_directory(a.sensor);
+  io::Acquisition acq;
+  optics::PhiSpec spec;
+  if (folder) {
+    acq = io::read_acquisition(a.sensor);
+    spec = optics::PhiSpec::from_json(acq.meta.at("phi"), a.sensor + "/sensor.json:$.phi");
+    LFNET_CHECK_AS(ConfigError, a.phi.empty() || parse_phi_argument(a.phi).label() == spec.label(),
+                   "--phi ", a.phi, " contradicts ", a.sensor, "/sensor.json, which says ",
+                   spec.label());
+  } else {
+    LFNET_CHECK_AS(IoError, fs::exists(a.sensor) || a.sensor.find(',') != std::string::npos,
+                   "--sensor ", a.sensor, " does not exist");
+    LFNET_CHECK_AS(ConfigError, !a.phi.empty() || ckpt,
+                   "a plain sensor image needs --phi (or a --model, whose Phi is then used)");
+    spec = a.phi.empty() ? optics::PhiSpec::from_json(ckpt->phi, a.model + ":$.phi")
+                         : parse_phi_argument(a.phi);
+    spec = optics::make_phi(spec)->spec();
+    acq = plain_sensor_acquisition(a.sensor, spec);
+  }
+  const auto phi = optics::make_phi(spec);
+  recon::ReconstructOptions o = a.options;
+  recon::PatchSolver solver;
+  double train_mean = 0;
+  if (ckpt) {
+    train::check_phi(*ckpt, spec.to_json(), a.model);
+    auto net = train::build_net(*ckpt, a.model);
+    o.patch_h = net->options().patch.height;
+    o.patch_w = net->options().patch.width;
+    solver = recon::network_solver(net, method);
+    if (ckpt->config.contains("measurement_mean")) {
+      train_mean = ckpt->config["measurement_mean"].get<double>();
+    }
+  } else if (method == "pinv" || method == "adjoint") {
+    solver = recon::linear_solver(*phi, method, o.patch_h, o.patch_w);
+  } else if (method == "dict") {
+    LFNET_CHECK_AS(ConfigError, !a.dictionary.empty(),
+                   "method 'dict' needs --dictionary FILE (e.g. models/dictionary.ckpt)");
+    const auto dictionary = dict::load_dictionary(a.dictionary);
+    dict::SparseCodingOptions coding;
+    coding.method = a.dict_method;
+    solver = recon::dictionary_solver(*phi, dictionary, coding, o.patch_h, o.patch_w);
+  } else {
+    std::string known;
+    for (const auto& m : recon::method_names()) {
+      if (m != "no-parallax") known += (known.empty() ? "" : ", ") + m;
+    }
+    throw ConfigError("unknown method '" + method + "' (known: " + known + ")");
+  }
+  LFNET_CHECK_AS(ConfigError, !a.match_mean || train_mean > 0,
+                 "--match-mean needs a model that records its training measurement mean");
+
+  const auto& lf_meta = acq.meta.at("light_field");
+  const int64_t c = lf_meta.at("channels").get<int64_t>();
+  const int64_t h = lf_meta.at("height").get<int64_t>(), w = lf_meta.at("width").get<int64_t>();
+  std::vector<torch::Tensor> channels;
+  double scale = 1.0;
+  Stopwatch clock;
+  if (acq.sensor.defined()) {
+    const int64_t per_channel = PatchGrid(h, w, o.patch_h, o.patch_w, o.stride).size();
+    for (int64_t ch = 0; ch < c; ++ch) {
+      auto sensor = acq.sensor[ch].clone();
+      if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
+      channels.push_back(recon::reconstruct_sensor(
+          *phi, sensor, solver, o, [&](int64_t done, int64_t total) {
+            if (progress) progress(ch * per_channel + done, c * total);
+          }));
+    }
+  } else {
+    LFNET_CHECK_AS(ConfigError, !a.match_mean,
+                   "--match-mean applies to sensor images, not to per_patch measurements");
+    const auto& g = acq.meta.at("grid");
+    const int64_t patch = g.at("patch").get<int64_t>();
+    o.stride = g.at("stride").get<int64_t>();
+    LFNET_CHECK_AS(ConfigError, patch == o.patch_h && patch == o.patch_w,
+                   "the measurements are of ", patch, "x", patch,
+                   " patches but the method reconstructs ", o.patch_h, "x", o.patch_w);
+    PatchGrid grid(h, w, patch, patch, o.stride);
+    for (int64_t ch = 0; ch < c; ++ch) {
+      auto source = [&](int64_t r0, int64_t r1) {
+        return optics::PatchMeasurements{
+            acq.measurements[ch].slice(0, r0 * grid.cols(), r1 * grid.cols()),
+            optics::patch_phases(*phi, grid, r0, r1)};
+      };
+      channels.push_back(recon::reconstruct_patches(
+          *phi, grid, source, solver, o, [&](int64_t done, int64_t total) {
+            if (progress) progress(ch * grid.size() + done, c * total);
+          }));
+    }
+  }
+  torch::Tensor lf = torch::cat(channels, 0);
+  if (a.post_filter) {
+    lf = recon::suppress_periodic(lf, o.stride);
+    if (o.clamp) lf.clamp_(0.0, 1.0);
+  }
+  const double seconds = clock.seconds();
+  Reconstruction r{LightField(lf), {}};
+  r.record = {{"method", method},
+              {"model", recon::needs_network(method) ? a.model
+                        : method == "dict"            ? a.dictionary
+                                                      : ""},
+              {"sensor", a.sensor},
+              {"stride", o.stride},
+              {"seconds", seconds},
+              {"phi", spec.to_json()},
+              {"mode", acq.meta.value("mode", "sensor")},
+              {"shape", r.lf.shape_string()},
+              {"match_mean_scale", scale},
+              {"post_filter", a.post_filter},
+              {"window", o.window},
+              {"lfnet_version", kVersion}};
+  return r;
+}
+
+void write_reconstruction(const Reconstruction& r, const std::string& out, bool force) {
+  write_folder(out, force, [&](const std::string& dir) {
+    io::write_light_field(r.lf, dir);
+    io::write_previews(r.lf, dir);
+    write_json_file((fs::path(dir) / "reconstruction.json").string(), r.record);
+  });
 }
 
 }  // namespace lfnet::app

@@ -14,10 +14,13 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/data/patch_dataset.h"
+#include "lfnet/dict/ksvd.h"
+#include "lfnet/dict/patch_sampling.h"
 #include "lfnet/dist/communicator.h"
 #include "lfnet/eval/evaluate.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/phi.h"
+#include "lfnet/recon/reconstruct.h"
 #include "lfnet/train/trainer.h"
 
 namespace lfnet::app {
@@ -48,7 +51,7 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
 
 // One training stage of an experiment.
 struct StageConfig {
-  std::string name;          // ae, cnn, joint or joint_scratch
+  std::string name;          // ae, cnn, joint, joint_scratch or dict (a K-SVD dictionary)
   nlohmann::json training = nlohmann::json::object();  // overrides of the common training options
 };
 
@@ -75,6 +78,9 @@ struct ExperimentConfig {
   nn::NetworkOptions network;
   nlohmann::json training = nlohmann::json::object();  // common train::TrainerOptions
   std::vector<StageConfig> stages;
+  // The dict stage: training patches and K-SVD ($.dictionary.sampling, $.dictionary.ksvd).
+  dict::PatchSamplingOptions dictionary_sampling;
+  dict::KsvdOptions dictionary_ksvd;
   EvaluationConfig evaluation;
   nlohmann::json raw;  // the config after merging the scale, as written to config.json
 
@@ -101,6 +107,14 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
                         const std::string& init, const std::string& resume,
                         const std::string& command_line,
                         std::shared_ptr<dist::Communicator> comm = nullptr);
+
+// Learns the dict stage's dictionary from the config's training light fields (K-SVD, with a
+// progress line per iteration) and writes DIR/models/dict.ckpt; returns its path.
+std::string train_dictionary_stage(const ExperimentConfig& config, const std::string& run_dir,
+                                   const std::string& command_line);
+
+// True for the stages that train a network (all but dict).
+inline bool is_network_stage(const std::string& name) { return name != "dict"; }
 
 // The dataset of a config.
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
@@ -160,9 +174,38 @@ struct MethodContext {
   std::string dict_method = "omp";  // for dict: omp or admm
 };
 
+// What `lfnet reconstruct` does for one acquisition.
+struct ReconstructRequest {
+  // An acquisition folder (sensor.json with sensor.tif or measurements.f32), or a camera's own
+  // sensor image: one file of N channels per colour channel, comma-separated, with `phi`.
+  std::string sensor;
+  std::string phi;  // Phi spec for plain images: NAME[:N] or a JSON file ("" = the model's)
+  std::string method = "net";
+  std::string model;       // checkpoint for net, ae, cnn
+  std::string dictionary;  // dictionary file for dict
+  std::string dict_method = "omp";
+  recon::ReconstructOptions options;  // stride (sensor mode), batch, window
+  bool match_mean = false;            // scale the measurements to the training mean
+  bool post_filter = false;           // suppress artefacts with the stride's period
+};
+
+// A reconstruction and its record (method, model, sensor, stride, seconds, phi, mode, shape).
+struct Reconstruction {
+  LightField lf;
+  nlohmann::json record;
+};
+
+// Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all).
+Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
+                                       const recon::ProgressCallback& progress = {});
+
+// Writes a reconstruction as a light-field folder with previews and reconstruction.json.
+void write_reconstruction(const Reconstruction& r, const std::string& out, bool force);
+
 // Evaluates `method` on one grey light field; the record names the light field and method.
+// `show_progress` draws a progress bar over the patches.
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, eval::EvalOptions options,
-                               torch::Tensor* estimate = nullptr);
+                               torch::Tensor* estimate = nullptr, bool show_progress = true);
 
 }  // namespace lfnet::app

@@ -1,0 +1,315 @@
+// lfnet batch: reconstruct every acquisition folder, or evaluate every light-field folder, under
+// a directory. One JSON record per item and method, a summary CSV; a bad item is recorded with
+// its error and the others go on.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "command.h"
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/core/progress.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/recon/methods.h"
+#include "lfnet/train/checkpoint.h"
+#include "workflow.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::app {
+
+namespace {
+
+struct BatchArgs {
+  std::string in, out, methods, model, dictionary, dict_method = "omp", phi, mode = "sensor";
+  int64_t stride = 5;
+  int64_t batch = 2048;
+  double noise = 0;
+  uint64_t seed = 0;
+  bool window = false, post_filter = false, match_mean = false, force = false;
+};
+
+// One thing to process: an acquisition folder (reconstruct) or a light-field folder (evaluate).
+struct BatchItem {
+  std::string path;  // the folder
+  std::string name;  // its path relative to --in, '/' separated
+  std::string kind;  // "reconstruct" or "evaluate"
+};
+
+bool looks_like_light_field(const fs::path& dir) {
+  try {
+    io::scan_folder(dir.string());
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+// Every acquisition and light-field folder under `root` (the root itself included), sorted; a
+// folder that is an item is not searched further.
+std::vector<BatchItem> discover_items(const std::string& root) {
+  LFNET_CHECK_AS(IoError, fs::is_directory(root), "--input ", root, " is not a folder");
+  std::vector<BatchItem> items;
+  std::vector<fs::path> pending = {fs::path(root)};
+  while (!pending.empty()) {
+    const fs::path dir = pending.back();
+    pending.pop_back();
+    std::string name = fs::relative(dir, root).generic_string();
+    if (name.empty() || name == ".") name = fs::absolute(dir).lexically_normal().filename().string();
+    if (fs::exists(dir / io::kSidecarName)) {
+      items.push_back({dir.string(), name, "reconstruct"});
+      continue;
+    }
+    if (looks_like_light_field(dir)) {
+      items.push_back({dir.string(), name, "evaluate"});
+      continue;
+    }
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(dir, ec)) {
+      if (entry.is_directory() && entry.path().filename().string().rfind('.', 0) != 0) {
+        pending.push_back(entry.path());
+      }
+    }
+  }
+  std::sort(items.begin(), items.end(),
+            [](const BatchItem& a, const BatchItem& b) { return a.name < b.name; });
+  return items;
+}
+
+std::vector<std::string> split_list(const std::string& text) {
+  std::vector<std::string> out;
+  std::stringstream s(text);
+  for (std::string part; std::getline(s, part, ',');) {
+    if (!part.empty()) out.push_back(part);
+  }
+  return out;
+}
+
+std::string csv_field(const nlohmann::json& v) {
+  std::string s = v.is_null() ? "" : v.is_string() ? v.get<std::string>() : v.dump();
+  if (s.find_first_of(",\"\n") != std::string::npos) {
+    std::string q = "\"";
+    for (char c : s) q += c == '"' ? std::string("\"\"") : c == '\n' ? std::string(" ") : std::string(1, c);
+    return q + "\"";
+  }
+  return s;
+}
+
+std::string safe_file_name(std::string name) {
+  for (auto& c : name) {
+    if (c == '/' || c == '\\' || c == ' ') c = '_';
+  }
+  return name;
+}
+
+// The records of one item, one per method; errors become records with status "error".
+std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs& a,
+                                         const std::vector<std::string>& methods,
+                                         const std::string& out_dir) {
+  std::vector<nlohmann::json> records;
+  auto failed = [&](const std::string& method, const std::string& error) {
+    return nlohmann::json{{"item", item.name}, {"path", item.path}, {"kind", item.kind},
+                          {"method", method},  {"status", "error"}, {"error", error}};
+  };
+  if (item.kind == "reconstruct") {
+    for (const auto& method : methods) {
+      try {
+        ReconstructRequest q;
+        q.sensor = item.path;
+        q.method = method;
+        q.model = a.model;
+        q.dictionary = a.dictionary;
+        q.dict_method = a.dict_method;
+        q.options.stride = a.stride;
+        q.options.batch = a.batch;
+        q.options.window = a.window;
+        q.post_filter = a.post_filter;
+        q.match_mean = a.match_mean;
+        auto r = reconstruct_acquisition(q);
+        const std::string target = (fs::path(out_dir) / item.name / method).string();
+        write_reconstruction(r, target, false);
+        auto record = r.record;
+        record["item"] = item.name;
+        record["path"] = item.path;
+        record["kind"] = item.kind;
+        record["status"] = "ok";
+        record["output"] = target;
+        records.push_back(record);
+      } catch (const std::exception& e) {
+        records.push_back(failed(method, e.what()));
+      }
+    }
+    return records;
+  }
+  // evaluate: simulate with the model's Phi (or --phi), reconstruct, score.
+  std::vector<NamedLightField> truths;
+  MethodContext context;
+  std::unique_ptr<optics::Phi> phi;
+  try {
+    optics::PhiSpec spec;
+    if (!a.model.empty()) {
+      const auto ckpt = train::load_checkpoint(a.model);
+      spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
+      context.net = train::build_net(ckpt, a.model);
+    } else {
+      LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
+                     "evaluating light-field folders needs --model or --phi");
+      spec = optics::PhiSpec::parse(a.phi);
+    }
+    phi = optics::make_phi(spec);
+    context.phi = phi.get();
+    context.dictionary = a.dictionary;
+    context.dict_method = a.dict_method;
+    LightFieldSources sources;
+    sources.light_fields = {item.path};
+    truths = load_sources(sources, phi->rows(), phi->cols());
+  } catch (const std::exception& e) {
+    for (const auto& method : methods) records.push_back(failed(method, e.what()));
+    return records;
+  }
+  for (const auto& method : methods) {
+    try {
+      eval::EvalOptions o;
+      o.mode = optics::parse_simulation_mode(a.mode);
+      if (a.noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{a.noise};
+      o.seed = a.seed;
+      o.reconstruct.stride = a.stride;
+      o.reconstruct.batch = a.batch;
+      o.reconstruct.window = a.window;
+      if (context.net) {
+        o.reconstruct.patch_h = context.net->options().patch.height;
+        o.reconstruct.patch_w = context.net->options().patch.width;
+      }
+      auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
+      record["item"] = item.name;
+      record["path"] = item.path;
+      record["kind"] = item.kind;
+      record["status"] = "ok";
+      if (recon::needs_network(method)) record["model"] = a.model;
+      if (method == "dict") record["model"] = a.dictionary;
+      records.push_back(record);
+    } catch (const std::exception& e) {
+      records.push_back(failed(method, e.what()));
+    }
+  }
+  return records;
+}
+
+void write_summary(const std::string& out_dir, const std::vector<nlohmann::json>& records) {
+  const std::vector<std::string> columns = {"item",    "kind",  "method", "status", "psnr_db",
+                                            "ssim",    "seconds", "stride", "mode", "output",
+                                            "error"};
+  const fs::path csv = fs::path(out_dir) / "summary.csv";
+  const fs::path tmp = fs::path(out_dir) / ".summary.csv.tmp";
+  {
+    std::ofstream f(tmp);
+    LFNET_CHECK_AS(IoError, f, "cannot write ", tmp.string());
+    for (size_t i = 0; i < columns.size(); ++i) f << (i ? "," : "") << columns[i];
+    f << "\n";
+    for (const auto& r : records) {
+      for (size_t i = 0; i < columns.size(); ++i) {
+        f << (i ? "," : "") << (r.contains(columns[i]) ? csv_field(r[columns[i]]) : "");
+      }
+      f << "\n";
+    }
+    LFNET_CHECK_AS(IoError, f.good(), "cannot write ", tmp.string());
+  }
+  fs::rename(tmp, csv);
+  nlohmann::json all = nlohmann::json::array();
+  for (const auto& r : records) all.push_back(r);
+  write_json_file((fs::path(out_dir) / "summary.json").string(), all);
+}
+
+void run_batch(const BatchArgs& a) {
+  const auto items = discover_items(a.in);
+  LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
+                 ") and no light-field folder under ", a.in);
+  std::vector<std::string> methods = split_list(a.methods);
+  if (methods.empty()) methods = {a.model.empty() ? "pinv" : "net"};
+  for (const auto& m : methods) {
+    const auto& known = recon::method_names();
+    LFNET_CHECK_AS(ConfigError, std::find(known.begin(), known.end(), m) != known.end(),
+                   "unknown method '", m, "' in --methods");
+  }
+  LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
+  prepare_run_dir(a.out, a.force);
+  fs::remove(fs::path(a.out) / "models");  // prepare_run_dir makes it; batch writes none
+  const fs::path records_dir = fs::path(a.out) / "records";
+  fs::create_directories(records_dir);
+  int64_t reconstruct = 0;
+  for (const auto& it : items) reconstruct += it.kind == "reconstruct";
+  spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
+               items.size(), a.in, reconstruct, items.size() - reconstruct, a.methods.empty() ? methods[0] : a.methods);
+
+  std::vector<nlohmann::json> records;
+  ProgressBar bar("batch", static_cast<int64_t>(items.size()), "items");
+  int64_t failures = 0;
+  for (const auto& item : items) {
+    bar.set_note(item.name);
+    for (auto& r : process_item(item, a, methods, a.out)) {
+      const bool ok = r["status"] == "ok";
+      failures += !ok;
+      const std::string file = safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
+      write_json_file((records_dir / file).string(), r);
+      if (ok && r.contains("psnr_db")) {
+        spdlog::info("{} {}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s", item.name,
+                     r["method"].get<std::string>(),
+                     r["psnr_db"].is_null() ? INFINITY : r["psnr_db"].get<double>(),
+                     r["ssim"].get<double>(), r["seconds"].get<double>());
+      } else if (ok) {
+        spdlog::info("{} {}: {:.2f} s -> {}", item.name, r["method"].get<std::string>(),
+                     r["seconds"].get<double>(), r["output"].get<std::string>());
+      } else {
+        spdlog::warn("{} {}: {}", item.name, r["method"].get<std::string>(),
+                     r["error"].get<std::string>());
+      }
+      records.push_back(std::move(r));
+    }
+    bar.advance(1);
+  }
+  bar.finish();
+  write_summary(a.out, records);
+  spdlog::info("batch: {} record(s), {} failed; summary in {}/summary.csv", records.size(),
+               failures, a.out);
+  LFNET_CHECK(failures == 0, failures, " of ", records.size(),
+              " item-method pair(s) failed; see ", a.out, "/summary.csv (the others are done)");
+}
+
+}  // namespace
+
+void add_batch_command(CLI::App& app, const GlobalOptions&) {
+  auto* cmd = app.add_subcommand(
+      "batch",
+      "Reconstruct every acquisition folder, or evaluate every light-field folder, under a "
+      "directory");
+  auto a = std::make_shared<BatchArgs>();
+  cmd->add_option("--input,--in", a->in, "folder to search (recursively) for items")->required();
+  cmd->add_option("--out", a->out,
+                  "output folder: reconstructions, records/, summary.csv, summary.json")
+      ->required();
+  cmd->add_option("--methods", a->methods,
+                  "comma-separated methods (default net with --model, pinv without)");
+  cmd->add_option("--model", a->model, "trained model (checkpoint) for net, ae and cnn");
+  cmd->add_option("--dictionary", a->dictionary, "dictionary file for dict");
+  cmd->add_option("--dict-method", a->dict_method, "sparse coding for dict: omp or admm")
+      ->check(CLI::IsMember({"omp", "admm"}));
+  cmd->add_option("--phi", a->phi, "Phi for evaluation without --model: NAME[:N]");
+  cmd->add_option("--mode", a->mode, "simulation mode of evaluations: sensor or per_patch")
+      ->check(CLI::IsMember({"sensor", "per_patch"}));
+  cmd->add_option("--noise", a->noise, "Gaussian noise sigma of evaluations");
+  cmd->add_option("--seed", a->seed, "noise seed of evaluations");
+  cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(CLI::PositiveNumber);
+  cmd->add_option("--batch", a->batch, "patches per solver call")->check(CLI::PositiveNumber);
+  cmd->add_flag("--window", a->window, "weight patch estimates by a smooth window when stitching");
+  cmd->add_flag("--post-filter", a->post_filter, "suppress artefacts with the stride's period");
+  cmd->add_flag("--match-mean", a->match_mean, "scale real measurements to the training mean");
+  cmd->add_flag("--force", a->force, "write into an existing non-empty output folder");
+  cmd->callback([a] { run_batch(*a); });
+}
+
+}  // namespace lfnet::app

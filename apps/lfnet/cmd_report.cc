@@ -1,0 +1,361 @@
+// lfnet report: turns result records into docs/RESULTS.md and its figures.
+//
+// RESULTS_DIR holds one folder per section: section.json (title, text, the command that made
+// the records, the paper's numbers for the same settings, optional figures) and records.jsonl
+// (lfnet evaluate records, one per line). Every table lists the simulation mode and warns when
+// the no-parallax baseline is missing.
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "command.h"
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
+#include "report_figures.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::app {
+
+namespace {
+
+struct Section {
+  std::string name;  // folder name
+  nlohmann::json meta;
+  std::vector<nlohmann::json> records;
+};
+
+const std::vector<std::string> kMethodOrder = {"net", "ae", "cnn", "dict", "pinv", "adjoint",
+                                               "no-parallax"};
+
+int method_rank(const std::string& m) {
+  auto it = std::find(kMethodOrder.begin(), kMethodOrder.end(), m);
+  return static_cast<int>(it - kMethodOrder.begin());
+}
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), f, v);
+  return buf;
+}
+
+double number(const nlohmann::json& r, const char* key, double fallback = NAN) {
+  return r.contains(key) && r[key].is_number() ? r[key].get<double>() : fallback;
+}
+
+std::string phi_name(const nlohmann::json& r) {
+  return r.contains("phi") && r["phi"].is_object() ? r["phi"].value("name", "?") : "?";
+}
+
+// The value of a setting of a record, as text: method, phi, n, stride, mode, noise,
+// light_field, scale.
+std::string setting(const nlohmann::json& r, const std::string& key) {
+  if (key == "method") return r.value("method", "");
+  if (key == "phi") return phi_name(r);
+  if (key == "n") return std::to_string(r.value("measurements", 0));
+  if (key == "stride") return std::to_string(r.value("stride", 0));
+  if (key == "mode") return r.value("mode", "");
+  if (key == "noise") return fmt("%g", number(r, "noise_sigma", 0.0));
+  if (key == "light_field") return r.value("light_field", "");
+  if (key == "scale") return r.value("scale", "");
+  if (key == "variant") return r.value("variant", "");
+  return "";
+}
+
+const std::vector<std::string> kSettings = {"light_field", "variant", "phi", "n", "noise",
+                                            "stride", "mode", "method"};
+
+std::vector<nlohmann::json> read_jsonl(const fs::path& path) {
+  std::vector<nlohmann::json> out;
+  std::ifstream in(path);
+  LFNET_CHECK_AS(IoError, in, "cannot read ", path.string());
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    try {
+      out.push_back(nlohmann::json::parse(line));
+    } catch (const std::exception& e) {
+      throw IoError(path.string() + ":" + std::to_string(n) + ": not JSON: " + e.what());
+    }
+  }
+  return out;
+}
+
+std::vector<Section> read_sections(const std::string& dir) {
+  LFNET_CHECK_AS(IoError, fs::is_directory(dir), dir, " is not a folder of result sections");
+  std::vector<Section> sections;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (!entry.is_directory() || !fs::exists(entry.path() / "section.json")) continue;
+    Section s;
+    s.name = entry.path().filename().string();
+    s.meta = read_json_file((entry.path() / "section.json").string());
+    const fs::path records = entry.path() / "records.jsonl";
+    if (fs::exists(records)) s.records = read_jsonl(records);
+    sections.push_back(std::move(s));
+  }
+  std::sort(sections.begin(), sections.end(), [](const Section& a, const Section& b) {
+    const int oa = a.meta.value("order", 1000), ob = b.meta.value("order", 1000);
+    return oa != ob ? oa < ob : a.name < b.name;
+  });
+  LFNET_CHECK_AS(IoError, !sections.empty(), "no section (a folder with section.json) in ", dir);
+  return sections;
+}
+
+// The paper entry of a section that matches a record: every key but the values must agree.
+const nlohmann::json* paper_entry(const Section& s, const nlohmann::json& r) {
+  if (!s.meta.contains("paper")) return nullptr;
+  for (const auto& p : s.meta["paper"]) {
+    bool match = true;
+    for (auto it = p.begin(); it != p.end() && match; ++it) {
+      if (it.key() == "psnr_db" || it.key() == "seconds" || it.key() == "source") continue;
+      const std::string want = it->is_string() ? it->get<std::string>()
+                               : it.key() == "noise" ? fmt("%g", it->get<double>())
+                                                     : it->dump();
+      match = setting(r, it.key()) == want;
+    }
+    if (match) return &p;
+  }
+  return nullptr;
+}
+
+// One paper claim against ours, for the summary at the end.
+struct Claim {
+  std::string section, setting;
+  double paper_psnr = NAN, ours_psnr = NAN, paper_s = NAN, ours_s = NAN;
+  std::string source;
+};
+
+std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
+  auto rows = s.records;
+  std::sort(rows.begin(), rows.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+    for (const auto& k : kSettings) {
+      if (k == "method") continue;
+      const auto va = setting(a, k), vb = setting(b, k);
+      if (va != vb) {
+        if (k == "n" || k == "stride" || k == "noise") return std::stod(va) < std::stod(vb);
+        return va < vb;
+      }
+    }
+    return method_rank(a.value("method", "")) < method_rank(b.value("method", ""));
+  });
+  // Columns: settings that vary, and always the method and the mode.
+  std::vector<std::string> columns = {"method"};
+  for (const auto& k : kSettings) {
+    std::set<std::string> values;
+    for (const auto& r : rows) values.insert(setting(r, k));
+    if (k != "method" && k != "mode" && values.size() > 1) columns.push_back(k);
+  }
+  columns.push_back("mode");
+  bool has_paper = false;
+  for (const auto& r : rows) has_paper |= paper_entry(s, r) != nullptr;
+  std::ostringstream md;
+  md << "|";
+  for (const auto& c : columns) md << " " << (c == "n" ? "N" : c == "light_field" ? "light field" : c) << " |";
+  md << " PSNR dB | SSIM | seconds |";
+  if (has_paper) md << " paper PSNR dB | paper seconds |";
+  md << "\n|";
+  for (size_t i = 0; i < columns.size() + 3 + (has_paper ? 2 : 0); ++i) md << (i >= columns.size() ? "---:|" : "---|");
+  md << "\n";
+  for (const auto& r : rows) {
+    md << "|";
+    for (const auto& c : columns) md << " " << setting(r, c) << " |";
+    const double psnr = number(r, "psnr_db", INFINITY), ssim = number(r, "ssim"), sec = number(r, "seconds");
+    md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
+       << " | " << fmt("%.2f", sec) << " |";
+    if (has_paper) {
+      const auto* p = paper_entry(s, r);
+      if (p) {
+        const double pp = p->contains("psnr_db") ? (*p)["psnr_db"].get<double>() : NAN;
+        const double ps = p->contains("seconds") ? (*p)["seconds"].get<double>() : NAN;
+        md << " " << (std::isnan(pp) ? "" : fmt("%.2f", pp)) << " | " << (std::isnan(ps) ? "" : fmt("%g", ps)) << " |";
+        std::string what;
+        for (const auto& c : columns) what += (what.empty() ? "" : ", ") + c + " " + setting(r, c);
+        claims.push_back({s.meta.value("title", s.name), what, pp, psnr, ps, sec, p->value("source", "")});
+      } else {
+        md << " | |";
+      }
+    }
+    md << "\n";
+  }
+  bool baseline = false;
+  for (const auto& r : rows) baseline |= r.value("method", "") == "no-parallax";
+  if (!baseline) md << "\n*These records have no `no-parallax` baseline.*\n";
+  return md.str();
+}
+
+// net minus no-parallax, dict and pinv for every group of records that differ only in method.
+std::string margins(const Section& s) {
+  std::map<std::string, std::map<std::string, double>> groups;
+  for (const auto& r : s.records) {
+    std::string key;
+    for (const auto& k : kSettings) {
+      if (k != "method") key += (key.empty() ? "" : ", ") + (k == "n" ? std::string("N") : k) + " " + setting(r, k);
+    }
+    groups[key][r.value("method", "")] = number(r, "psnr_db");
+  }
+  std::ostringstream md;
+  for (const auto& [key, by_method] : groups) {
+    if (!by_method.count("net")) continue;
+    std::string line;
+    for (const char* other : {"no-parallax", "dict", "pinv"}) {
+      if (!by_method.count(other)) continue;
+      line += (line.empty() ? "" : ", ") + std::string("net - ") + other + " = " +
+              fmt("%+.2f dB", by_method.at("net") - by_method.at(other));
+    }
+    if (!line.empty()) md << "- " << key << ": " << line << "\n";
+  }
+  return md.str();
+}
+
+struct ReportArgs {
+  std::string results = "results";
+  std::string out = "docs/RESULTS.md";
+  std::string figures;  // default: images/results beside --out
+};
+
+void run_report(const ReportArgs& a) {
+  const auto sections = read_sections(a.results);
+  const fs::path out_dir = fs::path(a.out).parent_path().empty() ? fs::path(".") : fs::path(a.out).parent_path();
+  const fs::path figures = a.figures.empty() ? out_dir / "images" / "results" : fs::path(a.figures);
+  const std::string figures_link = fs::relative(fs::absolute(figures), fs::absolute(out_dir)).generic_string();
+  std::ostringstream md;
+  md << "# Results\n\n"
+     << "Generated by `lfnet report " << a.results << "` from the records under `" << a.results
+     << "/`; do not edit by hand. Each section names the command that produced its records. "
+     << "PSNR and SSIM are over all views of the grey light field (DESIGN section 6); seconds "
+     << "are reconstruction wall time on the machine that ran the command. `no-parallax` (every "
+     << "view set to the angular mean of the truth) is what a conventional camera records.\n\n";
+  std::vector<Claim> claims;
+  std::vector<ParetoPoint> points;
+  for (const auto& s : sections) {
+    md << "## " << s.meta.value("title", s.name) << "\n\n";
+    if (s.meta.contains("text")) md << s.meta["text"].get<std::string>() << "\n\n";
+    if (s.meta.contains("command")) md << "Records made by:\n\n    " << s.meta["command"].get<std::string>() << "\n\n";
+    if (s.records.empty()) {
+      md << "*No records yet.*\n\n";
+      continue;
+    }
+    md << markdown_table(s, claims) << "\n";
+    const auto m = margins(s);
+    if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
+    if (s.meta.value("pareto", true)) {
+      for (const auto& r : s.records) {
+        if (number(r, "noise_sigma", 0) != 0 || !std::isfinite(number(r, "psnr_db", NAN))) continue;
+        if (r.value("mode", "") != "sensor") continue;
+        points.push_back({r.value("method", "") + " s" + setting(r, "stride") + " N" + setting(r, "n"),
+                          r.value("method", ""), number(r, "seconds"), number(r, "psnr_db")});
+      }
+    }
+    // Per-view PSNR of the methods named in "heatmaps" (first sensor-mode record of each).
+    if (s.meta.contains("heatmaps")) {
+      std::string row;
+      for (const auto& method : s.meta["heatmaps"]) {
+        for (const auto& r : s.records) {
+          if (r.value("method", "") != method.get<std::string>() || r.value("mode", "") != "sensor" ||
+              !r.contains("per_view_psnr_db")) continue;
+          const std::string file = s.name + "_views_" + method.get<std::string>() + ".png";
+          plot_view_heatmap(r["per_view_psnr_db"].get<std::vector<std::vector<double>>>(),
+                            method.get<std::string>() + ": PSNR per view, dB", (figures / file).string());
+          row += "![" + method.get<std::string>() + " per-view PSNR](" + figures_link + "/" + file + ") ";
+          break;
+        }
+      }
+      if (!row.empty()) md << "Per-view PSNR (the paper's angular-error figure):\n\n" << row << "\n\n";
+    }
+    // Pictures of reconstructions when the section names a folder that holds them.
+    if (s.meta.contains("pictures")) {
+      const auto& p = s.meta["pictures"];
+      const fs::path dir = p.value("reconstructions", "");
+      const std::string truth_dir = p.value("truth", "");
+      if (fs::is_directory(dir) && fs::is_directory(truth_dir)) {
+        std::vector<LightField> lfs = {io::read_light_field(truth_dir).central(5).grey()};
+        std::vector<std::string> titles = {"truth"};
+        for (const auto& method : p["methods"]) {
+          const fs::path m = dir / method.get<std::string>();
+          if (!fs::is_directory(m)) continue;
+          lfs.push_back(io::read_light_field(m.string()).grey());
+          titles.push_back(method.get<std::string>());
+        }
+        const std::string views = s.name + "_pictures.png", gif = s.name + "_parallax.gif";
+        plot_views(lfs, titles, (figures / views).string());
+        write_parallax_gif(lfs.size() > 1 ? lfs[1] : lfs[0], (figures / gif).string());
+        md << "Centre views, EPIs and error maps (crops):\n\n![reconstructions](" << figures_link
+           << "/" << views << ")\n\nParallax of the `" << titles[lfs.size() > 1 ? 1 : 0]
+           << "` reconstruction, walking the border views: ![parallax](" << figures_link << "/" << gif << ")\n\n";
+      } else {
+        md << "*(pictures: run the section's command to make " << dir.string() << ")*\n\n";
+      }
+    }
+  }
+  if (!points.empty()) {
+    mark_pareto_front(points);
+    plot_pareto(points, "What accuracy costs in time (sensor mode, no noise)",
+                (figures / "pareto.png").string());
+    md << "## What accuracy costs in time\n\n![PSNR against seconds](" << figures_link
+       << "/pareto.png)\n\nThe Pareto front (no other result is both faster and better), sensor mode:\n\n"
+       << "| method | stride | N | PSNR dB | seconds |\n|---|---:|---:|---:|---:|\n";
+    std::vector<ParetoPoint> front;
+    for (const auto& p : points) {
+      if (p.front) front.push_back(p);
+    }
+    std::sort(front.begin(), front.end(), [](const auto& x, const auto& y) { return x.seconds < y.seconds; });
+    for (const auto& p : front) {
+      std::istringstream parts(p.label);
+      std::string method, stride, n;
+      parts >> method >> stride >> n;
+      md << "| " << method << " | " << stride.substr(1) << " | " << n.substr(1) << " | "
+         << fmt("%.2f", p.psnr_db) << " | " << fmt("%.2f", p.seconds) << " |\n";
+    }
+    md << "\n";
+  }
+  if (!claims.empty()) {
+    md << "## The paper's numbers beside ours\n\n"
+       << "A PSNR claim counts as reproduced when ours is at most 0.5 dB below the paper's; a time "
+       << "claim when ours is no slower. The paper's scenes (the synthetic dragons, its Lytro set) "
+       << "are not ours, so only the size of the gaps compares.\n\n"
+       << "| section | setting | paper PSNR dB | ours | paper s | ours s | reproduced | source |\n"
+       << "|---|---|---:|---:|---:|---:|---|---|\n";
+    for (const auto& c : claims) {
+      std::string verdict;
+      if (!std::isnan(c.paper_psnr)) verdict += c.ours_psnr >= c.paper_psnr - 0.5 ? "PSNR yes" : "PSNR no (" + fmt("%+.2f dB", c.ours_psnr - c.paper_psnr) + ")";
+      if (!std::isnan(c.paper_s)) verdict += std::string(verdict.empty() ? "" : "; ") + (c.ours_s <= c.paper_s ? "time yes (" + fmt("%.0fx faster", c.paper_s / c.ours_s) + ")" : "time no");
+      md << "| " << c.section << " | " << c.setting << " | " << (std::isnan(c.paper_psnr) ? "" : fmt("%.2f", c.paper_psnr))
+         << " | " << fmt("%.2f", c.ours_psnr) << " | " << (std::isnan(c.paper_s) ? "" : fmt("%g", c.paper_s)) << " | "
+         << fmt("%.2f", c.ours_s) << " | " << verdict << " | " << c.source << " |\n";
+    }
+    md << "\n";
+  }
+  // Atomic: a temporary sibling, then rename.
+  fs::create_directories(out_dir);
+  const std::string tmp = a.out + ".tmp";
+  {
+    std::ofstream f(tmp);
+    LFNET_CHECK_AS(IoError, f, "cannot write ", tmp);
+    f << md.str();
+    LFNET_CHECK_AS(IoError, f.good(), "cannot write ", tmp);
+  }
+  fs::rename(tmp, a.out);
+  spdlog::info("wrote {} ({} sections, {} figures folder {})", a.out, sections.size(),
+               points.empty() ? "no Pareto plot;" : "Pareto plot;", figures.string());
+}
+
+}  // namespace
+
+void add_report_command(CLI::App& app, const GlobalOptions&) {
+  auto* cmd = app.add_subcommand("report", "Write docs/RESULTS.md and its figures from result records");
+  auto a = std::make_shared<ReportArgs>();
+  cmd->add_option("results", a->results, "folder of result sections (default results)");
+  cmd->add_option("--out", a->out, "the Markdown file to write (default docs/RESULTS.md)");
+  cmd->add_option("--figures", a->figures, "folder for the figures (default images/results beside --out)");
+  cmd->callback([a] { run_report(*a); });
+}
+
+}  // namespace lfnet::app

@@ -1,0 +1,184 @@
+// lfnet batch, lfnet report, the dict stage and reconstruct from a plain sensor image, end to end.
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "lfnet/io/light_field_io.h"
+#include "support/test_support.h"
+
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::vector<std::string> lines_of(const std::string& path) {
+  std::vector<std::string> lines;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+// A small textured light field with parallax, written as a folder.
+void write_test_light_field(const std::string& dir, int64_t h, int64_t w) {
+  auto y = torch::arange(h, torch::kFloat32).view({1, 1, 1, h, 1});
+  auto x = torch::arange(w, torch::kFloat32).view({1, 1, 1, 1, w});
+  auto u = torch::arange(5, torch::kFloat32).view({1, 5, 1, 1, 1});
+  auto v = torch::arange(5, torch::kFloat32).view({1, 1, 5, 1, 1});
+  auto data = 0.5 + 0.3 * torch::sin(0.4 * (x + (v - 2)) + 0.25 * (y + (u - 2)));
+  lfnet::io::write_light_field(lfnet::LightField(data), dir);
+}
+
+}  // namespace
+
+TEST_CASE("batch reconstructs and evaluates every item, records bad ones and goes on", "[app]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  std::string out;
+  write_test_light_field(tmp / "in/lf_a", 36, 45);
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "in/lf_a") + " --phi asp:2 --out " +
+                          (tmp / "in/cam/shot1"), out) == 0);
+  fs::create_directories(tmp / "in/broken");
+  std::ofstream(tmp / "in/broken/sensor.json") << "{ not json";
+  const std::string cmd = lfnet + "batch --input " + (tmp / "in") + " --out " + (tmp / "out") +
+                          " --phi asp:2 --methods pinv,no-parallax --stride 9";
+  CHECK(run_command(cmd, out) != 0);  // one item failed ...
+  CHECK(out.find("lfnet: error: 3 of 6") != std::string::npos);
+  // ... and the others are done.
+  const auto csv = lines_of(tmp / "out/summary.csv");
+  REQUIRE(csv.size() == 7);  // header + broken x2 + cam/shot1 x2 + lf_a x2
+  CHECK(csv[0].rfind("item,kind,method,status,psnr_db,ssim,seconds", 0) == 0);
+  int ok = 0, failed = 0;
+  for (size_t i = 1; i < csv.size(); ++i) {
+    ok += csv[i].find(",ok,") != std::string::npos;
+    failed += csv[i].find(",error,") != std::string::npos;
+  }
+  CHECK(ok == 3);
+  CHECK(failed == 3);
+  // no-parallax needs the truth: for the acquisition it is an error record, not a crash.
+  CHECK(fs::exists(tmp / "out/cam/shot1/pinv/grid.png"));
+  CHECK(fs::exists(tmp / "out/records/lf_a__pinv.json"));
+  std::ifstream rec(tmp / "out/records/lf_a__pinv.json");
+  const auto r = nlohmann::json::parse(rec);
+  CHECK(r["status"] == "ok");
+  CHECK(r["psnr_db"].get<double>() > 10.0);
+  // The output folder is never reused without --force.
+  CHECK(run_command(cmd, out) != 0);
+  CHECK(out.find("not empty") != std::string::npos);
+}
+
+TEST_CASE("reconstruct takes a plain sensor image with --phi, and the post-filter", "[app]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  std::string out;
+  write_test_light_field(tmp / "lf", 45, 45);
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"), out) == 0);
+  // The acquisition's sensor.tif on its own, as a camera would give it.
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq/sensor.tif") +
+                          " --out " + (tmp / "plain"), out) != 0);
+  CHECK(out.find("--phi") != std::string::npos);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --phi asp:2 --sensor " + (tmp / "acq/sensor.tif") +
+                          " --out " + (tmp / "plain") + " --post-filter", out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") + " --out " + (tmp / "folder"), out) == 0);
+  const auto a = lfnet::io::read_light_field(tmp / "plain");
+  const auto b = lfnet::io::read_light_field(tmp / "folder");
+  REQUIRE(a.data().sizes() == b.data().sizes());
+  // The post-filter changes only the stride-periodic part: small against the signal.
+  const double diff = (a.data() - b.data()).abs().mean().item<double>();
+  CHECK(diff < 0.02);
+  // A wrong channel count is an error naming the Phi.
+  CHECK(run_command(lfnet + "reconstruct --method pinv --phi asp:3 --sensor " + (tmp / "acq/sensor.tif") +
+                        " --out " + (tmp / "x"), out) != 0);
+  CHECK(out.find("N = 3") != std::string::npos);
+}
+
+TEST_CASE("the dict stage learns a dictionary that evaluate uses", "[app][slow]") {
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "dict.json") << R"({
+    "name": "d", "phi": "asp:2",
+    "data": {"random_scenes": 2, "random_seed": 3, "random_options": {"height": 48, "width": 48}},
+    "stages": ["dict"],
+    "dictionary": {"sampling": {"count": 400, "seed": 1},
+                   "ksvd": {"atoms": 40, "sparsity": 4, "iterations": 2}}
+  })";
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  std::string out;
+  REQUIRE(run_command(lfnet + "train " + (tmp / "dict.json") + " --out " + (tmp / "run"), out) == 0);
+  REQUIRE(fs::exists(tmp / "run/models/dict.ckpt"));
+  write_test_light_field(tmp / "lf", 36, 36);
+  REQUIRE(run_command(lfnet + "evaluate --lf " + (tmp / "lf") + " --phi asp:2 --method dict --stride 9 --dictionary " +
+                          (tmp / "run/models/dict.ckpt") + " --json " + (tmp / "r.json"), out) == 0);
+  std::ifstream in(tmp / "r.json");
+  const auto r = nlohmann::json::parse(in);
+  CHECK(r["method"] == "dict");
+  CHECK(std::isfinite(r["psnr_db"].get<double>()));
+  // A training option on the dict stage is refused with its JSON path.
+  std::ofstream(tmp / "bad.json") << R"({"phi": "asp:2", "data": {"random_scenes": 1},
+    "stages": [{"name": "dict", "training": {"epochs": 3}}]})";
+  CHECK(run_command(lfnet + "train " + (tmp / "bad.json") + " --out " + (tmp / "bad"), out) != 0);
+  CHECK(out.find("$.stages[0]") != std::string::npos);
+}
+
+TEST_CASE("report writes tables with the mode, margins, the paper's numbers and figures", "[app]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "results/a");
+  std::ofstream(tmp / "results/a/section.json") << R"({"title": "Held out", "order": 1,
+    "command": "scripts/x.sh", "heatmaps": ["net"],
+    "paper": [{"method": "net", "n": 2, "psnr_db": 26.77, "seconds": 242, "source": "Fig. 5"}]})";
+  std::ofstream rec(tmp / "results/a/records.jsonl");
+  auto record = [](const std::string& method, double psnr, double seconds) {
+    nlohmann::json pv = nlohmann::json::array();
+    for (int u = 0; u < 5; ++u) pv.push_back(std::vector<double>(5, psnr + u));
+    return nlohmann::json{{"method", method}, {"psnr_db", psnr}, {"ssim", 0.9}, {"seconds", seconds},
+                          {"stride", 5}, {"mode", "sensor"}, {"measurements", 2}, {"noise_sigma", 0.0},
+                          {"phi", {{"name", "asp"}, {"n", 2}}}, {"light_field", "x"},
+                          {"per_view_psnr_db", pv}}.dump();
+  };
+  rec << record("net", 30.0, 10.0) << "\n" << record("pinv", 29.0, 1.0) << "\n"
+      << record("no-parallax", 28.5, 0.1) << "\n" << record("dict", 29.5, 100.0) << "\n";
+  rec.close();
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
+                          (tmp / "docs/RESULTS.md"), out) == 0);
+  std::ifstream md_in(tmp / "docs/RESULTS.md");
+  std::stringstream md;
+  md << md_in.rdbuf();
+  const std::string text = md.str();
+  CHECK(text.find("## Held out") != std::string::npos);
+  CHECK(text.find("| method | mode |") != std::string::npos);
+  CHECK(text.find("| net | sensor | 30.00 | 0.900 | 10.00 | 26.77 | 242 |") != std::string::npos);
+  CHECK(text.find("net - no-parallax = +1.50 dB") != std::string::npos);
+  CHECK(text.find("net - dict = +0.50 dB") != std::string::npos);
+  CHECK(text.find("time yes (24x faster)") != std::string::npos);
+  // dict is slower and worse than net: off the front; the others are on it.
+  CHECK(text.find("| dict | 5 | 2 |") == std::string::npos);
+  CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
+  CHECK(fs::file_size(tmp / "docs/images/results/pareto.png") > 1000);
+  CHECK(fs::file_size(tmp / "docs/images/results/a_views_net.png") > 500);
+  // A missing results folder is one clear error.
+  CHECK(run_command(lfnet_binary() + " report " + (tmp / "nothing"), out) != 0);
+  CHECK(out.find("lfnet: error:") != std::string::npos);
+}
+
+TEST_CASE("every shipped config is valid", "[app]") {
+  std::string out;
+  int checked = 0;
+  for (const char* dir : {"configs", "configs/models", "configs/paper"}) {
+    const fs::path root = fs::path(LFNET_SOURCE_DIR) / dir;
+    for (const auto& entry : fs::recursive_directory_iterator(root)) {
+      if (entry.path().extension() != ".json" || entry.path().string().find("/scenes/") != std::string::npos) continue;
+      if (std::string(dir) == "configs" && entry.path().parent_path() != root) continue;
+      for (const char* scale : {"quick", "paper"}) {
+        INFO(entry.path().string() << " " << scale);
+        CHECK(run_command(lfnet_binary() + " train " + entry.path().string() + " --check --scale " + scale, out) == 0);
+        INFO(out);
+        CHECK(out.find("the config is valid") != std::string::npos);
+        ++checked;
+      }
+    }
+  }
+  CHECK(checked >= 2 * 20);
+}
