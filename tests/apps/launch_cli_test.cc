@@ -5,7 +5,9 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
+#include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
 
 using lfnet::test::lfnet_binary;
@@ -31,6 +33,20 @@ nlohmann::json read_lines(const std::string& path) {
   std::string line;
   while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
   return lines;
+}
+
+std::vector<std::string> csv_rows(const std::string& path) {
+  std::vector<std::string> rows;
+  std::ifstream in(path);
+  for (std::string line; std::getline(in, line);) rows.push_back(line);
+  return rows;
+}
+
+std::vector<std::string> split_csv(const std::string& line) {
+  std::vector<std::string> fields;
+  std::stringstream s(line);
+  for (std::string f; std::getline(s, f, ',');) fields.push_back(f);
+  return fields;
 }
 
 double seconds_since(std::chrono::steady_clock::time_point start) {
@@ -113,4 +129,46 @@ TEST_CASE("a rank killed mid-training makes the other fail with a clear error", 
   const auto at = out.find("after ");
   REQUIRE(at != std::string::npos);
   CHECK(std::stoi(out.substr(at + 6)) < 30);
+}
+
+TEST_CASE("batch on 2 ranks shares the items and gathers one summary on rank 0", "[app][dist]") {
+  if (!fs::exists("/usr/include/torch/csrc/distributed/c10d/ProcessGroupGloo.hpp")) return;
+  lfnet::test::TempDir tmp;
+  for (int k = 0; k < 3; ++k) {  // three light fields with parallax, and one broken item
+    auto y = torch::arange(36, torch::kFloat32).view({1, 1, 1, 36, 1});
+    auto x = torch::arange(45, torch::kFloat32).view({1, 1, 1, 1, 45});
+    auto u = torch::arange(5, torch::kFloat32).view({1, 5, 1, 1, 1});
+    auto v = torch::arange(5, torch::kFloat32).view({1, 1, 5, 1, 1});
+    auto data = 0.5 + 0.3 * torch::sin((0.3 + 0.1 * k) * (x + (v - 2)) + 0.25 * (y + (u - 2)));
+    lfnet::io::write_light_field(lfnet::LightField(data), tmp / ("in/lf_" + std::to_string(k)));
+  }
+  fs::create_directories(tmp / "in/broken");
+  std::ofstream(tmp / "in/broken/sensor.json") << "{ not json";
+  const std::string lfnet = lfnet_binary() + " ";
+  const std::string args = " --input " + (tmp / "in") + " --phi asp:2 --methods pinv --stride 9";
+  std::string out;
+  CHECK(run_command(lfnet + "--threads 1 --log-level warn batch" + args + " --out " +
+                        (tmp / "one"), out) != 0);
+  CHECK(out.find("lfnet: error: 1 of 4") != std::string::npos);
+  CHECK(run_command(lfnet + "launch -n 2 -- batch" + args + " --out " + (tmp / "two"), out) != 0);
+  // Rank 0 reports the job's failures, counted over both ranks' items.
+  CHECK(out.find("[rank 0] lfnet: error: 1 of 4") != std::string::npos);
+  CHECK(out.find("batch: 2 rank(s), rank 0 takes 2 item(s)") != std::string::npos);
+  const auto one = csv_rows(tmp / "one/summary.csv");
+  const auto two = csv_rows(tmp / "two/summary.csv");
+  REQUIRE(one.size() == 5);
+  REQUIRE(two.size() == one.size());
+  for (size_t i = 0; i < one.size(); ++i) {
+    INFO(one[i] << "\n" << two[i]);
+    const auto a = split_csv(one[i]), b = split_csv(two[i]);
+    REQUIRE(a.size() >= 4);
+    REQUIRE(b.size() >= 4);
+    for (size_t c = 0; c < 4; ++c) CHECK(a[c] == b[c]);  // item, kind, method, status
+    if (i > 0 && a[3] == "ok") {
+      CHECK(std::stod(b[4]) == Approx(std::stod(a[4])).epsilon(1e-6));  // PSNR
+    }
+  }
+  for (int k = 0; k < 3; ++k) {  // both ranks wrote their records into the shared folder
+    CHECK(fs::exists(tmp / ("two/records/lf_" + std::to_string(k) + "__pinv.json")));
+  }
 }
