@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 
@@ -201,6 +202,9 @@ class GlooCommunicator : public Communicator {
 std::shared_ptr<Communicator> connect(const DistOptions& options) {
   options.validate();
   if (options.world_size == 1) return std::make_shared<LocalCommunicator>();
+  // Writing to the socket of a rank that died raises SIGPIPE, which would kill this process
+  // silently; ignored, the write fails and Gloo throws, which becomes a CommunicationError.
+  std::signal(SIGPIPE, SIG_IGN);
   return std::make_shared<GlooCommunicator>(options);
 }
 

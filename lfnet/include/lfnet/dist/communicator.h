@@ -73,6 +73,7 @@ bool available();
 // Joins the job: LocalCommunicator for world_size 1, otherwise a c10d Gloo process group that
 // rendezvous at options.master (rank 0 listens there). Blocks until all ranks have joined;
 // CommunicationError after timeout_s, ConfigError for bad options or a build without c10d.
+// Several ranks make the process ignore SIGPIPE, so a dead peer is an error, not a silent death.
 std::shared_ptr<Communicator> connect(const DistOptions& options);
 
 // The part [begin, end) of n items that rank `rank` of `world` takes: contiguous, sizes
