@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "command.h"
+#include "dist_flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/progress.h"
@@ -32,6 +33,7 @@ struct BatchArgs {
   double noise = 0;
   uint64_t seed = 0;
   bool window = false, post_filter = false, match_mean = false, force = false;
+  dist::DistOptions dist;  // ranks sharing the items (docs/distributed.md)
 };
 
 // One thing to process: an acquisition folder (reconstruct) or a light-field folder (evaluate).
@@ -229,6 +231,8 @@ void write_summary(const std::string& out_dir, const std::vector<nlohmann::json>
 }
 
 void run_batch(const BatchArgs& a) {
+  auto comm = join_job(a.dist);
+  const int64_t rank = comm->rank(), world = comm->world_size();
   const auto items = discover_items(a.in);
   LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
                  ") and no light-field folder under ", a.in);
@@ -240,8 +244,12 @@ void run_batch(const BatchArgs& a) {
                    "unknown method '", m, "' in --methods");
   }
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
-  prepare_run_dir(a.out, a.force);
-  fs::remove(fs::path(a.out) / "models");  // prepare_run_dir makes it; batch writes none
+  if (rank == 0) {
+    prepare_run_dir(a.out, a.force);
+    fs::remove(fs::path(a.out) / "models");  // prepare_run_dir makes it; batch writes none
+  }
+  // The other ranks write only once rank 0 has checked and made the folder (when it is shared).
+  comm->barrier();
   const fs::path records_dir = fs::path(a.out) / "records";
   fs::create_directories(records_dir);
   int64_t reconstruct = 0;
@@ -249,10 +257,21 @@ void run_batch(const BatchArgs& a) {
   spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
                items.size(), a.in, reconstruct, items.size() - reconstruct, a.methods.empty() ? methods[0] : a.methods);
 
+  // Rank r takes items r, r + W, r + 2W, ... of the sorted list: neighbours in the list (often
+  // alike in size) go to different ranks.
+  std::vector<size_t> mine;
+  for (size_t i = static_cast<size_t>(rank); i < items.size(); i += static_cast<size_t>(world)) {
+    mine.push_back(i);
+  }
+  if (world > 1) {
+    spdlog::info("batch: {} rank(s), rank 0 takes {} item(s)", world, mine.size());
+  }
   std::vector<nlohmann::json> records;
-  ProgressBar bar("batch", static_cast<int64_t>(items.size()), "items");
+  std::vector<size_t> record_item;  // the item index of every record, for the gather
+  ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
   int64_t failures = 0;
-  for (const auto& item : items) {
+  for (size_t index : mine) {
+    const auto& item = items[index];
     bar.set_note(item.name);
     for (auto& r : process_item(item, a, methods, a.out)) {
       const bool ok = r["status"] == "ok";
@@ -272,10 +291,32 @@ void run_batch(const BatchArgs& a) {
                      r["error"].get<std::string>());
       }
       records.push_back(std::move(r));
+      record_item.push_back(index);
     }
     bar.advance(1);
   }
   bar.finish();
+  if (world > 1) {
+    // One summary on rank 0: every rank's records, back in the order of one process.
+    nlohmann::json shipped = nlohmann::json::array();
+    for (size_t i = 0; i < records.size(); ++i) shipped.push_back({record_item[i], records[i]});
+    const auto gathered = comm->all_gather(shipped.dump());
+    if (rank != 0) return;  // rank 0 writes the summary and reports failures
+    std::vector<std::pair<size_t, nlohmann::json>> all;
+    for (const auto& part : gathered) {
+      for (auto& entry : nlohmann::json::parse(part)) {
+        all.emplace_back(entry[0].get<size_t>(), std::move(entry[1]));
+      }
+    }
+    std::stable_sort(all.begin(), all.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+    records.clear();
+    failures = 0;
+    for (auto& entry : all) {
+      failures += entry.second["status"] != "ok";
+      records.push_back(std::move(entry.second));
+    }
+  }
   write_summary(a.out, records);
   spdlog::info("batch: {} record(s), {} failed; summary in {}/summary.csv", records.size(),
                failures, a.out);
@@ -312,6 +353,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--post-filter", a->post_filter, "suppress artefacts with the stride's period");
   cmd->add_flag("--match-mean", a->match_mean, "scale real measurements to the training mean");
   cmd->add_flag("--force", a->force, "write into an existing non-empty output folder");
+  add_dist_flags(cmd, a->dist);
   cmd->callback([a] { run_batch(*a); });
 }
 

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "command.h"
+#include "dist_flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/optics/phi.h"
@@ -27,6 +28,7 @@ struct TrainArgs {
   std::string init;
   std::string stage;  // train only this stage
   bool force = false;
+  dist::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
   bool check = false;  // read and check the config, then stop
 };
 
@@ -37,12 +39,16 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
   if (!a.resume.empty()) s += " --resume " + a.resume;
   if (!a.init.empty()) s += " --init " + a.init;
   if (!a.stage.empty()) s += " --stage " + a.stage;
+  if (a.dist.world_size > 1) s += " --world-size " + std::to_string(a.dist.world_size);
   return s;
 }
 
 // Trains the selected stages; returns the config and the checkpoint of the last stage.
 std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
                                                       const std::string& verb) {
+  // Join the job first, so that a rank that cannot reach the others fails before loading data.
+  auto comm = join_job(args.dist);
+  const bool lead = comm->rank() == 0;
   ExperimentConfig config = ExperimentConfig::load(args.config, args.scale);
   const std::string out = args.out.empty() ? "out/" + config.name : args.out;
   if (args.check) {
@@ -68,23 +74,26 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   // Resuming writes into the run folder it continues; anything else needs a fresh one.
   std::error_code ec;
   const bool fresh = !fs::exists(out, ec);
-  prepare_run_dir(out, args.force || !args.resume.empty());
   nlohmann::json resolved = config.raw;
   resolved["scale"] = config.scale;
+  if (lead) prepare_run_dir(out, args.force || !args.resume.empty());  // the other ranks write nothing
   const auto phi = optics::make_phi(config.phi);
-  spdlog::info("{}: Phi {}, {} stage(s), output in {}", config.name, config.phi.label(),
-               stages.size(), out);
+  spdlog::info("{}: Phi {}, {} stage(s), output in {}{}", config.name, config.phi.label(),
+               stages.size(), out,
+               comm->world_size() > 1
+                   ? " (" + std::to_string(comm->world_size()) + " data-parallel ranks)"
+                   : "");
   // The patch dataset (simulated measurements) is built only when a network is trained.
   std::unique_ptr<data::PatchDataset> dataset;
   const bool networks = std::any_of(stages.begin(), stages.end(),
                                     [](const StageConfig& s) { return is_network_stage(s.name); });
   try {
-    write_json_file((fs::path(out) / "config.json").string(), resolved);
+    if (lead) write_json_file((fs::path(out) / "config.json").string(), resolved);
     if (networks) dataset = make_dataset(config, *phi);
   } catch (...) {
     // Nothing was trained: a run folder this command created goes again, so the same command
     // can be repeated once the data is fixed.
-    if (fresh) fs::remove_all(out, ec);
+    if (fresh && lead) fs::remove_all(out, ec);
     throw;
   }
   if (dataset) {
@@ -96,14 +105,18 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
     if (!is_network_stage(stages[i].name)) {
       LFNET_CHECK_AS(ConfigError, args.resume.empty() && args.init.empty(),
                      "--resume and --init apply to network stages, not to '", stages[i].name, "'");
+      LFNET_CHECK_AS(ConfigError, comm->world_size() == 1, "the '", stages[i].name,
+                     "' stage does not train data-parallel: train it in one process (--stage ",
+                     stages[i].name, ")");
       last = train_dictionary_stage(config, out, command_line_of(args, verb));
       continue;
     }
     // --init applies to the first stage trained; later stages follow the usual chain.
     last = train_stage(config, stages[i], *dataset, out, i == 0 ? args.init : "", args.resume,
-                       command_line_of(args, verb));
+                       command_line_of(args, verb), comm);
     spdlog::info("stage {} done: {}", stages[i].name, last);
   }
+  comm->barrier();  // leave together: rank 0 hosts the rendezvous
   config.raw = resolved;
   return {config, last};
 }
@@ -128,6 +141,7 @@ void add_train_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--init", args->init,
                   "start from a checkpoint: finetuning, or Phi switching when its Phi differs");
   cmd->add_option("--stage", args->stage, "train only this stage of the config");
+  add_dist_flags(cmd, args->dist);
   cmd->callback([args] { run_training(*args, "train"); });
 }
 

@@ -275,7 +275,10 @@ std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
 std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
                         data::PatchDataset& dataset, const std::string& run_dir,
                         const std::string& init, const std::string& resume,
-                        const std::string& command_line) {
+                        const std::string& command_line,
+                        std::shared_ptr<dist::Communicator> comm) {
+  if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
+  const bool lead = comm->rank() == 0;
   const auto phi = optics::make_phi(config.phi);
   auto options = config.stage_options(stage);
   const std::string stage_dir = (fs::path(run_dir) / "models" / stage.name).string();
@@ -293,8 +296,11 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   run.phi = config.phi.to_json();
   run.command_line = command_line;
   train::Trainer trainer(net, options, run);
+  trainer.set_communicator(comm);
   const std::string models = (fs::path(run_dir) / "models").string();
-  if (!resume.empty()) {
+  if (!lead) {
+    // Rank 0 reads what the stage starts from; fit() hands its state to this rank.
+  } else if (!resume.empty()) {
     trainer.resume(resume);
   } else if (!init.empty()) {
     auto report = trainer.init_from(init);
@@ -312,6 +318,7 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   }
   train::TrainerHooks hooks;
   hooks.on_epoch = [&](const train::EpochRecord& r) {
+    if (!lead) return;
     spdlog::info("{} epoch {}: train loss {:.5f}, validation PSNR {:.2f} dB{} ({:.0f} patches/s)",
                  stage.name, r.epoch, r.train_loss, r.val_psnr_db, r.best ? " (best)" : "",
                  r.patches_per_s);
@@ -321,6 +328,7 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   trainer.fit(dataset, hooks);
   const std::string best = train::best_checkpoint_path(stage_dir);
   const std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
+  if (!lead) return target;
   std::error_code ec;
   fs::copy_file(best, target + ".tmp", fs::copy_options::overwrite_existing, ec);
   if (!ec) fs::rename(target + ".tmp", target, ec);

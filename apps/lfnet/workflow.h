@@ -16,6 +16,7 @@
 #include "lfnet/data/patch_dataset.h"
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/dict/patch_sampling.h"
+#include "lfnet/dist/communicator.h"
 #include "lfnet/eval/evaluate.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
@@ -100,10 +101,13 @@ void prepare_run_dir(const std::string& dir, bool force);
 
 // Trains one stage; returns the path of its best checkpoint, copied to DIR/models/<stage>.ckpt.
 // `init` (optional) starts from a checkpoint (finetuning, Phi switching); `resume` continues.
+// With a communicator of several ranks (docs/distributed.md) only rank 0 reads checkpoints,
+// logs and writes; the others receive its state when training starts.
 std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
                         data::PatchDataset& dataset, const std::string& run_dir,
                         const std::string& init, const std::string& resume,
-                        const std::string& command_line);
+                        const std::string& command_line,
+                        std::shared_ptr<dist::Communicator> comm = nullptr);
 
 // Learns the dict stage's dictionary from the config's training light fields (K-SVD, with a
 // progress line per iteration) and writes DIR/models/dict.ckpt; returns its path.

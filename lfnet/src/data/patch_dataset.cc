@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "lfnet/core/error.h"
+#include "lfnet/dist/communicator.h"
 #include "lfnet/optics/measure.h"
 
 namespace lfnet::data {
@@ -194,7 +195,35 @@ train::Batch PatchDataset::prepare_next() {
                               static_cast<uint64_t>(epoch_) * 1000003ULL +
                               static_cast<uint64_t>(served_);
   served_ += n;
-  return make_batch(draw(false, n, rng_), noise_seed);
+  Draw d = draw(false, n, rng_);
+  if (shard_world_ == 1) return make_batch(d, noise_seed);
+  const auto [begin, end] = dist::shard_range(n, shard_rank_, shard_world_);
+  if (!options_.effects.empty()) {
+    // The noise of one patch depends on the whole batch's draw: simulate it all, keep a part.
+    auto full = make_batch(d, noise_seed);
+    return {full.y.slice(0, begin, end).contiguous(), full.phase.slice(0, begin, end),
+            full.target.slice(0, begin, end).contiguous()};
+  }
+  if (begin == end) {
+    // A last batch smaller than the world leaves this rank nothing: an empty batch.
+    Draw one{{d.lf[0]}, {d.y0[0]}, {d.x0[0]}, {d.aug[0]}};
+    auto b = make_batch(one, noise_seed);
+    return {b.y.slice(0, 0, 0), b.phase.slice(0, 0, 0), b.target.slice(0, 0, 0)};
+  }
+  Draw part;
+  part.lf.assign(d.lf.begin() + begin, d.lf.begin() + end);
+  part.y0.assign(d.y0.begin() + begin, d.y0.begin() + end);
+  part.x0.assign(d.x0.begin() + begin, d.x0.begin() + end);
+  part.aug.assign(d.aug.begin() + begin, d.aug.begin() + end);
+  return make_batch(part, noise_seed);
+}
+
+void PatchDataset::set_shard(int64_t rank, int64_t world) {
+  LFNET_CHECK_AS(ConfigError, world >= 1 && rank >= 0 && rank < world, "bad shard: rank ", rank,
+                 " of ", world);
+  if (prefetch_.valid()) prefetch_.get();  // prepared for the old shard
+  shard_rank_ = rank;
+  shard_world_ = world;
 }
 
 }  // namespace lfnet::data

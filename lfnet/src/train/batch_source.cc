@@ -5,8 +5,14 @@
 #include <cmath>
 
 #include "lfnet/core/error.h"
+#include "lfnet/dist/communicator.h"
 
 namespace lfnet::train {
+
+void BatchSource::set_shard(int64_t rank, int64_t world) {
+  LFNET_CHECK_AS(ConfigError, world == 1 && rank == 0,
+                 "this batch source cannot be split across ranks (world size ", world, ")");
+}
 
 InMemoryBatchSource::InMemoryBatchSource(torch::Tensor y, torch::Tensor phase,
                                          torch::Tensor target, double validation_fraction,
@@ -66,9 +72,17 @@ Batch InMemoryBatchSource::next_train() {
   const int64_t n = order_.size(0);
   if (cursor_ >= n) cursor_ = 0;  // past the epoch's end: start over rather than fail
   const int64_t take = std::min(batch_size_, n - cursor_);
-  auto b = gather(order_.narrow(0, cursor_, take));
+  const auto [begin, end] = dist::shard_range(take, shard_rank_, shard_world_);
+  auto b = gather(order_.narrow(0, cursor_ + begin, end - begin));
   cursor_ += take;
   return b;
+}
+
+void InMemoryBatchSource::set_shard(int64_t rank, int64_t world) {
+  LFNET_CHECK_AS(ConfigError, world >= 1 && rank >= 0 && rank < world, "bad shard: rank ", rank,
+                 " of ", world);
+  shard_rank_ = rank;
+  shard_world_ = world;
 }
 
 }  // namespace lfnet::train

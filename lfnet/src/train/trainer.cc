@@ -305,6 +305,79 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
               "the net's Phi is not set: call set_phi with the patch matrices first");
   optimizer_ = make_adam(net_, options_);
   state_.stage = options_.stage;
+  comm_ = std::make_shared<dist::LocalCommunicator>();
+}
+
+void Trainer::set_communicator(std::shared_ptr<dist::Communicator> communicator) {
+  LFNET_CHECK(communicator != nullptr, "set_communicator: no communicator");
+  comm_ = std::move(communicator);
+}
+
+void Trainer::synchronise() {
+  // The history stays with rank 0, the only rank that writes checkpoints.
+  torch::NoGradGuard no_grad;
+  auto position = torch::tensor({state_.epoch, state_.step, state_.best_epoch}, torch::kInt64);
+  auto best = torch::tensor({state_.best_metric}, torch::kFloat64);
+  comm_->broadcast(position);
+  comm_->broadcast(best);
+  state_.epoch = position[0].item<int64_t>();
+  state_.step = position[1].item<int64_t>();
+  state_.best_epoch = position[2].item<int64_t>();
+  state_.best_metric = best.item<double>();
+  for (auto& p : net_->parameters()) {
+    auto data = p.detach();
+    comm_->broadcast(data);
+  }
+  for (auto& b : net_->buffers()) {
+    auto data = b.detach();
+    comm_->broadcast(data);
+  }
+  // Adam moments: rank 0 says which parameters have them; the others make room, then receive.
+  auto& adam = optimizer_->state();
+  const auto params = net_->parameters();
+  auto has = torch::zeros({static_cast<int64_t>(params.size())}, torch::kInt64);
+  for (size_t i = 0; i < params.size(); ++i) {
+    has[static_cast<int64_t>(i)] = adam.count(param_key(params[i])) ? 1 : 0;
+  }
+  comm_->broadcast(has);
+  for (size_t i = 0; i < params.size(); ++i) {
+    const auto key = param_key(params[i]);
+    if (has[static_cast<int64_t>(i)].item<int64_t>() == 0) {
+      adam.erase(key);
+      continue;
+    }
+    if (!adam.count(key)) {
+      auto fresh = std::make_unique<torch::optim::AdamParamState>();
+      fresh->exp_avg(torch::zeros_like(params[i]));
+      fresh->exp_avg_sq(torch::zeros_like(params[i]));
+      adam[key] = std::move(fresh);
+    }
+    auto& st = static_cast<torch::optim::AdamParamState&>(*adam.at(key));
+    auto m = st.exp_avg(), v = st.exp_avg_sq();
+    auto step = torch::tensor({st.step()}, torch::kInt64);
+    comm_->broadcast(m);
+    comm_->broadcast(v);
+    comm_->broadcast(step);
+    st.step(step.item<int64_t>());
+  }
+}
+
+void Trainer::average_gradients(double patches) {
+  torch::NoGradGuard no_grad;
+  std::vector<torch::Tensor> grads;
+  for (auto& p : net_->parameters()) {
+    if (!p.grad().defined()) p.mutable_grad() = torch::zeros_like(p);
+    grads.push_back(p.grad().reshape({-1}));
+  }
+  auto flat = torch::cat(grads);
+  comm_->all_reduce_sum(flat);
+  flat.div_(patches);
+  int64_t offset = 0;
+  for (auto& p : net_->parameters()) {
+    const int64_t n = p.numel();
+    p.mutable_grad().copy_(flat.slice(0, offset, offset + n).view_as(p));
+    offset += n;
+  }
 }
 
 void Trainer::apply_lr(double lr) {
@@ -492,7 +565,11 @@ Evaluation Trainer::evaluate(BatchSource& source) {
   net_->eval();
   double loss_sum = 0, squared = 0;
   int64_t patches = 0, elements = 0;
-  for (const auto& batch : source.validation()) {
+  const auto& batches = source.validation();
+  const int64_t world = comm_->world_size(), rank = comm_->rank();
+  for (size_t j = 0; j < batches.size(); ++j) {
+    if (static_cast<int64_t>(j) % world != rank) continue;  // another rank's share
+    const auto& batch = batches[j];
     check_batch(batch, "validation batch");
     auto pred = net_->forward(batch.y, batch.phase);
     loss_sum += loss_(pred, batch.target).item<double>() * static_cast<double>(batch.size());
@@ -501,6 +578,15 @@ Evaluation Trainer::evaluate(BatchSource& source) {
     elements += batch.target.numel();
   }
   net_->train();
+  if (world > 1) {
+    auto sums = torch::tensor({loss_sum, squared, static_cast<double>(patches),
+                               static_cast<double>(elements)}, torch::kFloat64);
+    comm_->all_reduce_sum(sums);
+    loss_sum = sums[0].item<double>();
+    squared = sums[1].item<double>();
+    patches = static_cast<int64_t>(sums[2].item<double>());
+    elements = static_cast<int64_t>(sums[3].item<double>());
+  }
   LFNET_CHECK(patches > 0, "the batch source has no validation patches");
   Evaluation e;
   e.patches = patches;
@@ -513,13 +599,19 @@ Evaluation Trainer::evaluate(BatchSource& source) {
 std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& hooks) {
   std::vector<EpochRecord> records;
   const bool skip = options_.on_nonfinite == "skip";
+  const bool distributed = comm_->world_size() > 1;
+  const bool lead = comm_->rank() == 0;  // the rank that writes checkpoints and shows progress
+  if (distributed) {
+    source.set_shard(comm_->rank(), comm_->world_size());
+    synchronise();
+  }
   for (int64_t epoch = state_.epoch; epoch < options_.epochs; ++epoch) {
     Stopwatch clock;
     source.start_epoch(epoch, options_.batch_size);
     const int64_t batches = source.train_batches_per_epoch();
     LFNET_CHECK(batches > 0, "the batch source has no training batches");
     std::optional<ProgressBar> bar;
-    if (options_.progress) {
+    if (options_.progress && lead) {
       bar.emplace("epoch " + std::to_string(epoch + 1) + "/" + std::to_string(options_.epochs),
                   batches, "batches");
     }
@@ -528,18 +620,38 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     int64_t seen = 0, skipped = 0;
     for (int64_t i = 0; i < batches; ++i) {
       Batch batch = source.next_train();
-      check_batch(batch, "training batch " + std::to_string(i + 1) + " of epoch " +
-                             std::to_string(epoch + 1));
+      // With several ranks a last batch smaller than the world leaves some ranks nothing.
+      if (!distributed || batch.size() > 0) {
+        check_batch(batch, "training batch " + std::to_string(i + 1) + " of epoch " +
+                               std::to_string(epoch + 1));
+      }
       lr = learning_rate(options_, epoch, i, batches);
       apply_lr(lr);
       optimizer_->zero_grad();
-      auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target);
-      const double value = loss.item<double>();
+      double value = 0, patches = static_cast<double>(batch.size());
       std::string problem;
+      if (!distributed) {
+        auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target);
+        value = loss.item<double>();
+        if (std::isfinite(value)) loss.backward();
+      } else {
+        // The loss is a mean over the batch: each rank backpropagates its patches' sum, the
+        // sums are added over the ranks and divided by the global batch.
+        double local_sum = 0;
+        if (batch.size() > 0) {
+          auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target) * patches;
+          local_sum = loss.item<double>();
+          if (std::isfinite(local_sum)) loss.backward();
+        }
+        auto totals = torch::tensor({local_sum, patches}, torch::kFloat64);
+        comm_->all_reduce_sum(totals);
+        patches = totals[1].item<double>();
+        value = totals[0].item<double>() / patches;
+        average_gradients(patches);
+      }
       if (!std::isfinite(value)) {
         problem = "the loss is " + format_double(value);
       } else {
-        loss.backward();
         const double norm =
             options_.clip_grad_norm > 0
                 ? torch::nn::utils::clip_grad_norm_(net_->parameters(), options_.clip_grad_norm)
@@ -561,8 +673,8 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
       }
       optimizer_->step();
       ++state_.step;
-      loss_sum += value * static_cast<double>(batch.size());
-      seen += batch.size();
+      loss_sum += value * patches;
+      seen += static_cast<int64_t>(patches);
       if (bar) {
         bar->set_note("loss " + format_double(loss_sum / static_cast<double>(seen)));
         bar->advance();
@@ -596,7 +708,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     state_.epoch = epoch + 1;
     r.seconds = clock.seconds();
     state_.history.push_back(r.to_json());
-    if (!options_.out_dir.empty()) {
+    if (!options_.out_dir.empty() && lead) {
       std::filesystem::create_directories(options_.out_dir);
       const auto ck = checkpoint();
       save_checkpoint(ck, last_checkpoint_path(options_.out_dir));
@@ -611,7 +723,14 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     }
     records.push_back(r);
     if (hooks.on_epoch) hooks.on_epoch(r);
-    if (hooks.stop_requested && hooks.stop_requested()) break;
+    bool stop = hooks.stop_requested && hooks.stop_requested();
+    if (distributed) {
+      // Any rank may ask to stop; all stop together.
+      auto votes = torch::tensor({stop ? int64_t{1} : int64_t{0}}, torch::kInt64);
+      comm_->all_reduce_sum(votes);
+      stop = votes.item<int64_t>() > 0;
+    }
+    if (stop) break;
   }
   return records;
 }

@@ -53,6 +53,9 @@ class PatchDataset : public train::BatchSource {
   int64_t train_batches_per_epoch() const override;
   train::Batch next_train() override;
   const std::vector<train::Batch>& validation() override { return validation_; }
+  // Every rank draws the whole batch (the generator advances alike) but simulates only its
+  // part; with sensor effects it simulates the whole batch, whose noise is one draw.
+  void set_shard(int64_t rank, int64_t world) override;
 
   // Mean of simulated training measurements: real measurements are scaled to it.
   double measurement_mean() const { return measurement_mean_; }
@@ -77,6 +80,7 @@ class PatchDataset : public train::BatchSource {
   std::vector<double> train_weight_;
   std::mt19937_64 rng_;
   int64_t epoch_ = 0, batch_size_ = 64, served_ = 0;
+  int64_t shard_rank_ = 0, shard_world_ = 1;
   std::vector<train::Batch> validation_;
   double measurement_mean_ = 0;
   // The batch after the one being trained on, prepared on another thread while the network

@@ -36,6 +36,12 @@ class BatchSource {
   virtual Batch next_train() = 0;
   // The validation set, the same every epoch (never trained on).
   virtual const std::vector<Batch>& validation() = 0;
+
+  // Data-parallel training (docs/distributed.md): from now on next_train() returns only
+  // rank `rank`'s part of each batch, dist::shard_range of the batch's patches, so the parts
+  // of all `world` ranks together are exactly the batch a single process gets. Sources that
+  // cannot shard throw ConfigError for world > 1 (this default).
+  virtual void set_shard(int64_t rank, int64_t world);
 };
 
 // Patches held in memory: a fixed train/validation split (by a seeded permutation) and a new
@@ -52,6 +58,7 @@ class InMemoryBatchSource : public BatchSource {
   int64_t train_batches_per_epoch() const override;
   Batch next_train() override;
   const std::vector<Batch>& validation() override { return validation_; }
+  void set_shard(int64_t rank, int64_t world) override;
 
   int64_t train_size() const { return train_index_.size(0); }
   int64_t validation_size() const;
@@ -64,6 +71,7 @@ class InMemoryBatchSource : public BatchSource {
   std::vector<Batch> validation_;
   uint64_t seed_;
   int64_t batch_size_ = 1, cursor_ = 0;
+  int64_t shard_rank_ = 0, shard_world_ = 1;
 };
 
 }  // namespace lfnet::train

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "lfnet/core/json.h"
+#include "lfnet/dist/communicator.h"
 #include "lfnet/nn/loss.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/train/batch_source.h"
@@ -150,8 +151,17 @@ class Trainer {
   // last checkpoint written stays intact.
   std::vector<EpochRecord> fit(BatchSource& source, const TrainerHooks& hooks = {});
 
-  // Loss and PSNR on the source's validation batches.
+  // Loss and PSNR on the source's validation batches (shared out among the ranks, then
+  // summed: every rank receives the whole set's numbers).
   Evaluation evaluate(BatchSource& source);
+
+  // Data-parallel training (docs/distributed.md). options.batch_size stays the global batch:
+  // fit() asks the source for this rank's part of each batch (BatchSource::set_shard), sums
+  // the gradients of all ranks and divides by the global batch, so W ranks take the steps one
+  // process would take. When fit() starts, rank 0's weights, Adam moments and training
+  // position are sent to every rank, so only rank 0 needs to resume or initialise. Only rank 0
+  // writes checkpoints and shows progress; the hooks run on every rank with global numbers.
+  void set_communicator(std::shared_ptr<dist::Communicator> communicator);
 
   // The complete current state as a checkpoint.
   Checkpoint checkpoint() const;
@@ -166,6 +176,10 @@ class Trainer {
   [[noreturn]] void fail_nonfinite(const std::string& what, const Batch& batch, int64_t epoch,
                                    int64_t index, double lr) const;
   bool weights_finite() const;
+  // Makes every rank hold rank 0's weights, buffers, Adam state and training position.
+  void synchronise();
+  // Sums the gradients over the ranks and divides by `patches` (the global batch).
+  void average_gradients(double patches);
 
   nn::LightFieldNet net_;
   TrainerOptions options_;
@@ -174,6 +188,7 @@ class Trainer {
   nn::ReconstructionLoss loss_;
   TrainingState state_;
   std::string last_written_;  // the last checkpoint this run wrote, for error messages
+  std::shared_ptr<dist::Communicator> comm_;  // LocalCommunicator unless set_communicator
 };
 
 // "<dir>/last.ckpt" and "<dir>/best.ckpt".
