@@ -6,6 +6,7 @@
 #include "command.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/runtime.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
@@ -24,6 +25,7 @@ struct TrainArgs {
   std::string resume;
   std::string init;
   std::string stage;  // train only this stage
+  std::string device;  // overrides the config's training.device ("" keeps it)
   bool force = false;
 };
 
@@ -34,6 +36,7 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
   if (!a.resume.empty()) s += " --resume " + a.resume;
   if (!a.init.empty()) s += " --init " + a.init;
   if (!a.stage.empty()) s += " --stage " + a.stage;
+  if (!a.device.empty()) s += " --device " + a.device;
   return s;
 }
 
@@ -41,6 +44,10 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
 std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
                                                       const std::string& verb) {
   ExperimentConfig config = ExperimentConfig::load(args.config, args.scale);
+  if (!args.device.empty()) {
+    parse_device(args.device);  // a clear error before any data is prepared
+    config.training["device"] = args.device;
+  }
   const std::string out = args.out.empty() ? "out/" + config.name : args.out;
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || args.init.empty(),
                  "give --resume or --init, not both");
@@ -81,6 +88,7 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
   cmd->add_option("--out", a.out, "run folder (default out/<config name>)");
   cmd->add_option("--scale", a.scale, "config scale: quick or paper (default: the config's)");
   cmd->add_flag("--force", a.force, "write into an existing non-empty run folder");
+  cmd->add_option("--device", a.device, "cpu or cuda[:K]: where to train (default: the config's training.device, cpu)");
 }
 
 }  // namespace

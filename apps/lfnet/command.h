@@ -29,6 +29,7 @@ void add_train_command(CLI::App& app, const GlobalOptions& global);
 void add_experiment_command(CLI::App& app, const GlobalOptions& global);
 void add_evaluate_command(CLI::App& app, const GlobalOptions& global);
 void add_reconstruct_command(CLI::App& app, const GlobalOptions& global);
+void add_bench_command(CLI::App& app, const GlobalOptions& global);
 
 // Render options for a scene file: image textures are read with lfnet::io::read_image, relative
 // to the scene file's folder ("" for none). Defined in cmd_render.cc; any subcommand that renders

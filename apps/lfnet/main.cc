@@ -23,6 +23,7 @@ int fail(const std::string& what) {
 
 int main(int argc, char** argv) {
   using namespace lfnet::app;
+  lfnet::configure_allocator();
   CLI::App app{"lfnet: compressive light field reconstruction from coded sensor images"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "lfnet 0.1.0");
@@ -42,7 +43,7 @@ int main(int argc, char** argv) {
   const std::vector<CommandFactory> commands = {
       add_info_command,  add_render_command,     add_simulate_command,
       add_train_command, add_experiment_command, add_evaluate_command,
-      add_reconstruct_command};
+      add_reconstruct_command, add_bench_command};
   for (const auto& add : commands) add(app, global);
 
   try {
