@@ -73,6 +73,8 @@ torch::Tensor reconstruct_sensor_fully_convolutional(nn::LightFieldNet net,
   LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != "ae", "the model has no '",
                  method, "' branch");
   net->eval();
+  // Everything here is inference: the tensors made under the guard are updated in place.
+  torch::InferenceMode inference;
   const auto device = net->phi.device();
   ReconstructOptions raw = options;
   raw.clamp = false;
