@@ -267,6 +267,13 @@ TEST_CASE("forward_all runs only the selected branches", "[nn][network]") {
   auto cnn = net->forward_all(y, phase, cnn_only);
   CHECK_FALSE(cnn.ae.defined());
   lfnet::test::require_close(cnn.output, all.cnn + all.base, 1e-6);
+  // Neither: the residual base alone (the fully convolutional path's per-patch part).
+  lfnet::nn::BranchSelection none;
+  none.ae = none.cnn = false;
+  auto base = net->forward_all(y, phase, none);
+  CHECK_FALSE(base.ae.defined());
+  CHECK_FALSE(base.cnn.defined());
+  lfnet::test::require_close(base.output, all.base, 0.0);
   // Both selected: the same as the default.
   lfnet::test::require_close(net->forward_all(y, phase, {}).output, all.output, 0.0);
 }

@@ -354,7 +354,8 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   }
   if (options_.residual == "pinv") out.base = apply_phase_stack(y, ph, base).view(shape);
   if (options_.residual == "adjoint") out.base = x0.view(shape);
-  if (out.base.defined()) out.output = out.output + out.base;
+  // With no branch run (a selection that leaves none), the output is the base alone.
+  if (out.base.defined()) out.output = out.output.defined() ? out.output + out.base : out.base;
   return out;
 }
 
