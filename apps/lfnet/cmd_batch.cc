@@ -29,7 +29,7 @@ namespace {
 struct BatchArgs {
   std::string in, out, methods, model, dictionary, dict_method = "omp", phi, mode = "sensor";
   int64_t stride = 5;
-  int64_t batch = 2048;
+  int64_t batch = 1024;
   double noise = 0;
   uint64_t seed = 0;
   bool window = false, post_filter = false, match_mean = false, force = false;

@@ -9,6 +9,7 @@
 #include "command.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/methods.h"
@@ -23,9 +24,11 @@ struct EvaluateArgs {
   std::string model, lf, scene, phi, views, mode = "sensor", method, dictionary, json, out;
   double noise = 0;
   int64_t stride = 5;
-  int64_t batch = 2048;
+  int64_t batch = 1024;
   uint64_t seed = 0;
   bool window = false;
+  std::string device = "cpu";
+  std::string precision = "float32";
 };
 
 void run_evaluate(const EvaluateArgs& a) {
@@ -49,6 +52,14 @@ void run_evaluate(const EvaluateArgs& a) {
       context.net = model.net;
       context.script = model.script;
       network_patch = model.network.patch;
+      if (context.net) {
+        context.net->to(parse_device(a.device));
+        nn::set_cnn_precision(context.net, nn::parse_precision(a.precision));
+      } else {
+        LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == "float32",
+                       "--device and --precision apply to checkpoints; ", a.model,
+                       " is an exported TorchScript file");
+      }
     }
   } else {
     LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
@@ -86,6 +97,8 @@ void run_evaluate(const EvaluateArgs& a) {
   torch::Tensor estimate;
   auto record = evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
   if (!a.model.empty()) record["model"] = a.model;
+  record["device"] = a.device;
+  if (recon::needs_network(method)) record["precision"] = a.precision;
   const double psnr = record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>();
   std::printf("%s on %s (%s, %s, stride %lld, noise %.3g): PSNR %.2f dB, SSIM %.4f, %.2f s\n",
               method.c_str(), truths[0].name.c_str(), spec.label().c_str(), a.mode.c_str(),
@@ -122,7 +135,13 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--seed", a->seed, "noise seed");
   cmd->add_option("--batch", a->batch, "patches per forward pass")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", a->window, "weight patch estimates by a smooth window when stitching");
-  cmd->callback([a] { run_evaluate(*a); });
+  cmd->add_option("--device", a->device, "cpu or cuda[:K] for the network (default cpu)");
+  cmd->add_option("--precision", a->precision, "float32 (default) or bfloat16 for the CNN branch")
+      ->check(CLI::IsMember({"float32", "bfloat16"}));
+  cmd->callback([a] {
+    parse_device(a->device);  // a clear error before any work
+    run_evaluate(*a);
+  });
 }
 
 }  // namespace lfnet::app

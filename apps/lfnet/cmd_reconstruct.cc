@@ -61,6 +61,15 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--match-mean", q.match_mean,
                 "scale real measurements to the training data's mean (the paper's step)");
   cmd->add_flag("--force", a->force, "replace an existing output folder");
+  cmd->add_option("--device", q.device, "cpu or cuda[:K] (default cpu)");
+  cmd->add_option("--cnn-mode", q.cnn_mode,
+                  "CNN branch per patch ('patches', default) or once over the light field in "
+                  "tiles ('full'; docs/performance.md)")
+      ->check(CLI::IsMember({"patches", "full"}));
+  cmd->add_option("--tile", q.tile, "tile size of --cnn-mode full (default 128)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--precision", q.precision, "float32 (default) or bfloat16 for the CNN branch")
+      ->check(CLI::IsMember({"float32", "bfloat16"}));
   cmd->callback([a] { run_reconstruct(*a); });
 }
 

@@ -9,6 +9,7 @@
 #include "dist_flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/runtime.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
@@ -27,6 +28,7 @@ struct TrainArgs {
   std::string resume;
   std::string init;
   std::string stage;  // train only this stage
+  std::string device;  // overrides the config's training.device ("" keeps it)
   bool force = false;
   dist::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
   bool check = false;  // read and check the config, then stop
@@ -40,6 +42,7 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
   if (!a.init.empty()) s += " --init " + a.init;
   if (!a.stage.empty()) s += " --stage " + a.stage;
   if (a.dist.world_size > 1) s += " --world-size " + std::to_string(a.dist.world_size);
+  if (!a.device.empty()) s += " --device " + a.device;
   return s;
 }
 
@@ -50,6 +53,10 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
   auto comm = join_job(args.dist);
   const bool lead = comm->rank() == 0;
   ExperimentConfig config = ExperimentConfig::load(args.config, args.scale);
+  if (!args.device.empty()) {
+    parse_device(args.device);  // a clear error before any data is prepared
+    config.training["device"] = args.device;
+  }
   const std::string out = args.out.empty() ? "out/" + config.name : args.out;
   if (args.check) {
     for (const auto& s : config.stages) {
@@ -129,6 +136,7 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
   cmd->add_option("--scale", a.scale, "config scale: quick or paper (default: the config's)");
   cmd->add_flag("--force", a.force, "write into an existing non-empty run folder");
   cmd->add_flag("--check", a.check, "only read and check the config (every stage), then stop");
+  cmd->add_option("--device", a.device, "cpu or cuda[:K]: where to train (default: the config's training.device, cpu)");
 }
 
 }  // namespace

@@ -33,6 +33,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions& global);
 void add_report_command(CLI::App& app, const GlobalOptions& global);
 void add_export_command(CLI::App& app, const GlobalOptions& global);
 void add_launch_command(CLI::App& app, const GlobalOptions& global);
+void add_bench_command(CLI::App& app, const GlobalOptions& global);
 
 // Render options for a scene file: image textures are read with lfnet::io::read_image, relative
 // to the scene file's folder ("" for none). Defined in cmd_render.cc; any subcommand that renders

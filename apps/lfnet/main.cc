@@ -24,6 +24,7 @@ int fail(const std::string& what) {
 
 int main(int argc, char** argv) {
   using namespace lfnet::app;
+  lfnet::configure_allocator();
   CLI::App app{"lfnet: compressive light field reconstruction from coded sensor images"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "lfnet 0.1.0");
@@ -46,7 +47,7 @@ int main(int argc, char** argv) {
       add_info_command,  add_render_command,     add_simulate_command,
       add_train_command, add_experiment_command, add_evaluate_command,
       add_reconstruct_command, add_batch_command, add_report_command,
-      add_export_command, add_launch_command};
+      add_export_command, add_launch_command, add_bench_command};
   for (const auto& add : commands) add(app, global);
 
   try {

@@ -16,6 +16,8 @@
 #include "lfnet/core/patches.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
+#include "lfnet/core/runtime.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/post_filter.h"
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/recon/methods.h"
@@ -567,10 +569,21 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   recon::ReconstructOptions o = a.options;
   recon::PatchSolver solver;
   double train_mean = 0;
+  const bool full = recon::parse_cnn_mode(a.cnn_mode) == recon::CnnMode::kFull;
+  LFNET_CHECK_AS(ConfigError, !full || method == "net" || method == "cnn",
+                 "--cnn-mode full needs --method net or cnn, not '", method, "'");
   if (model) {
     model->check_phi(spec.to_json());
     o.patch_h = model->network.patch.height;
     o.patch_w = model->network.patch.width;
+    if (model->net) {
+      model->net->to(parse_device(a.device));
+      nn::set_cnn_precision(model->net, nn::parse_precision(a.precision));
+    } else {
+      LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == "float32" && !full,
+                     "--device, --precision and --cnn-mode full apply to checkpoints; ", a.model,
+                     " is an exported TorchScript file");
+    }
     solver = model->solver(method);
     train_mean = model->measurement_mean();
   } else if (method == "pinv" || method == "adjoint") {
@@ -603,6 +616,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     for (int64_t ch = 0; ch < c; ++ch) {
       auto sensor = acq.sensor[ch].clone();
       if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
+      if (full) {
+        channels.push_back(recon::reconstruct_sensor_fully_convolutional(
+            model->net, method, *phi, sensor, o, a.tile));
+        if (progress) progress((ch + 1) * per_channel, c * per_channel);
+        continue;
+      }
       channels.push_back(recon::reconstruct_sensor(
           *phi, sensor, solver, o, [&](int64_t done, int64_t total) {
             if (progress) progress(ch * per_channel + done, c * total);
@@ -611,6 +630,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   } else {
     LFNET_CHECK_AS(ConfigError, !a.match_mean,
                    "--match-mean applies to sensor images, not to per_patch measurements");
+    LFNET_CHECK_AS(ConfigError, !full,
+                   "--cnn-mode full needs a sensor image, not per-patch measurements");
     const auto& g = acq.meta.at("grid");
     const int64_t patch = g.at("patch").get<int64_t>();
     o.stride = g.at("stride").get<int64_t>();
@@ -650,6 +671,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"match_mean_scale", scale},
               {"post_filter", a.post_filter},
               {"window", o.window},
+              {"device", a.device},
+              {"cnn_mode", a.cnn_mode},
+              {"precision", a.precision},
               {"lfnet_version", kVersion}};
   return r;
 }

@@ -211,6 +211,10 @@ struct ReconstructRequest {
   recon::ReconstructOptions options;  // stride (sensor mode), batch, window
   bool match_mean = false;            // scale the measurements to the training mean
   bool post_filter = false;           // suppress artefacts with the stride's period
+  std::string device = "cpu";         // cpu or cuda[:K], for checkpoints' networks
+  std::string cnn_mode = "patches";   // patches, or full (the CNN branch once, in tiles)
+  int64_t tile = 128;                 // tile of cnn_mode full
+  std::string precision = "float32";  // float32 or bfloat16 for the CNN branch
 };
 
 // A reconstruction and its record (method, model, sensor, stride, seconds, phi, mode, shape).

@@ -245,3 +245,62 @@ TEST_CASE("the net trains: gradients reach every parameter", "[nn][network]") {
   }
   for (const auto& b : net->named_buffers()) CHECK_FALSE(b.value().requires_grad());
 }
+
+TEST_CASE("forward_all runs only the selected branches", "[nn][network]") {
+  auto o = small_options("net");
+  o.residual = "pinv";
+  torch::manual_seed(5);
+  LightFieldNet net(o);
+  net->set_phi(random_phi(o, 2, 11));
+  auto y = torch::rand({6, o.measurement_size()});
+  auto phase = torch::tensor({0, 1, 1, 0, 1, 0}, torch::kInt64);
+  torch::NoGradGuard no_grad;
+  auto all = net->forward_all(y, phase);
+  lfnet::nn::BranchSelection ae_only;
+  ae_only.cnn = false;
+  auto ae = net->forward_all(y, phase, ae_only);
+  CHECK_FALSE(ae.cnn.defined());
+  lfnet::test::require_close(ae.ae, all.ae, 0.0);
+  lfnet::test::require_close(ae.output, all.ae + all.base, 1e-6);
+  lfnet::nn::BranchSelection cnn_only;
+  cnn_only.ae = false;
+  auto cnn = net->forward_all(y, phase, cnn_only);
+  CHECK_FALSE(cnn.ae.defined());
+  lfnet::test::require_close(cnn.output, all.cnn + all.base, 1e-6);
+  // Neither: the residual base alone (the fully convolutional path's per-patch part).
+  lfnet::nn::BranchSelection none;
+  none.ae = none.cnn = false;
+  auto base = net->forward_all(y, phase, none);
+  CHECK_FALSE(base.ae.defined());
+  CHECK_FALSE(base.cnn.defined());
+  lfnet::test::require_close(base.output, all.base, 0.0);
+  // Both selected: the same as the default.
+  lfnet::test::require_close(net->forward_all(y, phase, {}).output, all.output, 0.0);
+}
+
+TEST_CASE("the CNN branch in bfloat16 stays close to float32 and keeps float32 outside",
+          "[nn][network]") {
+  auto o = small_options("net");
+  torch::manual_seed(6);
+  LightFieldNet net(o);
+  net->set_phi(random_phi(o, 1, 12));
+  auto y = torch::rand({8, o.measurement_size()});
+  torch::NoGradGuard no_grad;
+  auto want = net->forward_all(y);
+  lfnet::nn::set_cnn_precision(net, lfnet::nn::Precision::kBFloat16);
+  CHECK(net->cnn->convs[0]->weight.scalar_type() == torch::kBFloat16);
+  CHECK(net->ae->fc[0]->weight.scalar_type() == torch::kFloat32);
+  auto got = net->forward_all(y);
+  REQUIRE(got.output.scalar_type() == torch::kFloat32);
+  // bfloat16 keeps 8 mantissa bits: relative error ~2^-8 per rounding.
+  const double scale = want.cnn.abs().max().item<double>();
+  const double err = (got.cnn - want.cnn).abs().max().item<double>();
+  CHECK(err > 0.0);
+  CHECK(err < 0.03 * scale);
+  lfnet::test::require_close(got.ae, want.ae, 0.0);
+  lfnet::nn::set_cnn_precision(net, lfnet::nn::Precision::kFloat32);
+  CHECK(net->cnn->convs[0]->weight.scalar_type() == torch::kFloat32);
+  CHECK(lfnet::nn::parse_precision("bfloat16") == lfnet::nn::Precision::kBFloat16);
+  CHECK(lfnet::nn::to_string(lfnet::nn::Precision::kFloat32) == "float32");
+  CHECK_THROWS_AS(lfnet::nn::parse_precision("half"), lfnet::ConfigError);
+}

@@ -3,7 +3,14 @@
 #include <torch/torch.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <thread>
+
+#include "lfnet/core/error.h"
+
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 namespace lfnet {
 
@@ -15,5 +22,35 @@ int configure_threads(int requested) {
 }
 
 int thread_count() { return torch::get_num_threads(); }
+
+bool configure_allocator() {
+#if defined(__GLIBC__)
+  if (std::getenv("MALLOC_MMAP_THRESHOLD_") != nullptr) return false;
+  constexpr int kOneGb = 1 << 30;
+  return mallopt(M_MMAP_THRESHOLD, kOneGb) == 1 && mallopt(M_TRIM_THRESHOLD, kOneGb) == 1 &&
+         mallopt(M_TOP_PAD, 64 << 20) == 1;
+#else
+  return false;
+#endif
+}
+
+c10::Device parse_device(const std::string& name) {
+  const bool cuda = name == "cuda" || name.rfind("cuda:", 0) == 0;
+  LFNET_CHECK_AS(ConfigError, name == "cpu" || cuda, "unknown device '", name,
+                 "' (known: cpu, cuda, cuda:K)");
+  if (!cuda) return c10::Device(c10::kCPU);
+  LFNET_CHECK_AS(ConfigError, torch::cuda::is_available(),
+                 "device '", name, "' asked for, but CUDA is not available (this LibTorch was "
+                 "built without CUDA or the machine has no GPU); use --device cpu");
+  try {
+    c10::Device device(name);
+    LFNET_CHECK_AS(ConfigError, device.index() < static_cast<int>(torch::cuda::device_count()),
+                   "device '", name, "': this machine has ", torch::cuda::device_count(),
+                   " CUDA device(s)");
+    return device;
+  } catch (const c10::Error& e) {
+    throw ConfigError("device '" + name + "' is not a valid device name");
+  }
+}
 
 }  // namespace lfnet

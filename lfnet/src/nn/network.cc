@@ -186,12 +186,13 @@ CnnBranchImpl::CnnBranchImpl(const NetworkOptions& options) {
 torch::Tensor CnnBranchImpl::forward(const torch::Tensor& x) {
   LFNET_CHECK(x.dim() == 6 && x.size(1) == 1, "CNN branch: expected (B, 1, U, V, h, w), got ",
               x.sizes());
-  auto z = x.transpose(1, 2);  // (B, U, 1, V, h, w): u-major, free for one channel
+  // (B, U, 1, V, h, w): u-major, free for one channel; in the weights' type (set_cnn_precision)
+  auto z = x.transpose(1, 2).to(convs.front()->weight.scalar_type());
   for (size_t i = 0; i < convs.size(); ++i) {
     z = convs[i]->forward_u_major(z);
     if (i + 1 < convs.size()) z = torch::relu_(z);
   }
-  return z.transpose(1, 2).contiguous();
+  return z.transpose(1, 2).to(x.scalar_type()).contiguous();
 }
 
 // ---- Phi stacks ----------------------------------------------------------------------------
@@ -237,6 +238,21 @@ torch::Tensor map_measurement_weights(const torch::Tensor& weight, const torch::
   auto pinv_t = at::linalg_solve(gram, b);  // (M_B, D) = (Phi_B^+)^T
   auto mapped = weight.to(torch::kFloat64).matmul(phi_a.to(torch::kFloat64)).matmul(pinv_t.t());
   return mapped.to(weight.scalar_type());
+}
+
+Precision parse_precision(const std::string& name) {
+  if (name == "float32") return Precision::kFloat32;
+  if (name == "bfloat16") return Precision::kBFloat16;
+  throw ConfigError("unknown precision '" + name + "' (known: float32, bfloat16)");
+}
+
+std::string to_string(Precision precision) {
+  return precision == Precision::kBFloat16 ? "bfloat16" : "float32";
+}
+
+void set_cnn_precision(LightFieldNet& net, Precision precision) {
+  if (!net->options().has_cnn()) return;
+  net->cnn->to(precision == Precision::kBFloat16 ? torch::kBFloat16 : torch::kFloat32);
 }
 
 int64_t parameter_count(const torch::nn::Module& module) {
@@ -313,16 +329,22 @@ torch::Tensor LightFieldNetImpl::scaled_adjoint(const torch::Tensor& y,
 }
 
 NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torch::Tensor& phase) {
+  return forward_all(y, phase, BranchSelection{});
+}
+
+NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torch::Tensor& phase,
+                                              BranchSelection run) {
   auto ph = check_phase(y, phase);
   const auto& p = options_.patch;
   const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
+  const bool run_ae = run.ae && options_.has_ae(), run_cnn = run.cnn && options_.has_cnn();
   const bool need_adjoint =
-      options_.has_cnn() || options_.ae.input == "adjoint" || options_.residual == "adjoint";
+      run_cnn || (run_ae && options_.ae.input == "adjoint") || options_.residual == "adjoint";
   torch::Tensor x0 = need_adjoint ? scaled_adjoint(y, ph) : torch::Tensor();
 
   NetworkOutputs out;
-  if (options_.has_ae()) out.ae = ae->forward(options_.ae.input == "adjoint" ? x0 : y);
-  if (options_.has_cnn()) out.cnn = cnn->forward(x0.view(shape));
+  if (run_ae) out.ae = ae->forward(options_.ae.input == "adjoint" ? x0 : y);
+  if (run_cnn) out.cnn = cnn->forward(x0.view(shape));
   if (out.ae.defined() && out.cnn.defined()) {
     const double a = options_.head_weights[0], b = options_.head_weights[1];
     // One fused kernel: lerp(cnn, ae, a) = (1 - a) cnn + a ae when the weights sum to 1.
@@ -332,7 +354,8 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   }
   if (options_.residual == "pinv") out.base = apply_phase_stack(y, ph, base).view(shape);
   if (options_.residual == "adjoint") out.base = x0.view(shape);
-  if (out.base.defined()) out.output = out.output + out.base;
+  // With no branch run (a selection that leaves none), the output is the base alone.
+  if (out.base.defined()) out.output = out.output.defined() ? out.output + out.base : out.base;
   return out;
 }
 

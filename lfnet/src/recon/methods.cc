@@ -26,16 +26,22 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
   LFNET_CHECK_AS(ConfigError, method == "net" || o.branches == "net" || o.branches == method,
                  "the model was trained as '", o.branches, "' and has no '", method, "' branch");
   net->eval();
-  return [net, method](const torch::Tensor& y, const torch::Tensor& phase) mutable {
+  // The `ae` and `cnn` methods run their branch alone. Measurements go to the net's device
+  // and patches come back to the CPU, where they are stitched.
+  nn::BranchSelection run;
+  run.ae = method != "cnn";
+  run.cnn = method != "ae";
+  return [net, method, run](const torch::Tensor& y, const torch::Tensor& phase) mutable {
     torch::InferenceMode guard;
-    auto out = net->forward_all(y, phase);
+    const auto device = net->phi.device();
+    auto out = net->forward_all(y.to(device), phase.defined() ? phase.to(device) : phase, run);
     torch::Tensor patch = out.output;
     if (method == "ae" && net->options().branches == "net") {
       patch = out.base.defined() ? out.ae + out.base : out.ae;
     } else if (method == "cnn" && net->options().branches == "net") {
       patch = out.base.defined() ? out.cnn + out.base : out.cnn;
     }
-    return patch.reshape({y.size(0), -1});
+    return patch.reshape({y.size(0), -1}).to(torch::kCPU);
   };
 }
 

@@ -10,6 +10,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/core/runtime.h"
 
 namespace lfnet::train {
 
@@ -117,6 +118,7 @@ void TrainerOptions::read(JsonReader& reader) {
   reader.get("max_skipped_batches", max_skipped_batches);
   reader.get("out_dir", out_dir);
   reader.get("progress", progress);
+  reader.get("device", device);
   with_path(reader, [&] { validate(); });
 }
 
@@ -135,7 +137,8 @@ nlohmann::json TrainerOptions::to_json() const {
           {"on_nonfinite", on_nonfinite},
           {"max_skipped_batches", max_skipped_batches},
           {"out_dir", out_dir},
-          {"progress", progress}};
+          {"progress", progress},
+          {"device", device}};
 }
 
 void TrainerOptions::validate() const {
@@ -144,6 +147,9 @@ void TrainerOptions::validate() const {
   };
   if (stage != "ae" && stage != "cnn" && stage != "joint") {
     fail("stage", "'" + stage + "' is unknown (known: ae, cnn, joint)");
+  }
+  if (device != "cpu" && device != "cuda" && device.rfind("cuda:", 0) != 0) {
+    fail("device", "'" + device + "' is unknown (known: cpu, cuda, cuda:K)");
   }
   if (epochs < 1) fail("epochs", "must be >= 1");
   if (batch_size < 1) fail("batch_size", "must be >= 1");
@@ -242,8 +248,8 @@ TensorMap adam_state(const torch::optim::Adam& adam, const torch::nn::Module& mo
     auto it = state.find(param_key(p.value()));
     if (it == state.end()) continue;
     const auto& s = static_cast<const torch::optim::AdamParamState&>(*it->second);
-    out[p.key() + "/exp_avg"] = s.exp_avg().detach().contiguous().clone();
-    out[p.key() + "/exp_avg_sq"] = s.exp_avg_sq().detach().contiguous().clone();
+    out[p.key() + "/exp_avg"] = s.exp_avg().detach().to(torch::kCPU).contiguous().clone();
+    out[p.key() + "/exp_avg_sq"] = s.exp_avg_sq().detach().to(torch::kCPU).contiguous().clone();
     out[p.key() + "/step"] = torch::tensor(s.step(), torch::kInt64);
   }
   return out;
@@ -265,8 +271,8 @@ void load_adam_state(torch::optim::Adam& adam, const torch::nn::Module& module,
     }
     auto s = std::make_unique<torch::optim::AdamParamState>();
     s->step(step->second.item<int64_t>());
-    s->exp_avg(m->second.clone());
-    s->exp_avg_sq(v->second.clone());
+    s->exp_avg(m->second.to(p.value().device()).clone());
+    s->exp_avg_sq(v->second.to(p.value().device()).clone());
     target[param_key(p.value())] = std::move(s);
     used += 3;
   }
@@ -278,6 +284,15 @@ void load_adam_state(torch::optim::Adam& adam, const torch::nn::Module& module,
 // ---- trainer -------------------------------------------------------------------------------
 
 namespace {
+
+// The batch on `device` (tensors already there are not copied).
+Batch to_device(const Batch& batch, const c10::Device& device) {
+  Batch out;
+  out.y = batch.y.defined() ? batch.y.to(device) : batch.y;
+  out.phase = batch.phase.defined() ? batch.phase.to(device) : batch.phase;
+  out.target = batch.target.defined() ? batch.target.to(device) : batch.target;
+  return out;
+}
 
 std::unique_ptr<torch::optim::Adam> make_adam(const nn::LightFieldNet& net,
                                               const TrainerOptions& o) {
@@ -303,6 +318,8 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
                  "the run needs the Phi spec of its measurements (RunInfo::phi)");
   LFNET_CHECK(net_->phi.abs().sum().item<double>() > 0,
               "the net's Phi is not set: call set_phi with the patch matrices first");
+  device_ = parse_device(options_.device);
+  net_->to(device_);
   optimizer_ = make_adam(net_, options_);
   state_.stage = options_.stage;
   comm_ = std::make_shared<dist::LocalCommunicator>();
@@ -417,7 +434,7 @@ void Trainer::resume(const std::string& path) {
                           "' from it with --init");
   }
   check_architecture(net_, ck.model, what);
-  if (!torch::equal(ck.model.at("phi"), net_->phi)) {
+  if (!torch::equal(ck.model.at("phi"), net_->phi.to(torch::kCPU))) {
     throw CheckpointError(what + " has other Phi matrices than this run although the Phi spec "
                           "is the same (did the Phi implementation change?); finetune with --init");
   }
@@ -441,7 +458,8 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   auto ck = load_checkpoint(path);
   const auto old_phi = ck.model.count("phi") ? ck.model.at("phi") : torch::Tensor();
   const bool phi_changed = ck.phi != run_.phi || !old_phi.defined() ||
-                           old_phi.sizes() != net_->phi.sizes() || !torch::equal(old_phi, net_->phi);
+                           old_phi.sizes() != net_->phi.sizes() ||
+                           !torch::equal(old_phi, net_->phi.to(torch::kCPU));
   const bool fc1_reads_measurements = net_->options().ae.input == "measurements";
   InitReport report;
   {
@@ -460,7 +478,8 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
         if (old_phi.defined() && old_phi.size(0) == 1 && net_->phases() == 1 &&
             src.dim() == 2 && src.size(0) == p.value().size(0) &&
             src.size(1) == old_phi.size(1)) {
-          p.value().copy_(nn::map_measurement_weights(src, old_phi[0], net_->phi[0],
+          p.value().copy_(nn::map_measurement_weights(src, old_phi[0],
+                                                      net_->phi[0].to(torch::kCPU),
                                                       net_->options().pinv_lambda));
           report.mapped.push_back(name);
         } else {
@@ -569,7 +588,7 @@ Evaluation Trainer::evaluate(BatchSource& source) {
   const int64_t world = comm_->world_size(), rank = comm_->rank();
   for (size_t j = 0; j < batches.size(); ++j) {
     if (static_cast<int64_t>(j) % world != rank) continue;  // another rank's share
-    const auto& batch = batches[j];
+    const Batch batch = to_device(batches[j], device_);
     check_batch(batch, "validation batch");
     auto pred = net_->forward(batch.y, batch.phase);
     loss_sum += loss_(pred, batch.target).item<double>() * static_cast<double>(batch.size());
@@ -619,7 +638,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     double loss_sum = 0, lr = options_.lr;
     int64_t seen = 0, skipped = 0;
     for (int64_t i = 0; i < batches; ++i) {
-      Batch batch = source.next_train();
+      Batch batch = to_device(source.next_train(), device_);
       // With several ranks a last batch smaller than the world leaves some ranks nothing.
       if (!distributed || batch.size() > 0) {
         check_batch(batch, "training batch " + std::to_string(i + 1) + " of epoch " +

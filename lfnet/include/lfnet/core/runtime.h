@@ -1,5 +1,9 @@
-// Process-wide runtime settings: thread counts.
+// Process-wide runtime settings: thread counts and the compute device.
 #pragma once
+
+#include <c10/core/Device.h>
+
+#include <string>
 
 namespace lfnet {
 
@@ -9,5 +13,17 @@ int configure_threads(int requested);
 
 // The intra-op thread count in effect.
 int thread_count();
+
+// Makes glibc's malloc keep large blocks (up to 1 GB) in its heap and reuse them rather than
+// map fresh zero-filled pages for every large tensor and unmap them when freed: batched
+// inference allocates the same few tens to hundreds of MB per batch, and the page faults cost
+// as much CPU time as the arithmetic (docs/performance.md, section 3). Returns false where
+// the C library has no such settings, or MALLOC_MMAP_THRESHOLD_ in the environment already
+// chose. Call once, before the work starts; a program's choice, not a library's.
+bool configure_allocator();
+
+// "cpu" or "cuda" (or "cuda:K") as a device. Throws ConfigError for other names and for CUDA
+// when this LibTorch has no CUDA or the machine no GPU, saying which.
+c10::Device parse_device(const std::string& name);
 
 }  // namespace lfnet

@@ -133,6 +133,13 @@ struct NetworkOutputs {
   torch::Tensor base;    // the residual base (undefined when residual is "none")
 };
 
+// Which branches forward_all runs (those the net has; a branch it lacks is never run).
+// Inference of one branch alone (the `ae` and `cnn` methods) need not pay for the other.
+struct BranchSelection {
+  bool ae = true;
+  bool cnn = true;
+};
+
 // The reconstruction network. Construct, then set_phi() with the Phi's patch matrices
 // (until then `phi` is a zero matrix of one phase).
 class LightFieldNetImpl : public torch::nn::Module {
@@ -143,6 +150,10 @@ class LightFieldNetImpl : public torch::nn::Module {
   // undefined when there is one phase. Returns (B, 1, U, V, h, w).
   torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {});
   NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase = {});
+  // The same with only the selected branches run; `output` combines those that ran (with
+  // their head weights when both did, else the one alone, plus the residual base).
+  NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase,
+                             BranchSelection run);
 
   // Replaces the Phi: `stack` is (P, N h w, U V h w) for any P >= 1. Recomputes the derived
   // buffers (adjoint_scale, base). Parameters are left alone (see remap_phi for fc1).
@@ -181,6 +192,22 @@ torch::Tensor pinv_stack(const torch::Tensor& stack, double lambda);
 // weight (H, M_A), phi_a (M_A, D), phi_b (M_B, D) -> (H, M_B).
 torch::Tensor map_measurement_weights(const torch::Tensor& weight, const torch::Tensor& phi_a,
                                       const torch::Tensor& phi_b, double lambda);
+
+// Arithmetic of the CNN branch's convolutions at inference.
+enum class Precision {
+  kFloat32,   // as trained
+  kBFloat16,  // bfloat16 weights and activations (8-bit mantissa), float32 accumulation in
+              // oneDNN; about 1.5 times faster on CPUs with AVX-512 BF16 (docs/performance.md)
+};
+
+// "float32" or "bfloat16"; anything else is a ConfigError.
+Precision parse_precision(const std::string& name);
+std::string to_string(Precision precision);
+
+// Converts the CNN branch's weights to `precision` (for inference: a net in bfloat16 is not
+// for training or saving). The branch casts its input to its weights' type and its output back
+// to the input's type, so the rest of the net is unchanged. No-op without a CNN branch.
+void set_cnn_precision(LightFieldNet& net, Precision precision);
 
 // Number of trainable parameters.
 int64_t parameter_count(const torch::nn::Module& module);

@@ -26,7 +26,7 @@ struct ReconstructOptions {
   int64_t patch_h = 9;       // spatial patch height h
   int64_t patch_w = 9;       // spatial patch width w
   int64_t stride = 5;        // patch stride; = patch size for non-overlapping patches
-  int64_t batch = 2048;      // patches per solver call; with the band, bounds peak memory
+  int64_t batch = 1024;      // patches per solver call; with the band, bounds peak memory
   bool window = false;       // weight patch estimates by a separable Hann-like window when stitching
   bool clamp = true;         // clamp the result to [0, 1]
   void validate() const;

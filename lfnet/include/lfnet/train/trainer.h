@@ -57,6 +57,9 @@ struct TrainerOptions {
   // the best validation PSNR, without Adam moments) whenever it improves; "" writes none.
   std::string out_dir;
   bool progress = true;  // a progress bar with ETA and loss on stderr
+  // Where the net trains: "cpu" or "cuda[:K]" (lfnet::parse_device). Batches are moved there;
+  // checkpoints always hold CPU tensors, so a run resumes on either.
+  std::string device = "cpu";
 
   static TrainerOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
@@ -183,6 +186,7 @@ class Trainer {
 
   nn::LightFieldNet net_;
   TrainerOptions options_;
+  c10::Device device_{c10::kCPU};
   RunInfo run_;
   std::unique_ptr<torch::optim::Adam> optimizer_;
   nn::ReconstructionLoss loss_;

@@ -1,0 +1,60 @@
+// Reconstruction with the CNN branch run once over the whole light field (in tiles) rather
+// than once per patch (DESIGN section 7; docs/performance.md).
+//
+// Patch stitching runs the CNN on every patch separately, zero-padded at the patch border, and
+// averages the overlapping estimates: at stride s every pixel is computed about (9 / s)^2 times.
+// Here the CNN's input is the stitched scaled adjoint s_p Phi_p^T y of the patches (for a Phi
+// that is periodic per pixel, the overlapping patches' estimates of a pixel differ only by
+// the scale s_p of their phase), and the CNN runs once over it: each output pixel sees its
+// true neighbours up to the receptive field (depth * (K - 1) / 2 pixels) instead of the zeros
+// past its patch's border. That is not what the net was trained on, so the result differs
+// from patch stitching; the autoencoder branch and the residual base still run per patch
+// and are stitched.
+#pragma once
+
+#include <torch/types.h>
+
+#include <cstdint>
+#include <string>
+
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/recon/reconstruct.h"
+
+namespace lfnet::recon {
+
+// How patch estimates of the CNN branch are formed.
+enum class CnnMode {
+  kPatches,  // per patch, stitched (the paper's way and the default)
+  kFull,     // once over the whole light field, in tiles
+};
+
+// "patches" or "full"; anything else is a ConfigError.
+CnnMode parse_cnn_mode(const std::string& name);
+std::string to_string(CnnMode mode);
+
+// Spatial tile of the fully convolutional pass, without its halo of depth * (K - 1) / 2
+// pixels on every side (the halo is recomputed, so larger tiles waste less).
+constexpr int64_t kDefaultCnnTile = 128;
+
+// The CNN branch over a whole single-channel light field x (U, V, H, W), in tiles of
+// `tile` x `tile` pixels with a halo; returns (U, V, H, W) float32 on the CPU. The result
+// equals running the branch on the whole light field at once with zero padding at the light
+// field's border (activations outside the light field are zeroed after every layer), to float
+// rounding. Runs on the device of the branch's weights.
+torch::Tensor cnn_over_light_field(nn::CnnBranch cnn, const torch::Tensor& x,
+                                   int64_t tile = kDefaultCnnTile);
+
+// Reconstructs a grey light field (1, U, V, H, W) from a sensor image (N, H, W) with `net`'s
+// method `method` (net or cnn; ae has no CNN and is a ConfigError), the CNN branch run by
+// cnn_over_light_field over the stitched scaled adjoint. The autoencoder branch (weighted by
+// its head weight) and the residual base are computed per patch and stitched as in
+// reconstruct_sensor with `options`.
+torch::Tensor reconstruct_sensor_fully_convolutional(nn::LightFieldNet net,
+                                                     const std::string& method,
+                                                     const optics::Phi& phi,
+                                                     const torch::Tensor& sensor,
+                                                     const ReconstructOptions& options,
+                                                     int64_t tile = kDefaultCnnTile);
+
+}  // namespace lfnet::recon

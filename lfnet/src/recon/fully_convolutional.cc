@@ -1,0 +1,111 @@
+#include "lfnet/recon/fully_convolutional.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+
+#include "lfnet/core/error.h"
+#include "lfnet/recon/methods.h"
+
+namespace lfnet::recon {
+
+CnnMode parse_cnn_mode(const std::string& name) {
+  if (name == "patches") return CnnMode::kPatches;
+  if (name == "full") return CnnMode::kFull;
+  throw ConfigError("unknown CNN mode '" + name + "' (known: patches, full)");
+}
+
+std::string to_string(CnnMode mode) { return mode == CnnMode::kFull ? "full" : "patches"; }
+
+torch::Tensor cnn_over_light_field(nn::CnnBranch cnn, const torch::Tensor& x, int64_t tile) {
+  LFNET_CHECK_AS(ConfigError, tile >= 1, "the CNN tile must be at least 1 pixel, got ", tile);
+  LFNET_CHECK(x.dim() == 4, "cnn_over_light_field: expected (U, V, H, W), got ", x.sizes());
+  LFNET_CHECK(!cnn->convs.empty(), "cnn_over_light_field: the CNN branch has no layers");
+  torch::InferenceMode guard;
+  const auto device = cnn->convs.front()->weight.device();
+  const auto dtype = cnn->convs.front()->weight.scalar_type();  // set_cnn_precision
+  const int64_t u = x.size(0), v = x.size(1), height = x.size(2), width = x.size(3);
+  int64_t halo = 0;
+  for (const auto& conv : cnn->convs) halo += conv->options().kernel / 2;
+  // Zero-pad by the halo: a tile then always reads a full (tile + 2 halo)^2 window.
+  auto padded = torch::constant_pad_nd(x.to(torch::kFloat32), {halo, halo, halo, halo});
+  auto inside = torch::constant_pad_nd(torch::ones({height, width}), {halo, halo, halo, halo});
+  auto out = torch::empty({u, v, height, width});
+  for (int64_t y0 = 0; y0 < height; y0 += tile) {
+    const int64_t th = std::min(tile, height - y0);
+    for (int64_t x0 = 0; x0 < width; x0 += tile) {
+      const int64_t tw = std::min(tile, width - x0);
+      const int64_t ph = th + 2 * halo, pw = tw + 2 * halo;
+      // u-major (1, U, C = 1, V, h, w)
+      auto z = padded.narrow(2, y0, ph).narrow(3, x0, pw).unsqueeze(0).unsqueeze(2).to(device, dtype);
+      // 1 inside the light field, 0 outside: activations there must act as zero padding.
+      auto mask =
+          inside.narrow(0, y0, ph).narrow(1, x0, pw).to(device, dtype).view({1, 1, 1, 1, ph, pw});
+      const bool at_border = y0 < halo || x0 < halo || y0 + th + halo > height ||
+                             x0 + tw + halo > width;
+      for (size_t i = 0; i < cnn->convs.size(); ++i) {
+        z = cnn->convs[i]->forward_u_major(z);
+        if (i + 1 < cnn->convs.size()) {
+          z = torch::relu_(z);
+          if (at_border) z.mul_(mask);
+        }
+      }
+      out.narrow(2, y0, th)
+          .narrow(3, x0, tw)
+          .copy_(z.squeeze(2).squeeze(0).narrow(2, halo, th).narrow(3, halo, tw));
+    }
+  }
+  return out;
+}
+
+torch::Tensor reconstruct_sensor_fully_convolutional(nn::LightFieldNet net,
+                                                     const std::string& method,
+                                                     const optics::Phi& phi,
+                                                     const torch::Tensor& sensor,
+                                                     const ReconstructOptions& options,
+                                                     int64_t tile) {
+  options.validate();
+  LFNET_CHECK_AS(ConfigError, method == "net" || method == "cnn",
+                 "a fully convolutional CNN pass needs the method net or cnn, not '", method, "'");
+  const auto& o = net->options();
+  LFNET_CHECK_AS(ConfigError, o.has_cnn(), "the model was trained as '", o.branches,
+                 "' and has no CNN branch to run fully convolutionally");
+  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != "ae", "the model has no '",
+                 method, "' branch");
+  net->eval();
+  // Everything here is inference: the tensors made under the guard are updated in place.
+  torch::InferenceMode inference;
+  const auto device = net->phi.device();
+  ReconstructOptions raw = options;
+  raw.clamp = false;
+  // The CNN's input: the stitched scaled adjoint of the patches.
+  PatchSolver adjoint = [&](const torch::Tensor& y, const torch::Tensor& phase) {
+    torch::InferenceMode guard;
+    return net->adjoint(y.to(device), phase.defined() ? phase.to(device) : phase)
+        .to(torch::kCPU);
+  };
+  auto x0 = reconstruct_sensor(phi, sensor, adjoint, raw);  // (1, U, V, H, W)
+  const double cnn_weight = method == "net" && o.branches == "net" ? o.head_weights[1] : 1.0;
+  auto out = cnn_over_light_field(net->cnn, x0[0], tile).mul_(cnn_weight).unsqueeze(0);
+  // The rest per patch: the weighted autoencoder branch and the residual base.
+  const bool ae = method == "net" && o.has_ae();
+  if (ae || o.residual != "none") {
+    nn::BranchSelection run;
+    run.ae = ae;
+    run.cnn = false;
+    const double ae_weight = o.branches == "net" ? o.head_weights[0] : 1.0;
+    PatchSolver rest = [&](const torch::Tensor& y, const torch::Tensor& phase) {
+      torch::InferenceMode guard;
+      auto r = net->forward_all(y.to(device), phase.defined() ? phase.to(device) : phase, run);
+      torch::Tensor patch = r.ae.defined() ? r.ae * ae_weight : torch::Tensor();
+      if (r.base.defined()) patch = patch.defined() ? patch + r.base : r.base;
+      return patch.reshape({y.size(0), -1}).to(torch::kCPU);
+    };
+    out.add_(reconstruct_sensor(phi, sensor, rest, raw));
+  }
+  LFNET_CHECK_AS(NumericalError, torch::isfinite(out).all().item<bool>(),
+                 "the fully convolutional reconstruction produced NaN or infinite values");
+  return options.clamp ? out.clamp_(0, 1) : out;
+}
+
+}  // namespace lfnet::recon

@@ -1,0 +1,71 @@
+// lfnet bench: the report's contract (docs/performance.md), on a small light field.
+#include <catch2/catch.hpp>
+
+#include <cmath>
+
+#include "lfnet/core/json.h"
+#include "support/test_support.h"
+
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+
+TEST_CASE("lfnet bench reports every case with its own figures", "[app]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string json = tmp / "bench.json";
+  REQUIRE(run_command(lfnet_binary() +
+                          " --threads 1 bench --height 36 --width 45 --methods net,cnn,pinv,dict"
+                          " --strides 9,4 --dict-atoms 40 --conv-batch 4 --reps 1 --json " + json,
+                      out) == 0);
+  INFO(out);
+  const auto report = lfnet::read_json_file(json);
+  CHECK(report["gemm_gflops"].get<double>() > 0.1);
+  REQUIRE(report["conv4d"].size() == 4);
+  for (const auto& k : report["conv4d"]) CHECK(k["gflops"].get<double>() > 0);
+  REQUIRE(report["cases"].size() == 8);
+  for (const auto& c : report["cases"]) {
+    INFO(c.dump());
+    REQUIRE_FALSE(c.contains("error"));
+    const int64_t stride = c["stride"].get<int64_t>();
+    // 36 x 45 in 9 x 9 patches: 4 x 5 at stride 9, 8 x 10 at stride 4 (the last row and
+    // column of patches are moved in to end at the border).
+    CHECK(c["patches"].get<int64_t>() == (stride == 9 ? 20 : 80));
+    CHECK(c["seconds"].get<double>() > 0);
+    CHECK(c["patches_per_second"].get<double>() ==
+          Approx(c["patches"].get<double>() / c["seconds"].get<double>()));
+    CHECK(c["peak_rss_mb"].get<double>() >= c["rss_before_mb"].get<double>());
+    CHECK(c["peak_rss_mb"].get<double>() > 10);
+    CHECK(std::isfinite(c["psnr_db"].get<double>()));
+    CHECK(c["gemm_fraction"].get<double>() > 0);
+  }
+  // The linear baseline recovers a smooth scene far better than an untrained net does.
+  const auto& cases = report["cases"];
+  CHECK(cases[2]["method"] == "pinv");
+  CHECK(cases[2]["psnr_db"].get<double>() > cases[0]["psnr_db"].get<double>() + 3);
+  CHECK(cases[2]["psnr_db"].get<double>() > 15);
+  // net runs both branches, cnn one: more FLOPs per patch for net.
+  CHECK(cases[0]["flops_per_patch"].get<double>() > cases[1]["flops_per_patch"].get<double>());
+}
+
+TEST_CASE("lfnet bench runs the CNN fully convolutionally on request", "[app]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string json = tmp / "bench.json";
+  REQUIRE(run_command(lfnet_binary() +
+                          " --threads 1 bench --height 30 --width 30 --methods cnn --strides 3"
+                          " --skip-kernels --reps 1 --cnn-mode full --tile 16 --in-process --json " +
+                          json,
+                      out) == 0);
+  INFO(out);
+  const auto c = lfnet::read_json_file(json)["cases"][0];
+  CHECK(c["cnn_mode"] == "full");
+  CHECK(c["tile"] == 16);
+  CHECK(std::isfinite(c["psnr_db"].get<double>()));
+}
+
+TEST_CASE("lfnet bench refuses a device it does not have", "[app]") {
+  std::string out;
+  CHECK(run_command(lfnet_binary() + " bench --device tpu --methods pinv", out) != 0);
+  CHECK(out.find("unknown device 'tpu'") != std::string::npos);
+  CHECK(run_command(lfnet_binary() + " bench --methods pinv --cnn-mode tiles", out) != 0);
+}
