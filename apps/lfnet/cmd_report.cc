@@ -197,7 +197,9 @@ std::string margins(const Section& s) {
   for (const auto& r : s.records) {
     std::string key;
     for (const auto& k : kSettings) {
-      if (k != "method") key += (key.empty() ? "" : ", ") + (k == "n" ? std::string("N") : k) + " " + setting(r, k);
+      if (k != "method" && !setting(r, k).empty()) {
+        key += (key.empty() ? "" : ", ") + (k == "n" ? std::string("N") : k) + " " + setting(r, k);
+      }
     }
     groups[key][r.value("method", "")] = number(r, "psnr_db");
   }

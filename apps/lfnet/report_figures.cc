@@ -237,7 +237,8 @@ void write_parallax_gif(const LightField& lf, const std::string& path, int64_t c
   const std::string tmp = path + ".tmp.gif";
   auto out = OIIO::ImageOutput::create(tmp);
   LFNET_CHECK_AS(IoError, out != nullptr, "cannot write GIF files: ", OIIO::geterror());
-  OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), 1, OIIO::TypeDesc::UINT8);
+  // GIF frames are RGB: the grey view in all three channels.
+  OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), 3, OIIO::TypeDesc::UINT8);
   const int fps[2] = {8, 1};
   spec.attribute("FramesPerSecond", OIIO::TypeRational, fps);
   spec.attribute("oiio:Movie", 1);
@@ -255,6 +256,8 @@ void write_parallax_gif(const LightField& lf, const std::string& path, int64_t c
                       .clamp(0, 1) * 255.0)
                      .round()
                      .to(torch::kUInt8)
+                     .unsqueeze(-1)
+                     .expand({h, w, 3})
                      .contiguous();
     LFNET_CHECK_AS(IoError, out->write_image(OIIO::TypeDesc::UINT8, frame.data_ptr()),
                    "cannot write ", tmp, ": ", out->geterror());

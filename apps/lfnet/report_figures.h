@@ -34,9 +34,9 @@ void plot_view_heatmap(const std::vector<std::vector<double>>& psnr, const std::
 // horizontal EPIs through the middle row, then |error| maps against the first (the truth),
 // scaled so 0.1 is white; PNG. All light fields are grey and of one size.
 void plot_views(const std::vector<LightField>& lfs, const std::vector<std::string>& titles,
-                const std::string& path, int64_t crop = 256);
+                const std::string& path, int64_t crop = 160);
 
 // An animated GIF that walks the views of `lf` along a loop of the angular border.
-void write_parallax_gif(const LightField& lf, const std::string& path, int64_t crop = 256);
+void write_parallax_gif(const LightField& lf, const std::string& path, int64_t crop = 160);
 
 }  // namespace lfnet::app
