@@ -208,7 +208,7 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
       c.stages.push_back(s);
       // Values (not only keys and types) are checked before any work starts.
       try {
-        c.stage_options(s).validate();
+        if (is_network_stage(s.name)) c.stage_options(s).validate();
       } catch (const ConfigError& e) {
         throw ConfigError("$.training (stage " + s.name + "): " + e.what());
       }
