@@ -4,7 +4,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -152,7 +151,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
   std::vector<NamedLightField> truths;
   MethodContext context;
   std::unique_ptr<optics::Phi> phi;
-  std::array<int64_t, 2> patch{9, 9};
+  std::optional<nn::PatchShape> patch;  // the model's, when there is one
   try {
     optics::PhiSpec spec;
     if (!a.model.empty()) {
@@ -160,7 +159,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
       spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
       context.net = model.net;
       context.script = model.script;
-      patch = {model.network.patch.height, model.network.patch.width};
+      patch = model.network.patch;
     } else {
       LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
                      "evaluating light-field folders needs --model or --phi");
@@ -179,17 +178,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
   }
   for (const auto& method : methods) {
     try {
-      eval::EvalOptions o;
-      o.mode = optics::parse_simulation_mode(a.mode);
-      if (a.noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{a.noise};
-      o.seed = a.seed;
-      o.reconstruct.stride = a.stride;
-      o.reconstruct.batch = a.batch;
-      o.reconstruct.window = a.window;
-      if (!a.model.empty()) {
-        o.reconstruct.patch_h = patch[0];
-        o.reconstruct.patch_w = patch[1];
-      }
+      const auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
+                                       patch);
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
       record["path"] = item.path;

@@ -83,17 +83,8 @@ void run_evaluate(const EvaluateArgs& a) {
   context.dictionary = a.dictionary;
   const auto truths = load_sources(sources, phi->rows(), phi->cols());
 
-  eval::EvalOptions o;
-  o.mode = optics::parse_simulation_mode(a.mode);
-  if (a.noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{a.noise};
-  o.seed = a.seed;
-  o.reconstruct.stride = a.stride;
-  o.reconstruct.batch = a.batch;
-  o.reconstruct.window = a.window;
-  if (network_patch) {
-    o.reconstruct.patch_h = network_patch->height;
-    o.reconstruct.patch_w = network_patch->width;
-  }
+  const auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
+                                   network_patch);
   torch::Tensor estimate;
   auto record = evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
   if (!a.model.empty()) record["model"] = a.model;

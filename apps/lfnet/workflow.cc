@@ -433,6 +433,23 @@ double ModelFile::measurement_mean() const {
   return config.contains("measurement_mean") ? config["measurement_mean"].get<double>() : 0.0;
 }
 
+eval::EvalOptions make_eval_options(const std::string& mode, double noise, uint64_t seed,
+                                    int64_t stride, int64_t batch, bool window,
+                                    const std::optional<nn::PatchShape>& patch) {
+  eval::EvalOptions o;
+  o.mode = optics::parse_simulation_mode(mode);
+  if (noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{noise};
+  o.seed = seed;
+  o.reconstruct.stride = stride;
+  o.reconstruct.batch = batch;
+  o.reconstruct.window = window;
+  if (patch) {
+    o.reconstruct.patch_h = patch->height;
+    o.reconstruct.patch_w = patch->width;
+  }
+  return o;
+}
+
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, eval::EvalOptions options,
                                torch::Tensor* estimate, bool show_progress) {

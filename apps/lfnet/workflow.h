@@ -8,6 +8,7 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -229,6 +230,13 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
 
 // Writes a reconstruction as a light-field folder with previews and reconstruction.json.
 void write_reconstruction(const Reconstruction& r, const std::string& out, bool force);
+
+// The evaluation options of the command line: simulation mode, Gaussian noise sigma (0: none),
+// noise seed, patch stride, solver batch, window stitching, and the model's patch size when
+// there is a model (else the default 9 x 9).
+eval::EvalOptions make_eval_options(const std::string& mode, double noise, uint64_t seed,
+                                    int64_t stride, int64_t batch, bool window,
+                                    const std::optional<nn::PatchShape>& patch);
 
 // Evaluates `method` on one grey light field; the record names the light field and method.
 // `show_progress` draws a progress bar over the patches.
