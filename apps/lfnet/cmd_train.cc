@@ -62,9 +62,11 @@ std::pair<ExperimentConfig, std::string> run_training(const TrainArgs& args,
     for (const auto& s : config.stages) {
       if (is_network_stage(s.name)) (void)config.stage_network(s), (void)config.stage_options(s);
     }
-    std::printf("%s: %s, scale '%s', Phi %s, %zu stage(s); the config is valid\n",
+    std::string names;
+    for (const auto& s : config.stages) names += (names.empty() ? "" : ", ") + s.name;
+    std::printf("%s: %s, scale '%s', Phi %s, stages %s; the config is valid\n",
                 args.config.c_str(), config.name.c_str(), config.scale.c_str(),
-                config.phi.label().c_str(), config.stages.size());
+                config.phi.label().c_str(), names.c_str());
     return {config, ""};
   }
   LFNET_CHECK_AS(ConfigError, args.resume.empty() || args.init.empty(),
