@@ -109,21 +109,65 @@ std::vector<Section> read_sections(const std::string& dir) {
   return sections;
 }
 
-// The paper entry of a section that matches a record: every key but the values must agree.
+// Whether a record has every setting a selector names (keys other than settings are ignored).
+bool matches(const nlohmann::json& r, const nlohmann::json& selector) {
+  for (auto it = selector.begin(); it != selector.end(); ++it) {
+    if (std::find(kSettings.begin(), kSettings.end(), it.key()) == kSettings.end()) continue;
+    const std::string want = it->is_string() ? it->get<std::string>()
+                             : it.key() == "noise" ? fmt("%g", it->get<double>())
+                                                   : it->dump();
+    if (setting(r, it.key()) != want) return false;
+  }
+  return true;
+}
+
+// The paper entry of a section that matches a record: every setting it names must agree.
 const nlohmann::json* paper_entry(const Section& s, const nlohmann::json& r) {
   if (!s.meta.contains("paper")) return nullptr;
   for (const auto& p : s.meta["paper"]) {
-    bool match = true;
-    for (auto it = p.begin(); it != p.end() && match; ++it) {
-      if (it.key() == "psnr_db" || it.key() == "seconds" || it.key() == "source") continue;
-      const std::string want = it->is_string() ? it->get<std::string>()
-                               : it.key() == "noise" ? fmt("%g", it->get<double>())
-                                                     : it->dump();
-      match = setting(r, it.key()) == want;
-    }
-    if (match) return &p;
+    if (matches(r, p)) return &p;
   }
   return nullptr;
+}
+
+// The first record of a section that a selector matches.
+const nlohmann::json* find_record(const Section& s, const nlohmann::json& selector) {
+  for (const auto& r : s.records) {
+    if (matches(r, selector)) return &r;
+  }
+  return nullptr;
+}
+
+// A claim of the paper about a difference: "a" is better than "b" by paper_db (a number, or
+// [low, high]). Ours is psnr(a) - psnr(b) from the section's records.
+struct GapClaim {
+  std::string section, claim, source;
+  double low = NAN, high = NAN, ours = NAN;
+};
+
+std::vector<GapClaim> gap_claims(const Section& s) {
+  std::vector<GapClaim> out;
+  if (!s.meta.contains("gaps")) return out;
+  for (const auto& g : s.meta["gaps"]) {
+    GapClaim c{s.meta.value("title", s.name), g.value("claim", ""), g.value("source", "")};
+    const auto& p = g.at("paper_db");
+    c.low = p.is_array() ? p.at(0).get<double>() : p.get<double>();
+    c.high = p.is_array() ? p.at(1).get<double>() : c.low;
+    const auto* a = find_record(s, g.at("a"));
+    const auto* b = find_record(s, g.at("b"));
+    if (a && b) c.ours = number(*a, "psnr_db") - number(*b, "psnr_db");
+    out.push_back(c);
+  }
+  return out;
+}
+
+// Reproduced: ours is at least the paper's (lower) gap minus 0.5 dB. Otherwise say whether at
+// least the sign agrees.
+std::string gap_verdict(const GapClaim& c) {
+  if (std::isnan(c.ours)) return "not measured (records missing)";
+  if (c.ours >= c.low - 0.5) return "yes";
+  if ((c.ours > 0) == (c.low > 0) && c.ours != 0) return "direction only (" + fmt("%+.2f dB", c.ours - c.low) + ")";
+  return "no (" + fmt("%+.2f dB", c.ours - c.low) + ")";
 }
 
 // One paper claim against ours, for the summary at the end.
@@ -154,15 +198,18 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
     if (k != "method" && k != "mode" && values.size() > 1) columns.push_back(k);
   }
   columns.push_back("mode");
-  bool has_paper = false;
+  bool has_paper = false, has_training = false;
   for (const auto& r : rows) has_paper |= paper_entry(s, r) != nullptr;
+  for (const auto& r : rows) has_training |= r.contains("training_seconds");
   std::ostringstream md;
   md << "|";
   for (const auto& c : columns) md << " " << (c == "n" ? "N" : c == "light_field" ? "light field" : c) << " |";
   md << " PSNR dB | SSIM | seconds |";
+  if (has_training) md << " training s |";
   if (has_paper) md << " paper PSNR dB | paper seconds |";
   md << "\n|";
-  for (size_t i = 0; i < columns.size() + 3 + (has_paper ? 2 : 0); ++i) md << (i >= columns.size() ? "---:|" : "---|");
+  const size_t n_columns = columns.size() + 3 + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
+  for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
   md << "\n";
   for (const auto& r : rows) {
     md << "|";
@@ -170,6 +217,7 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
     const double psnr = number(r, "psnr_db", INFINITY), ssim = number(r, "ssim"), sec = number(r, "seconds");
     md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
        << " | " << fmt("%.2f", sec) << " |";
+    if (has_training) md << " " << (r.contains("training_seconds") ? fmt("%.0f", number(r, "training_seconds")) : "") << " |";
     if (has_paper) {
       const auto* p = paper_entry(s, r);
       if (p) {
@@ -236,8 +284,10 @@ void run_report(const ReportArgs& a) {
      << "are reconstruction wall time on the machine that ran the command. `no-parallax` (every "
      << "view set to the angular mean of the truth) is what a conventional camera records.\n\n";
   std::vector<Claim> claims;
+  std::vector<GapClaim> gaps;
   std::vector<ParetoPoint> points;
   for (const auto& s : sections) {
+    for (auto& g : gap_claims(s)) gaps.push_back(std::move(g));
     md << "## " << s.meta.value("title", s.name) << "\n\n";
     if (s.meta.contains("text")) md << s.meta["text"].get<std::string>() << "\n\n";
     if (s.meta.contains("command")) md << "Records made by:\n\n    " << s.meta["command"].get<std::string>() << "\n\n";
@@ -332,6 +382,19 @@ void run_report(const ReportArgs& a) {
       md << "| " << c.section << " | " << c.setting << " | " << (std::isnan(c.paper_psnr) ? "" : fmt("%.2f", c.paper_psnr))
          << " | " << fmt("%.2f", c.ours_psnr) << " | " << (std::isnan(c.paper_s) ? "" : fmt("%g", c.paper_s)) << " | "
          << fmt("%.2f", c.ours_s) << " | " << verdict << " | " << c.source << " |\n";
+    }
+    md << "\n";
+  }
+  if (!gaps.empty()) {
+    md << "## The paper's claims about differences\n\n"
+       << "Each claim compares two of our records of the same section (ours = the first minus "
+       << "the second). Reproduced when our difference is at least the paper's (lower) figure "
+       << "minus 0.5 dB; \"direction only\" when the sign agrees but the size does not.\n\n"
+       << "| section | claim | paper dB | ours dB | reproduced | source |\n|---|---|---:|---:|---|---|\n";
+    for (const auto& g : gaps) {
+      const std::string paper = g.low == g.high ? fmt("%+.1f", g.low) : fmt("%+.1f", g.low) + " to " + fmt("%+.1f", g.high);
+      md << "| " << g.section << " | " << g.claim << " | " << paper << " | "
+         << (std::isnan(g.ours) ? "" : fmt("%+.2f", g.ours)) << " | " << gap_verdict(g) << " | " << g.source << " |\n";
     }
     md << "\n";
   }

@@ -127,7 +127,11 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   fs::create_directories(tmp / "results/a");
   std::ofstream(tmp / "results/a/section.json") << R"({"title": "Held out", "order": 1,
     "command": "scripts/x.sh", "heatmaps": ["net"],
-    "paper": [{"method": "net", "n": 2, "psnr_db": 26.77, "seconds": 242, "source": "Fig. 5"}]})";
+    "paper": [{"method": "net", "n": 2, "psnr_db": 26.77, "seconds": 242, "source": "Fig. 5"}],
+    "gaps": [{"claim": "net beats pinv", "a": {"method": "net"}, "b": {"method": "pinv"}, "paper_db": [2, 3], "source": "s. 3"},
+             {"claim": "net beats dict", "a": {"method": "net"}, "b": {"method": "dict"}, "paper_db": 0.7, "source": "s. 4"},
+             {"claim": "pinv beats net", "a": {"method": "pinv"}, "b": {"method": "net"}, "paper_db": 1, "source": "s. 5"},
+             {"claim": "missing", "a": {"method": "ae"}, "b": {"method": "net"}, "paper_db": 1, "source": "s. 6"}]})";
   std::ofstream rec(tmp / "results/a/records.jsonl");
   auto record = [](const std::string& method, double psnr, double seconds) {
     nlohmann::json pv = nlohmann::json::array();
@@ -140,6 +144,13 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   rec << record("net", 30.0, 10.0) << "\n" << record("pinv", 29.0, 1.0) << "\n"
       << record("no-parallax", 28.5, 0.1) << "\n" << record("dict", 29.5, 100.0) << "\n";
   rec.close();
+  // A section whose records say how long their model trained gets a "training s" column.
+  fs::create_directories(tmp / "results/b");
+  std::ofstream(tmp / "results/b/section.json") << R"({"title": "Switching", "order": 2, "pareto": false})";
+  auto trained = nlohmann::json::parse(record("net", 27.0, 5.0));
+  trained["training_seconds"] = 321.4;
+  trained["variant"] = "finetuned";
+  std::ofstream(tmp / "results/b/records.jsonl") << trained.dump() << "\n" << record("no-parallax", 26.0, 0.1) << "\n";
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
                           (tmp / "docs/RESULTS.md"), out) == 0);
@@ -153,6 +164,14 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("net - no-parallax = +1.50 dB") != std::string::npos);
   CHECK(text.find("net - dict = +0.50 dB") != std::string::npos);
   CHECK(text.find("time yes (24x faster)") != std::string::npos);
+  // Differences: net - pinv = +1.00 against 2 to 3 dB; net - dict = +0.50 against 0.7 (within
+  // 0.5 dB); pinv - net = -1.00 against +1; ae has no record.
+  CHECK(text.find("| Held out | net beats pinv | +2.0 to +3.0 | +1.00 | direction only (-1.00 dB) | s. 3 |") != std::string::npos);
+  CHECK(text.find("| net beats dict | +0.7 | +0.50 | yes |") != std::string::npos);
+  CHECK(text.find("| pinv beats net | +1.0 | -1.00 | no (-2.00 dB) |") != std::string::npos);
+  CHECK(text.find("| method | variant | mode | PSNR dB | SSIM | seconds | training s |") != std::string::npos);
+  CHECK(text.find("| net | finetuned | sensor | 27.00 | 0.900 | 5.00 | 321 |") != std::string::npos);
+  CHECK(text.find("| missing | +1.0 |  | not measured (records missing) |") != std::string::npos);
   // dict is slower and worse than net: off the front; the others are on it.
   CHECK(text.find("| dict | 5 | 2 |") == std::string::npos);
   CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
