@@ -7,8 +7,20 @@ cd "$(dirname "$0")/.."
 lfnet=${LFNET:-build/apps/lfnet}
 py=/usr/bin/python3
 
-# Appends the JSON object of file $2 as one line to $1.
-append_record() { "$py" -c 'import json,sys; print(json.dumps(json.load(open(sys.argv[1]))))' "$2" >> "$1"; }
+# Appends the JSON object of file $2 as one line to $1. With $3, the record's "variant"; with
+# $4 (a training.jsonl), "training_seconds": the sum of its epochs' seconds.
+append_record() {
+  "$py" - "$@" <<'PY'
+import json, sys
+out, path = sys.argv[1], sys.argv[2]
+r = json.load(open(path))
+if len(sys.argv) > 3 and sys.argv[3]:
+    r["variant"] = sys.argv[3]
+if len(sys.argv) > 4 and sys.argv[4]:
+    r["training_seconds"] = sum(json.loads(l)["record"]["seconds"] for l in open(sys.argv[4]) if l.strip())
+open(out, "a").write(json.dumps(r) + "\n")
+PY
+}
 
 heldout-asp-n2() {
   local dir=results/heldout-asp-n2 pics=out/results/heldout-asp-n2 tmp
@@ -29,15 +41,20 @@ heldout-asp-n2() {
   rm -rf "$tmp"
 }
 
-# One evaluation into $1 (records file): evaluate args follow.
+# One evaluation into $1 (records file): evaluate args follow. $VARIANT and $TRAINING (a
+# training.jsonl), when set, label the record (append_record).
 record() {
   local file=$1 tmp
   shift
   tmp=$(mktemp)
   "$lfnet" evaluate "$@" --json "$tmp"
-  append_record "$file" "$tmp"
+  append_record "$file" "$tmp" "${VARIANT:-}" "${TRAINING:-}"
   rm -f "$tmp"
 }
+
+# The experiments of configs/paper/ whose models are not the shipped ones sit in
+# models/paper-quick/ (quick scale), each with its training log.
+pq=models/paper-quick
 
 # The paper's Fig. 5: ASP, mask and random projections at N = 2, stride 5. Random projections
 # are measured per patch (their 9-pixel blocks do not tile a sensor at stride 5).
@@ -72,9 +89,14 @@ noise-sweep() {
   tmp=$(mktemp)
   for sigma in 0 0.1 0.2; do
     for method in net dict pinv no-parallax; do
-      record "$tmp" --model models/asp-n2.ckpt --dictionary models/dictionary.ckpt \
-        --lf ../shared/data/hci_antinous --method "$method" --mode sensor --stride 5 --noise "$sigma"
+      local variant=""
+      [[ $method == net || $method == dict ]] && variant="trained without noise"
+      VARIANT=$variant record "$tmp" --model models/asp-n2.ckpt \
+        --dictionary models/dictionary.ckpt --lf ../shared/data/hci_antinous --method "$method" \
+        --mode sensor --stride 5 --noise "$sigma"
     done
+    VARIANT="trained at sigma 0.1" record "$tmp" --model $pq/noise-trained.ckpt \
+      --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
   done
   mv "$tmp" results/noise-sweep/records.jsonl
 }
@@ -95,9 +117,61 @@ stride-sweep() {
   mv "$tmp" results/stride-sweep/records.jsonl
 }
 
+# The paper's Fig. 4 and section 3.3: each branch alone against the two-branch net, and the
+# branches trained separately then jointly (the shipped asp-n2, the same config as
+# configs/paper/branch-ablation/pretrained-then-joint.json) against joint training from scratch.
+branch-ablation() {
+  local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor --stride 5)
+  tmp=$(mktemp)
+  for method in net ae cnn pinv no-parallax; do
+    VARIANT="each branch, then joint" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --method "$method"
+  done
+  VARIANT="joint from scratch" record "$tmp" --model $pq/joint-from-scratch.ckpt "${lf[@]}" \
+    --method net
+  mv "$tmp" results/branch-ablation/records.jsonl
+}
+
+# The paper's section 3.2: weighted L2 (the shipped asp-n2, configs/paper/loss-ablation/
+# weighted-l2.json) against plain L2.
+loss-ablation() {
+  local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor --stride 5)
+  tmp=$(mktemp)
+  VARIANT="weighted L2" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --method net
+  VARIANT="L2" record "$tmp" --model $pq/l2.ckpt "${lf[@]}" --method net
+  VARIANT="" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --method no-parallax
+  mv "$tmp" results/loss-ablation/records.jsonl
+}
+
+# The paper's section 4: a net trained on three real Lytro light fields, tested on the fourth.
+lytro() {
+  local tmp
+  tmp=$(mktemp)
+  for method in net pinv no-parallax; do
+    record "$tmp" --model $pq/lytro.ckpt --lf ../shared/data/lytro_Begonia --mode sensor \
+      --stride 5 --method "$method"
+  done
+  mv "$tmp" results/lytro/records.jsonl
+}
+
+# Phi switching: the ASP model finetuned for a mask (2 epochs) against a mask net trained from
+# scratch for as long, and the shipped mask-n2 (the full quick schedule from scratch).
+phi-switching() {
+  local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor --stride 5)
+  tmp=$(mktemp)
+  VARIANT="finetuned from asp-n2" TRAINING=$pq/mask-from-asp.training.jsonl \
+    record "$tmp" --model $pq/mask-from-asp.ckpt "${lf[@]}" --method net
+  VARIANT="from scratch, as long" TRAINING=$pq/mask-from-scratch.training.jsonl \
+    record "$tmp" --model $pq/mask-from-scratch.ckpt "${lf[@]}" --method net
+  VARIANT="from scratch, ae + cnn + joint" \
+    record "$tmp" --model models/mask-n2.ckpt "${lf[@]}" --method net
+  VARIANT="" record "$tmp" --model models/mask-n2.ckpt "${lf[@]}" --method no-parallax
+  mv "$tmp" results/phi-switching/records.jsonl
+}
+
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
-  sections=(heldout-asp-n2 phi-comparison compression-sweep noise-sweep stride-sweep)
+  sections=(heldout-asp-n2 phi-comparison compression-sweep noise-sweep stride-sweep branch-ablation
+            loss-ablation lytro phi-switching)
 fi
 for s in "${sections[@]}"; do
   echo "== $s"

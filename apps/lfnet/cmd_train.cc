@@ -190,12 +190,12 @@ void add_experiment_command(CLI::App& app, const GlobalOptions&) {
         for (int64_t stride : ev.strides) {
           for (const auto& mode : ev.modes) {
             for (double noise : ev.noise) {
-              eval::EvalOptions o;
-              o.mode = optics::parse_simulation_mode(mode);
-              if (noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{noise};
-              o.reconstruct.stride = stride;
-              o.reconstruct.patch_h = config.dataset.patch_h;
-              o.reconstruct.patch_w = config.dataset.patch_w;
+              nn::PatchShape patch;
+              patch.height = config.dataset.patch_h;
+              patch.width = config.dataset.patch_w;
+              const eval::EvalOptions defaults;
+              const auto o = make_eval_options(mode, noise, defaults.seed, stride, defaults.reconstruct.batch,
+                                               defaults.reconstruct.window, patch);
               auto record = evaluate_method(truth, method, context, o);
               record["experiment"] = config.name;
               record["scale"] = config.scale;
