@@ -7,6 +7,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -306,17 +307,22 @@ void run_report(const ReportArgs& a) {
                           r.value("method", ""), number(r, "seconds"), number(r, "psnr_db")});
       }
     }
-    // Per-view PSNR of the methods named in "heatmaps" (first sensor-mode record of each).
+    // Per-view PSNR of the records named in "heatmaps" (first sensor-mode record of each): a
+    // method name, or a selector of settings with an optional "label".
     if (s.meta.contains("heatmaps")) {
       std::string row;
-      for (const auto& method : s.meta["heatmaps"]) {
+      for (const auto& entry : s.meta["heatmaps"]) {
+        const nlohmann::json selector = entry.is_string() ? nlohmann::json{{"method", entry}} : entry;
+        std::string label = selector.value("label", selector.value("method", "?"));
+        if (!selector.contains("label") && selector.contains("variant")) label += " (" + selector["variant"].get<std::string>() + ")";
+        std::string slug;
+        for (char c : label) slug += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
         for (const auto& r : s.records) {
-          if (r.value("method", "") != method.get<std::string>() || r.value("mode", "") != "sensor" ||
-              !r.contains("per_view_psnr_db")) continue;
-          const std::string file = s.name + "_views_" + method.get<std::string>() + ".png";
+          if (!matches(r, selector) || r.value("mode", "") != "sensor" || !r.contains("per_view_psnr_db")) continue;
+          const std::string file = s.name + "_views_" + slug + ".png";
           plot_view_heatmap(r["per_view_psnr_db"].get<std::vector<std::vector<double>>>(),
-                            method.get<std::string>() + ": PSNR per view, dB", (figures / file).string());
-          row += "![" + method.get<std::string>() + " per-view PSNR](" + figures_link + "/" + file + ") ";
+                            label + ": PSNR per view, dB", (figures / file).string());
+          row += "![" + label + " per-view PSNR](" + figures_link + "/" + file + ") ";
           break;
         }
       }

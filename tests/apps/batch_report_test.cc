@@ -146,7 +146,8 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   rec.close();
   // A section whose records say how long their model trained gets a "training s" column.
   fs::create_directories(tmp / "results/b");
-  std::ofstream(tmp / "results/b/section.json") << R"({"title": "Switching", "order": 2, "pareto": false})";
+  std::ofstream(tmp / "results/b/section.json") << R"({"title": "Switching", "order": 2, "pareto": false,
+    "heatmaps": [{"method": "net", "variant": "finetuned", "label": "fine tuned"}, {"method": "net", "variant": "none"}]})";
   auto trained = nlohmann::json::parse(record("net", 27.0, 5.0));
   trained["training_seconds"] = 321.4;
   trained["variant"] = "finetuned";
@@ -177,6 +178,10 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
   CHECK(fs::file_size(tmp / "docs/images/results/pareto.png") > 1000);
   CHECK(fs::file_size(tmp / "docs/images/results/a_views_net.png") > 500);
+  // A heatmap chosen by a selector; one that matches no record draws nothing.
+  CHECK(fs::file_size(tmp / "docs/images/results/b_views_fine_tuned.png") > 500);
+  CHECK(text.find("![fine tuned per-view PSNR](images/results/b_views_fine_tuned.png)") != std::string::npos);
+  CHECK(!fs::exists(tmp / "docs/images/results/b_views_net__none_.png"));
   // A missing results folder is one clear error.
   CHECK(run_command(lfnet_binary() + " report " + (tmp / "nothing"), out) != 0);
   CHECK(out.find("lfnet: error:") != std::string::npos);
