@@ -111,7 +111,7 @@ std::string safe_file_name(std::string name) {
 // The records of one item, one per method; errors become records with status "error".
 std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs& a,
                                          const std::vector<std::string>& methods,
-                                         const std::string& out_dir) {
+                                         const std::string& out_dir, ModelCache& cache) {
   std::vector<nlohmann::json> records;
   auto failed = [&](const std::string& method, const std::string& error) {
     return nlohmann::json{{"item", item.name}, {"path", item.path}, {"kind", item.kind},
@@ -131,7 +131,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
         q.options.window = a.window;
         q.post_filter = a.post_filter;
         q.match_mean = a.match_mean;
-        auto r = reconstruct_acquisition(q);
+        auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         write_reconstruction(r, target, false);
         auto record = r.record;
@@ -155,7 +155,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
   try {
     optics::PhiSpec spec;
     if (!a.model.empty()) {
-      const auto model = load_model(a.model, /*network=*/true);
+      const auto& model = cache.model(a.model);
       spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
       context.net = model.net;
       context.script = model.script;
@@ -168,6 +168,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
     phi = optics::make_phi(spec);
     context.phi = phi.get();
     context.dictionary = a.dictionary;
+    if (!a.dictionary.empty() && std::find(methods.begin(), methods.end(), "dict") != methods.end()) {
+      context.loaded_dictionary = &cache.dictionary(a.dictionary);
+    }
     context.dict_method = a.dict_method;
     LightFieldSources sources;
     sources.light_fields = {item.path};
@@ -260,10 +263,11 @@ void run_batch(const BatchArgs& a) {
   std::vector<size_t> record_item;  // the item index of every record, for the gather
   ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
   int64_t failures = 0;
+  ModelCache cache;  // every item shares one read of the model and the dictionary
   for (size_t index : mine) {
     const auto& item = items[index];
     bar.set_note(item.name);
-    for (auto& r : process_item(item, a, methods, a.out)) {
+    for (auto& r : process_item(item, a, methods, a.out, cache)) {
       const bool ok = r["status"] == "ok";
       failures += !ok;
       const std::string file = safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
@@ -308,8 +312,8 @@ void run_batch(const BatchArgs& a) {
     }
   }
   write_summary(a.out, records);
-  spdlog::info("batch: {} record(s), {} failed; summary in {}/summary.csv", records.size(),
-               failures, a.out);
+  spdlog::info("batch: {} record(s), {} failed; summary in {}/summary.csv; {} model or dictionary file(s) read",
+               records.size(), failures, a.out, cache.loads());
   LFNET_CHECK(failures == 0, failures, " of ", records.size(),
               " item-method pair(s) failed; see ", a.out, "/summary.csv (the others are done)");
 }

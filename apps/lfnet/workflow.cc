@@ -469,9 +469,12 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       solver = context.script ? recon::script_solver(*context.script, method)
                               : recon::network_solver(context.net, method);
     } else if (method == "dict") {
-      LFNET_CHECK_AS(ConfigError, !context.dictionary.empty(),
+      LFNET_CHECK_AS(ConfigError, context.loaded_dictionary || !context.dictionary.empty(),
                      "method 'dict' needs a dictionary: give --dictionary FILE (e.g. models/dictionary.ckpt)");
-      const auto dictionary = dict::load_dictionary(context.dictionary);
+      dict::Dictionary own_dictionary;
+      const dict::Dictionary& dictionary =
+          context.loaded_dictionary ? *context.loaded_dictionary
+                                    : (own_dictionary = dict::load_dictionary(context.dictionary));
       dict::SparseCodingOptions coding;
       coding.method = context.dict_method;
       report = std::make_shared<recon::SolverReport>();
@@ -552,16 +555,41 @@ io::Acquisition plain_sensor_acquisition(const std::string& files, const optics:
 
 }  // namespace
 
+ModelFile& ModelCache::model(const std::string& path) {
+  auto it = models_.find(path);
+  if (it == models_.end()) {
+    it = models_.emplace(path, load_model(path, /*network=*/true)).first;
+    ++loads_;
+  }
+  return it->second;
+}
+
+const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
+  auto it = dictionaries_.find(path);
+  if (it == dictionaries_.end()) {
+    it = dictionaries_.emplace(path, dict::load_dictionary(path)).first;
+    ++loads_;
+  }
+  return it->second;
+}
+
 Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
-                                       const recon::ProgressCallback& progress) {
+                                       const recon::ProgressCallback& progress,
+                                       ModelCache* cache) {
   const std::string method = a.method;
   LFNET_CHECK_AS(ConfigError, method != "no-parallax",
                  "no-parallax needs the true light field: it is a method of lfnet evaluate");
   // The model first: its Phi is the default for plain sensor images.
-  std::optional<ModelFile> model;
+  std::optional<ModelFile> own_model;
+  ModelFile* model = nullptr;
   if (recon::needs_network(method)) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(), "method '", method, "' needs --model");
-    model = load_model(a.model, /*network=*/true);
+    if (cache) {
+      model = &cache->model(a.model);
+    } else {
+      own_model = load_model(a.model, /*network=*/true);
+      model = &*own_model;
+    }
   }
   const bool folder = fs::is_directory(a.sensor);
   io::Acquisition acq;
@@ -608,7 +636,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   } else if (method == "dict") {
     LFNET_CHECK_AS(ConfigError, !a.dictionary.empty(),
                    "method 'dict' needs --dictionary FILE (e.g. models/dictionary.ckpt)");
-    const auto dictionary = dict::load_dictionary(a.dictionary);
+    dict::Dictionary own_dictionary;
+    const dict::Dictionary& dictionary =
+        cache ? cache->dictionary(a.dictionary) : (own_dictionary = dict::load_dictionary(a.dictionary));
     dict::SparseCodingOptions coding;
     coding.method = a.dict_method;
     solver = recon::dictionary_solver(*phi, dictionary, coding, o.patch_h, o.patch_w);

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -15,6 +16,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/data/patch_dataset.h"
+#include "lfnet/dict/dictionary.h"
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/dict/patch_sampling.h"
 #include "lfnet/dist/communicator.h"
@@ -196,6 +198,7 @@ struct MethodContext {
   nn::LightFieldNet net{nullptr};  // for net, ae, cnn
   std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported net (used when set)
   std::string dictionary;          // for dict: a dictionary file
+  const dict::Dictionary* loaded_dictionary = nullptr;  // or that file already read (used when set)
   std::string dict_method = "omp";  // for dict: omp or admm
 };
 
@@ -224,9 +227,24 @@ struct Reconstruction {
   nlohmann::json record;
 };
 
-// Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all).
+// Models and dictionaries loaded once for many reconstructions (lfnet batch), by path.
+class ModelCache {
+ public:
+  ModelFile& model(const std::string& path);
+  const dict::Dictionary& dictionary(const std::string& path);
+  int64_t loads() const { return loads_; }  // files read so far
+
+ private:
+  std::map<std::string, ModelFile> models_;
+  std::map<std::string, dict::Dictionary> dictionaries_;
+  int64_t loads_ = 0;
+};
+
+// Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all);
+// with a `cache`, the model or dictionary is read once and reused by later calls.
 Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
-                                       const recon::ProgressCallback& progress = {});
+                                       const recon::ProgressCallback& progress = {},
+                                       ModelCache* cache = nullptr);
 
 // Writes a reconstruction as a light-field folder with previews and reconstruction.json.
 void write_reconstruction(const Reconstruction& r, const std::string& out, bool force);

@@ -70,6 +70,21 @@ TEST_CASE("batch reconstructs and evaluates every item, records bad ones and goe
   CHECK(out.find("not empty") != std::string::npos);
 }
 
+TEST_CASE("batch reads the model once for all its items", "[app]") {
+  lfnet::test::TempDir tmp;
+  write_test_light_field(tmp / "in/lf_a", 27, 27);
+  write_test_light_field(tmp / "in/lf_b", 27, 36);
+  const std::string model = std::string(LFNET_SOURCE_DIR) + "/models/asp-n2.ckpt";
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " --threads 2 batch --input " + (tmp / "in") + " --out " +
+                          (tmp / "out") + " --model " + model + " --methods net,ae,pinv --stride 9",
+                      out) == 0);
+  INFO(out);
+  CHECK(lines_of(tmp / "out/summary.csv").size() == 7);
+  CHECK(out.find("6 record(s), 0 failed") != std::string::npos);
+  CHECK(out.find("1 model or dictionary file(s) read") != std::string::npos);
+}
+
 TEST_CASE("reconstruct takes a plain sensor image with --phi, and the post-filter", "[app]") {
   lfnet::test::TempDir tmp;
   const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
