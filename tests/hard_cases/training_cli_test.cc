@@ -114,6 +114,31 @@ TEST_CASE("training killed while writing a checkpoint resumes from the previous 
                       out) == 0);
   CHECK(lfnet::train::load_checkpoint(last.string()).training.epoch == epoch + 1);
   CHECK(fs::exists(tmp.path() / "run/models/ae.ckpt"));
+  // The killed writer's temporary file is gone: the next write of last.ckpt removed it.
+  CHECK_FALSE(writing_checkpoint(stage_dir));
+}
+
+TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live ones", "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  write_config(tmp / "one.json", tiny_config(1, 64));
+  std::string out;
+  REQUIRE(run_command(program("train " + (tmp / "one.json") + " --out " + (tmp / "run")), out) == 0);
+  const fs::path dir = tmp.path() / "run/models/ae";
+  // A dead writer (a child that has exited and been reaped) and a live one (this process).
+  const pid_t dead = fork();
+  if (dead == 0) _exit(0);
+  waitpid(dead, nullptr, 0);
+  const fs::path stale = dir / ("last.ckpt.tmp" + std::to_string(dead));
+  const fs::path live = dir / ("last.ckpt.tmp" + std::to_string(getpid()));
+  const fs::path other = dir / "notes.tmp123";
+  for (const auto& p : {stale, live, other}) std::ofstream(p) << "partial";
+  write_config(tmp / "two.json", tiny_config(2, 64));
+  REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
+                            " --stage ae --resume " + (dir / "last.ckpt").string()),
+                      out) == 0);
+  CHECK_FALSE(fs::exists(stale));
+  CHECK(fs::exists(live));
+  CHECK(fs::exists(other));
 }
 
 TEST_CASE("a far too large learning rate stops with a clear message; the last good checkpoint resumes",

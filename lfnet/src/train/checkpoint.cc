@@ -1,6 +1,7 @@
 #include "lfnet/train/checkpoint.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <torch/torch.h>
@@ -203,6 +204,29 @@ TrainingState TrainingState::from_json(const nlohmann::json& j) {
 
 // ---- file ----------------------------------------------------------------------------------
 
+// Removes `<target>.tmp<pid>` files left by writers that were killed: those whose process no
+// longer exists. A live writer's file (another process saving the same path) is left alone.
+namespace {
+void remove_stale_temporaries(const std::filesystem::path& target) {
+  namespace fs = std::filesystem;
+  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
+  const std::string prefix = target.filename().string() + ".tmp";
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0) continue;
+    const std::string digits = name.substr(prefix.size());
+    if (digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+    const pid_t pid = static_cast<pid_t>(std::stol(digits));
+    if (pid == ::getpid() || pid <= 0) continue;
+    if (::kill(pid, 0) != 0 && errno == ESRCH) {
+      std::error_code ignored;
+      fs::remove(it->path(), ignored);
+    }
+  }
+}
+}  // namespace
+
 void save_checkpoint(const Checkpoint& checkpoint, const std::string& path) {
   std::string payload;
   nlohmann::json records = nlohmann::json::array();
@@ -253,6 +277,7 @@ void save_checkpoint(const Checkpoint& checkpoint, const std::string& path) {
     ::unlink(tmp.c_str());
     throw IoError("cannot write checkpoint " + path + ": " + why);
   }
+  remove_stale_temporaries(target);
   // Make the rename itself durable.
   const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
   if (dfd >= 0) {
