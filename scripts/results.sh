@@ -168,6 +168,22 @@ phi-switching() {
   mv "$tmp" results/phi-switching/records.jsonl
 }
 
+# The paper scale of ASP N = 2 (configs/paper/phi-comparison/asp.json --scale paper, about 4
+# hours of 2 idle cores; its model is models/asp-n2-paper.ckpt) beside the quick-scale asp-n2.
+paper-scale-asp-n2() {
+  local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor)
+  tmp=$(mktemp)
+  for stride in 9 5; do
+    for method in net ae cnn pinv no-parallax; do
+      VARIANT="paper scale" record "$tmp" --model models/asp-n2-paper.ckpt "${lf[@]}" \
+        --stride "$stride" --method "$method"
+    done
+    VARIANT="quick scale" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --stride "$stride" \
+      --method net
+  done
+  mv "$tmp" results/paper-scale-asp-n2/records.jsonl
+}
+
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
   sections=(heldout-asp-n2 phi-comparison compression-sweep noise-sweep stride-sweep branch-ablation
