@@ -144,11 +144,12 @@ loss-ablation() {
 
 # The paper's section 4: a net trained on three real Lytro light fields, tested on the fourth.
 lytro() {
-  local tmp
+  local tmp pics=out/results/lytro
   tmp=$(mktemp)
+  rm -rf "$pics" && mkdir -p "$pics"
   for method in net pinv no-parallax; do
     record "$tmp" --model $pq/lytro.ckpt --lf ../shared/data/lytro_Begonia --mode sensor \
-      --stride 5 --method "$method"
+      --stride 5 --method "$method" --out "$pics/$method"
   done
   mv "$tmp" results/lytro/records.jsonl
 }
