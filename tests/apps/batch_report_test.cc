@@ -190,6 +190,8 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("| pinv beats net | +1.0 | -1.00 | no (-2.00 dB) |") != std::string::npos);
   CHECK(text.find("| method | variant | mode | PSNR dB | SSIM | seconds | training s |") != std::string::npos);
   CHECK(text.find("| net | finetuned | sensor | 27.00 | 0.900 | 5.00 | 321 |") != std::string::npos);
+  CHECK(text.find("Reproduced: 1 of 1 PSNR figures, 1 of 1 times.") != std::string::npos);
+  CHECK(text.find("Reproduced: 1 of 5 claims; 1 more in direction only.") != std::string::npos);
   CHECK(text.find("| missing | +1.0 |  | not measured (records missing) |") != std::string::npos);
   // dict is slower and worse than net: off the front; the others are on it.
   CHECK(text.find("| dict | 5 | 2 |") == std::string::npos);
