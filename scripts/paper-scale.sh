@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Trains ASP N = 2 at the paper's scale (configs/paper/phi-comparison/asp.json --scale paper:
-# about 4 hours of 2 idle cores, or minutes on a GPU with LFNET_OPTS/--device), stage by stage
+# about 3-4 hours of this 2-core machine; `--device cuda` trains on a GPU), stage by stage
 # and resumably: a stage whose model exists is skipped, an interrupted one continues from its
 # last.ckpt. Run it again after an interruption. The final model becomes
 # models/asp-n2-paper.ckpt; then `scripts/results.sh paper-scale-asp-n2`.

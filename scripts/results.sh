@@ -169,8 +169,8 @@ phi-switching() {
   mv "$tmp" results/phi-switching/records.jsonl
 }
 
-# The paper scale of ASP N = 2 (configs/paper/phi-comparison/asp.json --scale paper, about 4
-# hours of 2 idle cores; its model is models/asp-n2-paper.ckpt) beside the quick-scale asp-n2.
+# The paper scale of ASP N = 2 (configs/paper/phi-comparison/asp.json --scale paper, about 3-4
+# hours of this 2-core machine; its model is models/asp-n2-paper.ckpt) beside the quick-scale asp-n2.
 paper-scale-asp-n2() {
   local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor)
   tmp=$(mktemp)
