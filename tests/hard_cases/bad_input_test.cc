@@ -21,20 +21,11 @@
 
 namespace fs = std::filesystem;
 using lfnet::test::lfnet_binary;
+using lfnet::test::read_bytes;
+using lfnet::test::write_bytes;
 using lfnet::test::run_command;
 
 namespace {
-
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream(path, std::ios::binary) << bytes;
-}
 
 // Every file under `dir` with its bytes: a folder is "untouched" when this is unchanged.
 std::map<std::string, std::string> snapshot(const fs::path& dir) {

@@ -22,16 +22,10 @@
 
 namespace fs = std::filesystem;
 using lfnet::test::lfnet_binary;
+using lfnet::test::read_bytes;
 using lfnet::test::run_command;
 
 namespace {
-
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 std::string program(const std::string& args) {
   return lfnet_binary() + " --threads 2 --log-level warn " + args;

@@ -38,4 +38,10 @@ std::string python_with(const std::string& module);
 // The lfnet program under test.
 std::string lfnet_binary();
 
+// The whole content of a file, byte for byte ("" when it cannot be read).
+std::string read_bytes(const std::string& path);
+
+// Writes `bytes` to a file, replacing it.
+void write_bytes(const std::string& path, const std::string& bytes);
+
 }  // namespace lfnet::test

@@ -16,6 +16,9 @@ using lfnet::nn::LightFieldNet;
 using lfnet::nn::NetworkOptions;
 using lfnet::train::Checkpoint;
 
+using lfnet::test::read_bytes;
+using lfnet::test::write_bytes;
+
 namespace {
 
 Checkpoint checkpoint_of(const LightFieldNet& net, const nlohmann::json& phi_spec) {
@@ -24,16 +27,6 @@ Checkpoint checkpoint_of(const LightFieldNet& net, const nlohmann::json& phi_spe
   ck.phi = phi_spec;
   ck.model = lfnet::train::module_state(*net);
   return ck;
-}
-
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary);
-  out << bytes;
 }
 
 }  // namespace
