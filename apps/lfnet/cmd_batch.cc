@@ -168,9 +168,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
     phi = optics::make_phi(spec);
     context.phi = phi.get();
     context.dictionary = a.dictionary;
-    if (!a.dictionary.empty() && std::find(methods.begin(), methods.end(), "dict") != methods.end()) {
-      context.loaded_dictionary = &cache.dictionary(a.dictionary);
-    }
+    context.cache = &cache;
     context.dict_method = a.dict_method;
     LightFieldSources sources;
     sources.light_fields = {item.path};

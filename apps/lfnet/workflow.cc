@@ -469,12 +469,10 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       solver = context.script ? recon::script_solver(*context.script, method)
                               : recon::network_solver(context.net, method);
     } else if (method == "dict") {
-      LFNET_CHECK_AS(ConfigError, context.loaded_dictionary || !context.dictionary.empty(),
+      LFNET_CHECK_AS(ConfigError, !context.dictionary.empty(),
                      "method 'dict' needs a dictionary: give --dictionary FILE (e.g. models/dictionary.ckpt)");
-      dict::Dictionary own_dictionary;
-      const dict::Dictionary& dictionary =
-          context.loaded_dictionary ? *context.loaded_dictionary
-                                    : (own_dictionary = dict::load_dictionary(context.dictionary));
+      ModelCache local;
+      const auto& dictionary = (context.cache ? *context.cache : local).dictionary(context.dictionary);
       dict::SparseCodingOptions coding;
       coding.method = context.dict_method;
       report = std::make_shared<recon::SolverReport>();
@@ -579,17 +577,13 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   const std::string method = a.method;
   LFNET_CHECK_AS(ConfigError, method != "no-parallax",
                  "no-parallax needs the true light field: it is a method of lfnet evaluate");
+  ModelCache local;
+  ModelCache& files = cache ? *cache : local;
   // The model first: its Phi is the default for plain sensor images.
-  std::optional<ModelFile> own_model;
   ModelFile* model = nullptr;
   if (recon::needs_network(method)) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(), "method '", method, "' needs --model");
-    if (cache) {
-      model = &cache->model(a.model);
-    } else {
-      own_model = load_model(a.model, /*network=*/true);
-      model = &*own_model;
-    }
+    model = &files.model(a.model);
   }
   const bool folder = fs::is_directory(a.sensor);
   io::Acquisition acq;
@@ -636,9 +630,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   } else if (method == "dict") {
     LFNET_CHECK_AS(ConfigError, !a.dictionary.empty(),
                    "method 'dict' needs --dictionary FILE (e.g. models/dictionary.ckpt)");
-    dict::Dictionary own_dictionary;
-    const dict::Dictionary& dictionary =
-        cache ? cache->dictionary(a.dictionary) : (own_dictionary = dict::load_dictionary(a.dictionary));
+    const auto& dictionary = files.dictionary(a.dictionary);
     dict::SparseCodingOptions coding;
     coding.method = a.dict_method;
     solver = recon::dictionary_solver(*phi, dictionary, coding, o.patch_h, o.patch_w);

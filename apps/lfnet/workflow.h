@@ -192,13 +192,26 @@ struct ModelFile {
 // Loads --model; `network`: build the checkpoint's network too (exported files always are).
 ModelFile load_model(const std::string& path, bool network);
 
+// Models and dictionaries loaded once for many reconstructions (lfnet batch), by path.
+class ModelCache {
+ public:
+  ModelFile& model(const std::string& path);
+  const dict::Dictionary& dictionary(const std::string& path);
+  int64_t loads() const { return loads_; }  // files read so far
+
+ private:
+  std::map<std::string, ModelFile> models_;
+  std::map<std::string, dict::Dictionary> dictionaries_;
+  int64_t loads_ = 0;
+};
+
 // What a method needs besides the measurements.
 struct MethodContext {
   const optics::Phi* phi = nullptr;
   nn::LightFieldNet net{nullptr};  // for net, ae, cnn
   std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported net (used when set)
   std::string dictionary;          // for dict: a dictionary file
-  const dict::Dictionary* loaded_dictionary = nullptr;  // or that file already read (used when set)
+  ModelCache* cache = nullptr;     // where to read it (and keep it) for many calls; none: read it each call
   std::string dict_method = "omp";  // for dict: omp or admm
 };
 
@@ -225,19 +238,6 @@ struct ReconstructRequest {
 struct Reconstruction {
   LightField lf;
   nlohmann::json record;
-};
-
-// Models and dictionaries loaded once for many reconstructions (lfnet batch), by path.
-class ModelCache {
- public:
-  ModelFile& model(const std::string& path);
-  const dict::Dictionary& dictionary(const std::string& path);
-  int64_t loads() const { return loads_; }  // files read so far
-
- private:
-  std::map<std::string, ModelFile> models_;
-  std::map<std::string, dict::Dictionary> dictionaries_;
-  int64_t loads_ = 0;
 };
 
 // Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all);
