@@ -76,7 +76,7 @@ void mark_pareto_front(std::vector<ParetoPoint>& points) {
 
 void plot_pareto(const std::vector<ParetoPoint>& points, const std::string& title,
                  const std::string& path) {
-  const int width = 960, height = 600, left = 70, right = 20, top = 40, bottom = 60;
+  const int width = 960, height = 600, left = 70, right = 20, top = 50, bottom = 60;
   cv::Mat img(height, width, CV_8UC3, cv::Scalar(255, 255, 255));
   put_text(img, title, {left, 25}, 0.6);
   if (points.empty()) {
@@ -113,7 +113,7 @@ void plot_pareto(const std::vector<ParetoPoint>& points, const std::string& titl
     put_text(img, format("%.0f", y), {left - 30, py(y) + 5});
   }
   put_text(img, "seconds per light field (log scale)", {width / 2 - 120, height - 15}, 0.5);
-  put_text(img, "PSNR dB", {5, top - 10}, 0.5);
+  put_text(img, "PSNR dB", {5, top - 8}, 0.5);
   // The front, joined in order of time.
   std::vector<const ParetoPoint*> front;
   for (const auto& p : points) {
@@ -129,7 +129,33 @@ void plot_pareto(const std::vector<ParetoPoint>& points, const std::string& titl
     const cv::Point c(px(p.seconds), py(p.psnr_db));
     cv::circle(img, c, p.front ? 6 : 4, method_colour(p.method), cv::FILLED, cv::LINE_AA);
     if (p.front) cv::circle(img, c, 8, kFront, 1, cv::LINE_AA);
-    put_text(img, p.label, c + cv::Point(8, -6), 0.38, p.front ? kFront : cv::Scalar(90, 90, 90));
+  }
+  // Labels: the front's first, then the rest from the best PSNR down, each at the first of four
+  // places beside its point that overlaps no label already drawn (or none, where all do).
+  const cv::Rect legend(width - right - 165, top, 165, 150);
+  std::vector<cv::Rect> taken = {legend};
+  std::vector<const ParetoPoint*> order;
+  for (const auto& p : points) order.push_back(&p);
+  std::stable_sort(order.begin(), order.end(), [](const ParetoPoint* a, const ParetoPoint* b) {
+    return a->front != b->front ? a->front : a->psnr_db > b->psnr_db;
+  });
+  for (const ParetoPoint* p : order) {
+    const cv::Point c(px(p->seconds), py(p->psnr_db));
+    int baseline = 0;
+    const cv::Size size = cv::getTextSize(p->label, cv::FONT_HERSHEY_SIMPLEX, 0.38, 1, &baseline);
+    for (const cv::Point at : {c + cv::Point(9, -6), c + cv::Point(9, size.height + 6),
+                               c + cv::Point(-9 - size.width, -6),
+                               c + cv::Point(-9 - size.width, size.height + 6)}) {
+      const cv::Rect box(at.x - 1, at.y - size.height - 1, size.width + 2, size.height + baseline + 2);
+      const bool inside = box.x >= left && box.x + box.width <= width - right && box.y >= top &&
+                          box.y + box.height <= height - bottom;
+      const bool free = std::none_of(taken.begin(), taken.end(),
+                                     [&](const cv::Rect& r) { return (r & box).area() > 0; });
+      if (!inside || !free) continue;
+      put_text(img, p->label, at, 0.38, p->front ? kFront : cv::Scalar(90, 90, 90));
+      taken.push_back(box);
+      break;
+    }
   }
   // Legend.
   int ly = top + 15;
