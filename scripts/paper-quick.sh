@@ -20,11 +20,12 @@ declare -A config=(
   [l2]=configs/paper/loss-ablation/l2.json
   [lytro]=configs/paper/lytro/asp-n2.json
   [noise-trained]=configs/paper/noise-sweep/asp-n2-noise-trained.json
+  [noise-trained-0.2]=configs/paper/noise-sweep/asp-n2-noise-trained-0.2.json
 )
 declare -A extra=([mask-from-asp]="--init models/asp-n2.ckpt")
 names=("$@")
 if [[ ${#names[@]} -eq 0 ]]; then
-  names=(mask-from-asp mask-from-scratch joint-from-scratch l2 lytro noise-trained)
+  names=(mask-from-asp mask-from-scratch joint-from-scratch l2 lytro noise-trained noise-trained-0.2)
 fi
 mkdir -p models/paper-quick
 for name in "${names[@]}"; do
