@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Trains ASP N = 2 at the paper's scale (configs/paper/phi-comparison/asp.json --scale paper:
-# about 3-4 hours of this 2-core machine; `--device cuda` trains on a GPU), stage by stage
+# 3.8 hours of this 2-core machine; `--device cuda` trains on a GPU), stage by stage
 # and resumably: a stage whose model exists is skipped, an interrupted one continues from its
 # last.ckpt. Run it again after an interruption. The final model becomes
-# models/asp-n2-paper.ckpt; then `scripts/results.sh paper-scale-asp-n2`.
+# models/asp-n2-paper.ckpt and its training log models/asp-n2-paper.training.jsonl; then
+# `scripts/results.sh paper-scale-asp-n2`.
 # Usage: scripts/paper-scale.sh [extra lfnet train arguments, e.g. --device cuda]
 # Pass lfnet's global options in LFNET_OPTS, e.g. LFNET_OPTS="--threads 1" beside other work;
 # CONFIG, SCALE, OUT and MODEL change what is trained, at which scale, where, and the copy.
@@ -35,4 +36,5 @@ for stage in $stages; do
 done
 cp "$out/models/$last.ckpt" "$model.tmp"
 mv "$model.tmp" "$model"
+cp "$out/training.jsonl" "${model%.ckpt}.training.jsonl"
 ls -l "$model"
