@@ -97,6 +97,8 @@ noise-sweep() {
     done
     VARIANT="trained at sigma 0.1" record "$tmp" --model $pq/noise-trained.ckpt \
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
+    VARIANT="trained at sigma 0.2" record "$tmp" --model $pq/noise-trained-0.2.ckpt \
+      --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
   done
   mv "$tmp" results/noise-sweep/records.jsonl
 }
@@ -169,15 +171,17 @@ phi-switching() {
   mv "$tmp" results/phi-switching/records.jsonl
 }
 
-# The paper scale of ASP N = 2 (configs/paper/phi-comparison/asp.json --scale paper, about 3-4
+# The paper scale of ASP N = 2 (configs/paper/phi-comparison/asp.json --scale paper, 3.8
 # hours of this 2-core machine; its model is models/asp-n2-paper.ckpt) beside the quick-scale asp-n2.
 paper-scale-asp-n2() {
   local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor)
   tmp=$(mktemp)
   for stride in 9 5; do
     for method in net ae cnn pinv no-parallax; do
-      VARIANT="paper scale" record "$tmp" --model models/asp-n2-paper.ckpt "${lf[@]}" \
-        --stride "$stride" --method "$method"
+      local training=
+      [[ $method == net ]] && training=models/asp-n2-paper.training.jsonl
+      VARIANT="paper scale" TRAINING=$training record "$tmp" --model models/asp-n2-paper.ckpt \
+        "${lf[@]}" --stride "$stride" --method "$method"
     done
     VARIANT="quick scale" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --stride "$stride" \
       --method net
