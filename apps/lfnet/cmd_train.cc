@@ -183,6 +183,8 @@ void add_experiment_command(CLI::App& app, const GlobalOptions&) {
     if (!model.empty()) context.net = train::build_net(train::load_checkpoint(model), model);
     const fs::path dictionary = fs::path(out) / "models" / "dict.ckpt";
     if (fs::exists(dictionary)) context.dictionary = dictionary.string();
+    ModelCache cache;  // the dictionary is read once for every light field, stride, mode and noise
+    context.cache = &cache;
     const auto truths = load_sources(ev.data, phi->rows(), phi->cols());
     const std::string results = (fs::path(out) / "results.jsonl").string();
     for (const auto& truth : truths) {

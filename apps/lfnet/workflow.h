@@ -192,7 +192,8 @@ struct ModelFile {
 // Loads --model; `network`: build the checkpoint's network too (exported files always are).
 ModelFile load_model(const std::string& path, bool network);
 
-// Models and dictionaries loaded once for many reconstructions (lfnet batch), by path.
+// Models and dictionaries loaded once for many reconstructions (lfnet batch, the evaluations
+// of lfnet experiment), by path.
 class ModelCache {
  public:
   ModelFile& model(const std::string& path);
