@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "command.h"
+#include "lfnet/core/parallax.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/runtime.h"
@@ -21,7 +22,7 @@ namespace lfnet::app {
 
 namespace {
 struct EvaluateArgs {
-  std::string model, lf, scene, phi, views, mode = "sensor", method, dictionary, json, out;
+  std::string model, lf, scene, phi, views, orient, mode = "sensor", method, dictionary, json, out;
   double noise = 0;
   int64_t stride = 5;
   int64_t batch = 1024;
@@ -71,6 +72,8 @@ void run_evaluate(const EvaluateArgs& a) {
   if (!a.lf.empty()) sources.light_fields = {a.lf};
   if (!a.scene.empty()) sources.scenes = {a.scene};
   sources.views = a.views;
+  sources.orient = a.orient;
+  AngularOrientation::parse(a.orient, "--orient");  // before any work
   if (!a.views.empty()) {
     auto [ru, rv] = parse_views(a.views);
     if (a.model.empty()) {
@@ -113,6 +116,8 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--scene", a->scene, "or a procedural scene spec");
   cmd->add_option("--phi", a->phi, "NAME[:N]: needed without --model; must match the model");
   cmd->add_option("--views", a->views, "angular window R0:R1,C0:C1 (1-based; default central)");
+  cmd->add_option("--orient", a->orient,
+                  "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
   cmd->add_option("--noise", a->noise, "Gaussian noise sigma, relative to a white scene's mean");
   cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(CLI::PositiveNumber);
   cmd->add_option("--mode", a->mode, "simulation mode: sensor or per_patch")

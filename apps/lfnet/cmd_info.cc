@@ -2,10 +2,12 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 
 #include "command.h"
+#include "lfnet/core/parallax.h"
 #include "lfnet/io/light_field_io.h"
 
 namespace lfnet::app {
@@ -13,11 +15,15 @@ namespace lfnet::app {
 void add_info_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand("info", "Print the shape, value range, naming scheme and grid of a light field folder");
   auto dir = std::make_shared<std::string>();
+  auto orient = std::make_shared<std::string>();
   cmd->add_option("--lf", *dir, "light field folder of sub-aperture images")->required();
-  cmd->callback([dir] {
+  cmd->add_option("--orient", *orient,
+                  "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
+  cmd->callback([dir, orient] {
+    const auto orientation = AngularOrientation::parse(*orient, "--orient");
     const auto layout = io::scan_folder(*dir);
     const auto start = std::chrono::steady_clock::now();
-    const LightField lf = io::read_light_field(*dir);
+    const LightField lf = reorient(io::read_light_field(*dir), orientation);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const auto& d = lf.data();
@@ -32,6 +38,16 @@ void add_info_command(CLI::App& app, const GlobalOptions& global) {
     std::printf("values:    min %.4f, max %.4f, mean %.4f\n", d.min().item<double>(),
                 d.max().item<double>(), d.mean().item<double>());
     std::printf("loaded in: %.3f s\n", seconds);
+    if (!orientation.identity()) std::printf("oriented:  %s\n", orientation.to_string().c_str());
+    // On the central 5 x 5 views (or all, if fewer), as experiments see them.
+    const int64_t n = std::min<int64_t>(5, std::min(lf.rows(), lf.cols()));
+    const auto parallax = check_parallax(lf.central(n));
+    std::printf("parallax:  %s\n", parallax.summary().c_str());
+    if (parallax.verdict == ParallaxVerdict::kDisagree) {
+      spdlog::warn("{}: one angular axis looks reversed; load it with --orient flip-u "
+                   "(docs/conventions.md)",
+                   *dir);
+    }
   });
 }
 

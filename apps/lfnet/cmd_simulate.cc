@@ -41,6 +41,7 @@ struct SimulateArgs {
   uint64_t seed = 0;
   std::string out;
   std::string views;  // R0:R1,C0:C1, 1-based; default the central 5 x 5
+  std::string orient;  // angular reorientation of the folder (docs/conventions.md)
   bool color = false;
   std::string effects;  // EFFECTS.json
   int64_t stride = 5;
@@ -74,8 +75,9 @@ Input load_input(const SimulateArgs& args) {
     in.scene_effects = spec.sensor;
     in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}};
   } else {
-    lf = io::read_light_field(args.lf);
+    lf = read_oriented(args.lf, args.orient, "--orient");
     in.source = {{"kind", "light_field"}, {"path", fs::absolute(args.lf).string()}};
+    if (!args.orient.empty()) in.source["orient"] = args.orient;
   }
   AngularRange ru, rv;
   if (args.views.empty()) {
@@ -355,6 +357,8 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)");
   cmd->add_option("--views", args->views,
                   "angular window R0:R1,C0:C1, 1-based inclusive (default: the central 5x5)");
+  cmd->add_option("--orient", args->orient,
+                  "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
   cmd->add_flag("--color", args->color, "simulate every colour channel (default: grey luma)");
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
   cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")->capture_default_str();

@@ -7,11 +7,14 @@
 
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <optional>
+#include <set>
 #include <sstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/parallax.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/io/light_field_io.h"
@@ -37,14 +40,34 @@ void LightFieldSources::read(JsonReader& r) {
   r.get("random_seed", random_seed);
   r.get("random_options", random_options);
   r.get("views", views);
+  r.get("orient", orient);
   r.finish();
   if (random_scenes < 0) throw ConfigError(r.path_of("random_scenes") + ": must be >= 0");
+  AngularOrientation::parse(orient, r.path_of("orient"));
 }
 
 nlohmann::json LightFieldSources::to_json() const {
   return {{"light_fields", light_fields}, {"scenes", scenes},
           {"random_scenes", random_scenes}, {"random_seed", random_seed},
-          {"random_options", random_options}, {"views", views}};
+          {"random_options", random_options}, {"views", views}, {"orient", orient}};
+}
+
+LightField read_oriented(const std::string& dir, const std::string& orient,
+                         const std::string& what) {
+  const auto orientation = AngularOrientation::parse(orient, what);
+  LightField lf = reorient(io::read_light_field(dir), orientation);
+  const auto check = check_parallax(lf);
+  if (check.verdict == ParallaxVerdict::kDisagree) {
+    static std::mutex mutex;
+    static std::set<std::string> warned;
+    std::lock_guard<std::mutex> lock(mutex);
+    if (warned.insert(fs::absolute(dir).lexically_normal().string()).second) {
+      spdlog::warn("{}: {}; if its views are named from the bottom row, load it with {} flip-u "
+                   "(docs/conventions.md)",
+                   dir, check.summary(), what);
+    }
+  }
+  return lf;
 }
 
 namespace {
@@ -74,7 +97,7 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
                         sources.random_scenes;
   ProgressBar bar("loading light fields", total);
   for (const auto& dir : sources.light_fields) {
-    auto lf = io::read_light_field(dir);
+    auto lf = read_oriented(dir, sources.orient, "orient");
     out.push_back({fs::path(dir).filename().string(), select_views(lf, sources.views, rows, cols, dir)});
     bar.advance();
   }

@@ -37,6 +37,8 @@ struct LightFieldSources {
   uint64_t random_seed = 1;               // seed of the first random scene
   nlohmann::json random_options = nlohmann::json::object();  // scene::RandomSceneOptions
   std::string views;                      // R0:R1,C0:C1 (1-based); "" = central U x V
+  std::string orient;                     // angular reorientation of the folders on loading:
+                                          // flip-u, flip-v, transpose (docs/conventions.md)
 
   void read(JsonReader& r);
   nlohmann::json to_json() const;
@@ -48,6 +50,12 @@ struct NamedLightField {
   std::string name;
   LightField lf;
 };
+
+// Reads a light-field folder and reorients its angular axes (`orient`, parsed as `what`: an
+// option or JSON path); warns once per folder when its horizontal and vertical parallax
+// disagree in sign (docs/conventions.md).
+LightField read_oriented(const std::string& dir, const std::string& orient,
+                         const std::string& what);
 
 // Loads every source as a grey light field of rows x cols views, with a progress bar.
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,

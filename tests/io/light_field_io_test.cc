@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/parallax.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -69,7 +70,8 @@ TEST_CASE("every naming scheme is recognised with its grid", "[io]") {
        io::NamingScheme::kRowCol},
       {"tm", [](int64_t u, int64_t v) { return fmt("TM_%02lld_%02lld.png", u + 1, v + 1); },
        io::NamingScheme::kTmRowCol},
-      {"mit", [](int64_t u, int64_t v) { return fmt("dragons-%lld.png", 3 * u + v + 1); },
+      // The MIT archive numbers its files from the bottom row of views (camera Y points up).
+      {"mit", [](int64_t u, int64_t v) { return fmt("dragons-%lld.png", 3 * (2 - u) + v + 1); },
        io::NamingScheme::kMitIndex},
   };
   for (const auto& c : cases) {
@@ -85,6 +87,35 @@ TEST_CASE("every naming scheme is recognised with its grid", "[io]") {
     // View (u, v) lands at (u, v): compare every view, not just the shape.
     lfnet::test::require_close(back.data(), lf.data(), 0.5 / 65535 + 1e-7);
   }
+}
+
+TEST_CASE("after loading, horizontal and vertical parallax agree in sign for every scheme",
+          "[io][parallax]") {
+  lfnet::test::TempDir tmp;
+  // Known disparities +2 and -1 px per view step, in lfnet's orientation (u down, v right).
+  const auto lf = lfnet::test::parallax_light_field(5, 5, 128, 160, 2, -1, 7);
+  REQUIRE(lfnet::check_parallax(lf).verdict == lfnet::ParallaxVerdict::kAgree);
+  // Each scheme's files as its own camera writes them: the MIT archive's 01 is the bottom-left
+  // camera (X = -2.5, Y = -2.5 cm in its README), 05 bottom-right, 21 top-left.
+  const std::vector<std::pair<std::string, std::function<std::string(int64_t, int64_t)>>> schemes = {
+      {"hci", [](int64_t u, int64_t v) { return fmt("input_Cam%03lld.png", 5 * u + v); }},
+      {"rowcol", [](int64_t u, int64_t v) { return fmt("lf_%lld_%lld.png", u + 1, v + 1); }},
+      {"tm", [](int64_t u, int64_t v) { return fmt("TM_%02lld_%02lld.png", u + 1, v + 1); }},
+      {"mit", [](int64_t u, int64_t v) { return fmt("scene-%02lld.png", 5 * (4 - u) + v + 1); }},
+  };
+  for (const auto& [name, namer] : schemes) {
+    INFO(name);
+    write_views(lf, tmp / name, namer);
+    const auto back = io::read_light_field(tmp / name);
+    const auto check = lfnet::check_parallax(back);
+    INFO(check.summary());
+    CHECK(check.verdict == lfnet::ParallaxVerdict::kAgree);
+    CHECK(check.correlation > 0.9);
+  }
+  // The MIT files read top row first (the old reading) would disagree: the check sees it.
+  const auto upside_down = lfnet::reorient(io::read_light_field(tmp / "mit"),
+                                           lfnet::AngularOrientation::parse("flip-u", "test"));
+  CHECK(lfnet::check_parallax(upside_down).verdict == lfnet::ParallaxVerdict::kDisagree);
 }
 
 TEST_CASE("RGBA views are read as RGB", "[io]") {

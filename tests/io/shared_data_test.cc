@@ -3,6 +3,7 @@
 
 #include <filesystem>
 
+#include "lfnet/core/parallax.h"
 #include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
 
@@ -38,6 +39,10 @@ TEST_CASE("every light field in ../shared/data loads with its documented shape",
     CHECK(lf.data().min().item<float>() >= 0.0f);
     CHECK(lf.data().max().item<float>() <= 1.0f);
     CHECK(lf.data().std().item<float>() > 0.01f);
+    // Every camera's naming scheme is read in lfnet's orientation.
+    const auto parallax = lfnet::check_parallax(c);
+    INFO(parallax.summary());
+    CHECK(parallax.verdict == lfnet::ParallaxVerdict::kAgree);
   }
   // The HCI disparity map is a PFM of the centre view's size.
   auto disp = io::read_pfm(data + "/hci_antinous/gt_disp_lowres.pfm");

@@ -77,4 +77,29 @@ void write_bytes(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary) << bytes;
 }
 
+LightField parallax_light_field(int64_t rows, int64_t cols, int64_t h, int64_t w, int64_t left,
+                                int64_t right, uint64_t seed) {
+  torch::manual_seed(seed);
+  const int64_t pad = std::max(std::abs(left), std::abs(right)) * std::max(rows, cols);
+  auto layer = [&] {
+    // Blurred noise: texture at every scale a block matcher sees, values well inside [0, 1].
+    auto t = torch::rand({1, 1, h + 2 * pad + 2, w + 2 * pad + 2});
+    return torch::avg_pool2d(t, {3, 3}, {1, 1})[0][0];
+  };
+  const auto a = layer(), b = layer();
+  auto out = torch::empty({1, rows, cols, h, w});
+  const int64_t cu = rows / 2, cv = cols / 2;
+  for (int64_t u = 0; u < rows; ++u) {
+    for (int64_t v = 0; v < cols; ++v) {
+      auto crop = [&](const torch::Tensor& t, int64_t d) {
+        return t.narrow(0, pad - d * (u - cu), h).narrow(1, pad - d * (v - cv), w);
+      };
+      auto view = crop(a, left).clone();
+      view.narrow(1, w / 2, w - w / 2).copy_(crop(b, right).narrow(1, w / 2, w - w / 2));
+      out[0][u][v].copy_(view);
+    }
+  }
+  return LightField(out);
+}
+
 }  // namespace lfnet::test

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <string>
 
+#include "lfnet/core/light_field.h"
+
 namespace lfnet::test {
 
 // Fails the current test with the first index where |got - want| > atol + rtol * |want|.
@@ -43,5 +45,11 @@ std::string read_bytes(const std::string& path);
 
 // Writes `bytes` to a file, replacing it.
 void write_bytes(const std::string& path, const std::string& bytes);
+
+// A grey rows x cols x h x w light field of known parallax, in lfnet's orientation: a random
+// texture whose left half moves by `left` and right half by `right` pixels per view step
+// (integers, so every view is an exact shift: L(u, v)(y, x) = T(y - d du, x - d dv)).
+LightField parallax_light_field(int64_t rows, int64_t cols, int64_t h, int64_t w, int64_t left,
+                                int64_t right, uint64_t seed = 1);
 
 }  // namespace lfnet::test

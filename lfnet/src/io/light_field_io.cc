@@ -81,8 +81,11 @@ FolderLayout layout_from_pairs(NamingScheme scheme, const std::vector<Candidate>
   return layout;
 }
 
+// Views numbered row-major over a square grid. `rows_up`: the numbering starts at the bottom
+// row (a camera whose Y axis points up), so its rows are read in reverse to put u downward.
 FolderLayout layout_from_index(NamingScheme scheme, std::vector<Candidate> found,
-                               const std::string& dir, int64_t base, const std::string& what) {
+                               const std::string& dir, int64_t base, const std::string& what,
+                               bool rows_up = false) {
   int64_t max_index = 0;
   std::map<int64_t, std::string> by_index;
   for (const auto& c : found) {
@@ -102,8 +105,12 @@ FolderLayout layout_from_index(NamingScheme scheme, std::vector<Candidate> found
     LFNET_CHECK_AS(IoError, it != by_index.end(), "light field folder ", dir, " has a gap in its ",
                    n, "x", n, " grid: the ", what, " view numbered ", i + base,
                    " (row ", i / n + 1, ", column ", i % n + 1, ") is missing");
-    layout.views.push_back({i / n, i % n, it->second});
+    const int64_t row = rows_up ? n - 1 - i / n : i / n;
+    layout.views.push_back({row, i % n, it->second});
   }
+  std::sort(layout.views.begin(), layout.views.end(), [](const ViewFile& a, const ViewFile& b) {
+    return a.u != b.u ? a.u < b.u : a.v < b.v;
+  });
   return layout;
 }
 
@@ -153,7 +160,10 @@ FolderLayout scan_folder(const std::string& dir) {
   auto& [scheme, files] = *found.begin();
   switch (scheme) {
     case NamingScheme::kHciCam: return layout_from_index(scheme, files, dir, 0, "input_Cam");
-    case NamingScheme::kMitIndex: return layout_from_index(scheme, files, dir, 1, "<name>-NN");
+    // The MIT archive's README places file 01 at camera Y = -2.5 cm and 21 at +2.5 cm with Y
+    // growing upward: its first row of files is the bottom row of views.
+    case NamingScheme::kMitIndex:
+      return layout_from_index(scheme, files, dir, 1, "<name>-NN", /*rows_up=*/true);
     case NamingScheme::kRowCol: return layout_from_pairs(scheme, files, dir, 1, "lf_%lld_%lld.png");
     case NamingScheme::kTmRowCol:
       return layout_from_pairs(scheme, files, dir, 1, "TM_%02lld_%02lld.png");

@@ -16,7 +16,8 @@ enum class NamingScheme {
   kHciCam,    // input_CamNNN.ext, NNN = rows * row + col, 0-based (HCI benchmark)
   kRowCol,    // lf_R_C.ext, 1-based (Stanford Lytro archive, deepulfcam; lfnet's own writer)
   kTmRowCol,  // TM_RR_CC.ext, 1-based, two digits (Lytro Illum validation set)
-  kMitIndex,  // <name>-NN.ext, NN 1-based row-major over the grid (MIT Synthetic LF Archive)
+  kMitIndex,  // <name>-NN.ext, NN 1-based row-major from the BOTTOM row of views (MIT Synthetic
+              // LF Archive: camera Y grows upward), read with its rows reversed
 };
 std::string to_string(NamingScheme scheme);
 
