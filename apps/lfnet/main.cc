@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "lfnet 0.1.0");
   GlobalOptions global;
-  app.add_option("--threads", global.threads, "CPU threads (default: every core)")
+  app.add_option("--threads", global.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));

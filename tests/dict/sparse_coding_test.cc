@@ -90,13 +90,18 @@ TEST_CASE("ADMM-LASSO recovers an exactly sparse patch to its tolerance", "[dict
   o.admm.rho = 0.1;
   o.admm.relaxation = 1.6;
   o.admm.abs_tolerance = 1e-7;
+  // In float32 this is raised to the precision's floor, 3.8e-5 for K = 1,000: asked for
+  // 1e-5, float32 patches stalled above it forever on OpenBLAS's SkylakeX kernel.
   o.admm.rel_tolerance = 1e-5;
+  // Why 3,000 suffices: on this problem every patch stops after 195-436 iterations, in both
+  // precisions, on OpenBLAS's Haswell and SkylakeX kernels and on 1 and 2 threads
+  // (scripts/test-kernels.sh); ADMM converges linearly here, so round-off moves that by tens.
   o.admm.max_iterations = 3000;
   SparseCoder coder(p.dict, o);
   auto r = coder.code(p.a, p.y);
   require_finite(r);
   CHECK(r.converged.all().item<bool>());
-  CHECK(r.iterations.max().item<int64_t>() < 3000);
+  CHECK(r.iterations.max().item<int64_t>() < 1000);
   CHECK(r.nonzeros.eq(5).all().item<bool>());
   // The LASSO's shrinkage biases the estimate by about lambda relative (1.4e-4 here).
   const double rel = ((r.patches - p.patches).norm() / p.patches.norm()).item<double>();

@@ -16,6 +16,7 @@
 #include <string>
 #include <thread>
 
+#include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/train/checkpoint.h"
 #include "support/test_support.h"
@@ -165,44 +166,73 @@ TEST_CASE("a far too large learning rate stops with a clear message; the last go
 
 TEST_CASE("the same seed and thread count give bit-identical simulate, train and reconstruct",
           "[app][determinism]") {
+  // Promises (docs/robustness.md, section 3): for one thread count, every output is
+  // bit-identical run to run, on 1 and on 2 threads. Across thread counts only the noisy
+  // sensor image is (its noise is addressed by pixel index); trained weights and
+  // reconstructions go through BLAS, whose rounding follows the thread count and the CPU's
+  // kernel, and agree to a stated tolerance.
   lfnet::test::TempDir tmp;
   write_config(tmp / "c.json", tiny_config(1, 64));
   std::string out;
   REQUIRE(run_command(program("render --random 4 --size 30x30 --out " + (tmp / "lf")), out) == 0);
-  for (const char* run : {"a", "b"}) {
-    const std::string dir = tmp / run;
-    REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --noise 0.05 --seed 9 --out " +
-                              dir + "/acq"),
-                        out) == 0);
-    REQUIRE(run_command(program("train " + (tmp / "c.json") + " --out " + dir + "/run"), out) == 0);
-    REQUIRE(run_command(program("reconstruct --model " + dir + "/run/models/ae.ckpt --sensor " + dir +
-                              "/acq --stride 3 --out " + dir + "/rec"),
-                        out) == 0);
+  for (const char* threads : {"1", "2"}) {
+    for (const char* run : {"a", "b"}) {
+      const std::string dir = tmp / (std::string(run) + threads);
+      const std::string lfnet = lfnet_binary() + " --threads " + threads + " --log-level warn ";
+      REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") +
+                              " --phi asp:2 --noise 0.05 --seed 9 --out " + dir + "/acq",
+                          out) == 0);
+      REQUIRE(run_command(lfnet + "train " + (tmp / "c.json") + " --out " + dir + "/run", out) == 0);
+      REQUIRE(run_command(lfnet + "reconstruct --model " + dir + "/run/models/ae.ckpt --sensor " +
+                              dir + "/acq --stride 3 --out " + dir + "/rec",
+                          out) == 0);
+    }
   }
-  // TIFF headers carry the time of writing: compare the pixels.
-  auto sensor_a = lfnet::io::read_image_channels(tmp / "a/acq/sensor.tif");
-  CHECK(torch::equal(sensor_a, lfnet::io::read_image_channels(tmp / "b/acq/sensor.tif")));
-  auto ca = lfnet::train::load_checkpoint(tmp / "a/run/models/ae/last.ckpt");
-  auto cb = lfnet::train::load_checkpoint(tmp / "b/run/models/ae/last.ckpt");
-  REQUIRE(ca.model.size() == cb.model.size());
-  for (const auto& [name, tensor] : ca.model) {
-    INFO(name);
-    CHECK(torch::equal(tensor, cb.model.at(name)));
+  for (const char* threads : {"1", "2"}) {
+    INFO(threads << " thread(s), run to run");
+    const std::string a = tmp / (std::string("a") + threads), b = tmp / (std::string("b") + threads);
+    // TIFF headers carry the time of writing: compare the pixels.
+    CHECK(torch::equal(lfnet::io::read_image_channels(a + "/acq/sensor.tif"),
+                       lfnet::io::read_image_channels(b + "/acq/sensor.tif")));
+    auto ca = lfnet::train::load_checkpoint(a + "/run/models/ae/last.ckpt");
+    auto cb = lfnet::train::load_checkpoint(b + "/run/models/ae/last.ckpt");
+    REQUIRE(ca.model.size() == cb.model.size());
+    for (const auto& [name, tensor] : ca.model) {
+      INFO(name);
+      CHECK(torch::equal(tensor, cb.model.at(name)));
+    }
+    for (const auto& [name, tensor] : ca.optimizer) {
+      INFO(name);
+      CHECK(torch::equal(tensor, cb.optimizer.at(name)));
+    }
+    CHECK(ca.training.history[0]["train_loss"] == cb.training.history[0]["train_loss"]);
+    for (const auto& e : fs::directory_iterator(a + "/rec")) {
+      const auto name = e.path().filename().string();
+      if (name == "reconstruction.json") continue;
+      INFO(name);
+      CHECK(read_bytes(e.path().string()) == read_bytes(b + "/rec/" + name));
+    }
   }
-  for (const auto& [name, tensor] : ca.optimizer) {
-    INFO(name);
-    CHECK(torch::equal(tensor, cb.optimizer.at(name)));
+  // Across thread counts.
+  const std::string one = tmp / "a1", two = tmp / "a2";
+  CHECK(torch::equal(lfnet::io::read_image_channels(one + "/acq/sensor.tif"),
+                     lfnet::io::read_image_channels(two + "/acq/sensor.tif")));
+  auto c1 = lfnet::train::load_checkpoint(one + "/run/models/ae/last.ckpt");
+  auto c2 = lfnet::train::load_checkpoint(two + "/run/models/ae/last.ckpt");
+  for (const auto& [name, tensor] : c1.model) {
+    INFO(name << ", 1 thread against 2");
+    // One epoch from the same start: BLAS round-off (about 1e-7 relative per product) grows
+    // through 2 Adam steps to well under 1e-4.
+    lfnet::test::require_close(c2.model.at(name), tensor, 1e-5, 1e-4);
   }
-  CHECK(ca.training.history[0]["train_loss"] == cb.training.history[0]["train_loss"]);
-  for (const auto& e : fs::directory_iterator(tmp.path() / "a/rec")) {
-    const auto name = e.path().filename().string();
-    if (name == "reconstruction.json") continue;
-    INFO(name);
-    CHECK(read_bytes(e.path().string()) == read_bytes(tmp / ("b/rec/" + name)));
-  }
+  const auto rec1 = lfnet::io::read_light_field(one + "/rec", 1).data();
+  const auto rec2 = lfnet::io::read_light_field(two + "/rec", 1).data();
+  // 16-bit views: a rounding flip moves a value by one code.
+  lfnet::test::require_close(rec2, rec1, 2.0 / 65535);
   // A different seed gives a different sensor image (the comparison can fail).
   REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --noise 0.05 --seed 10 --out " +
                             (tmp / "c/acq")),
                       out) == 0);
-  CHECK_FALSE(torch::equal(sensor_a, lfnet::io::read_image_channels(tmp / "c/acq/sensor.tif")));
+  CHECK_FALSE(torch::equal(lfnet::io::read_image_channels(one + "/acq/sensor.tif"),
+                           lfnet::io::read_image_channels(tmp / "c/acq/sensor.tif")));
 }

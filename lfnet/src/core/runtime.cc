@@ -15,7 +15,14 @@
 namespace lfnet {
 
 int configure_threads(int requested) {
-  int n = requested > 0 ? requested : static_cast<int>(std::thread::hardware_concurrency());
+  int n = requested;
+  if (n <= 0) {
+    // OMP_NUM_THREADS, when set to a positive count, is the default (scripts/test-kernels.sh
+    // runs everything on 1 and on 2 threads that way); otherwise every core.
+    const char* env = std::getenv("OMP_NUM_THREADS");
+    n = env != nullptr ? std::atoi(env) : 0;
+    if (n <= 0) n = static_cast<int>(std::thread::hardware_concurrency());
+  }
   n = std::max(1, n);
   torch::set_num_threads(n);
   return torch::get_num_threads();

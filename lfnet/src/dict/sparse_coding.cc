@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <functional>
 #include <numeric>
 #include <string_view>
@@ -265,6 +266,17 @@ SparseCodingResult SparseCoder::code_omp(const PreparedOperator& op, const torch
 
 namespace {
 
+// The smallest relative tolerance that iterations in precision T reach on any BLAS kernel:
+// each iteration's two products sum K terms, so x and z carry a relative round-off of about
+// eps(T) sqrt(K) that no further iteration removes. Below 10 times that, whether a patch ever
+// stops depends on how the kernel orders its sums (float32, K = 1,000: 3.8e-5; patches that
+// stalled at 1.0-1.5e-5 on OpenBLAS's SkylakeX kernel and converged on its Haswell one).
+template <typename T>
+double admm_rel_tolerance_floor(int64_t k) {
+  return 10.0 * static_cast<double>(std::numeric_limits<T>::epsilon()) *
+         std::sqrt(static_cast<double>(k));
+}
+
 // The batched ADMM iterations in precision T. `theta` (m, K) and `p` (m, K) in T; `q0` (B, K)
 // = Theta^T y per row, in T, overwritten. Writes z per patch into `alpha` (B, K) float64.
 template <typename T>
@@ -275,7 +287,7 @@ void admm_iterations(const AdmmOptions& o, const torch::Tensor& theta, const tor
   const T rho = static_cast<T>(o.rho), inv_rho = static_cast<T>(1.0 / o.rho);
   const T relax = static_cast<T>(o.relaxation);
   const double eps_abs = std::sqrt(static_cast<double>(k)) * o.abs_tolerance;
-  const double eps_rel = o.rel_tolerance;
+  const double eps_rel = std::max(o.rel_tolerance, admm_rel_tolerance_floor<T>(k));
   const auto dtype = q0.scalar_type();
   // Patches are rows. The active patches occupy rows [0, active) of the work arrays; a patch
   // that converges leaves by compaction, so the matrix products shrink with the batch.

@@ -7,8 +7,9 @@
 
 namespace lfnet {
 
-// Sets LibTorch's intra-op threads to `requested`, or to every hardware core when
-// `requested` <= 0 (LibTorch here starts with one). Returns the count in effect.
+// Sets LibTorch's intra-op threads to `requested`; when `requested` <= 0, to OMP_NUM_THREADS
+// if that is a positive count, else to every hardware core (LibTorch here starts with one).
+// Returns the count in effect.
 int configure_threads(int requested);
 
 // The intra-op thread count in effect.
