@@ -91,14 +91,21 @@ LightField select_views(const LightField& lf, const std::string& views, int64_t 
 }  // namespace
 
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
-                                          int64_t cols) {
+                                          int64_t cols, bool whole_grids) {
   std::vector<NamedLightField> out;
   const int64_t total = static_cast<int64_t>(sources.light_fields.size() + sources.scenes.size()) +
                         sources.random_scenes;
   ProgressBar bar("loading light fields", total);
   for (const auto& dir : sources.light_fields) {
     auto lf = read_oriented(dir, sources.orient, "orient");
-    out.push_back({fs::path(dir).filename().string(), select_views(lf, sources.views, rows, cols, dir)});
+    if (whole_grids && sources.views.empty()) {
+      LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, dir, " has ", lf.rows(),
+                     "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
+      out.push_back({fs::path(dir).filename().string(), lf.grey()});
+    } else {
+      out.push_back({fs::path(dir).filename().string(),
+                     select_views(lf, sources.views, rows, cols, dir)});
+    }
     bar.advance();
   }
   for (const auto& path : sources.scenes) {
@@ -290,7 +297,9 @@ void prepare_run_dir(const std::string& dir, bool force) {
 
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi) {
-  auto named = load_sources(config.train_data, phi.rows(), phi.cols());
+  const auto& d = config.dataset;
+  const bool windows = d.angular_windows != "central" || d.angular_steps != std::vector<int64_t>{1};
+  auto named = load_sources(config.train_data, phi.rows(), phi.cols(), windows);
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
   for (auto& n : named) lfs.push_back(n.lf);

@@ -57,9 +57,11 @@ struct NamedLightField {
 LightField read_oriented(const std::string& dir, const std::string& orient,
                          const std::string& what);
 
-// Loads every source as a grey light field of rows x cols views, with a progress bar.
+// Loads every source as a grey light field of rows x cols views, with a progress bar. With
+// `whole_grids`, folders without a `views` window keep every view (at least rows x cols), for
+// a data set that draws its own angular windows.
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
-                                          int64_t cols);
+                                          int64_t cols, bool whole_grids = false);
 
 // One training stage of an experiment.
 struct StageConfig {

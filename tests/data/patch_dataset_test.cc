@@ -2,6 +2,10 @@
 
 #include <catch2/catch.hpp>
 
+#include <cmath>
+#include <set>
+#include <tuple>
+
 #include "lfnet/core/error.h"
 #include "lfnet/optics/measure.h"
 #include "support/test_support.h"
@@ -118,4 +122,101 @@ TEST_CASE("light fields too small to split are a clear error", "[data]") {
                   ConfigError);
   CHECK_THROWS_AS(data::PatchDataset({LightField(torch::rand({1, 3, 3, 40, 40}))}, *phi, small_options()),
                   ConfigError);
+}
+
+namespace {
+// A 9 x 9 light field whose view (u, v) holds the value (9 u + v) / 100 everywhere: a patch's
+// views tell which window of the grid it came from.
+LightField labelled_grid() {
+  auto labels = torch::arange(81, torch::kFloat32).view({1, 9, 9, 1, 1}) / 100.0;
+  return LightField(labels.expand({1, 9, 9, 70, 40}).clone());
+}
+
+// The window (u0, v0, step) that a (U, V, h, w) patch of labelled_grid() shows, or step 0.
+std::tuple<int64_t, int64_t, int64_t> window_of(const torch::Tensor& patch) {
+  auto label = [&](int64_t u, int64_t v) {
+    return static_cast<int64_t>(std::lround(patch[u][v][0][0].item<double>() * 100.0));
+  };
+  const int64_t u0 = label(0, 0) / 9, v0 = label(0, 0) % 9;
+  const int64_t step = label(0, 1) - label(0, 0);
+  for (int64_t u = 0; u < 5; ++u) {
+    for (int64_t v = 0; v < 5; ++v) {
+      if (label(u, v) != 9 * (u0 + step * u) + v0 + step * v) return {0, 0, 0};
+    }
+  }
+  return {u0, v0, step};
+}
+}  // namespace
+
+TEST_CASE("training patches come from every angular window and step of a wider grid",
+          "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.augment = false;
+  o.angular_windows = "any";
+  o.angular_steps = {1, 2};
+  data::PatchDataset ds({labelled_grid()}, *phi, o);
+  ds.start_epoch(0, 200);
+  const auto t = ds.next_train().target.squeeze(1);
+  std::set<std::tuple<int64_t, int64_t, int64_t>> seen;
+  for (int64_t i = 0; i < t.size(0); ++i) {
+    const auto w = window_of(t[i]);
+    REQUIRE(std::get<2>(w) != 0);  // a real window of the grid, views in order
+    seen.insert(w);
+  }
+  // 25 windows at step 1 and one (the whole grid) at step 2; 200 draws see most of them.
+  CHECK(seen.count({0, 0, 2}) == 1);
+  CHECK(seen.size() >= 20);
+  for (const auto& [u0, v0, step] : seen) CHECK(u0 + step * 4 <= 8);
+  // Validation keeps the central window at step 1: views 3..7 of 9.
+  for (const auto& b : ds.validation()) {
+    const auto v = b.target.squeeze(1);
+    for (int64_t i = 0; i < v.size(0); ++i) CHECK(window_of(v[i]) == std::make_tuple(2, 2, 1));
+  }
+  // The default draws the central window only, at step 1.
+  auto plain = small_options();
+  plain.augment = false;
+  data::PatchDataset central({labelled_grid()}, *phi, plain);
+  central.start_epoch(0, 64);
+  const auto c = central.next_train().target.squeeze(1);
+  for (int64_t i = 0; i < c.size(0); ++i) CHECK(window_of(c[i]) == std::make_tuple(2, 2, 1));
+  // A step that does not fit a 5 x 5 grid falls back to its only window.
+  o.angular_steps = {2};
+  data::PatchDataset narrow({LightField(torch::rand({1, 5, 5, 70, 40}))}, *phi, o);
+  narrow.start_epoch(0, 16);
+  CHECK(narrow.next_train().target.size(0) == 16);
+  // Bad options name themselves.
+  o.angular_windows = "every";
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("angular_windows"));
+  o.angular_windows = "any";
+  o.angular_steps = {0};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("angular_steps"));
+}
+
+TEST_CASE("photometric jitter varies patches and their measurements stay consistent",
+          "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.augment = false;
+  o.jitter_gamma = 0.5;
+  o.jitter_contrast = 0.3;
+  o.jitter_brightness = 0.1;
+  const LightField lf(torch::rand({1, 5, 5, 70, 40}) * 0.5 + 0.25);
+  data::PatchDataset ds({lf}, *phi, o);
+  ds.start_epoch(0, 128);
+  const auto b = ds.next_train();
+  const auto t = b.target.squeeze(1);
+  CHECK(t.min().item<double>() >= 0.0);
+  CHECK(t.max().item<double>() <= 1.0);
+  // Patch means spread beyond the source's (about 0.5 +- 0.02 for 2025 uniform values).
+  const auto means = t.mean({1, 2, 3, 4});
+  CHECK((means.max() - means.min()).item<double>() > 0.15);
+  // The measurements are those of the jittered patch (ASP is the same at every pixel).
+  const auto m = phi->patch_matrix(0, 0, 9, 9);
+  lfnet::test::require_close(b.y, t.reshape({t.size(0), -1}).matmul(m.t()), 1e-4, 1e-4);
+  // Validation is never jittered: its patches are crops of the light field.
+  data::PatchDataset plain({lf}, *phi, small_options());
+  lfnet::test::require_close(ds.validation()[0].target, plain.validation()[0].target, 0.0);
+  o.jitter_gamma = 2;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("jitter"));
 }

@@ -129,3 +129,74 @@ TEST_CASE("random scene options are validated and parsed strictly", "[scene][ran
   CHECK(spec.layers[0].slanted());
   CHECK(spec.layers.back().name.rfind("occluder", 0) == 0);
 }
+
+TEST_CASE("random scenes take regions of natural images as textures when asked", "[scene][random]") {
+  lfnet::test::TempDir tmp;
+  // Two "photographs" (only their names matter to the generator) and a stray file.
+  for (const char* name : {"b.png", "a.jpg", "notes.txt"}) lfnet::test::write_bytes(tmp / name, "x");
+  RandomSceneOptions o;
+  o.height = 48;
+  o.width = 48;
+  const auto before = random_scene(11, o).to_json();
+  o.texture_images = {tmp.path().string()};
+  // Listing images changes nothing until a probability asks for them.
+  CHECK(random_scene(11, o).to_json() == before);
+  CHECK(lfnet::scene::texture_image_files(o.texture_images) ==
+        std::vector<std::string>{tmp / "a.jpg", tmp / "b.png"});
+  o.image_probability = 1.0;
+  const SceneSpec spec = random_scene(11, o);
+  CHECK(spec.to_json() == random_scene(11, o).to_json());
+  std::set<std::string> paths;
+  std::set<double> zooms;
+  for (const auto& layer : spec.layers) {
+    REQUIRE(layer.texture.kind == lfnet::scene::TextureKind::kImage);
+    paths.insert(layer.texture.path);
+    zooms.insert(layer.texture.zoom);
+    CHECK(layer.texture.zoom >= 1.0);
+    CHECK(layer.texture.zoom <= 4.0);
+  }
+  CHECK(zooms.size() == spec.layers.size());
+  // Rendering reads them through the loader: a gradient image, so zoom and offset show.
+  int loads = 0;
+  lfnet::scene::RenderOptions render;
+  render.image_loader = [&](const std::string& path) {
+    ++loads;
+    CHECK(paths.count(path) == 1);
+    return torch::linspace(0, 1, 200).view({1, 1, 200}).expand({1, 150, 200}).contiguous();
+  };
+  const auto lf = lfnet::scene::render_scene(spec, render).light_field;
+  CHECK(loads >= 1);
+  CHECK(torch::isfinite(lf.data()).all().item<bool>());
+  CHECK(lf.data().std().item<double>() > 0.01);
+  // Bad options are named.
+  o.texture_images = {tmp / "notes.txt"};
+  CHECK_THROWS_WITH(random_scene(1, o), Catch::Contains("notes.txt"));
+  o.texture_images.clear();
+  CHECK_THROWS_WITH(o.validate("$.random_options"), Catch::Contains("texture_images"));
+}
+
+TEST_CASE("an image texture's zoom and offset choose the region it shows", "[scene][render]") {
+  // A 1 x 100 ramp fitted to a 20-pixel-wide scene: zoom 2 shows half of it, offset -1 / +1
+  // its left / right half.
+  auto scene_json = [](double zoom, double offset) {
+    return nlohmann::json{{"height", 20}, {"width", 20}, {"rows", 1}, {"cols", 1}, {"color", false},
+                          {"layers", {{{"texture", {{"kind", "image"}, {"path", "ramp.png"},
+                                                    {"fit", "stretch"}, {"zoom", zoom},
+                                                    {"offset", {offset, 0.0}}}}}}}};
+  };
+  lfnet::scene::RenderOptions render;
+  render.image_loader = [](const std::string&) {
+    return torch::linspace(0, 1, 100).view({1, 1, 100}).expand({1, 100, 100}).contiguous();
+  };
+  auto row = [&](double zoom, double offset) {
+    const auto spec = SceneSpec::from_json(scene_json(zoom, offset));
+    return lfnet::scene::render_scene(spec, render).light_field.data()[0][0][0][10];
+  };
+  const auto whole = row(1, 0), left = row(2, -1), right = row(2, 1);
+  CHECK(whole.min().item<double>() < 0.05);
+  CHECK(whole.max().item<double>() > 0.95);
+  CHECK(left.max().item<double>() < 0.55);
+  CHECK(right.min().item<double>() > 0.45);
+  CHECK_THROWS_AS(SceneSpec::from_json(scene_json(0.5, 0)), lfnet::ConfigError);
+  CHECK_THROWS_AS(SceneSpec::from_json(scene_json(2, 1.5)), lfnet::ConfigError);
+}

@@ -18,6 +18,11 @@ DatasetOptions DatasetOptions::from_json(JsonReader& r) {
   r.get("validation_fraction", o.validation_fraction);
   r.get("augment", o.augment);
   r.get("min_std", o.min_std);
+  r.get("angular_windows", o.angular_windows);
+  r.get("angular_steps", o.angular_steps);
+  r.get("jitter_gamma", o.jitter_gamma);
+  r.get("jitter_contrast", o.jitter_contrast);
+  r.get("jitter_brightness", o.jitter_brightness);
   r.get("seed", o.seed);
   if (r.has("effects")) {
     nlohmann::json effects;
@@ -41,6 +46,11 @@ nlohmann::json DatasetOptions::to_json() const {
           {"validation_fraction", validation_fraction},
           {"augment", augment},
           {"min_std", min_std},
+          {"angular_windows", angular_windows},
+          {"angular_steps", angular_steps},
+          {"jitter_gamma", jitter_gamma},
+          {"jitter_contrast", jitter_contrast},
+          {"jitter_brightness", jitter_brightness},
           {"seed", seed},
           {"effects", effects.to_json()}};
 }
@@ -53,6 +63,19 @@ void DatasetOptions::validate() const {
     throw ConfigError("validation_fraction must lie in (0, 1)");
   }
   if (min_std < 0) throw ConfigError("min_std must be non-negative");
+  if (angular_windows != "central" && angular_windows != "any") {
+    throw ConfigError("angular_windows must be \"central\" or \"any\", got \"" + angular_windows +
+                      "\"");
+  }
+  if (angular_steps.empty()) throw ConfigError("angular_steps must list at least one step");
+  for (int64_t step : angular_steps) {
+    if (step < 1 || step > 8) throw ConfigError("angular_steps must lie in 1..8");
+  }
+  for (double j : {jitter_gamma, jitter_contrast, jitter_brightness}) {
+    if (!(std::isfinite(j) && j >= 0 && j <= 1)) {
+      throw ConfigError("jitter_gamma, jitter_contrast and jitter_brightness must lie in [0, 1]");
+    }
+  }
 }
 
 namespace {
@@ -72,12 +95,28 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   options_.validate();
   LFNET_CHECK_AS(ConfigError, !lfs_.empty(), "the training data holds no light field");
   LFNET_CHECK_AS(ConfigError, validation_batch_size >= 1, "validation batch size must be >= 1");
+  const int64_t nu = phi.rows(), nv = phi.cols();
   for (size_t i = 0; i < lfs_.size(); ++i) {
     auto& lf = lfs_[i];
     lf = lf.grey();
-    LFNET_CHECK_AS(ConfigError, lf.rows() == phi.rows() && lf.cols() == phi.cols(),
-                   "training light field ", i, " has ", lf.rows(), "x", lf.cols(),
-                   " views but Phi codes ", phi.rows(), "x", phi.cols());
+    LFNET_CHECK_AS(ConfigError, lf.rows() >= nu && lf.cols() >= nv, "training light field ", i,
+                   " has ", lf.rows(), "x", lf.cols(), " views but Phi codes ", nu, "x", nv);
+    // Its windows: [0] the central one at step 1 (validation's), then training's: each
+    // configured step that fits the grid, centrally or everywhere. None fits: the central.
+    std::vector<Window> windows = {{central_start(lf.rows(), nu), central_start(lf.cols(), nv), 1}};
+    for (int64_t step : options_.angular_steps) {
+      const int64_t su = step * (nu - 1) + 1, sv = step * (nv - 1) + 1;
+      if (su > lf.rows() || sv > lf.cols()) continue;
+      if (options_.angular_windows == "central") {
+        windows.push_back({central_start(lf.rows(), su), central_start(lf.cols(), sv), step});
+        continue;
+      }
+      for (int64_t u0 = 0; u0 + su <= lf.rows(); ++u0) {
+        for (int64_t v0 = 0; v0 + sv <= lf.cols(); ++v0) windows.push_back({u0, v0, step});
+      }
+    }
+    if (windows.size() == 1) windows.push_back(windows.front());
+    windows_.push_back(std::move(windows));
     const int64_t split = static_cast<int64_t>(
         std::floor(static_cast<double>(lf.height()) * (1.0 - options_.validation_fraction)));
     LFNET_CHECK_AS(ConfigError,
@@ -109,10 +148,22 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
           .item<double>();
 }
 
+PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
+  auto part = [&](const auto& v) {
+    using V = std::decay_t<decltype(v)>;
+    return V(v.begin() + begin, v.begin() + end);
+  };
+  return {part(lf),     part(y0),    part(x0),       part(aug),
+          part(window), part(gamma), part(contrast), part(brightness)};
+}
+
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
   std::discrete_distribution<int64_t> pick(train_weight_.begin(), train_weight_.end());
   const bool square = options_.patch_h == options_.patch_w && phi_.rows() == phi_.cols();
   std::uniform_int_distribution<int> codes(0, square ? 7 : 3);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const bool jitter = !validation && (options_.jitter_gamma > 0 || options_.jitter_contrast > 0 ||
+                                      options_.jitter_brightness > 0);
   Draw d;
   for (int64_t i = 0; i < count; ++i) {
     const int64_t k = pick(rng);
@@ -134,6 +185,24 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
     d.y0.push_back(py);
     d.x0.push_back(px);
     d.aug.push_back(!validation && options_.augment ? codes(rng) : 0);
+    // Draws beyond the original ones only where an option asks for them, so that configs
+    // without these options draw exactly the patches they always drew.
+    const auto& windows = windows_[k];
+    int64_t w = validation ? 0 : 1;
+    if (!validation && windows.size() > 2) {
+      const auto last = static_cast<int64_t>(windows.size()) - 1;
+      w = std::uniform_int_distribution<int64_t>(1, last)(rng);
+    }
+    d.window.push_back(w);
+    double g = 1, c = 1, b = 0;
+    if (jitter) {
+      g = std::exp(options_.jitter_gamma * unit(rng));
+      c = std::exp(options_.jitter_contrast * unit(rng));
+      b = options_.jitter_brightness * unit(rng);
+    }
+    d.gamma.push_back(static_cast<float>(g));
+    d.contrast.push_back(static_cast<float>(c));
+    d.brightness.push_back(static_cast<float>(b));
   }
   return d;
 }
@@ -144,8 +213,20 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
   std::vector<torch::Tensor> patches;
   std::vector<int64_t> phases;
   patches.reserve(b);
+  const int64_t nu = phi_.rows(), nv = phi_.cols();
   for (int64_t i = 0; i < b; ++i) {
-    auto p = lfs_[d.lf[i]].data()[0].slice(2, d.y0[i], d.y0[i] + h).slice(3, d.x0[i], d.x0[i] + w);
+    const Window& win = windows_[d.lf[i]][d.window[i]];
+    auto p = lfs_[d.lf[i]]
+                 .data()[0]
+                 .slice(0, win.u0, win.u0 + win.step * (nu - 1) + 1, win.step)
+                 .slice(1, win.v0, win.v0 + win.step * (nv - 1) + 1, win.step)
+                 .slice(2, d.y0[i], d.y0[i] + h)
+                 .slice(3, d.x0[i], d.x0[i] + w);
+    if (d.gamma[i] != 1.0f || d.contrast[i] != 1.0f || d.brightness[i] != 0.0f) {
+      p = p.pow(d.gamma[i]);
+      const auto mean = p.mean();
+      p = ((p - mean) * d.contrast[i] + mean + d.brightness[i]).clamp(0.0, 1.0);
+    }
     patches.push_back(augment_patch(p, d.aug[i]));
     phases.push_back(phi_.local() ? optics::patch_phase(phi_, d.y0[i], d.x0[i]) : 0);
   }
@@ -206,16 +287,10 @@ train::Batch PatchDataset::prepare_next() {
   }
   if (begin == end) {
     // A last batch smaller than the world leaves this rank nothing: an empty batch.
-    Draw one{{d.lf[0]}, {d.y0[0]}, {d.x0[0]}, {d.aug[0]}};
-    auto b = make_batch(one, noise_seed);
+    auto b = make_batch(d.slice(0, 1), noise_seed);
     return {b.y.slice(0, 0, 0), b.phase.slice(0, 0, 0), b.target.slice(0, 0, 0)};
   }
-  Draw part;
-  part.lf.assign(d.lf.begin() + begin, d.lf.begin() + end);
-  part.y0.assign(d.y0.begin() + begin, d.y0.begin() + end);
-  part.x0.assign(d.x0.begin() + begin, d.x0.begin() + end);
-  part.aug.assign(d.aug.begin() + begin, d.aug.begin() + end);
-  return make_batch(part, noise_seed);
+  return make_batch(d.slice(begin, end), noise_seed);
 }
 
 void PatchDataset::set_shard(int64_t rank, int64_t world) {

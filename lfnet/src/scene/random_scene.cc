@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cctype>
 #include <cstdlib>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -66,8 +68,17 @@ std::vector<Rgb> random_palette(Rng& rng) {
   return colors;
 }
 
-TextureSpec random_texture(Rng& rng, const RandomSceneOptions& o, bool background) {
+TextureSpec random_texture(Rng& rng, const RandomSceneOptions& o, bool background,
+                           const std::vector<std::string>& images) {
   const double extent = static_cast<double>(std::max(o.height, o.width));
+  // Drawn only when images are in play, so that scenes without them stay as they were.
+  if (!images.empty() && rng.bernoulli(o.image_probability)) {
+    TextureSpec t = TextureSpec::defaults(TextureKind::kImage);
+    t.path = images[static_cast<size_t>(rng.next() % images.size())];
+    t.zoom = rng.log_uniform(1.0, 4.0);
+    t.offset = Point{rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)};
+    return t;
+  }
   // Probabilities of fractal, noise, stripes, checker, gradient and constant textures.
   const std::array<double, 6> weights =
       background ? std::array<double, 6>{0.5, 0.12, 0.07, 0.05, 0.2, 0.06}
@@ -265,6 +276,18 @@ RandomSceneOptions RandomSceneOptions::from_json(JsonReader& r) {
   read_double(r, "specular_probability", o.specular_probability);
   read_double(r, "vignetting_probability", o.vignetting_probability);
   read_double(r, "defocus_probability", o.defocus_probability);
+  if (r.has("texture_images")) {
+    json list;
+    read_raw(r, "texture_images", list);
+    if (!list.is_array()) fail(r.path_of("texture_images"), "must be a list of paths");
+    for (size_t i = 0; i < list.size(); ++i) {
+      if (!list[i].is_string()) {
+        fail(r.path_of("texture_images") + "[" + std::to_string(i) + "]", "must be a path");
+      }
+      o.texture_images.push_back(list[i].get<std::string>());
+    }
+  }
+  read_double(r, "image_probability", o.image_probability);
   r.finish();
   o.validate(r.path());
   return o;
@@ -284,7 +307,9 @@ nlohmann::json RandomSceneOptions::to_json() const {
           {"slanted_probability", slanted_probability},
           {"specular_probability", specular_probability},
           {"vignetting_probability", vignetting_probability},
-          {"defocus_probability", defocus_probability}};
+          {"defocus_probability", defocus_probability},
+          {"texture_images", texture_images},
+          {"image_probability", image_probability}};
 }
 
 void RandomSceneOptions::validate(const std::string& p) const {
@@ -306,14 +331,48 @@ void RandomSceneOptions::validate(const std::string& p) const {
       {"slanted_probability", slanted_probability},
       {"specular_probability", specular_probability},
       {"vignetting_probability", vignetting_probability},
-      {"defocus_probability", defocus_probability}};
+      {"defocus_probability", defocus_probability},
+      {"image_probability", image_probability}};
   for (const auto& [key, value] : probabilities) {
     if (!(value >= 0.0 && value <= 1.0)) fail(p + "." + key, "a probability must lie in [0, 1]");
   }
+  if (image_probability > 0.0 && texture_images.empty()) {
+    fail(p + ".texture_images", "image_probability > 0 needs at least one image or folder");
+  }
+}
+
+std::vector<std::string> texture_image_files(const std::vector<std::string>& paths) {
+  namespace fs = std::filesystem;
+  auto is_image = [](const fs::path& f) {
+    std::string ext = f.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff";
+  };
+  std::vector<std::string> files;
+  for (const auto& path : paths) {
+    std::error_code ec;
+    if (fs::is_directory(path, ec)) {
+      std::vector<std::string> found;
+      for (const auto& e : fs::directory_iterator(path, ec)) {
+        if (e.is_regular_file(ec) && is_image(e.path())) found.push_back(e.path().string());
+      }
+      LFNET_CHECK_AS(ConfigError, !found.empty(), "texture_images: ", path,
+                     " holds no png, jpg or tif file");
+      std::sort(found.begin(), found.end());
+      files.insert(files.end(), found.begin(), found.end());
+    } else {
+      LFNET_CHECK_AS(ConfigError, fs::is_regular_file(path, ec) && is_image(path),
+                     "texture_images: ", path, " is neither an image file nor a folder");
+      files.push_back(path);
+    }
+  }
+  return files;
 }
 
 SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& o) {
   o.validate();
+  const std::vector<std::string> images =
+      o.image_probability > 0.0 ? texture_image_files(o.texture_images) : std::vector<std::string>{};
   Rng rng(detail::derive_seed(seed, 0x72616e646f6dULL));
   SceneSpec s;
   s.name = "random-" + std::to_string(seed);
@@ -331,7 +390,7 @@ SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& o) {
   // the range (a floor, a wall seen at an angle).
   LayerSpec back;
   back.name = "background";
-  back.texture = random_texture(rng, o, true);
+  back.texture = random_texture(rng, o, true, images);
   double front_from = 0.0;
   if (rng.bernoulli(o.slanted_probability) && hi > lo && o.height > 1 && o.width > 1) {
     const double far = rng.uniform(lo, hi);
@@ -356,7 +415,7 @@ SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& o) {
   for (int64_t i = 1; i < n; ++i) {
     LayerSpec layer;
     layer.disparity = rng.uniform(front_from, hi);
-    layer.texture = random_texture(rng, o, false);
+    layer.texture = random_texture(rng, o, false, images);
     if (i > n - 1 - thin_layers) {
       layer.name = "occluder";
       layer.shape = rng.bernoulli(0.5) ? random_bars(rng) : random_branch(rng, o);

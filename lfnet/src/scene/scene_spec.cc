@@ -184,6 +184,8 @@ TextureSpec TextureSpec::from_json(JsonReader& r) {
     case TextureKind::kImage:
       if (!read_string(r, "path", t.path)) fail(r.path_of("path"), "required key is missing");
       read_string(r, "fit", t.fit);
+      read_double(r, "zoom", t.zoom);
+      read_point(r, "offset", t.offset);
       break;
   }
   r.finish();
@@ -228,6 +230,8 @@ json TextureSpec::to_json() const {
     case TextureKind::kImage:
       j["path"] = path;
       j["fit"] = fit;
+      if (zoom != 1.0) j["zoom"] = zoom;
+      if (offset.x != 0.0 || offset.y != 0.0) j["offset"] = point_json(offset);
       break;
   }
   return j;
@@ -271,6 +275,12 @@ void TextureSpec::validate(const std::string& json_path) const {
       if (path.empty()) fail(json_path + ".path", "image texture needs a file path");
       if (fit != "cover" && fit != "stretch") {
         fail(json_path + ".fit", "image fit must be 'cover' or 'stretch', got '" + fit + "'");
+      }
+      if (!(std::isfinite(zoom) && zoom >= 1.0 && zoom <= 64.0)) {
+        fail(json_path + ".zoom", "image zoom must lie in [1, 64]");
+      }
+      if (!(std::abs(offset.x) <= 1.0 && std::abs(offset.y) <= 1.0)) {
+        fail(json_path + ".offset", "image offset must lie in [-1, 1] on both axes");
       }
       break;
   }

@@ -227,8 +227,9 @@ torch::Tensor image_texture(const TextureSpec& t, const Canvas& canvas, bool col
   const double out_w = static_cast<double>(canvas.image_width);
   const double out_h = static_cast<double>(canvas.image_height);
   // Shrinking: average integer blocks first, so that bilinear sampling does not alias.
-  const double shrink =
-      std::min(static_cast<double>(img.size(2)) / out_w, static_cast<double>(img.size(1)) / out_h);
+  const double shrink = std::min(static_cast<double>(img.size(2)) / out_w,
+                                  static_cast<double>(img.size(1)) / out_h) /
+                         t.zoom;
   const auto pool = static_cast<int64_t>(std::floor(shrink));
   if (pool >= 2) img = torch::avg_pool2d(img.unsqueeze(0), pool).squeeze(0);
   img = img.contiguous();
@@ -238,6 +239,12 @@ torch::Tensor image_texture(const TextureSpec& t, const Canvas& canvas, bool col
   double sx = static_cast<double>(iw) / out_w;  // source px per image px
   double sy = static_cast<double>(ih) / out_h;
   if (t.fit == "cover") sx = sy = std::min(sx, sy);
+  sx /= t.zoom;
+  sy /= t.zoom;
+  // The source point under the image centre: the middle, moved by `offset` across the part of
+  // the source that does not show.
+  const double cx = iw / 2.0 + t.offset.x * std::max(0.0, iw - out_w * sx) / 2.0;
+  const double cy = ih / 2.0 + t.offset.y * std::max(0.0, ih - out_h * sy) / 2.0;
   auto out = torch::empty({channels, canvas.height(), canvas.width()}, torch::kFloat32);
   const float* src = img.data_ptr<float>();
   float* dst = out.data_ptr<float>();
@@ -248,13 +255,13 @@ torch::Tensor image_texture(const TextureSpec& t, const Canvas& canvas, bool col
   parallel_items(hc, 20 * wc * channels, [&](int64_t b, int64_t e) {
     for (int64_t i = b; i < e; ++i) {
       const double y = static_cast<double>(i) - my;
-      const double py = reflect((y + 0.5 - out_h / 2.0) * sy + ih / 2.0 - 0.5, ih);
+      const double py = reflect((y + 0.5 - out_h / 2.0) * sy + cy - 0.5, ih);
       const auto y0 = std::min<int64_t>(static_cast<int64_t>(py), ih - 1);
       const int64_t y1 = std::min<int64_t>(y0 + 1, ih - 1);
       const auto fy = static_cast<float>(py - static_cast<double>(y0));
       for (int64_t j = 0; j < wc; ++j) {
         const double x = static_cast<double>(j) - mx;
-        const double px = reflect((x + 0.5 - out_w / 2.0) * sx + iw / 2.0 - 0.5, iw);
+        const double px = reflect((x + 0.5 - out_w / 2.0) * sx + cx - 0.5, iw);
         const auto x0 = std::min<int64_t>(static_cast<int64_t>(px), iw - 1);
         const int64_t x1 = std::min<int64_t>(x0 + 1, iw - 1);
         const auto fx = static_cast<float>(px - static_cast<double>(x0));

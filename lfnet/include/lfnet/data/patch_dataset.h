@@ -29,6 +29,18 @@ struct DatasetOptions {
   double validation_fraction = 0.15;   // share of every light field's rows kept for validation
   bool augment = true;                 // flips and transposes that keep angular axes consistent
   double min_std = 0.0;                // drop training patches flatter than this (0: keep all)
+  // Which U x V windows of a wider light field training patches come from: "central" (the
+  // central window at each step) or "any" (every window that fits). `angular_steps` are the
+  // view spacings: 2 takes every second view, which doubles the baseline and the disparity.
+  // Validation always uses the central window at step 1.
+  std::string angular_windows = "central";
+  std::vector<int64_t> angular_steps = {1};
+  // Photometric jitter of training patches, drawn per patch (0: off): the patch is raised to
+  // a gamma exp(+-gamma), its contrast about its mean scaled by exp(+-contrast), its level
+  // shifted by +-brightness, then clipped to [0, 1]; all uniform in those ranges.
+  double jitter_gamma = 0.0;
+  double jitter_contrast = 0.0;
+  double jitter_brightness = 0.0;
   uint64_t seed = 1;                   // patch draws, augmentation and noise
   optics::SensorOptions effects;       // sensor effects on the measurements (none by default)
 
@@ -65,6 +77,13 @@ class PatchDataset : public train::BatchSource {
   struct Draw {
     std::vector<int64_t> lf, y0, x0;
     std::vector<int> aug;
+    std::vector<int64_t> window;  // index into windows_[lf]
+    std::vector<float> gamma, contrast, brightness;
+    Draw slice(int64_t begin, int64_t end) const;
+  };
+  // An angular window: views u0, u0 + step, ... (U of them), and likewise v.
+  struct Window {
+    int64_t u0 = 0, v0 = 0, step = 1;
   };
   Draw draw(bool validation, int64_t count, std::mt19937_64& rng) const;
   train::Batch make_batch(const Draw& d, uint64_t noise_seed) const;
@@ -76,6 +95,7 @@ class PatchDataset : public train::BatchSource {
   DatasetOptions options_;
   torch::Tensor weights_;           // local Phi: (P, N, U, V, h, w) per-pixel weights
   torch::Tensor matrix_;            // block Phi: (N h w, U V h w)
+  std::vector<std::vector<Window>> windows_;  // per light field; [0]: central, step 1
   std::vector<int64_t> split_row_;  // first validation row of every light field
   std::vector<double> train_weight_;
   std::mt19937_64 rng_;

@@ -4,6 +4,8 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <string>
+#include <vector>
 
 #include "lfnet/core/json.h"
 #include "lfnet/scene/scene_spec.h"
@@ -26,6 +28,11 @@ struct RandomSceneOptions {
   double specular_probability = 0.15;       // effects
   double vignetting_probability = 0.15;
   double defocus_probability = 0.1;
+  // Natural-image textures: image files, or folders whose png/jpg/tif files all count (relative
+  // paths from the working folder). Each layer takes a random region of a random one of them
+  // (zoom 1..4) with this probability; 0 keeps the procedural textures only.
+  std::vector<std::string> texture_images;
+  double image_probability = 0.0;
 
   static RandomSceneOptions from_json(JsonReader& reader);
   nlohmann::json to_json() const;
@@ -39,5 +46,9 @@ struct RandomSceneOptions {
 // textures of varied statistics: 1/f^beta fractals with beta in [1.6, 3], smooth noise, stripes,
 // checkers, gradients and flat colours in natural palettes of varied contrast.
 SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& options = {});
+
+// The image files that `texture_images` names, sorted within each folder. Throws ConfigError
+// for a path that is neither an image file nor a folder holding one.
+std::vector<std::string> texture_image_files(const std::vector<std::string>& paths);
 
 }  // namespace lfnet::scene

@@ -51,6 +51,9 @@ struct TextureSpec {
                                    // default the image extent along the ramp / half-diagonal
   std::string path;                // image: file, relative to the scene file's folder
   std::string fit = "cover";       // image: cover (keep aspect, crop) | stretch
+  double zoom = 1.0;               // image: >= 1 magnifies, showing 1 / zoom of the fitted image
+  Point offset;                    // image: where that part lies, -1..1 across the part left out
+                                   // along x and y (0, 0: the middle)
   std::optional<uint64_t> seed;    // noise, fractal: default derived from the scene seed and
                                    // the layer index
 
