@@ -36,6 +36,35 @@ TEST_CASE("the JSON reader reports wrong types and missing keys with their path"
   CHECK_THROWS_WITH(r.require("name", name), Catch::Contains("$.phi.name"));
 }
 
+TEST_CASE("the JSON reader is type-strict: no silent rounding, casting or wrapping",
+          "[core][json]") {
+  auto doc = nlohmann::json::parse(R"({"half": 2.5, "whole": 3.0, "big": 1e15, "flag": 1,
+      "neg": -1, "huge": 1e300, "text": 7, "yes": true, "list": [1, 2.5], "num": 4})");
+  lfnet::JsonReader r(doc, "$.x");
+  int64_t i = 0;
+  CHECK_THROWS_WITH(r.get("half", i), Catch::Contains("$.x.half") && Catch::Contains("whole number"));
+  REQUIRE(r.get("whole", i));
+  CHECK(i == 3);
+  REQUIRE(r.get("big", i));
+  CHECK(i == 1000000000000000);
+  int small = 0;
+  CHECK_THROWS_WITH(r.get("big", small), Catch::Contains("outside the range"));
+  CHECK_THROWS_WITH(r.get("huge", i), Catch::Contains("$.x.huge"));
+  uint64_t u = 0;
+  CHECK_THROWS_WITH(r.get("neg", u), Catch::Contains("$.x.neg"));
+  bool b = false;
+  CHECK_THROWS_WITH(r.get("flag", b), Catch::Contains("true or false"));
+  CHECK_THROWS_WITH(r.get("yes", i), Catch::Contains("whole number"));
+  std::string t;
+  CHECK_THROWS_WITH(r.get("text", t), Catch::Contains("expected a string"));
+  std::vector<int64_t> list;
+  CHECK_THROWS_WITH(r.get("list", list), Catch::Contains("$.x.list[1]"));
+  double d = 0;
+  CHECK_THROWS_WITH(r.get("yes", d), Catch::Contains("expected a number"));
+  REQUIRE(r.get("num", d));
+  CHECK(d == 4.0);
+}
+
 TEST_CASE("malformed JSON is a ConfigError with the byte offset", "[core][json]") {
   CHECK_THROWS_WITH(lfnet::parse_json("{\"a\": 1,,}", "cfg.json"), Catch::Contains("cfg.json"));
   CHECK_THROWS_AS(lfnet::parse_json("{", "x"), lfnet::ConfigError);

@@ -2,7 +2,9 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
+#include <iomanip>
 #include <fstream>
 #include <sstream>
 
@@ -18,6 +20,28 @@ JsonReader JsonReader::child(const std::string& key) {
   auto it = object_.find(key);
   if (it == object_.end()) throw ConfigError(path_of(key) + ": required object is missing");
   return JsonReader(*it, path_of(key));
+}
+
+void JsonReader::check_integer(const nlohmann::json& value, const std::string& path,
+                               long double lo, long double hi) {
+  long double v = 0;
+  if (value.is_number_unsigned()) {
+    v = static_cast<long double>(value.get<uint64_t>());
+  } else if (value.is_number_integer()) {
+    v = static_cast<long double>(value.get<int64_t>());
+  } else if (value.is_number_float()) {
+    v = static_cast<long double>(value.get<double>());
+    if (!std::isfinite(v) || std::floor(v) != v) {
+      throw ConfigError(path + ": expected a whole number, got " + value.dump());
+    }
+  } else {
+    throw ConfigError(path + ": expected a whole number, got " + value.dump());
+  }
+  if (v < lo || v > hi) {
+    std::ostringstream range;
+    range << std::fixed << std::setprecision(0) << lo << " .. " << hi;
+    throw ConfigError(path + ": " + value.dump() + " is outside the range " + range.str());
+  }
 }
 
 void JsonReader::finish() const {

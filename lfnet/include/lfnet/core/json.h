@@ -3,8 +3,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include <limits>
 #include <set>
 #include <string>
+#include <type_traits>
+#include <vector>
 
 #include "lfnet/core/error.h"
 
@@ -16,12 +19,15 @@ class JsonReader {
  public:
   JsonReader(const nlohmann::json& object, std::string path);
 
-  // Sets `out` from `key` if present; a value of the wrong type is a ConfigError.
+  // Sets `out` from `key` if present; a value of the wrong kind is a ConfigError naming the
+  // path: integers must be whole numbers that fit the field (2.5 is not 2, -1 is no count),
+  // booleans true or false (not 1), numbers numbers, strings strings; lists element by element.
   template <typename T>
   bool get(const std::string& key, T& out) {
     seen_.insert(key);
     auto it = object_.find(key);
     if (it == object_.end()) return false;
+    check_kind<T>(*it, path_of(key));
     try {
       out = it->template get<T>();
     } catch (const nlohmann::json::exception& e) {
@@ -50,6 +56,34 @@ class JsonReader {
   void finish() const;
 
  private:
+  template <typename T>
+  struct IsVector : std::false_type {};
+  template <typename T, typename A>
+  struct IsVector<std::vector<T, A>> : std::true_type {};
+
+  // Throws ConfigError at `path` when `value` is not of T's kind (see get()).
+  template <typename T>
+  static void check_kind(const nlohmann::json& value, const std::string& path) {
+    if constexpr (std::is_same_v<T, bool>) {
+      if (!value.is_boolean()) throw ConfigError(path + ": expected true or false, got " + value.dump());
+    } else if constexpr (std::is_integral_v<T>) {
+      check_integer(value, path, static_cast<long double>(std::numeric_limits<T>::min()),
+                    static_cast<long double>(std::numeric_limits<T>::max()));
+    } else if constexpr (std::is_floating_point_v<T>) {
+      if (!value.is_number()) throw ConfigError(path + ": expected a number, got " + value.dump());
+    } else if constexpr (std::is_same_v<T, std::string>) {
+      if (!value.is_string()) throw ConfigError(path + ": expected a string, got " + value.dump());
+    } else if constexpr (IsVector<T>::value) {
+      if (!value.is_array()) throw ConfigError(path + ": expected a list, got " + value.dump());
+      for (size_t i = 0; i < value.size(); ++i) {
+        check_kind<typename T::value_type>(value[i], path + "[" + std::to_string(i) + "]");
+      }
+    }
+  }
+  // A whole number in [lo, hi]; integral floats such as 1e3 count.
+  static void check_integer(const nlohmann::json& value, const std::string& path, long double lo,
+                            long double hi);
+
   template <typename T>
   static std::string type_hint(const nlohmann::json& value, const T&) {
     return "unexpected value " + value.dump();
