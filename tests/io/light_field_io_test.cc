@@ -101,6 +101,7 @@ TEST_CASE("after loading, horizontal and vertical parallax agree in sign for eve
       {"hci", [](int64_t u, int64_t v) { return fmt("input_Cam%03lld.png", 5 * u + v); }},
       {"rowcol", [](int64_t u, int64_t v) { return fmt("lf_%lld_%lld.png", u + 1, v + 1); }},
       {"tm", [](int64_t u, int64_t v) { return fmt("TM_%02lld_%02lld.png", u + 1, v + 1); }},
+      {"name", [](int64_t u, int64_t v) { return fmt("2067_%02lld_%02lld.png", u + 1, v + 1); }},
       {"mit", [](int64_t u, int64_t v) { return fmt("scene-%02lld.png", 5 * (4 - u) + v + 1); }},
   };
   for (const auto& [name, namer] : schemes) {
@@ -209,4 +210,37 @@ TEST_CASE("writing never leaves partial files behind", "[io]") {
   int files = 0;
   for (auto& e : fs::recursive_directory_iterator(tmp.path())) files += e.is_regular_file();
   CHECK(files == 0);
+}
+
+TEST_CASE("<name>_RR_CC folders: either separator, 0- or 1-based, any digit count", "[io]") {
+  lfnet::test::TempDir tmp;
+  LightField lf(torch::rand({1, 3, 4, 5, 6}));
+  struct Case {
+    std::string name;
+    std::function<std::string(int64_t, int64_t)> namer;
+  };
+  const std::vector<Case> cases = {
+      {"lytro", [](int64_t u, int64_t v) { return fmt("2067_%02lld_%02lld.png", u + 1, v + 1); }},
+      {"zero", [](int64_t u, int64_t v) { return fmt("scene_%lld_%lld.png", u, v); }},
+      {"dash", [](int64_t u, int64_t v) { return fmt("my-lf-%03lld-%03lld.tif", u + 1, v + 1); }},
+  };
+  for (const auto& c : cases) {
+    INFO(c.name);
+    write_views(lf, tmp / c.name, c.namer);
+    const auto layout = io::scan_folder(tmp / c.name);
+    CHECK(layout.scheme == io::NamingScheme::kNameRowCol);
+    CHECK(layout.rows == 3);
+    CHECK(layout.cols == 4);
+    lfnet::test::require_close(io::read_light_field(tmp / c.name).data(), lf.data(),
+                               0.5 / 65535 + 1e-7);
+  }
+  // A gap names the missing file in the folder's own spelling; two prefixes are two fields.
+  fs::remove(tmp / "lytro/2067_02_03.png");
+  CHECK_THROWS_WITH(io::scan_folder(tmp / "lytro"), Catch::Contains("2067_02_03.png"));
+  write_views(lf, tmp / "two", [](int64_t u, int64_t v) { return fmt("a_%lld_%lld.png", u, v); });
+  io::write_image(tmp / "two/b_0_0.png", lf.view(0, 0));
+  CHECK_THROWS_WITH(io::scan_folder(tmp / "two"), Catch::Contains("two light fields"));
+  // A grid starting at 2 is not guessed at.
+  write_views(lf, tmp / "late", [](int64_t u, int64_t v) { return fmt("x_%lld_%lld.png", u + 2, v + 2); });
+  CHECK_THROWS_WITH(io::scan_folder(tmp / "late"), Catch::Contains("0- or 1-based"));
 }

@@ -26,6 +26,7 @@ std::string to_string(NamingScheme scheme) {
     case NamingScheme::kHciCam: return "input_CamNNN (HCI)";
     case NamingScheme::kRowCol: return "lf_R_C";
     case NamingScheme::kTmRowCol: return "TM_RR_CC";
+    case NamingScheme::kNameRowCol: return "<name>_RR_CC";
     case NamingScheme::kMitIndex: return "<name>-NN (MIT)";
   }
   return "unknown";
@@ -36,6 +37,8 @@ namespace {
 const std::regex kHci(R"(^input_Cam(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
 const std::regex kRowColRe(R"(^lf_(\d+)_(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
 const std::regex kTm(R"(^TM_(\d+)_(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
+const std::regex kNameRowColRe(R"(^(.+?)([_-])(\d+)\2(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)",
+                               std::regex::icase);
 const std::regex kMit(R"(^(.+)-(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
 
 // Side of a square grid holding `count` views, or 0 if not square.
@@ -128,6 +131,7 @@ FolderLayout scan_folder(const std::string& dir) {
   std::sort(names.begin(), names.end());
 
   std::map<NamingScheme, std::vector<Candidate>> found;
+  std::string generic_prefix;  // <name>_ of <name>_RR_CC, which every such file must share
   std::smatch m;
   auto index = [&](const std::string& digits, const std::string& name) {
     // A view index is small; more digits than that is a foreign file, not a grid of 10^18.
@@ -143,13 +147,21 @@ FolderLayout scan_folder(const std::string& dir) {
       found[NamingScheme::kRowCol].push_back({index(m[1], name), index(m[2], name), path});
     } else if (std::regex_match(name, m, kTm)) {
       found[NamingScheme::kTmRowCol].push_back({index(m[1], name), index(m[2], name), path});
+    } else if (std::regex_match(name, m, kNameRowColRe)) {
+      const std::string prefix = m[1].str() + m[2].str();
+      if (generic_prefix.empty()) generic_prefix = prefix;
+      LFNET_CHECK_AS(IoError, prefix == generic_prefix, "light field folder ", dir,
+                     " holds views of two light fields (", generic_prefix, "RR_CC and ", prefix,
+                     "RR_CC): keep one light field per folder");
+      found[NamingScheme::kNameRowCol].push_back({index(m[3], name), index(m[4], name), path});
     } else if (std::regex_match(name, m, kMit)) {
       found[NamingScheme::kMitIndex].push_back({index(m[2], name), 0, path});
     }
   }
   if (found.empty()) {
     throw IoError("no light field views found in " + dir +
-                  ": expected input_CamNNN.png, lf_R_C.png, TM_RR_CC.png or <name>-NN.png files");
+                  ": expected input_CamNNN.png, lf_R_C.png, TM_RR_CC.png, <name>_RR_CC.png (or -RR-CC) or "
+                  "<name>-NN.png files");
   }
   if (found.size() > 1) {
     std::string schemes;
@@ -167,6 +179,17 @@ FolderLayout scan_folder(const std::string& dir) {
     case NamingScheme::kRowCol: return layout_from_pairs(scheme, files, dir, 1, "lf_%lld_%lld.png");
     case NamingScheme::kTmRowCol:
       return layout_from_pairs(scheme, files, dir, 1, "TM_%02lld_%02lld.png");
+    case NamingScheme::kNameRowCol: {
+      int64_t base = files.front().a;
+      for (const auto& c : files) base = std::min({base, c.a, c.b});
+      LFNET_CHECK_AS(IoError, base == 0 || base == 1, "light field folder ", dir, ": ",
+                     generic_prefix, "RR_CC views start at row or column ", base,
+                     "; lfnet reads 0- or 1-based grids");
+      std::string literal;  // the prefix as printf text: a file name may hold '%'
+      for (char c : generic_prefix) literal += c == '%' ? std::string("%%") : std::string(1, c);
+      return layout_from_pairs(scheme, files, dir, base,
+                               literal + "%02lld" + generic_prefix.back() + "%02lld.png");
+    }
   }
   throw IoError("unhandled naming scheme");
 }

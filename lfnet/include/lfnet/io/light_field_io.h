@@ -16,6 +16,8 @@ enum class NamingScheme {
   kHciCam,    // input_CamNNN.ext, NNN = rows * row + col, 0-based (HCI benchmark)
   kRowCol,    // lf_R_C.ext, 1-based (Stanford Lytro archive, deepulfcam; lfnet's own writer)
   kTmRowCol,  // TM_RR_CC.ext, 1-based, two digits (Lytro Illum validation set)
+  kNameRowCol,  // <name>_RR_CC.ext or <name>-RR-CC.ext: row then column, 0- or 1-based (the
+                // lowest index found), any digit count (Lytro exports such as 2067_01_01.png)
   kMitIndex,  // <name>-NN.ext, NN 1-based row-major from the BOTTOM row of views (MIT Synthetic
               // LF Archive: camera Y grows upward), read with its rows reversed
 };
