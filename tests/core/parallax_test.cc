@@ -26,7 +26,8 @@ TEST_CASE("the parallax check tells a consistent light field from one with a rev
     CHECK(bad.agreement < 0.05);
     CHECK(bad.correlation < -0.9);
   }
-  const auto both = lfnet::check_parallax(reorient(lf, AngularOrientation::parse("flip-u,flip-v", "t")));
+  const auto both =
+      lfnet::check_parallax(reorient(lf, AngularOrientation::parse("flip-u,flip-v", "t")));
   CHECK(both.verdict == ParallaxVerdict::kAgree);
 }
 
@@ -55,8 +56,7 @@ TEST_CASE("angular reorientations parse, print and move views", "[core][parallax
   CHECK(AngularOrientation::parse("", "x").identity());
   CHECK(AngularOrientation::parse("none", "x").identity());
   CHECK_THROWS_AS(AngularOrientation::parse("flip-x", "--orient"), lfnet::ConfigError);
-  CHECK_THROWS_WITH(AngularOrientation::parse("flip-u,", "--orient"),
-                    Catch::Contains("--orient"));
+  CHECK_THROWS_WITH(AngularOrientation::parse("flip-u,", "--orient"), Catch::Contains("--orient"));
 
   auto data = torch::arange(2 * 3 * 4, torch::kFloat32).view({1, 2, 3, 2, 2});
   lfnet::LightField lf(data);

@@ -168,6 +168,18 @@ TEST_CASE("Batch-OMP agrees with scikit-learn's orthogonal_mp_gram (tol)",
   }
 }
 
+// `run()` on one LibTorch thread, then on at least two; the thread count is restored.
+template <typename F>
+std::pair<OmpResult, OmpResult> on_one_and_two_threads(F run) {
+  const int threads = torch::get_num_threads();
+  torch::set_num_threads(1);
+  OmpResult one = run();
+  torch::set_num_threads(std::max(2, threads));
+  OmpResult many = run();
+  torch::set_num_threads(threads);
+  return {one, many};
+}
+
 TEST_CASE("Batch-OMP gives the same codes on one thread and on several", "[dict][omp]") {
   // Promise: batch_omp's own arithmetic runs one signal per thread in a fixed order, so the
   // same Gram matrix and correlations give bit-identical codes on any thread count. The
@@ -179,12 +191,7 @@ TEST_CASE("Batch-OMP gives the same codes on one thread and on several", "[dict]
   const auto gram = d.t().mm(d), xy = d.t().mm(y.t());
   OmpOptions o;
   o.max_atoms = 9;
-  const int threads = torch::get_num_threads();
-  torch::set_num_threads(1);
-  auto one = batch_omp(gram, xy, o);
-  torch::set_num_threads(std::max(2, threads));
-  auto many = batch_omp(gram, xy, o);
-  torch::set_num_threads(threads);
+  const auto [one, many] = on_one_and_two_threads([&] { return batch_omp(gram, xy, o); });
   CHECK(torch::equal(one.indices, many.indices));
   CHECK(torch::equal(one.values, many.values));
 }
@@ -199,12 +206,7 @@ TEST_CASE("OMP end to end agrees across thread counts to BLAS round-off", "[dict
   auto y = sparse_signals(d, 300, 6, 0.01);
   OmpOptions o;
   o.max_atoms = 6;
-  const int threads = torch::get_num_threads();
-  torch::set_num_threads(1);
-  auto one = lfnet::dict::omp(d, y, o);
-  torch::set_num_threads(std::max(2, threads));
-  auto many = lfnet::dict::omp(d, y, o);
-  torch::set_num_threads(threads);
+  const auto [one, many] = on_one_and_two_threads([&] { return lfnet::dict::omp(d, y, o); });
   CHECK(torch::equal(one.indices, many.indices));
   lfnet::test::require_close(many.values, one.values, 1e-12, 1e-10);
 }

@@ -12,9 +12,12 @@ namespace lfnet {
 
 std::string to_string(ParallaxVerdict verdict) {
   switch (verdict) {
-    case ParallaxVerdict::kAgree: return "agree";
-    case ParallaxVerdict::kDisagree: return "disagree";
-    case ParallaxVerdict::kUndetermined: return "undetermined";
+    case ParallaxVerdict::kAgree:
+      return "agree";
+    case ParallaxVerdict::kDisagree:
+      return "disagree";
+    case ParallaxVerdict::kUndetermined:
+      return "undetermined";
   }
   return "unknown";
 }
@@ -47,8 +50,7 @@ namespace {
 // the scene in x (the row of views) or in y (the column).
 torch::Tensor matching_cost(const torch::Tensor& centre, const torch::Tensor& views,
                             const std::vector<int64_t>& offsets, bool along_x,
-                            const std::vector<double>& candidates, int64_t margin,
-                            int64_t block) {
+                            const std::vector<double>& candidates, int64_t margin, int64_t block) {
   const int64_t h = centre.size(0) - 2 * margin, w = centre.size(1) - 2 * margin;
   const int64_t dim = along_x ? 1 : 0;
   const auto target = centre.narrow(0, margin, h).narrow(1, margin, w);
@@ -91,12 +93,14 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
   const int64_t reach = 2;
   std::vector<int64_t> off_h, off_v;
   std::vector<torch::Tensor> row_views, col_views;
-  for (int64_t v = std::max<int64_t>(0, cv - reach); v <= std::min(lf.cols() - 1, cv + reach); ++v) {
+  for (int64_t v = std::max<int64_t>(0, cv - reach); v <= std::min(lf.cols() - 1, cv + reach);
+       ++v) {
     if (v == cv) continue;
     off_h.push_back(v - cv);
     row_views.push_back(g[cu][v]);
   }
-  for (int64_t u = std::max<int64_t>(0, cu - reach); u <= std::min(lf.rows() - 1, cu + reach); ++u) {
+  for (int64_t u = std::max<int64_t>(0, cu - reach); u <= std::min(lf.rows() - 1, cu + reach);
+       ++u) {
     if (u == cu) continue;
     off_v.push_back(u - cu);
     col_views.push_back(g[u][cv]);
@@ -114,10 +118,10 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
   for (int64_t i = -steps; i <= steps; ++i) candidates.push_back(static_cast<double>(i) * o.step);
   auto cand = torch::tensor(candidates, torch::kFloat64);
 
-  auto cost_h = matching_cost(centre, torch::stack(row_views), off_h, true, candidates, margin,
-                              o.block);
-  auto cost_v = matching_cost(centre, torch::stack(col_views), off_v, false, candidates, margin,
-                              o.block);
+  auto cost_h =
+      matching_cost(centre, torch::stack(row_views), off_h, true, candidates, margin, o.block);
+  auto cost_v =
+      matching_cost(centre, torch::stack(col_views), off_v, false, candidates, margin, o.block);
   auto d_h = cand.index_select(0, cost_h.argmin(0).flatten());
   auto d_v = cand.index_select(0, cost_v.argmin(0).flatten());
   // Texture of the central view per block, over the same interior.
@@ -127,8 +131,8 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
   auto mean_sq = torch::avg_pool2d(interior * interior, {o.block, o.block});
   auto sd = (mean_sq - mean * mean).clamp_min(0).sqrt().flatten().to(torch::kFloat64);
 
-  auto usable = sd.ge(o.min_contrast) & d_h.abs().ge(o.min_disparity) &
-                d_v.abs().ge(o.min_disparity);
+  auto usable =
+      sd.ge(o.min_contrast) & d_h.abs().ge(o.min_disparity) & d_v.abs().ge(o.min_disparity);
   auto dh = d_h.masked_select(usable), dv = d_v.masked_select(usable);
   out.blocks = dh.numel();
   if (out.blocks == 0) return out;

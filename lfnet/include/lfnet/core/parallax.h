@@ -13,14 +13,14 @@ namespace lfnet {
 
 // Options of check_parallax.
 struct ParallaxCheckOptions {
-  int64_t block = 16;            // side of the square blocks disparity is estimated on, pixels
-  double max_disparity = 4.0;    // candidates -max..+max pixels per view step
-  double step = 0.125;           // spacing of the candidates, pixels per view step
-  double min_disparity = 0.25;   // a block counts only when both |d| reach this (Lytro
-                                 // cameras see about -1..+1 px per view step)
-  double min_contrast = 0.01;    // and its central view's standard deviation does (values 0..1;
-                                 // Lytro views are dark)
-  int64_t min_blocks = 8;        // fewer usable blocks: the verdict is kUndetermined
+  int64_t block = 16;           // side of the square blocks disparity is estimated on, pixels
+  double max_disparity = 4.0;   // candidates -max..+max pixels per view step
+  double step = 0.125;          // spacing of the candidates, pixels per view step
+  double min_disparity = 0.25;  // a block counts only when both |d| reach this (Lytro
+                                // cameras see about -1..+1 px per view step)
+  double min_contrast = 0.01;   // and its central view's standard deviation does (values 0..1;
+                                // Lytro views are dark)
+  int64_t min_blocks = 8;       // fewer usable blocks: the verdict is kUndetermined
 };
 
 // What the check found.
@@ -33,9 +33,9 @@ std::string to_string(ParallaxVerdict verdict);
 
 struct ParallaxCheck {
   ParallaxVerdict verdict = ParallaxVerdict::kUndetermined;
-  int64_t blocks = 0;        // blocks with texture and parallax on both axes
-  double agreement = 0.0;    // fraction of those whose two disparities share a sign
-  double correlation = 0.0;  // Pearson correlation of horizontal and vertical disparity
+  int64_t blocks = 0;           // blocks with texture and parallax on both axes
+  double agreement = 0.0;       // fraction of those whose two disparities share a sign
+  double correlation = 0.0;     // Pearson correlation of horizontal and vertical disparity
   std::string summary() const;  // one line for `lfnet info` and warnings
 };
 
