@@ -337,9 +337,9 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--phi", a->phi, "Phi for evaluation without --model: NAME[:N]");
   cmd->add_option("--mode", a->mode, "simulation mode of evaluations: sensor or per_patch")
       ->check(CLI::IsMember({"sensor", "per_patch"}));
-  cmd->add_option("--noise", a->noise, "Gaussian noise sigma of evaluations");
+  cmd->add_option("--noise", a->noise, "Gaussian noise sigma of evaluations")->check(kFiniteNonNegative);
   cmd->add_option("--seed", a->seed, "noise seed of evaluations");
-  cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(CLI::PositiveNumber);
+  cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(kStride);
   cmd->add_option("--batch", a->batch, "patches per solver call")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", a->window, "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", a->post_filter, "suppress artefacts with the stride's period");

@@ -118,8 +118,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--views", a->views, "angular window R0:R1,C0:C1 (1-based; default central)");
   cmd->add_option("--orient", a->orient,
                   "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
-  cmd->add_option("--noise", a->noise, "Gaussian noise sigma, relative to a white scene's mean");
-  cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(CLI::PositiveNumber);
+  cmd->add_option("--noise", a->noise, "Gaussian noise sigma, relative to a white scene's mean")
+      ->check(kFiniteNonNegative);
+  cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(kStride);
   cmd->add_option("--mode", a->mode, "simulation mode: sensor or per_patch")
       ->check(CLI::IsMember({"sensor", "per_patch"}));
   cmd->add_option("--method", a->method,

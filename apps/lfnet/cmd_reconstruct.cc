@@ -51,7 +51,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--dict-method", q.dict_method, "sparse coding for dict: omp or admm")
       ->check(CLI::IsMember({"omp", "admm"}));
   cmd->add_option("--stride", q.options.stride, "patch stride (sensor images; default 5)")
-      ->check(CLI::PositiveNumber);
+      ->check(kStride);
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--window", q.options.window,

@@ -352,7 +352,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
       ->capture_default_str();
   cmd->add_option("--noise", args->noise,
                   "Gaussian noise sigma, relative to a white scene's mean measurement (1)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kFiniteNonNegative);
   cmd->add_option("--seed", args->seed, "seed of the noise")->capture_default_str();
   cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)");
   cmd->add_option("--views", args->views,
@@ -361,7 +361,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                   "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
   cmd->add_flag("--color", args->color, "simulate every colour channel (default: grey luma)");
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
-  cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")->capture_default_str();
+  cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")
+      ->check(kStride)
+      ->capture_default_str();
   cmd->add_option("--patch", args->patch, "patch size, per_patch mode")->capture_default_str();
   cmd->add_flag("--force", args->force, "replace an existing non-empty --out folder");
   cmd->add_flag("--describe", args->describe,

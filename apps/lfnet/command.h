@@ -3,6 +3,8 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cmath>
+#include <cstdint>
 #include <functional>
 #include <string>
 
@@ -18,6 +20,30 @@ struct GlobalOptions {
   int threads = 0;                 // 0: every core
   std::string log_level = "info";  // trace, debug, info, warn, error, off
 };
+
+// Option checks with short messages that name the value: CLI11's own ranges print the
+// type's limits (a 309-digit number for a double).
+// A finite number >= 0 (noise sigmas): nan, inf and negatives are refused.
+inline const CLI::Validator kFiniteNonNegative(
+    [](std::string& text) -> std::string {
+      double v = 0;
+      if (!CLI::detail::lexical_cast(text, v) || !std::isfinite(v) || v < 0) {
+        return "must be a finite number >= 0, got " + text;
+      }
+      return "";
+    },
+    "FLOAT>=0");
+// A patch stride: a whole number from 1 to 64 (the largest patch side; the patch size itself
+// bounds it further when the patch is known).
+inline const CLI::Validator kStride(
+    [](std::string& text) -> std::string {
+      int64_t v = 0;
+      if (!CLI::detail::lexical_cast(text, v) || v < 1 || v > 64) {
+        return "must be a whole number from 1 to the patch size (9 by default), got " + text;
+      }
+      return "";
+    },
+    "1..PATCH");
 
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.
 using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& global)>;

@@ -129,6 +129,10 @@ TEST_CASE("malformed configs and unknown keys name the file and the JSON path", 
       {with("/phi", nlohmann::json{{"name", "random"}, {"n", 25}, {"params", {{"block", 32}}}}), "2^27"},
       {with("/stages", nlohmann::json::array({{{"name", "cnn"}, {"training", 5}}})), "$.stages[0].training"},
       {with("/data", nlohmann::json::object()), "no training data"},
+      // Fractions where whole numbers belong are refused, not rounded.
+      {with("/phi", nlohmann::json{{"name", "asp"}, {"n", 2.5}}), "$.phi.n"},
+      {with("/training/epochs", 1.7), "$.training.epochs"},
+      {with("/training/progress", 1), "$.training.progress"},
       // Data that cannot be loaded: the run folder this command created is removed again.
       {with("/data", nlohmann::json{{"light_fields", {"/nonexistent/lf"}}}), "/nonexistent/lf"},
   };
@@ -137,6 +141,23 @@ TEST_CASE("malformed configs and unknown keys name the file and the JSON path", 
     expect_error("train " + cfg + " --out " + (tmp / "run"), c.what, tmp.path());
     CHECK_FALSE(fs::exists(tmp / "run"));
   }
+}
+
+TEST_CASE("out-of-domain numbers on the command line name the option before any work",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const std::string lf = tmp / "lf";
+  write_light_field(lf);
+  const std::string eval = "evaluate --phi asp:2 --lf " + lf + " --method pinv ";
+  expect_error(eval + "--stride 0", "--stride", tmp.path());
+  expect_error(eval + "--stride 12", "1..9", tmp.path());
+  expect_error(eval + "--noise nan", "--noise", tmp.path());
+  expect_error(eval + "--noise inf", "--noise", tmp.path());
+  expect_error(eval + "--noise -0.1", "--noise", tmp.path());
+  const std::string sim = "simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "acq") + " ";
+  expect_error(sim + "--noise nan", "--noise", tmp.path());
+  expect_error(sim + "--views 1:99999999999999999999,1:5", "99999999999999999999", tmp.path());
+  CHECK_FALSE(fs::exists(tmp / "acq"));
 }
 
 TEST_CASE("missing, mismatched, truncated and foreign image files are one-line errors",

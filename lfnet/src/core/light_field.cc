@@ -70,6 +70,13 @@ std::pair<AngularRange, AngularRange> parse_views(const std::string& text) {
     throw ConfigError("views '" + text +
                       "' is not of the form R0:R1,C0:C1 (1-based, inclusive), e.g. 3:7,3:7");
   }
+  for (size_t i = 1; i <= 4; ++i) {
+    // A view index is small; more digits than that would overflow stoll.
+    if (m[i].length() > 6) {
+      throw ConfigError("views '" + text + "': view index " + m[i].str() +
+                        " is far beyond any light field's grid");
+    }
+  }
   auto r0 = std::stoll(m[1]), r1 = std::stoll(m[2]), c0 = std::stoll(m[3]), c1 = std::stoll(m[4]);
   if (r0 < 1 || c0 < 1 || r1 < r0 || c1 < c0) {
     throw ConfigError("views '" + text + "': indices are 1-based and R0 <= R1, C0 <= C1");

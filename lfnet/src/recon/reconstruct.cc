@@ -1,5 +1,7 @@
 #include "lfnet/recon/reconstruct.h"
 
+#include <algorithm>
+
 #include <cmath>
 
 #include "lfnet/core/error.h"
@@ -9,7 +11,13 @@ namespace lfnet::recon {
 
 void ReconstructOptions::validate() const {
   if (patch_h < 1 || patch_w < 1) throw ConfigError("patch size must be positive");
-  if (stride < 1) throw ConfigError("stride must be at least 1, got " + std::to_string(stride));
+  const int64_t side = std::min(patch_h, patch_w);
+  if (stride < 1 || stride > side) {
+    // A stride beyond the patch would leave pixels between patches that no patch covers.
+    throw ConfigError("stride must lie in 1.." + std::to_string(side) + " (the " +
+                      std::to_string(patch_h) + "x" + std::to_string(patch_w) +
+                      " patch), got " + std::to_string(stride));
+  }
   if (batch < 1) throw ConfigError("batch must be at least 1, got " + std::to_string(batch));
 }
 
