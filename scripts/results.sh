@@ -189,10 +189,42 @@ paper-scale-asp-n2() {
   mv "$tmp" results/paper-scale-asp-n2/records.jsonl
 }
 
+# The cross-scene benchmark (docs/models.md): ASP N = 2, stride 5, sensor mode, on light fields
+# that no model of configs/models/ trained on, from two cameras and a renderer: HCI
+# hci_antinous, Lytro Illum lytro_Begonia, the rendered heldout_window (disparities up to
+# 2.9 px) and heldout_wide (up to 4 px). Every network of $CROSS_SCENE_MODELS (default: the
+# ASP N = 2 models in models/) against no-parallax, pinv and the dictionary; then the bar
+# chart of margins over pinv (scripts/plot_cross_scene.py).
+cross-scene() {
+  local tmp models
+  read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
+  tmp=$(mktemp)
+  local sources=(--lf ../shared/data/hci_antinous --lf ../shared/data/lytro_Begonia
+                 --scene configs/scenes/heldout_window.json --scene configs/scenes/heldout_wide.json)
+  local i=0
+  while [[ $i -lt ${#sources[@]} ]]; do
+    local src=("${sources[$i]}" "${sources[$((i + 1))]}")
+    i=$((i + 2))
+    for method in no-parallax pinv dict; do
+      record "$tmp" --model "${models[0]}" --dictionary models/dictionary.ckpt "${src[@]}" \
+        --method "$method" --mode sensor --stride 5
+    done
+    for model in "${models[@]}"; do
+      local name training=
+      name=$(basename "$model" .ckpt)
+      [[ -f models/$name.training.jsonl ]] && training=models/$name.training.jsonl
+      VARIANT=$name TRAINING=$training record "$tmp" --model "$model" "${src[@]}" --method net \
+        --mode sensor --stride 5
+    done
+  done
+  mv "$tmp" results/cross-scene/records.jsonl
+  "$py" scripts/plot_cross_scene.py results/cross-scene/records.jsonl docs/images/results/cross-scene-margins
+}
+
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
-  sections=(heldout-asp-n2 phi-comparison compression-sweep noise-sweep stride-sweep branch-ablation
-            loss-ablation lytro phi-switching)
+  sections=(cross-scene heldout-asp-n2 phi-comparison compression-sweep noise-sweep stride-sweep
+            branch-ablation loss-ablation lytro phi-switching)
 fi
 for s in "${sections[@]}"; do
   echo "== $s"
