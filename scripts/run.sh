@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
-scripts/build.sh
+LFNET_TARGET=lfnet scripts/build.sh  # the program only; scripts/test.sh builds the tests
 out=${1:-out/quickstart}
 build/apps/lfnet experiment configs/quickstart.json --out "$out" --force
 echo
