@@ -2,7 +2,6 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
-#include <algorithm>
 #include <chrono>
 #include <cstdio>
 
@@ -39,9 +38,7 @@ void add_info_command(CLI::App& app, const GlobalOptions& global) {
                 d.max().item<double>(), d.mean().item<double>());
     std::printf("loaded in: %.3f s\n", seconds);
     if (!orientation.identity()) std::printf("oriented:  %s\n", orientation.to_string().c_str());
-    // On the central 5 x 5 views (or all, if fewer), as experiments see them.
-    const int64_t n = std::min<int64_t>(5, std::min(lf.rows(), lf.cols()));
-    const auto parallax = check_parallax(lf.central(n));
+    const auto parallax = check_parallax(lf);
     std::printf("parallax:  %s\n", parallax.summary().c_str());
     if (parallax.verdict == ParallaxVerdict::kDisagree) {
       spdlog::warn("{}: one angular axis looks reversed; load it with --orient flip-u "

@@ -297,9 +297,8 @@ void prepare_run_dir(const std::string& dir, bool force) {
 
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi) {
-  const auto& d = config.dataset;
-  const bool windows = d.angular_windows != "central" || d.angular_steps != std::vector<int64_t>{1};
-  auto named = load_sources(config.train_data, phi.rows(), phi.cols(), windows);
+  auto named = load_sources(config.train_data, phi.rows(), phi.cols(),
+                            config.dataset.needs_whole_grids());
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
   for (auto& n : named) lfs.push_back(n.lf);

@@ -86,21 +86,23 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
   ParallaxCheck out;
   if (!lf.defined() || lf.rows() < 2 || lf.cols() < 2) return out;
   torch::NoGradGuard no_grad;
-  const auto g = lf.grey().data()[0];  // (U, V, H, W)
-  const int64_t cu = lf.rows() / 2, cv = lf.cols() / 2;
   // The two nearest views on each side of the centre: enough to see the sign, and the
-  // margin (the largest shift) stays small.
+  // margin (the largest shift) stays small. Only those views are converted to grey.
   const int64_t reach = 2;
+  const AngularRange ru{std::max<int64_t>(0, lf.rows() / 2 - reach),
+                        std::min(lf.rows(), lf.rows() / 2 + reach + 1)};
+  const AngularRange rv{std::max<int64_t>(0, lf.cols() / 2 - reach),
+                        std::min(lf.cols(), lf.cols() / 2 + reach + 1)};
+  const auto g = lf.window(ru, rv).grey().data()[0];  // (U', V', H, W) around the centre
+  const int64_t cu = lf.rows() / 2 - ru.begin, cv = lf.cols() / 2 - rv.begin;
   std::vector<int64_t> off_h, off_v;
   std::vector<torch::Tensor> row_views, col_views;
-  for (int64_t v = std::max<int64_t>(0, cv - reach); v <= std::min(lf.cols() - 1, cv + reach);
-       ++v) {
+  for (int64_t v = 0; v < g.size(1); ++v) {
     if (v == cv) continue;
     off_h.push_back(v - cv);
     row_views.push_back(g[cu][v]);
   }
-  for (int64_t u = std::max<int64_t>(0, cu - reach); u <= std::min(lf.rows() - 1, cu + reach);
-       ++u) {
+  for (int64_t u = 0; u < g.size(0); ++u) {
     if (u == cu) continue;
     off_v.push_back(u - cu);
     col_views.push_back(g[u][cv]);

@@ -40,7 +40,7 @@ struct ParallaxCheck {
 };
 
 // Estimates, per textured block, the disparity along the central row of views (horizontal)
-// and along the central column (vertical) by matching every view of that row or column
+// and along the central column (vertical) by matching the views within two of the centre
 // against the central view over a range of candidate disparities, then compares their signs.
 // Works on grey; needs at least 2 views along each axis. Cost: one bilinear warp per view
 // and candidate of the central row and column (about 0.3 s for 512 x 512 x 9 x 9).

@@ -44,6 +44,12 @@ struct DatasetOptions {
   uint64_t seed = 1;                   // patch draws, augmentation and noise
   optics::SensorOptions effects;       // sensor effects on the measurements (none by default)
 
+  // Whether training draws windows other than the central one at step 1, so that light
+  // fields should come with their whole angular grid.
+  bool needs_whole_grids() const {
+    return angular_windows != "central" || angular_steps != std::vector<int64_t>{1};
+  }
+
   static DatasetOptions from_json(JsonReader& r);
   nlohmann::json to_json() const;
   void validate() const;
