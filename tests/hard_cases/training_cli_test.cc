@@ -49,12 +49,15 @@ void write_config(const std::string& path, const nlohmann::json& config) {
   std::ofstream(path) << config.dump(2);
 }
 
-// A file in `dir` whose name contains ".tmp": a checkpoint being written.
+// A temporary `.<stem>.tmp<pid>.ckpt` in `dir`: a checkpoint being written.
 bool writing_checkpoint(const fs::path& dir) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const auto name = it->path().filename().string();
-    if (name.find(".ckpt.tmp") != std::string::npos) return true;
+    if (name.rfind(".", 0) == 0 && name.find(".tmp") != std::string::npos &&
+        name.size() > 5 && name.compare(name.size() - 5, 5, ".ckpt") == 0) {
+      return true;
+    }
   }
   return false;
 }
@@ -123,8 +126,8 @@ TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live o
   const pid_t dead = fork();
   if (dead == 0) _exit(0);
   waitpid(dead, nullptr, 0);
-  const fs::path stale = dir / ("last.ckpt.tmp" + std::to_string(dead));
-  const fs::path live = dir / ("last.ckpt.tmp" + std::to_string(getpid()));
+  const fs::path stale = dir / (".last.tmp" + std::to_string(dead) + ".ckpt");
+  const fs::path live = dir / (".last.tmp" + std::to_string(getpid()) + ".ckpt");
   const fs::path other = dir / "notes.tmp123";
   for (const auto& p : {stale, live, other}) std::ofstream(p) << "partial";
   write_config(tmp / "two.json", tiny_config(2, 64));

@@ -1,5 +1,7 @@
 #include "lfnet/core/json.h"
 
+#include "lfnet/core/output.h"
+
 #include <unistd.h>
 
 #include <cmath>
@@ -75,19 +77,12 @@ nlohmann::json read_json_file(const std::string& path) {
 }
 
 void write_json_file(const std::string& path, const nlohmann::json& value) {
-  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
-  {
+  write_file_atomically(path, [&](const std::string& tmp) {
     std::ofstream out(tmp);
     if (!out) throw IoError("cannot write " + path);
     out << value.dump(2) << "\n";
     if (!out.good()) throw IoError("cannot write " + path);
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write " + path + ": " + ec.message());
-  }
+  });
 }
 
 }  // namespace lfnet

@@ -62,13 +62,13 @@ void ProgressBar::draw(bool force) {
   const double frac = total_ > 0 ? static_cast<double>(done_) / static_cast<double>(total_) : 1.0;
   if (tty_) {
     if (!force && now - last_draw_ < std::chrono::milliseconds(100)) return;
-  } else {
-    const int decile = static_cast<int>(frac * 10);
-    if (!force && decile == last_decile_) return;
-    if (force && decile == last_decile_) return;  // this state is already on screen
-    last_decile_ = decile;
+  } else if (force) {
+    if (!drawn_ && now - start_ < std::chrono::seconds(1)) return;  // quick work: no line
+  } else if (now - last_draw_ < std::chrono::seconds(5)) {
+    return;
   }
   last_draw_ = now;
+  drawn_ = true;
   const double elapsed = elapsed_seconds();
   const double rate = elapsed > 0 ? static_cast<double>(done_) / elapsed : 0.0;
   const double eta = rate > 0 ? static_cast<double>(total_ - done_) / rate : -1;

@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 
 namespace lfnet::dict {
 
@@ -43,20 +44,13 @@ void save_dictionary(const Dictionary& dictionary, const std::string& path) {
   torch::serialize::OutputArchive archive;
   archive.write(kAtomsKey, dictionary.atoms.contiguous());
   archive.write(kMetaKey, c10::IValue(meta.dump()));
-  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
-  try {
-    archive.save_to(tmp);
-  } catch (const c10::Error& e) {
-    std::error_code ec;
-    std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write dictionary " + path + ": " + e.what_without_backtrace());
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write dictionary " + path + ": " + ec.message());
-  }
+  write_file_atomically(path, [&](const std::string& tmp) {
+    try {
+      archive.save_to(tmp);
+    } catch (const c10::Error& e) {
+      throw IoError("cannot write dictionary " + path + ": " + e.what_without_backtrace());
+    }
+  });
 }
 
 Dictionary load_dictionary(const std::string& path) {

@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 #include "lfnet/io/sensor_io.h"
 
 namespace fs = std::filesystem;
@@ -250,15 +251,6 @@ LightField read_light_field(const std::string& dir, int threads) {
   return LightField(stacked.permute({2, 0, 1, 3, 4}).contiguous());
 }
 
-namespace {
-// A temporary name beside `path` that keeps its extension, so OIIO picks the same format.
-std::string temporary_beside(const std::string& path) {
-  fs::path p(path);
-  return (p.parent_path() / ("." + p.stem().string() + ".tmp" + std::to_string(::getpid()) +
-                             p.extension().string()))
-      .string();
-}
-}  // namespace
 
 void write_image(const std::string& path, const torch::Tensor& image, int bits) {
   LFNET_CHECK(image.dim() == 2 || image.dim() == 3, "write_image takes (H, W) or (C, H, W)");
@@ -270,25 +262,15 @@ void write_image(const std::string& path, const torch::Tensor& image, int bits) 
   if (!is_float) hwc = hwc.clamp(0, 1);
   OIIO::TypeDesc type = is_float ? OIIO::TypeDesc::FLOAT
                                  : (bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::UINT8);
-  const std::string tmp = temporary_beside(path);
   auto out = OIIO::ImageOutput::create(path);
   if (!out) throw IoError("cannot write " + path + ": unknown image format " + ext);
   OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), static_cast<int>(c), type);
   spec.attribute("oiio:UnassociatedAlpha", 1);
-  bool ok = out->open(tmp, spec) &&
-            out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
-  if (!ok) {
-    std::string err = out->geterror();
-    std::error_code ec;
-    fs::remove(tmp, ec);
-    throw IoError("cannot write " + path + ": " + err);
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw IoError("cannot write " + path + ": " + ec.message());
-  }
+  write_file_atomically(path, [&](const std::string& tmp) {
+    const bool ok = out->open(tmp, spec) &&
+                    out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
+    if (!ok) throw IoError("cannot write " + path + ": " + out->geterror());
+  });
 }
 
 void write_light_field(const LightField& lf, const std::string& dir, const WriteOptions& options) {
@@ -378,8 +360,7 @@ void write_pfm(const std::string& path, const torch::Tensor& image) {
   LFNET_CHECK(chw.dim() == 3 && (chw.size(0) == 1 || chw.size(0) == 3),
               "PFM holds 1 or 3 channels");
   auto hwc = chw.to(torch::kFloat32).permute({1, 2, 0}).flip({0}).contiguous();
-  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
-  {
+  write_file_atomically(path, [&](const std::string& tmp) {
     std::ofstream out(tmp, std::ios::binary);
     LFNET_CHECK_AS(IoError, out, "cannot write ", path);
     out << (chw.size(0) == 3 ? "PF" : "Pf") << "\n"
@@ -387,10 +368,7 @@ void write_pfm(const std::string& path, const torch::Tensor& image) {
     out.write(reinterpret_cast<const char*>(hwc.data_ptr<float>()),
               static_cast<std::streamsize>(hwc.numel() * sizeof(float)));
     LFNET_CHECK_AS(IoError, out.good(), "cannot write ", path);
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot write ", path, ": ", ec.message());
+  });
 }
 
 }  // namespace lfnet::io

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 
 namespace lfnet::nn {
 
@@ -524,18 +525,13 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
 void export_network(const LightFieldNet& net, const ScriptMetadata& meta,
                     const std::string& path) {
   auto module = script_network(net, meta);
-  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
-  try {
-    module.save(tmp, {{kScriptMetadataFile, metadata_text(module)}});
-  } catch (const c10::Error& e) {
-    std::remove(tmp.c_str());
-    throw IoError("cannot write " + path + ": " + e.what_without_backtrace());
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    std::remove(tmp.c_str());
-    throw IoError("cannot write " + path + ": " + why);
-  }
+  write_file_atomically(path, [&](const std::string& tmp) {
+    try {
+      module.save(tmp, {{kScriptMetadataFile, metadata_text(module)}});
+    } catch (const c10::Error& e) {
+      throw IoError("cannot write " + path + ": " + e.what_without_backtrace());
+    }
+  });
 }
 
 bool is_script_file(const std::string& path) {

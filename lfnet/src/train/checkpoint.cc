@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 
 namespace lfnet::train {
 
@@ -204,28 +205,6 @@ TrainingState TrainingState::from_json(const nlohmann::json& j) {
 
 // ---- file ----------------------------------------------------------------------------------
 
-// Removes `<target>.tmp<pid>` files left by writers that were killed: those whose process no
-// longer exists. A live writer's file (another process saving the same path) is left alone.
-namespace {
-void remove_stale_temporaries(const std::filesystem::path& target) {
-  namespace fs = std::filesystem;
-  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
-  const std::string prefix = target.filename().string() + ".tmp";
-  std::error_code ec;
-  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
-    const std::string name = it->path().filename().string();
-    if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0) continue;
-    const std::string digits = name.substr(prefix.size());
-    if (digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
-    const pid_t pid = static_cast<pid_t>(std::stol(digits));
-    if (pid == ::getpid() || pid <= 0) continue;
-    if (::kill(pid, 0) != 0 && errno == ESRCH) {
-      std::error_code ignored;
-      fs::remove(it->path(), ignored);
-    }
-  }
-}
-}  // namespace
 
 void save_checkpoint(const Checkpoint& checkpoint, const std::string& path) {
   std::string payload;
@@ -257,33 +236,20 @@ void save_checkpoint(const Checkpoint& checkpoint, const std::string& path) {
   put<uint64_t>(file, fnv1a(file.data(), file.size()));
   file.append(kEndMagic, 8);
 
-  namespace fs = std::filesystem;
-  const fs::path target(path);
-  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
-  const std::string tmp = path + ".tmp" + std::to_string(::getpid());
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw IoError("cannot write checkpoint " + path + ": " + std::strerror(errno));
-  try {
-    write_all(fd, file, tmp);
-    if (::fsync(fd) != 0) throw IoError("cannot sync " + tmp + ": " + std::strerror(errno));
-  } catch (...) {
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    throw;
-  }
-  ::close(fd);
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    ::unlink(tmp.c_str());
-    throw IoError("cannot write checkpoint " + path + ": " + why);
-  }
-  remove_stale_temporaries(target);
-  // Make the rename itself durable.
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
+  write_file_atomically(
+      path,
+      [&](const std::string& tmp) {
+        const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        if (fd < 0) throw IoError("cannot write checkpoint " + path + ": " + std::strerror(errno));
+        try {
+          write_all(fd, file, tmp);
+        } catch (...) {
+          ::close(fd);
+          throw;
+        }
+        ::close(fd);
+      },
+      /*durable=*/true);
 }
 
 Checkpoint load_checkpoint(const std::string& path) {

@@ -1,0 +1,185 @@
+// The output policy (core/output.h): atomic files and folders, inputs never overwritten,
+// exclusive writers, stale temporaries removed, failed starts undone.
+#include "lfnet/core/output.h"
+
+#include <catch2/catch.hpp>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using lfnet::ConfigError;
+
+namespace {
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+// The pid of a process that has exited (a reaped child): a writer that died.
+pid_t dead_pid() {
+  const pid_t pid = fork();
+  if (pid == 0) _exit(0);
+  waitpid(pid, nullptr, 0);
+  return pid;
+}
+
+size_t entries(const fs::path& dir) {
+  size_t n = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++n;
+  return n;
+}
+}  // namespace
+
+TEST_CASE("an output that is, contains or lies inside an input is refused", "[core][output]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp.path() / "data/lf");
+  const std::string lf = tmp / "data/lf";
+  CHECK_THROWS_WITH(lfnet::check_output_apart(lf, {lf}), Catch::Contains("is the input"));
+  CHECK_THROWS_WITH(lfnet::check_output_apart(lf + "/", {lf}), Catch::Contains("is the input"));
+  CHECK_THROWS_WITH(lfnet::check_output_apart(lf + "/rec", {lf}),
+                    Catch::Contains("lies inside the input"));
+  CHECK_THROWS_WITH(lfnet::check_output_apart(tmp / "data", {lf}),
+                    Catch::Contains("contains the input"));
+  CHECK_THROWS_AS(lfnet::check_output_apart(tmp / "data/./lf/../lf", {lf}), ConfigError);
+  // Siblings and name prefixes are apart: data/lf2 is not inside data/lf.
+  CHECK_NOTHROW(lfnet::check_output_apart(tmp / "data/lf2", {lf, ""}));
+  CHECK_NOTHROW(lfnet::check_output_apart(tmp / "out", {lf}));
+}
+
+TEST_CASE("write_folder refuses a non-empty folder without force and swaps with it",
+          "[core][output]") {
+  lfnet::test::TempDir tmp;
+  const std::string out = tmp / "out";
+  lfnet::OutputFolderPolicy policy;
+  lfnet::write_folder(out, policy, [](const std::string& dir) {
+    std::ofstream(fs::path(dir) / "a.txt") << "first";
+  });
+  CHECK(read_text(fs::path(out) / "a.txt") == "first");
+  CHECK_THROWS_WITH(lfnet::write_folder(out, policy, [](const std::string&) {}),
+                    Catch::Contains("--force"));
+  // A failing writer with force leaves the old folder as it was and no temporary.
+  policy.force = true;
+  CHECK_THROWS_AS(lfnet::write_folder(out, policy,
+                                      [](const std::string& dir) {
+                                        std::ofstream(fs::path(dir) / "b.txt") << "half";
+                                        throw lfnet::IoError("disk full");
+                                      }),
+                  lfnet::IoError);
+  CHECK(read_text(fs::path(out) / "a.txt") == "first");
+  CHECK_FALSE(fs::exists(fs::path(out) / "b.txt"));
+  CHECK(entries(tmp.path()) == 1);  // out only: no temporary, no lock file
+  // With force a complete new folder replaces the old one, nothing of the old one is mixed in.
+  lfnet::write_folder(out, policy, [](const std::string& dir) {
+    std::ofstream(fs::path(dir) / "b.txt") << "second";
+  });
+  CHECK_FALSE(fs::exists(fs::path(out) / "a.txt"));
+  CHECK(read_text(fs::path(out) / "b.txt") == "second");
+  CHECK(entries(tmp.path()) == 1);
+}
+
+TEST_CASE("a second writer of the same output is refused while the first holds it",
+          "[core][output]") {
+  lfnet::test::TempDir tmp;
+  const std::string out = tmp / "out";
+  {
+    lfnet::OutputLock first(out);
+    CHECK_THROWS_WITH(lfnet::OutputLock(out), Catch::Contains("another lfnet process"));
+    CHECK_THROWS_WITH(lfnet::write_folder(out, {}, [](const std::string&) {}),
+                      Catch::Contains("another lfnet process"));
+    // Another output in the same folder is free.
+    CHECK_NOTHROW(lfnet::OutputLock(tmp / "other"));
+  }
+  CHECK_NOTHROW(lfnet::OutputLock(out));
+  CHECK_FALSE(fs::exists(tmp.path() / ".out.lock"));
+}
+
+TEST_CASE("temporaries of dead writers are removed, a live writer's are kept", "[core][output]") {
+  lfnet::test::TempDir tmp;
+  const fs::path target = tmp.path() / "model.ckpt";
+  const pid_t dead = dead_pid();
+  const fs::path stale_file = tmp.path() / (".model.tmp" + std::to_string(dead) + ".ckpt");
+  // A live writer other than this process: the parent (this process writes its own name).
+  const fs::path live_file = tmp.path() / (".model.tmp" + std::to_string(getppid()) + ".ckpt");
+  const fs::path unrelated = tmp.path() / (".modelx.tmp" + std::to_string(dead) + ".ckpt");
+  for (const auto& p : {stale_file, live_file, unrelated}) std::ofstream(p) << "partial";
+  lfnet::write_text_file(target.string(), "whole");
+  CHECK(read_text(target) == "whole");
+  CHECK_FALSE(fs::exists(stale_file));
+  CHECK(fs::exists(live_file));
+  CHECK(fs::exists(unrelated));
+  // Folders: a dead writer's half-built folder and a folder it was replacing.
+  const fs::path half = tmp.path() / (".rec.tmp" + std::to_string(dead));
+  const fs::path old = tmp.path() / (".rec.tmp" + std::to_string(dead) + ".old");
+  fs::create_directories(half);
+  fs::create_directories(old);
+  lfnet::write_folder(tmp / "rec", {}, [](const std::string&) {});
+  CHECK_FALSE(fs::exists(half));
+  CHECK_FALSE(fs::exists(old));
+}
+
+TEST_CASE("output files: refused when taken or a folder, replaced with force",
+          "[core][output]") {
+  lfnet::test::TempDir tmp;
+  lfnet::OutputFolderPolicy policy;
+  policy.option = "--json";
+  policy.inputs = {tmp / "in.json"};
+  CHECK_THROWS_WITH(lfnet::check_output_file(tmp / "in.json", policy), Catch::Contains("--json"));
+  CHECK_THROWS_WITH(lfnet::check_output_file(tmp.path().string(), policy),
+                    Catch::Contains("contains the input"));
+  lfnet::write_text_file(tmp / "out.json", "{}");
+  CHECK_THROWS_WITH(lfnet::check_output_file(tmp / "out.json", policy), Catch::Contains("--force"));
+  policy.force = true;
+  CHECK_NOTHROW(lfnet::check_output_file(tmp / "out.json", policy));
+  fs::create_directories(tmp.path() / "dir");
+  CHECK_THROWS_WITH(lfnet::check_output_file(tmp / "dir", policy), Catch::Contains("is a folder"));
+  CHECK(lfnet::split_paths("a.tif,,b.tif") == std::vector<std::string>{"a.tif", "b.tif"});
+}
+
+TEST_CASE("a run folder that fails before committing leaves nothing; force restores the old one",
+          "[core][output]") {
+  lfnet::test::TempDir tmp;
+  const std::string run = tmp / "run";
+  {
+    lfnet::RunFolder folder(run, {});
+    std::ofstream(fs::path(run) / "config.json") << "{}";
+  }  // destroyed without commit: a failed start
+  CHECK_FALSE(fs::exists(run));
+  {
+    lfnet::RunFolder folder(run, {});
+    std::ofstream(fs::path(run) / "model.ckpt") << "old";
+    folder.commit();
+  }
+  CHECK(fs::exists(fs::path(run) / "model.ckpt"));
+  CHECK_THROWS_WITH(lfnet::RunFolder(run, {}), Catch::Contains("--force"));
+  lfnet::OutputFolderPolicy force;
+  force.force = true;
+  {
+    lfnet::RunFolder folder(run, force);
+    CHECK_FALSE(fs::exists(fs::path(run) / "model.ckpt"));  // afresh
+    std::ofstream(fs::path(run) / "config.json") << "{}";
+  }  // failed before its first checkpoint: the old run comes back
+  CHECK(read_text(fs::path(run) / "model.ckpt") == "old");
+  CHECK_FALSE(fs::exists(fs::path(run) / "config.json"));
+  {
+    lfnet::RunFolder folder(run, force);
+    std::ofstream(fs::path(run) / "new.ckpt") << "new";
+    folder.commit();
+  }
+  CHECK_FALSE(fs::exists(fs::path(run) / "model.ckpt"));
+  CHECK(fs::exists(fs::path(run) / "new.ckpt"));
+  CHECK(entries(tmp.path()) == 1);
+  {
+    lfnet::RunFolder resumed(run, {}, /*resume=*/true);  // continues in place
+    CHECK(fs::exists(fs::path(run) / "new.ckpt"));
+  }
+  CHECK(fs::exists(fs::path(run) / "new.ckpt"));  // resuming never removes the run
+}
