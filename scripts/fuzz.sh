@@ -27,14 +27,14 @@ fi
 if [ -z "${LFNET_FUZZ_NO_BUILD:-}" ]; then
   [ -f build/CMakeCache.txt ] || scripts/build.sh
   ninja -C build lfnet_core lfnet_optics lfnet_scene lfnet_nn lfnet_dict lfnet_recon lfnet_train \
-    lfnet_data lfnet_eval lfnet_io >/dev/null
+    lfnet_data lfnet_eval lfnet_io lfnet_pipeline >/dev/null
 fi
 
 out=build-fuzz
 mkdir -p "$out/obj"
 cxx=(clang++ -std=c++17 -g -O1 -fno-omit-frame-pointer -fsanitize=fuzzer-no-link,address
      -D_GLIBCXX_USE_CXX11_ABI=1 -DFMT_SHARED -DSPDLOG_COMPILED_LIB -DSPDLOG_FMT_EXTERNAL
-     -DSPDLOG_SHARED_LIB -Ilfnet/include -Iapps/lfnet -isystem /usr/include/torch/csrc/api/include
+     -DSPDLOG_SHARED_LIB -Ilfnet/include -isystem /usr/include/torch/csrc/api/include
      -Wno-unused-command-line-argument)
 
 compile() {  # source -> object, rebuilt when the source is newer
@@ -50,7 +50,7 @@ libs=(-Wl,--start-group build/lfnet/src/*/liblfnet_*.a -Wl,--end-group
       -ltorch -ltorch_cpu -lc10 -lOpenImageIO -lOpenImageIO_Util -lspdlog -lfmt -lpthread)
 
 declare -A instrumented=(
-  [config]="apps/lfnet/workflow.cc lfnet/src/core/json.cc lfnet/src/optics/phi.cc lfnet/src/optics/asp.cc lfnet/src/optics/local_models.cc"
+  [config]="lfnet/src/pipeline/experiment.cc lfnet/src/pipeline/sources.cc lfnet/src/core/json.cc lfnet/src/optics/phi.cc lfnet/src/optics/asp.cc lfnet/src/optics/local_models.cc"
   [light_field_folder]="lfnet/src/io/light_field_io.cc lfnet/src/io/sensor_io.cc lfnet/src/core/json.cc"
 )
 

@@ -3,21 +3,31 @@
 // its error and the others go on.
 #include <spdlog/spdlog.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "command.h"
 #include "dist_flags.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
-#include "lfnet/recon/methods.h"
-#include "workflow.h"
+#include "lfnet/recon/method_registry.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/experiment.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/pipeline/stages.h"
 
 namespace fs = std::filesystem;
 
@@ -39,7 +49,8 @@ struct BatchArgs {
 struct BatchItem {
   std::string path;  // the folder
   std::string name;  // its path relative to --in, '/' separated
-  std::string kind;  // "reconstruct" or "evaluate"
+  std::string kind;  // "reconstruct", "evaluate", or "unreadable" (with `error`)
+  std::string error;
 };
 
 bool looks_like_light_field(const fs::path& dir) {
@@ -57,25 +68,52 @@ std::vector<BatchItem> discover_items(const std::string& root) {
   LFNET_CHECK_AS(IoError, fs::is_directory(root), "--input ", root, " is not a folder");
   std::vector<BatchItem> items;
   std::vector<fs::path> pending = {fs::path(root)};
+  std::set<std::string> visited;  // canonical folders: a link back up is not followed again
   while (!pending.empty()) {
     const fs::path dir = pending.back();
     pending.pop_back();
     std::string name = fs::relative(dir, root).generic_string();
     if (name.empty() || name == ".") name = fs::absolute(dir).lexically_normal().filename().string();
+    std::error_code canonical_error;
+    const auto canonical = fs::canonical(dir, canonical_error);
+    if (canonical_error) {
+      items.push_back({dir.string(), name, "unreadable", canonical_error.message()});
+      continue;
+    }
+    if (!visited.insert(canonical.string()).second) {
+      items.push_back({dir.string(), name, "unreadable",
+                       "a link to " + canonical.string() + ", which the batch already visits"});
+      continue;
+    }
+    if (::access(dir.c_str(), R_OK | X_OK) != 0) {
+      items.push_back({dir.string(), name, "unreadable", "permission denied"});
+      continue;
+    }
     if (fs::exists(dir / io::kSidecarName)) {
-      items.push_back({dir.string(), name, "reconstruct"});
+      items.push_back({dir.string(), name, "reconstruct", ""});
       continue;
     }
     if (looks_like_light_field(dir)) {
-      items.push_back({dir.string(), name, "evaluate"});
+      items.push_back({dir.string(), name, "evaluate", ""});
       continue;
     }
     std::error_code ec;
-    for (const auto& entry : fs::directory_iterator(dir, ec)) {
-      if (entry.is_directory() && entry.path().filename().string().rfind('.', 0) != 0) {
-        pending.push_back(entry.path());
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+      const fs::path path = it->path();
+      if (path.filename().string().rfind('.', 0) == 0) continue;
+      std::error_code kind_error;
+      const bool is_link = fs::is_symlink(fs::symlink_status(path, kind_error));
+      const auto status = fs::status(path, kind_error);
+      if (is_link && kind_error) {
+        const std::string rel = fs::relative(path, root).generic_string();
+        items.push_back({path.string(), rel, "unreadable",
+                         kind_error.value() == ELOOP ? "a link that loops"
+                                                     : "a broken link (" + kind_error.message() + ")"});
+      } else if (fs::is_directory(status)) {
+        pending.push_back(path);
       }
     }
+    if (ec) items.push_back({dir.string(), name, "unreadable", ec.message()});
   }
   std::sort(items.begin(), items.end(),
             [](const BatchItem& a, const BatchItem& b) { return a.name < b.name; });
@@ -111,16 +149,20 @@ std::string safe_file_name(std::string name) {
 // The records of one item, one per method; errors become records with status "error".
 std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs& a,
                                          const std::vector<std::string>& methods,
-                                         const std::string& out_dir, ModelCache& cache) {
+                                         const std::string& out_dir, pipeline::ModelCache& cache) {
   std::vector<nlohmann::json> records;
   auto failed = [&](const std::string& method, const std::string& error) {
     return nlohmann::json{{"item", item.name}, {"path", item.path}, {"kind", item.kind},
                           {"method", method},  {"status", "error"}, {"error", error}};
   };
+  if (item.kind == "unreadable") {
+    for (const auto& method : methods) records.push_back(failed(method, item.error));
+    return records;
+  }
   if (item.kind == "reconstruct") {
     for (const auto& method : methods) {
       try {
-        ReconstructRequest q;
+        pipeline::ReconstructRequest q;
         q.sensor = item.path;
         q.method = method;
         q.model = a.model;
@@ -131,9 +173,11 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
         q.options.window = a.window;
         q.post_filter = a.post_filter;
         q.match_mean = a.match_mean;
-        auto r = reconstruct_acquisition(q, {}, &cache);
+        auto r = pipeline::reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
-        write_reconstruction(r, target, false);
+        OutputFolderPolicy policy;
+        policy.inputs = {item.path, a.model, a.dictionary};
+        pipeline::write_reconstruction(r, target, policy);
         auto record = r.record;
         record["item"] = item.name;
         record["path"] = item.path;
@@ -148,8 +192,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
     return records;
   }
   // evaluate: simulate with the model's Phi (or --phi), reconstruct, score.
-  std::vector<NamedLightField> truths;
-  MethodContext context;
+  std::vector<pipeline::NamedLightField> truths;
+  pipeline::MethodContext context;
   std::unique_ptr<optics::Phi> phi;
   std::optional<nn::PatchShape> patch;  // the model's, when there is one
   try {
@@ -170,24 +214,25 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
     context.dictionary = a.dictionary;
     context.cache = &cache;
     context.dict_method = a.dict_method;
-    LightFieldSources sources;
+    pipeline::LightFieldSources sources;
     sources.light_fields = {item.path};
-    truths = load_sources(sources, phi->rows(), phi->cols());
+    truths = pipeline::load_sources(sources, phi->rows(), phi->cols());
   } catch (const std::exception& e) {
     for (const auto& method : methods) records.push_back(failed(method, e.what()));
     return records;
   }
   for (const auto& method : methods) {
     try {
-      const auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
+      const auto o = pipeline::make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
                                        patch);
-      auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
+      auto record = pipeline::evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
       record["path"] = item.path;
       record["kind"] = item.kind;
       record["status"] = "ok";
-      if (recon::needs_network(method)) record["model"] = a.model;
-      if (method == "dict") record["model"] = a.dictionary;
+      const auto needs = recon::find_method(method).needs();
+      if (needs == recon::MethodNeeds::kNetwork) record["model"] = a.model;
+      if (needs == recon::MethodNeeds::kDictionary) record["model"] = a.dictionary;
       records.push_back(record);
     } catch (const std::exception& e) {
       records.push_back(failed(method, e.what()));
@@ -201,10 +246,8 @@ void write_summary(const std::string& out_dir, const std::vector<nlohmann::json>
                                             "ssim",    "seconds", "stride", "mode", "output",
                                             "error"};
   const fs::path csv = fs::path(out_dir) / "summary.csv";
-  const fs::path tmp = fs::path(out_dir) / ".summary.csv.tmp";
+  std::ostringstream f;
   {
-    std::ofstream f(tmp);
-    LFNET_CHECK_AS(IoError, f, "cannot write ", tmp.string());
     for (size_t i = 0; i < columns.size(); ++i) f << (i ? "," : "") << columns[i];
     f << "\n";
     for (const auto& r : records) {
@@ -213,9 +256,8 @@ void write_summary(const std::string& out_dir, const std::vector<nlohmann::json>
       }
       f << "\n";
     }
-    LFNET_CHECK_AS(IoError, f.good(), "cannot write ", tmp.string());
   }
-  fs::rename(tmp, csv);
+  write_text_file(csv.string(), f.str());
   nlohmann::json all = nlohmann::json::array();
   for (const auto& r : records) all.push_back(r);
   write_json_file((fs::path(out_dir) / "summary.json").string(), all);
@@ -224,21 +266,25 @@ void write_summary(const std::string& out_dir, const std::vector<nlohmann::json>
 void run_batch(const BatchArgs& a) {
   auto comm = join_job(a.dist);
   const int64_t rank = comm->rank(), world = comm->world_size();
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.in, a.model, a.dictionary};
+  check_output_folder(a.out, policy);
   const auto items = discover_items(a.in);
   LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
                  ") and no light-field folder under ", a.in);
   std::vector<std::string> methods = split_list(a.methods);
   if (methods.empty()) methods = {a.model.empty() ? "pinv" : "net"};
   for (const auto& m : methods) {
-    const auto& known = recon::method_names();
-    LFNET_CHECK_AS(ConfigError, std::find(known.begin(), known.end(), m) != known.end(),
-                   "unknown method '", m, "' in --methods");
+    try {
+      (void)recon::find_method(m);
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("--methods: ") + e.what());
+    }
   }
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
-  if (rank == 0) {
-    prepare_run_dir(a.out, a.force);
-    fs::remove(fs::path(a.out) / "models");  // prepare_run_dir makes it; batch writes none
-  }
+  std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
+  if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy);
   // The other ranks write only once rank 0 has checked and made the folder (when it is shared).
   comm->barrier();
   const fs::path records_dir = fs::path(a.out) / "records";
@@ -261,7 +307,7 @@ void run_batch(const BatchArgs& a) {
   std::vector<size_t> record_item;  // the item index of every record, for the gather
   ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
   int64_t failures = 0;
-  ModelCache cache;  // every item shares one read of the model and the dictionary
+  pipeline::ModelCache cache;  // every item shares one read of the model and the dictionary
   for (size_t index : mine) {
     const auto& item = items[index];
     bar.set_note(item.name);
@@ -270,6 +316,7 @@ void run_batch(const BatchArgs& a) {
       failures += !ok;
       const std::string file = safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
       write_json_file((records_dir / file).string(), r);
+      if (folder) folder->commit();  // a record lasts: the batch keeps its folder from now on
       if (ok && r.contains("psnr_db")) {
         spdlog::info("{} {}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s", item.name,
                      r["method"].get<std::string>(),
@@ -310,6 +357,7 @@ void run_batch(const BatchArgs& a) {
     }
   }
   write_summary(a.out, records);
+  if (folder) folder->commit();
   spdlog::info("batch: {} record(s), {} failed; summary in {}/summary.csv; {} model or dictionary file(s) read",
                records.size(), failures, a.out, cache.loads());
   LFNET_CHECK(failures == 0, failures, " of ", records.size(),

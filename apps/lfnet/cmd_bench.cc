@@ -21,7 +21,8 @@
 #include "lfnet/dict/patch_sampling.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/fully_convolutional.h"
-#include "lfnet/recon/methods.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/recon/method_registry.h"
 #include "lfnet/scene/random_scene.h"
 #include "lfnet/scene/render.h"
 #include "lfnet/train/checkpoint.h"
@@ -117,66 +118,10 @@ double gemm_flops(int reps, const torch::Device& device) {
   return 2.0 * n * n * n / t;
 }
 
-// FLOPs of the CNN branch's convolutions on one patch.
-double cnn_patch_flops(const nn::NetworkOptions& o) {
-  const auto& p = o.patch;
-  const int64_t c = o.cnn.channels;
-  double flops = 0;
-  for (int64_t i = 0; i < o.cnn.depth; ++i) {
-    flops += nn::conv4d_flops(1, i == 0 ? 1 : c, i + 1 == o.cnn.depth ? 1 : c, p.rows, p.cols,
-                              p.height, p.width, o.kernel);
-  }
-  return flops;
-}
-
-// FLOPs of the fully convolutional CNN pass over an H x W light field in tiles (halo included).
-double cnn_full_flops(const nn::NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {
-  const double per_position = cnn_patch_flops(o) / static_cast<double>(o.patch.size());
-  const int64_t halo = o.cnn.depth * (o.kernel / 2);
-  double positions = 0;
-  for (int64_t y0 = 0; y0 < height; y0 += tile) {
-    for (int64_t x0 = 0; x0 < width; x0 += tile) {
-      positions += static_cast<double>((std::min(tile, height - y0) + 2 * halo) *
-                                       (std::min(tile, width - x0) + 2 * halo));
-    }
-  }
-  return per_position * positions * static_cast<double>(o.patch.rows * o.patch.cols);
-}
-
-// FLOPs of one patch through the parts of the network that `method` runs.
-double network_patch_flops(const nn::NetworkOptions& o, const std::string& method) {
-  const auto& p = o.patch;
-  const double d = static_cast<double>(p.size()), m = static_cast<double>(o.measurement_size());
-  auto conv = [&](int64_t cin, int64_t cout) {
-    return nn::conv4d_flops(1, cin, cout, p.rows, p.cols, p.height, p.width, o.kernel);
-  };
-  const bool ae = method != "cnn" && o.has_ae(), cnn = method != "ae" && o.has_cnn();
-  double flops = 0;
-  if (cnn || (ae && o.ae.input == "adjoint")) flops += 2 * m * d;
-  if (ae) {
-    double in = static_cast<double>(o.ae_input_size());
-    std::vector<int64_t> widths = o.ae.hidden;
-    widths.push_back(p.size());
-    for (auto w : widths) {
-      flops += 2 * in * static_cast<double>(w);
-      in = static_cast<double>(w);
-    }
-    flops += conv(1, 1);
-  }
-  if (cnn) flops += cnn_patch_flops(o);
-  if (o.residual == "pinv") flops += 2 * m * d;
-  return flops;
-}
-
-// Nominal FLOPs of one patch of Batch-OMP with `atoms` atoms in a dictionary of size k: the
-// correlations Theta^T y, the correlation updates G[:, chosen] gamma and D alpha.
-double omp_patch_flops(double m, double d, double k, double atoms) {
-  return 2 * m * k + k * atoms * (atoms + 1) + 2 * d * atoms;
-}
 
 LightField bench_light_field(const BenchArgs& a) {
   if (!a.scene.empty()) {
-    return scene::render_scene(scene::load_scene(a.scene), scene_render_options(a.scene))
+    return scene::render_scene(scene::load_scene(a.scene), pipeline::scene_render_options(a.scene))
         .light_field.grey()
         .central(5);
   }
@@ -246,38 +191,30 @@ nlohmann::json run_case(const BenchArgs& a, const std::string& method, int64_t s
   const LightField truth = bench_light_field(a);
   const auto sensor = optics::simulate_sensor(*phi, truth.data()[0]);
 
-  recon::PatchSolver solver;
   const auto cnn_mode = recon::parse_cnn_mode(a.cnn_mode);
   const bool full = cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn");
-  double flops_per_patch = 0;
   nlohmann::json extra = nlohmann::json::object();
+  recon::MethodResources resources;
+  resources.phi = phi.get();
+  resources.patch_h = resources.patch_w = patch;
+  dict::Dictionary dictionary;
   if (net) {
     net->to(device);
     nn::set_cnn_precision(net, nn::parse_precision(a.precision));
-    solver = recon::network_solver(net, method);
-    flops_per_patch = network_patch_flops(net->options(), method);
+    resources.net = net;
     extra["model"] = model_info;
     extra["cnn_mode"] = full ? "full" : "patches";
     extra["precision"] = a.precision;
     if (full) extra["tile"] = a.tile;
-  } else if (method == "pinv" || method == "adjoint") {
-    solver = recon::linear_solver(*phi, method, patch, patch);
-    flops_per_patch = 2.0 * phi->measurements() * patch * patch * phi->rows() * phi->cols() * patch * patch;
-  } else if (method == "dict") {
-    const auto dictionary = bench_dictionary(a, patch);
-    dict::SparseCodingOptions so;
-    solver = recon::dictionary_solver(*phi, dictionary, so, patch, patch);
-    flops_per_patch = omp_patch_flops(static_cast<double>(phi->measurements() * patch * patch),
-                                      static_cast<double>(dictionary.dimension()),
-                                      static_cast<double>(dictionary.size()),
-                                      static_cast<double>(so.omp.max_atoms));
+  } else if (recon::find_method(method).needs() == recon::MethodNeeds::kDictionary) {
+    dictionary = bench_dictionary(a, patch);
+    resources.dictionary = &dictionary;
     extra["dictionary_atoms"] = dictionary.size();
     extra["dictionary"] = a.dictionary.empty() ? "bench K-SVD (3 iterations)" : a.dictionary;
-    extra["omp_atoms"] = so.omp.max_atoms;
-  } else {
-    throw ConfigError("lfnet bench takes the methods net, ae, cnn, dict, pinv and adjoint, not '" +
-                      method + "'");
+    extra["omp_atoms"] = resources.coding.omp.max_atoms;
   }
+  const recon::PatchSolver solver = recon::make_solver(method, resources);
+  const double flops_per_patch = recon::find_method(method).patch_flops(resources);
   const double setup_seconds = setup_clock.seconds();
   const double setup_peak = status_mb("VmHWM");
   const bool isolated_peak = reset_peak_rss();
@@ -296,8 +233,8 @@ nlohmann::json run_case(const BenchArgs& a, const std::string& method, int64_t s
   // computes the CNN once per tile position instead.
   double flops = flops_per_patch * static_cast<double>(grid.size());
   if (full) {
-    flops += cnn_full_flops(net->options(), truth.height(), truth.width(), a.tile) -
-             cnn_patch_flops(net->options()) * static_cast<double>(grid.size());
+    flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), a.tile) -
+             nn::cnn_patch_flops(net->options()) * static_cast<double>(grid.size());
   }
   nlohmann::json r = {
       {"method", method},
@@ -410,7 +347,7 @@ nlohmann::json conv_kernels(const BenchArgs& a, const torch::Device& device) {
     auto y = cnn->forward(x);
     if (device.is_cuda()) y.cpu();
   });
-  const double f = b * cnn_patch_flops(o);
+  const double f = b * nn::cnn_patch_flops(o);
   out.push_back({{"layer", "cnn branch (" + std::to_string(o.cnn.depth) + " layers)"},
                  {"batch", b}, {"seconds", t}, {"gflops", f / t / 1e9},
                  {"gemm_fraction", f / t / a.gemm}, {"patches_per_second", b / t}});

@@ -10,11 +10,17 @@
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
-#include "lfnet/recon/methods.h"
-#include "workflow.h"
+#include "lfnet/recon/method_registry.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/experiment.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/pipeline/stages.h"
 
 namespace fs = std::filesystem;
 
@@ -28,6 +34,7 @@ struct EvaluateArgs {
   int64_t batch = 1024;
   uint64_t seed = 0;
   bool window = false;
+  bool force = false;
   std::string device = "cpu";
   std::string precision = "float32";
 };
@@ -37,11 +44,16 @@ void run_evaluate(const EvaluateArgs& a) {
                  "give exactly one of --lf DIR and --scene SCENE.json");
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
   const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
-  MethodContext context;
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.lf, a.scene, a.model, a.dictionary};
+  if (!a.out.empty()) check_output_folder(a.out, policy);
+  if (!a.json.empty()) check_output_apart(a.json, policy.inputs, "--json");
+  pipeline::MethodContext context;
   optics::PhiSpec spec;
   std::optional<nn::PatchShape> network_patch;  // the patch size of net, ae and cnn
   if (!a.model.empty()) {
-    const auto model = load_model(a.model, recon::needs_network(method));
+    const auto model = pipeline::load_model(a.model, recon::needs_network(method));
     spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
     if (!a.phi.empty()) {
       auto given = optics::PhiSpec::parse(a.phi);
@@ -68,7 +80,7 @@ void run_evaluate(const EvaluateArgs& a) {
     LFNET_CHECK_AS(ConfigError, !a.phi.empty(), "--phi NAME[:N] is needed without --model");
     spec = optics::PhiSpec::parse(a.phi);
   }
-  LightFieldSources sources;
+  pipeline::LightFieldSources sources;
   if (!a.lf.empty()) sources.light_fields = {a.lf};
   if (!a.scene.empty()) sources.scenes = {a.scene};
   sources.views = a.views;
@@ -84,12 +96,12 @@ void run_evaluate(const EvaluateArgs& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
-  const auto truths = load_sources(sources, phi->rows(), phi->cols());
+  const auto truths = pipeline::load_sources(sources, phi->rows(), phi->cols());
 
-  const auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
+  const auto o = pipeline::make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
                                    network_patch);
   torch::Tensor estimate;
-  auto record = evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
+  auto record = pipeline::evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
   if (!a.model.empty()) record["model"] = a.model;
   record["device"] = a.device;
   if (recon::needs_network(method)) record["precision"] = a.precision;
@@ -101,8 +113,11 @@ void run_evaluate(const EvaluateArgs& a) {
   if (!a.json.empty()) write_json_file(a.json, record);
   if (!a.out.empty()) {
     LightField est(estimate);
-    io::write_light_field(est, a.out);
-    io::write_previews(est, a.out);
+    write_folder(a.out, policy, [&](const std::string& dir) {
+      io::write_light_field(est, dir);
+      io::write_previews(est, dir);
+      write_json_file((std::filesystem::path(dir) / "evaluation.json").string(), record);
+    });
   }
 }
 }  // namespace
@@ -129,6 +144,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for --method dict");
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
   cmd->add_option("--out", a->out, "write the reconstruction as a light-field folder");
+  cmd->add_flag("--force", a->force, "replace an existing --out folder");
   cmd->add_option("--seed", a->seed, "noise seed");
   cmd->add_option("--batch", a->batch, "patches per forward pass")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", a->window, "weight patch estimates by a smooth window when stitching");

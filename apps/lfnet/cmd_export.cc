@@ -9,6 +9,7 @@
 
 #include "command.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/train/checkpoint.h"
@@ -37,8 +38,11 @@ std::pair<torch::Tensor, torch::Tensor> check_inputs(const nn::LightFieldNet& ne
 }
 
 void run_export(const ExportArgs& a) {
-  LFNET_CHECK_AS(ConfigError, a.force || !fs::exists(a.out), "--out ", a.out,
-                 " exists: choose another file or pass --force to replace it");
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.model};
+  check_output_file(a.out, policy);
+  OutputLock lock(a.out);
   LFNET_CHECK_AS(ConfigError, !nn::is_script_file(a.model), "--model ", a.model,
                  " is already an exported file; export takes a checkpoint");
   const auto ckpt = train::load_checkpoint(a.model);

@@ -4,27 +4,37 @@
 
 #include "command.h"
 #include "lfnet/core/progress.h"
-#include "workflow.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/experiment.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/pipeline/stages.h"
 
 namespace lfnet::app {
 
 namespace {
 struct ReconstructArgs {
-  ReconstructRequest request;
+  pipeline::ReconstructRequest request;
   std::string out;
   bool force = false;
 };
 
 void run_reconstruct(const ReconstructArgs& a) {
-  std::unique_ptr<ProgressBar> bar;
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = split_paths(a.request.sensor);
+  policy.inputs.insert(policy.inputs.end(), {a.request.model, a.request.dictionary, a.request.phi});
+  check_output_folder(a.out, policy);
+  ProgressBar bar("reconstruct", 0, "patches");  // its total is known once the work starts
   int64_t shown = 0;
-  auto r = reconstruct_acquisition(a.request, [&](int64_t done, int64_t total) {
-    if (!bar) bar = std::make_unique<ProgressBar>("reconstruct", total, "patches");
-    bar->advance(done - shown);
+  auto r = pipeline::reconstruct_acquisition(a.request, [&](int64_t done, int64_t total) {
+    bar.set_total(total);
+    bar.advance(done - shown);
     shown = done;
   });
-  if (bar) bar->finish();
-  write_reconstruction(r, a.out, a.force);
+  bar.finish();
+  pipeline::write_reconstruction(r, a.out, policy);
   spdlog::info("reconstructed {} with {} in {:.2f} s into {}", r.lf.shape_string(),
                a.request.method, r.record["seconds"].get<double>(), a.out);
 }

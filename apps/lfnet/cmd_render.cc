@@ -6,13 +6,13 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <regex>
-#include <set>
 
 #include "command.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/pipeline/sources.h"
 #include "lfnet/scene/scene.h"
 
 namespace lfnet::app {
@@ -66,31 +66,6 @@ std::pair<double, double> parse_range(const std::string& text) {
   } catch (const std::exception&) {
     throw ConfigError("--disparity-range '" + text + "': expected MIN:MAX, e.g. -3:3");
   }
-}
-
-// What `render` writes besides other files the folder may hold.
-bool is_render_output(const std::string& name) {
-  static const std::regex view(R"(lf_\d+_\d+\.(png|tif|tiff|exr))");
-  static const std::set<std::string> names = {"disparity.pfm", "grid.png",    "epi_h.png",
-                                              "epi_v.png",     "preview.png", "scene.json"};
-  return names.count(name) > 0 || std::regex_match(name, view);
-}
-
-void prepare_output(const std::string& dir, bool force) {
-  if (fs::exists(dir)) {
-    if (!fs::is_directory(dir)) throw IoError("--out " + dir + " exists and is not a folder");
-    if (!fs::is_empty(dir)) {
-      if (!force) {
-        throw IoError("output folder " + dir + " is not empty; pass --force to overwrite it");
-      }
-      for (const auto& entry : fs::directory_iterator(dir)) {
-        if (entry.is_regular_file() && is_render_output(entry.path().filename().string())) {
-          fs::remove(entry.path());
-        }
-      }
-    }
-  }
-  fs::create_directories(dir);
 }
 
 // Viridis-like ramp for disparity maps: far (small) is dark blue, near (large) is yellow.
@@ -189,19 +164,17 @@ void run_render(const RenderArgs& args) {
     throw ConfigError("--epi-row " + std::to_string(args.epi_row) + " is outside the " +
                       std::to_string(spec.height) + "-row view");
   }
-  prepare_output(args.out, args.force);
+  OutputFolderPolicy policy;
+  policy.force = args.force;
+  policy.inputs = {args.scene, args.random_options};
+  check_output_folder(args.out, policy);
 
-  const scene::RenderOptions render_options = scene_render_options(random ? "" : args.scene);
+  const scene::RenderOptions render_options = pipeline::scene_render_options(random ? "" : args.scene);
   const auto start = std::chrono::steady_clock::now();
   const scene::RenderResult result = scene::render_scene(spec, render_options);
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
-  io::write_light_field(result.light_field, args.out, {"png", args.bits});
-  io::write_pfm((fs::path(args.out) / "disparity.pfm").string(), result.disparity);
-  io::write_previews(result.light_field, args.out);
-  io::write_image((fs::path(args.out) / "preview.png").string(),
-                  preview_image(result.light_field, result.disparity, args.epi_row), 8);
   nlohmann::json record = spec.to_json();
   record["rendered"] = {
       {"effects_run", result.effects_run},
@@ -209,7 +182,14 @@ void run_render(const RenderArgs& args) {
       {"threads", torch::get_num_threads()},
       {"source", random ? "random " + std::to_string(args.random_seed) : args.scene}};
   if (random) record["rendered"]["random_options"] = options.to_json();
-  write_json_file((fs::path(args.out) / "scene.json").string(), record);
+  write_folder(args.out, policy, [&](const std::string& dir) {
+    io::write_light_field(result.light_field, dir, {"png", args.bits});
+    io::write_pfm((fs::path(dir) / "disparity.pfm").string(), result.disparity);
+    io::write_previews(result.light_field, dir);
+    io::write_image((fs::path(dir) / "preview.png").string(),
+                    preview_image(result.light_field, result.disparity, args.epi_row), 8);
+    write_json_file((fs::path(dir) / "scene.json").string(), record);
+  });
 
   std::string effects;
   for (const auto& e : result.effects_run) effects += (effects.empty() ? "" : ", ") + e;
@@ -222,13 +202,6 @@ void run_render(const RenderArgs& args) {
 }
 
 }  // namespace
-
-scene::RenderOptions scene_render_options(const std::string& scene_file) {
-  scene::RenderOptions options;
-  options.image_loader = [](const std::string& path) { return io::read_image(path); };
-  if (!scene_file.empty()) options.base_dir = fs::path(scene_file).parent_path().string();
-  return options;
-}
 
 void add_render_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand(
@@ -247,7 +220,7 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("--out", args->out,
                   "output folder: lf_R_C.png, disparity.pfm, previews, scene.json")
       ->required();
-  cmd->add_flag("--force", args->force, "overwrite the outputs in a non-empty folder");
+  cmd->add_flag("--force", args->force, "replace an existing --out folder");
   cmd->add_option("--bits", args->bits, "bits per PNG sample, 8 or 16")
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--epi-row", args->epi_row,

@@ -18,6 +18,8 @@
 
 #include "command.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
+#include "lfnet/recon/method_registry.h"
 #include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
 #include "report_figures.h"
@@ -34,8 +36,7 @@ struct Section {
   std::vector<nlohmann::json> records;
 };
 
-const std::vector<std::string> kMethodOrder = {"net", "ae", "cnn", "dict", "pinv", "adjoint",
-                                               "no-parallax"};
+const std::vector<std::string> kMethodOrder = recon::registered_methods();
 
 int method_rank(const std::string& m) {
   auto it = std::find(kMethodOrder.begin(), kMethodOrder.end(), m);
@@ -426,16 +427,8 @@ void run_report(const ReportArgs& a) {
     md << "\nReproduced: " << reproduced << " of " << gaps.size() << " claims; " << direction
        << " more in direction only.\n\n";
   }
-  // Atomic: a temporary sibling, then rename.
   fs::create_directories(out_dir);
-  const std::string tmp = a.out + ".tmp";
-  {
-    std::ofstream f(tmp);
-    LFNET_CHECK_AS(IoError, f, "cannot write ", tmp);
-    f << md.str();
-    LFNET_CHECK_AS(IoError, f.good(), "cannot write ", tmp);
-  }
-  fs::rename(tmp, a.out);
+  write_text_file(a.out, md.str());
   spdlog::info("wrote {} ({} sections, {} figures folder {})", a.out, sections.size(),
                points.empty() ? "no Pareto plot;" : "Pareto plot;", figures.string());
 }

@@ -11,7 +11,12 @@
 #include <optional>
 
 #include "command.h"
-#include "workflow.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/experiment.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/pipeline/stages.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
@@ -71,11 +76,11 @@ Input load_input(const SimulateArgs& args) {
     } catch (const ConfigError& e) {
       throw ConfigError(args.scene + ": " + e.what());
     }
-    lf = scene::render_scene(spec, scene_render_options(args.scene)).light_field;
+    lf = scene::render_scene(spec, pipeline::scene_render_options(args.scene)).light_field;
     in.scene_effects = spec.sensor;
     in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}};
   } else {
-    lf = read_oriented(args.lf, args.orient, "--orient");
+    lf = pipeline::read_oriented(args.lf, args.orient, "--orient");
     in.source = {{"kind", "light_field"}, {"path", fs::absolute(args.lf).string()}};
     if (!args.orient.empty()) in.source["orient"] = args.orient;
   }
@@ -244,6 +249,10 @@ void run_simulate(const SimulateArgs& args) {
                  "--lf DIR or --scene SCENE.json is required to simulate");
   LFNET_CHECK_AS(ConfigError, !simulate || !args.out.empty(), "--out DIR is required to simulate");
 
+  OutputFolderPolicy policy;
+  policy.force = args.force;
+  policy.inputs = {args.lf, args.scene, args.plot_weights};
+  if (simulate) check_output_folder(args.out, policy);
   Input input;
   int64_t rows = 0, cols = 0;
   if (simulate) {
@@ -289,7 +298,7 @@ void run_simulate(const SimulateArgs& args) {
       {"source", input.source},
   };
   const int64_t n = phi->measurements();
-  write_folder(args.out, args.force, [&](const std::string& dir) {
+  write_folder(args.out, policy, [&](const std::string& dir) {
     Stopwatch clock;
     if (mode == optics::SimulationMode::kSensor) {
       auto sensor = optics::simulate_sensor(*phi, lf.data(), effects, args.seed);  // (C, N, H, W)

@@ -8,12 +8,11 @@
 #include <functional>
 #include <string>
 
-#include "lfnet/scene/render.h"
+#include "lfnet/core/version.h"
 
 namespace lfnet::app {
 
-// The program's version, recorded in every output it writes.
-constexpr const char* kVersion = "0.1.0";
+using lfnet::kVersion;
 
 // Settings every subcommand shares.
 struct GlobalOptions {
@@ -60,10 +59,5 @@ void add_report_command(CLI::App& app, const GlobalOptions& global);
 void add_export_command(CLI::App& app, const GlobalOptions& global);
 void add_launch_command(CLI::App& app, const GlobalOptions& global);
 void add_bench_command(CLI::App& app, const GlobalOptions& global);
-
-// Render options for a scene file: image textures are read with lfnet::io::read_image, relative
-// to the scene file's folder ("" for none). Defined in cmd_render.cc; any subcommand that renders
-// a scene (e.g. simulate --scene) uses it.
-scene::RenderOptions scene_render_options(const std::string& scene_file);
 
 }  // namespace lfnet::app

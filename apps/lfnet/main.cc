@@ -2,6 +2,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <regex>
 #include <vector>
 
 #include "command.h"
@@ -11,11 +12,16 @@
 
 namespace {
 
+// One error line: without the source locations the library's checks append (" [file.cc:12]"),
+// which --log-level debug shows.
 int fail(const std::string& what) {
   std::string line = what;
   for (auto& ch : line) {
     if (ch == '\n') ch = ' ';
   }
+  spdlog::debug("error with source locations: {}", line);
+  static const std::regex location(R"( \[[^\[\]]*\.(cc|h|hpp|cpp):[0-9]+\])");
+  line = std::regex_replace(line, location, "");
   std::fprintf(stderr, "lfnet: error: %s\n", line.c_str());
   return 1;
 }

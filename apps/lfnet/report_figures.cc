@@ -11,6 +11,8 @@
 #include <map>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
 
@@ -35,14 +37,11 @@ void put_text(cv::Mat& img, const std::string& text, cv::Point at, double scale 
   cv::putText(img, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, thickness, cv::LINE_AA);
 }
 
-// Writes a PNG atomically: a temporary sibling, then rename.
 void write_png(const std::string& path, const cv::Mat& img) {
   fs::create_directories(fs::path(path).parent_path());
-  const std::string tmp = path + ".tmp.png";
-  LFNET_CHECK_AS(IoError, cv::imwrite(tmp, img), "cannot write ", tmp);
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot write ", path, ": ", ec.message());
+  write_file_atomically(path, [&](const std::string& tmp) {
+    LFNET_CHECK_AS(IoError, cv::imwrite(tmp, img), "cannot write ", path);
+  });
 }
 
 // A grey (H, W) float tensor in [0, 1] as an 8-bit image.
@@ -159,7 +158,7 @@ void plot_pareto(const std::vector<ParetoPoint>& points, const std::string& titl
   }
   // Legend.
   int ly = top + 15;
-  for (const char* m : {"net", "ae", "cnn", "dict", "pinv", "adjoint", "no-parallax"}) {
+  for (const auto& m : recon::registered_methods()) {
     cv::circle(img, {width - right - 110, ly - 4}, 5, method_colour(m), cv::FILLED, cv::LINE_AA);
     put_text(img, m, {width - right - 98, ly});
     ly += 18;
@@ -260,7 +259,7 @@ void write_parallax_gif(const LightField& lf, const std::string& path, int64_t c
   for (int64_t v = V - 2; v >= 0; --v) loop.push_back({U - 1, v});
   for (int64_t u = U - 2; u >= 1; --u) loop.push_back({u, 0});
   fs::create_directories(fs::path(path).parent_path());
-  const std::string tmp = path + ".tmp.gif";
+  write_file_atomically(path, [&](const std::string& tmp) {
   auto out = OIIO::ImageOutput::create(tmp);
   LFNET_CHECK_AS(IoError, out != nullptr, "cannot write GIF files: ", OIIO::geterror());
   // GIF frames are RGB: the grey view in all three channels.
@@ -289,9 +288,7 @@ void write_parallax_gif(const LightField& lf, const std::string& path, int64_t c
                    "cannot write ", tmp, ": ", out->geterror());
   }
   LFNET_CHECK_AS(IoError, out->close(), "cannot write ", tmp, ": ", out->geterror());
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot write ", path, ": ", ec.message());
+  });
 }
 
 }  // namespace lfnet::app

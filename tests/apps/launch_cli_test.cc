@@ -94,7 +94,8 @@ TEST_CASE("launch trains on 2 ranks and stops the job when a rank fails", "[app]
   CHECK(run_command(lfnet + "launch -n 2 -- train " + (tmp / "tiny.json") + " --out " +
                         (tmp / "two"), out) != 0);
   CHECK(seconds_since(start) < 120);
-  CHECK(out.find("[rank 0] lfnet: error: output folder") != std::string::npos);
+  CHECK(out.find("[rank 0] lfnet: error: --out ") != std::string::npos);
+  CHECK(out.find("exists and is not empty") != std::string::npos);
   CHECK(out.find("lfnet: error: rank ") != std::string::npos);
   CHECK(run_command(lfnet + "launch -n 2 -- info --lf x", out) != 0);
   CHECK(out.find("runs 'train' or 'batch'") != std::string::npos);

@@ -61,7 +61,7 @@ TEST_CASE("lfnet render writes the light field, disparity, previews and resolved
   CHECK(lfnet::scene::SceneSpec::from_json(record).to_json() == spec.to_json());
 }
 
-TEST_CASE("lfnet render refuses a non-empty folder unless forced", "[app][scene]") {
+TEST_CASE("lfnet render refuses a non-empty folder unless forced, then replaces it", "[app][scene]") {
   lfnet::test::TempDir tmp;
   fs::create_directories(tmp / "out");
   { std::ofstream(tmp / "out/notes.txt") << "keep me"; }
@@ -73,8 +73,8 @@ TEST_CASE("lfnet render refuses a non-empty folder unless forced", "[app][scene]
   CHECK(out.find("--force") != std::string::npos);
   CHECK(std::count(out.begin(), out.end(), '\n') == 1);
   REQUIRE(run_command(base + " --force", out) == 0);
-  REQUIRE(run_command(base + " --force --views 3x3", out) == 0);  // overwrites a 5 x 5 render
-  CHECK(fs::exists(tmp / "out/notes.txt"));                       // other files are left alone
+  REQUIRE(run_command(base + " --force --views 3x3", out) == 0);  // replaces a 5 x 5 render
+  CHECK_FALSE(fs::exists(tmp / "out/notes.txt"));  // the folder is replaced whole, not mixed
   CHECK(lfnet::io::read_light_field(tmp / "out", 1).shape_string() == "3x3x3x16x20");
 
   // The random scene is the library's random_scene(3) with the options given.

@@ -10,14 +10,7 @@
 #include <unistd.h>
 
 #include "lfnet/core/error.h"
-#include "lfnet/scene/render.h"
-#include "workflow.h"
-
-namespace lfnet::app {
-// The renderer is never reached from parsing; the fuzz target does not link the program's
-// subcommands.
-scene::RenderOptions scene_render_options(const std::string&) { return {}; }
-}  // namespace lfnet::app
+#include "lfnet/pipeline/experiment.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size > 8192) return 0;  // configs are small; longer inputs only slow the search
@@ -28,7 +21,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));
   }
   try {
-    auto config = lfnet::app::ExperimentConfig::load(path);
+    auto config = lfnet::pipeline::ExperimentConfig::load(path);
     for (const auto& stage : config.stages) {
       (void)config.stage_options(stage);
       (void)config.stage_network(stage);

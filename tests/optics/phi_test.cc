@@ -3,6 +3,8 @@
 
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+
 #include <cmath>
 #include <map>
 #include <set>
@@ -26,7 +28,8 @@ PhiSpec spec_of(const std::string& name, int64_t n, int64_t rows = 5, int64_t co
   return s;
 }
 
-const std::vector<std::string> kModels = {"asp", "mask", "aperture", "random", "lenslet"};
+// Every registered model: a new Phi is tested by registering it.
+const std::vector<std::string> kModels = lfnet::optics::phi_names();
 
 // |<A x, y> - <x, A^T y>| relative to ||A x|| ||y||.
 double adjoint_error(const lfnet::optics::Phi& phi, torch::ScalarType dtype, int64_t h, int64_t w) {
@@ -45,6 +48,12 @@ double adjoint_error(const lfnet::optics::Phi& phi, torch::ScalarType dtype, int
 }
 
 }  // namespace
+
+TEST_CASE("the registry holds the five built-in models", "[optics][phi]") {
+  for (const char* name : {"asp", "mask", "aperture", "random", "lenslet"}) {
+    CHECK(std::find(kModels.begin(), kModels.end(), name) != kModels.end());
+  }
+}
 
 TEST_CASE("every model's adjoint is exact in float32 and float64", "[optics][phi]") {
   for (const auto& name : kModels) {

@@ -364,4 +364,8 @@ torch::Tensor sparse_residual(const torch::Tensor& dictionary, const OmpResult& 
   return out;
 }
 
+double omp_patch_flops(double m, double d, double k, double atoms) {
+  return 2 * m * k + k * atoms * (atoms + 1) + 2 * d * atoms;
+}
+
 }  // namespace lfnet::dict

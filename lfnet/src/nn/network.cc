@@ -2,7 +2,9 @@
 
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "lfnet/core/error.h"
 
@@ -361,6 +363,54 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
 
 torch::Tensor LightFieldNetImpl::forward(const torch::Tensor& y, const torch::Tensor& phase) {
   return forward_all(y, phase).output;
+}
+
+double cnn_patch_flops(const NetworkOptions& o) {
+  const auto& p = o.patch;
+  const int64_t c = o.cnn.channels;
+  double flops = 0;
+  for (int64_t i = 0; i < o.cnn.depth; ++i) {
+    flops += conv4d_flops(1, i == 0 ? 1 : c, i + 1 == o.cnn.depth ? 1 : c, p.rows, p.cols,
+                              p.height, p.width, o.kernel);
+  }
+  return flops;
+}
+
+double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {
+  const double per_position = cnn_patch_flops(o) / static_cast<double>(o.patch.size());
+  const int64_t halo = o.cnn.depth * (o.kernel / 2);
+  double positions = 0;
+  for (int64_t y0 = 0; y0 < height; y0 += tile) {
+    for (int64_t x0 = 0; x0 < width; x0 += tile) {
+      positions += static_cast<double>((std::min(tile, height - y0) + 2 * halo) *
+                                       (std::min(tile, width - x0) + 2 * halo));
+    }
+  }
+  return per_position * positions * static_cast<double>(o.patch.rows * o.patch.cols);
+}
+
+double patch_flops(const NetworkOptions& o, const BranchSelection& run) {
+  const auto& p = o.patch;
+  const double d = static_cast<double>(p.size()), m = static_cast<double>(o.measurement_size());
+  auto conv = [&](int64_t cin, int64_t cout) {
+    return conv4d_flops(1, cin, cout, p.rows, p.cols, p.height, p.width, o.kernel);
+  };
+  const bool ae = run.ae && o.has_ae(), cnn = run.cnn && o.has_cnn();
+  double flops = 0;
+  if (cnn || (ae && o.ae.input == "adjoint")) flops += 2 * m * d;
+  if (ae) {
+    double in = static_cast<double>(o.ae_input_size());
+    std::vector<int64_t> widths = o.ae.hidden;
+    widths.push_back(p.size());
+    for (auto w : widths) {
+      flops += 2 * in * static_cast<double>(w);
+      in = static_cast<double>(w);
+    }
+    flops += conv(1, 1);
+  }
+  if (cnn) flops += cnn_patch_flops(o);
+  if (o.residual == "pinv") flops += 2 * m * d;
+  return flops;
 }
 
 }  // namespace lfnet::nn

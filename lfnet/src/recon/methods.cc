@@ -9,16 +9,6 @@
 
 namespace lfnet::recon {
 
-const std::vector<std::string>& method_names() {
-  static const std::vector<std::string> kNames = {"net",  "ae",      "cnn",        "dict",
-                                                  "pinv", "adjoint", "no-parallax"};
-  return kNames;
-}
-
-bool needs_network(const std::string& method) {
-  return method == "net" || method == "ae" || method == "cnn";
-}
-
 PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
   LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
                  "' is not a network method (net, ae, cnn)");

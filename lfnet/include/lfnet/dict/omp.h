@@ -77,4 +77,9 @@ torch::Tensor sparse_combine(const torch::Tensor& dictionary, const OmpResult& c
 torch::Tensor sparse_residual(const torch::Tensor& dictionary, const OmpResult& codes,
                               const torch::Tensor& signals);
 
+// Nominal FLOPs of one patch of Batch-OMP choosing `atoms` atoms from a dictionary of k atoms
+// of dimension d, for m measurements: the correlations Theta^T y, the correlation updates
+// G[:, chosen] gamma and D alpha.
+double omp_patch_flops(double m, double d, double k, double atoms);
+
 }  // namespace lfnet::dict

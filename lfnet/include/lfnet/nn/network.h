@@ -209,6 +209,14 @@ std::string to_string(Precision precision);
 // to the input's type, so the rest of the net is unchanged. No-op without a CNN branch.
 void set_cnn_precision(LightFieldNet& net, Precision precision);
 
+// The FLOP model (lfnet bench), from the same options that build the modules: nominal
+// floating-point operations of one patch through the parts `run` selects (linear layers,
+// Conv4d, the adjoint and residual products), of the CNN branch alone, and of the CNN branch
+// run fully convolutionally over an H x W light field in tiles of `tile` (halo included).
+double patch_flops(const NetworkOptions& o, const BranchSelection& run);
+double cnn_patch_flops(const NetworkOptions& o);
+double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile);
+
 // Number of trainable parameters.
 int64_t parameter_count(const torch::nn::Module& module);
 

@@ -1,4 +1,5 @@
-// Reconstruction methods by name (DESIGN section 5), as patch solvers.
+// The solvers behind the reconstruction methods (docs/methods.md); the methods themselves are
+// registered in method_registry.h.
 #pragma once
 
 #include <atomic>
@@ -15,9 +16,9 @@
 
 namespace lfnet::recon {
 
-// Every method `lfnet evaluate --method` knows.
-const std::vector<std::string>& method_names();
-// Methods that need a trained network.
+// Every registered method (method_registry.h), in registration order.
+std::vector<std::string> method_names();
+// True for the registered methods that need a trained network.
 bool needs_network(const std::string& method);
 
 // The network (`net`) or one of its branches (`ae`, `cnn`; the branch alone, plus the

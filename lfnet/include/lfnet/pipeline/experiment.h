@@ -1,0 +1,75 @@
+// Experiments: a JSON config that names the Phi, the data, the network, the training stages
+// and the evaluations; scales merge named patches into it (docs/experiments.md).
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+#include "lfnet/core/json.h"
+#include "lfnet/data/patch_dataset.h"
+#include "lfnet/dict/ksvd.h"
+#include "lfnet/dict/patch_sampling.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/train/trainer.h"
+
+namespace lfnet::pipeline {
+
+// One training stage of an experiment.
+struct StageConfig {
+  std::string name;          // ae, cnn, joint, joint_scratch or dict (a K-SVD dictionary)
+  nlohmann::json training = nlohmann::json::object();  // overrides of the common training options
+};
+
+// What to evaluate after training.
+struct EvaluationConfig {
+  LightFieldSources data;                       // held-out light fields
+  std::vector<std::string> methods = {"net", "no-parallax"};
+  std::vector<int64_t> strides = {5};
+  std::vector<std::string> modes = {"sensor"};
+  std::vector<double> noise = {0.0};
+  std::string model_stage;  // stage whose model net/ae/cnn use ("" = the last)
+
+  void read(JsonReader& r);
+  nlohmann::json to_json() const;
+};
+
+// Sets one value of a JSON config from `KEY.PATH=VALUE` (--set): VALUE is read as JSON (a
+// number, true, a list, a quoted string...) and otherwise taken as a string; objects on the
+// path are created. A malformed override is a ConfigError naming it.
+void apply_override(nlohmann::json& config, const std::string& override_text);
+
+// The resolved experiment config.
+struct ExperimentConfig {
+  std::string name = "experiment";
+  std::string scale;  // the scale applied (its overrides are merged in)
+  optics::PhiSpec phi;
+  LightFieldSources train_data;
+  data::DatasetOptions dataset;
+  nn::NetworkOptions network;
+  nlohmann::json training = nlohmann::json::object();  // common train::TrainerOptions
+  std::vector<StageConfig> stages;
+  // The dict stage: training patches and K-SVD ($.dictionary.sampling, $.dictionary.ksvd).
+  dict::PatchSamplingOptions dictionary_sampling;
+  dict::KsvdOptions dictionary_ksvd;
+  EvaluationConfig evaluation;
+  nlohmann::json raw;  // the config after merging the scale, as written to config.json
+
+  // Reads a config file; `scale` picks one of its "scales" (merge patches) or, when empty,
+  // its "default_scale". `overrides` (KEY.PATH=VALUE, see apply_override) apply last.
+  static ExperimentConfig load(const std::string& path, const std::string& scale = "",
+                               const std::vector<std::string>& overrides = {});
+  // Reads the config.json of a run folder (the config as it was trained, scale merged).
+  static ExperimentConfig load_run(const std::string& run_dir);
+  static ExperimentConfig from_json(const nlohmann::json& j, const std::string& source);
+
+  // The trainer options of one stage: common options, then the stage's overrides.
+  train::TrainerOptions stage_options(const StageConfig& stage) const;
+  // The network options of a stage (branches ae, cnn or net).
+  nn::NetworkOptions stage_network(const StageConfig& stage) const;
+};
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,53 @@
+// Trained model files (lfnet checkpoints, exported TorchScript files, dictionaries), loaded
+// once and kept for many reconstructions.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+
+#include "lfnet/dict/dictionary.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
+#include "lfnet/recon/reconstruct.h"
+
+namespace lfnet::pipeline {
+
+// A trained model given as --model: an lfnet checkpoint or a file `lfnet export` wrote
+// (told apart by content).
+struct ModelFile {
+  std::string path;
+  bool scripted = false;                        // an exported TorchScript file
+  nlohmann::json phi;                           // the Phi spec it was trained for
+  nlohmann::json config;                        // the resolved config of its training run
+  nn::NetworkOptions network;
+  nn::LightFieldNet net{nullptr};               // checkpoints (when the network was asked for)
+  std::shared_ptr<nn::ScriptedNetwork> script;  // exported files
+
+  // Throws CheckpointError unless the model was trained for `phi_spec` (equal JSON).
+  void check_phi(const nlohmann::json& phi_spec) const;
+  // The training measurement mean its config records, or 0.
+  double measurement_mean() const;
+};
+
+// Loads --model; `network`: build the checkpoint's network too (exported files always are).
+ModelFile load_model(const std::string& path, bool network);
+
+// Models and dictionaries loaded once for many reconstructions (lfnet batch, the evaluations
+// of lfnet experiment), by path.
+class ModelCache {
+ public:
+  ModelFile& model(const std::string& path);
+  const dict::Dictionary& dictionary(const std::string& path);
+  int64_t loads() const { return loads_; }  // files read so far
+
+ private:
+  std::map<std::string, ModelFile> models_;
+  std::map<std::string, dict::Dictionary> dictionaries_;
+  int64_t loads_ = 0;
+};
+
+}  // namespace lfnet::pipeline

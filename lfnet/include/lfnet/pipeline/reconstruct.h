@@ -1,0 +1,52 @@
+// Reconstructing one acquisition (an lfnet sensor folder or a camera's own sensor images)
+// with any method, and writing the result as a light-field folder.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+
+#include "lfnet/core/light_field.h"
+#include "lfnet/core/output.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/recon/reconstruct.h"
+
+namespace lfnet::pipeline {
+
+// What `lfnet reconstruct` does for one acquisition.
+struct ReconstructRequest {
+  // An acquisition folder (sensor.json with sensor.tif or measurements.f32), or a camera's own
+  // sensor image: one file of N channels per colour channel, comma-separated, with `phi`.
+  std::string sensor;
+  std::string phi;  // Phi spec for plain images: NAME[:N] or a JSON file ("" = the model's)
+  std::string method = "net";
+  std::string model;       // checkpoint for net, ae, cnn
+  std::string dictionary;  // dictionary file for dict
+  std::string dict_method = "omp";
+  recon::ReconstructOptions options;  // stride (sensor mode), batch, window
+  bool match_mean = false;            // scale the measurements to the training mean
+  bool post_filter = false;           // suppress artefacts with the stride's period
+  std::string device = "cpu";         // cpu or cuda[:K], for checkpoints' networks
+  std::string cnn_mode = "patches";   // patches, or full (the CNN branch once, in tiles)
+  int64_t tile = 128;                 // tile of cnn_mode full
+  std::string precision = "float32";  // float32 or bfloat16 for the CNN branch
+};
+
+// A reconstruction and its record (method, model, sensor, stride, seconds, phi, mode, shape).
+struct Reconstruction {
+  LightField lf;
+  nlohmann::json record;
+};
+
+// Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all);
+// with a `cache`, the model or dictionary is read once and reused by later calls.
+Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
+                                       const recon::ProgressCallback& progress = {},
+                                       ModelCache* cache = nullptr);
+
+// Writes a reconstruction as a light-field folder with previews and reconstruction.json, by
+// the output-folder policy (core/output.h).
+void write_reconstruction(const Reconstruction& r, const std::string& out,
+                          const OutputFolderPolicy& policy);
+
+}  // namespace lfnet::pipeline

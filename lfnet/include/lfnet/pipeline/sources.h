@@ -1,0 +1,55 @@
+// Light-field sources of a config: folders, scene files and random scenes, loaded as grey
+// light fields of the Phi's angular size (docs/pipeline.md).
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/json.h"
+#include "lfnet/core/light_field.h"
+#include "lfnet/scene/render.h"
+
+namespace lfnet::pipeline {
+
+// Light fields named in a config: real folders, scene specs and random scenes.
+struct LightFieldSources {
+  std::vector<std::string> light_fields;  // folders of sub-aperture images
+  std::vector<std::string> scenes;        // scene spec files (configs/scenes)
+  int64_t random_scenes = 0;              // procedural random scenes
+  uint64_t random_seed = 1;               // seed of the first random scene
+  nlohmann::json random_options = nlohmann::json::object();  // scene::RandomSceneOptions
+  std::string views;                      // R0:R1,C0:C1 (1-based); "" = central U x V
+  std::string orient;                     // angular reorientation of the folders on loading:
+                                          // flip-u, flip-v, transpose (docs/conventions.md)
+
+  void read(JsonReader& r);
+  nlohmann::json to_json() const;
+  bool empty() const { return light_fields.empty() && scenes.empty() && random_scenes == 0; }
+};
+
+// A named grey light field with its angular window applied.
+struct NamedLightField {
+  std::string name;
+  LightField lf;
+};
+
+// Reads a light-field folder and reorients its angular axes (`orient`, parsed as `what`: an
+// option or JSON path); warns once per folder when its horizontal and vertical parallax
+// disagree in sign (docs/conventions.md).
+LightField read_oriented(const std::string& dir, const std::string& orient,
+                         const std::string& what);
+
+// Loads every source as a grey light field of rows x cols views, with a progress bar. With
+// `whole_grids`, folders without a `views` window keep every view (at least rows x cols), for
+// a data set that draws its own angular windows.
+std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
+                                          int64_t cols, bool whole_grids = false);
+
+// Render options for a scene file: image textures are read with io::read_image, relative to
+// the scene file's folder ("" for none).
+scene::RenderOptions scene_render_options(const std::string& scene_file);
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,70 @@
+// The reconstruction methods by name (docs/methods.md): one class per method, registered once.
+// Commands, bench, batch and the report read the list from here. Adding a method takes its
+// class and one registration line (docs/extending.md).
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lfnet/dict/dictionary.h"
+#include "lfnet/dict/sparse_coding.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/recon/methods.h"
+#include "lfnet/recon/reconstruct.h"
+
+namespace lfnet::recon {
+
+// What a method needs besides the measurements and the Phi.
+enum class MethodNeeds {
+  kNothing,     // linear methods
+  kNetwork,     // a trained model (--model)
+  kDictionary,  // a dictionary file (--dictionary)
+  kTruth,       // the true light field: an evaluation baseline, not a reconstruction
+};
+
+// What a method's solver may use; the caller fills in what the method needs.
+struct MethodResources {
+  const optics::Phi* phi = nullptr;
+  int64_t patch_h = 9, patch_w = 9;
+  nn::LightFieldNet net{nullptr};                // kNetwork: a checkpoint's network,
+  const nn::ScriptedNetwork* script = nullptr;   // or an exported one (used when set)
+  const dict::Dictionary* dictionary = nullptr;  // kDictionary
+  dict::SparseCodingOptions coding;              // kDictionary: OMP or ADMM
+  std::shared_ptr<SolverReport> report;          // iterative methods: non-convergence counts
+};
+
+class Method {
+ public:
+  virtual ~Method() = default;
+  virtual std::string name() const = 0;
+  virtual std::string summary() const = 0;  // one line for help texts and docs
+  virtual MethodNeeds needs() const { return MethodNeeds::kNothing; }
+  // The patch solver; a ConfigError when a needed resource is missing. kTruth methods have
+  // none (the evaluation computes them from the truth).
+  virtual PatchSolver solver(const MethodResources& resources) const = 0;
+  // Nominal floating-point operations per patch (lfnet bench), 0 when unknown.
+  virtual double patch_flops(const MethodResources&) const { return 0; }
+};
+
+// Adds a method, replacing one of the same name.
+void register_method(std::unique_ptr<Method> method);
+
+// The method called `name`; unknown names are a ConfigError listing the known ones.
+const Method& find_method(const std::string& name);
+
+// Every registered method's name, in registration order (net, ae, cnn, dict, pinv, adjoint,
+// no-parallax for the built-ins): the order of tables and legends.
+std::vector<std::string> registered_methods();
+
+// "a, b, c": the registered methods, optionally without those needing `excluded`.
+std::string method_list(std::optional<MethodNeeds> excluded = std::nullopt);
+
+// The solver of `name` with `resources`, after checking that they hold what it needs (the
+// message names the option that supplies it).
+PatchSolver make_solver(const std::string& name, const MethodResources& resources);
+
+}  // namespace lfnet::recon

@@ -1,0 +1,204 @@
+#include "lfnet/pipeline/experiment.h"
+
+#include <filesystem>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/pipeline/stages.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+void EvaluationConfig::read(JsonReader& r) {
+  if (r.has("data")) {
+    auto d = r.child("data");
+    data.read(d);
+  }
+  r.get("methods", methods);
+  r.get("strides", strides);
+  r.get("modes", modes);
+  r.get("noise", noise);
+  r.get("model_stage", model_stage);
+  r.finish();
+}
+
+nlohmann::json EvaluationConfig::to_json() const {
+  return {{"data", data.to_json()}, {"methods", methods}, {"strides", strides},
+          {"modes", modes},         {"noise", noise},     {"model_stage", model_stage}};
+}
+
+void apply_override(nlohmann::json& config, const std::string& text) {
+  const size_t eq = text.find('=');
+  LFNET_CHECK_AS(ConfigError, eq != std::string::npos && eq > 0, "--set ", text,
+                 ": expected KEY.PATH=VALUE, e.g. training.epochs=1");
+  const std::string key = text.substr(0, eq), value_text = text.substr(eq + 1);
+  nlohmann::json value;
+  try {
+    value = nlohmann::json::parse(value_text);
+  } catch (const nlohmann::json::exception&) {
+    value = value_text;  // a bare word is a string
+  }
+  nlohmann::json* node = &config;
+  size_t start = 0;
+  while (true) {
+    const size_t dot = key.find('.', start);
+    const std::string part = key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    LFNET_CHECK_AS(ConfigError, !part.empty(), "--set ", text, ": empty key in '", key, "'");
+    LFNET_CHECK_AS(ConfigError, node->is_object(), "--set ", text, ": $.",
+                   key.substr(0, start ? start - 1 : 0), " is not an object");
+    if (dot == std::string::npos) {
+      (*node)[part] = value;
+      return;
+    }
+    if (!node->contains(part)) (*node)[part] = nlohmann::json::object();
+    node = &(*node)[part];
+    start = dot + 1;
+  }
+}
+
+ExperimentConfig ExperimentConfig::load_run(const std::string& run_dir) {
+  const std::string path = (fs::path(run_dir) / "config.json").string();
+  LFNET_CHECK_AS(IoError, fs::is_regular_file(path), run_dir,
+                 " is not a run folder: it has no config.json");
+  auto j = read_json_file(path);
+  LFNET_CHECK_AS(ConfigError, j.is_object(), path, ": a config is a JSON object");
+  const std::string scale = j.value("scale", "");
+  j.erase("scale");
+  auto config = from_json(j, path);
+  config.scale = scale;
+  return config;
+}
+
+ExperimentConfig ExperimentConfig::load(const std::string& path, const std::string& scale,
+                                        const std::vector<std::string>& overrides) {
+  auto j = read_json_file(path);
+  LFNET_CHECK_AS(ConfigError, j.is_object(), path, ": a config is a JSON object");
+  std::string chosen = scale;
+  if (chosen.empty() && j.contains("default_scale")) {
+    LFNET_CHECK_AS(ConfigError, j["default_scale"].is_string(), path,
+                   ": $.default_scale: expected the name of a scale, got ",
+                   j["default_scale"].dump());
+    chosen = j["default_scale"].get<std::string>();
+  }
+  if (j.contains("scales")) {
+    LFNET_CHECK_AS(ConfigError, j["scales"].is_object(), path,
+                   ": $.scales: expected an object of named config patches");
+    // Every scale is merged into the config when chosen, so each must be an object.
+    for (const auto& [name, patch] : j["scales"].items()) {
+      LFNET_CHECK_AS(ConfigError, patch.is_object(), path, ": $.scales.", name,
+                     ": expected an object (a patch merged into the config)");
+    }
+  }
+  if (!chosen.empty()) {
+    LFNET_CHECK_AS(ConfigError, j.contains("scales") && j["scales"].contains(chosen), path,
+                   ": $.scales has no scale '", chosen, "'");
+    const nlohmann::json patch = j["scales"][chosen];
+    j.merge_patch(patch);
+  }
+  j.erase("scales");
+  j.erase("default_scale");
+  for (const auto& o : overrides) apply_override(j, o);
+  auto config = from_json(j, overrides.empty() ? path : path + " (with --set)");
+  config.scale = chosen;
+  return config;
+}
+
+ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std::string& source) {
+  ExperimentConfig c;
+  c.raw = j;
+  try {
+    JsonReader r(j, "$");
+    r.get("name", c.name);
+    nlohmann::json phi;
+    r.require("phi", phi);
+    c.phi = phi.is_string() ? optics::PhiSpec::parse(phi.get<std::string>())
+                            : optics::PhiSpec::from_json(phi, "$.phi");
+    {
+      auto d = r.child("data");
+      c.train_data.read(d);
+    }
+    if (r.has("dataset")) {
+      auto d = r.child("dataset");
+      c.dataset = data::DatasetOptions::from_json(d);
+    }
+    nlohmann::json network = nlohmann::json::object();
+    r.get("network", network);
+    c.network = nn::NetworkOptions::from_json(network, "$.network");
+    r.get("training", c.training);
+    // Parse once so errors in the common options surface before any work.
+    (void)train::TrainerOptions::from_json(c.training, "$.training");
+    nlohmann::json stages = nlohmann::json::array({"joint"});
+    r.get("stages", stages);
+    LFNET_CHECK_AS(ConfigError, stages.is_array() && !stages.empty(),
+                   "$.stages: a non-empty list of stages (ae, cnn, joint, joint_scratch)");
+    for (size_t i = 0; i < stages.size(); ++i) {
+      const std::string path = "$.stages[" + std::to_string(i) + "]";
+      StageConfig s;
+      if (stages[i].is_string()) {
+        s.name = stages[i].get<std::string>();
+      } else {
+        JsonReader sr(stages[i], path);
+        sr.require("name", s.name);
+        sr.get("training", s.training);
+        sr.finish();
+        LFNET_CHECK_AS(ConfigError, s.training.is_object(), path,
+                       ".training: expected an object of training options");
+      }
+      LFNET_CHECK_AS(ConfigError,
+                     s.name == "ae" || s.name == "cnn" || s.name == "joint" ||
+                         s.name == "joint_scratch" || s.name == "dict",
+                     path, ": unknown stage '", s.name,
+                     "' (known: ae, cnn, joint, joint_scratch, dict)");
+      LFNET_CHECK_AS(ConfigError, s.name != "dict" || s.training.empty(), path,
+                     ": the dict stage takes its options from $.dictionary, not 'training'");
+      c.stages.push_back(s);
+      // Values (not only keys and types) are checked before any work starts.
+      try {
+        if (is_network_stage(s.name)) c.stage_options(s).validate();
+      } catch (const ConfigError& e) {
+        throw ConfigError("$.training (stage " + s.name + "): " + e.what());
+      }
+    }
+    if (r.has("dictionary")) {
+      auto d = r.child("dictionary");
+      nlohmann::json sampling = nlohmann::json::object(), ksvd = nlohmann::json::object();
+      d.get("sampling", sampling);
+      d.get("ksvd", ksvd);
+      d.finish();
+      c.dictionary_sampling = dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
+      c.dictionary_ksvd = dict::KsvdOptions::from_json(ksvd, "$.dictionary.ksvd");
+    }
+    if (r.has("evaluation")) {
+      auto e = r.child("evaluation");
+      c.evaluation.read(e);
+    }
+    r.finish();
+  } catch (const ConfigError& e) {
+    throw ConfigError(source + ": " + e.what());
+  }
+  // The resolved spec (every parameter filled in) is what models and results record.
+  c.phi = optics::make_phi(c.phi)->spec();
+  c.network.measurements = c.phi.n;
+  c.network.patch.rows = c.phi.rows;
+  c.network.patch.cols = c.phi.cols;
+  c.network.patch.height = c.dataset.patch_h;
+  c.network.patch.width = c.dataset.patch_w;
+  return c;
+}
+
+train::TrainerOptions ExperimentConfig::stage_options(const StageConfig& stage) const {
+  nlohmann::json merged = training;
+  if (stage.training.is_object()) merged.merge_patch(stage.training);
+  merged["stage"] = stage.name == "joint_scratch" ? "joint" : stage.name;
+  return train::TrainerOptions::from_json(merged, "$.stages[" + stage.name + "].training");
+}
+
+nn::NetworkOptions ExperimentConfig::stage_network(const StageConfig& stage) const {
+  nn::NetworkOptions o = network;
+  o.branches = (stage.name == "ae" || stage.name == "cnn") ? stage.name : "net";
+  o.validate();
+  return o;
+}
+
+}  // namespace lfnet::pipeline

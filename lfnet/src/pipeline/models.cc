@@ -1,0 +1,65 @@
+#include "lfnet/pipeline/models.h"
+
+#include <filesystem>
+
+#include "lfnet/core/error.h"
+#include "lfnet/recon/methods.h"
+#include "lfnet/train/checkpoint.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+ModelFile load_model(const std::string& path, bool network) {
+  ModelFile model;
+  model.path = path;
+  model.scripted = nn::is_script_file(path);
+  if (model.scripted) {
+    model.script = std::make_shared<nn::ScriptedNetwork>(nn::load_script(path));
+    model.phi = model.script->meta.phi;
+    model.config = model.script->meta.config;
+    model.network = model.script->network;
+    return model;
+  }
+  const auto ckpt = train::load_checkpoint(path);
+  model.phi = ckpt.phi;
+  model.config = ckpt.config;
+  try {
+    model.network = nn::NetworkOptions::from_json(ckpt.network, "$.network");
+  } catch (const ConfigError& e) {
+    throw CheckpointError(path + " has invalid network options: " + e.what());
+  }
+  if (network) model.net = train::build_net(ckpt, path);
+  return model;
+}
+
+void ModelFile::check_phi(const nlohmann::json& phi_spec) const {
+  if (script) return nn::check_script_phi(*script, phi_spec);
+  train::Checkpoint ckpt;
+  ckpt.phi = phi;
+  train::check_phi(ckpt, phi_spec, path);
+}
+
+double ModelFile::measurement_mean() const {
+  return config.contains("measurement_mean") ? config["measurement_mean"].get<double>() : 0.0;
+}
+
+ModelFile& ModelCache::model(const std::string& path) {
+  auto it = models_.find(path);
+  if (it == models_.end()) {
+    it = models_.emplace(path, load_model(path, /*network=*/true)).first;
+    ++loads_;
+  }
+  return it->second;
+}
+
+const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
+  auto it = dictionaries_.find(path);
+  if (it == dictionaries_.end()) {
+    it = dictionaries_.emplace(path, dict::load_dictionary(path)).first;
+    ++loads_;
+  }
+  return it->second;
+}
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,216 @@
+#include "lfnet/pipeline/reconstruct.h"
+
+#include <filesystem>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/core/patches.h"
+#include "lfnet/core/progress.h"
+#include "lfnet/core/runtime.h"
+#include "lfnet/core/version.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/recon/fully_convolutional.h"
+#include "lfnet/recon/method_registry.h"
+#include "lfnet/recon/post_filter.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+namespace {
+
+// A Phi spec from the command line: NAME[:N] or a JSON file holding a spec object.
+optics::PhiSpec parse_phi_argument(const std::string& text) {
+  if (fs::path(text).extension() == ".json") {
+    return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
+  }
+  return optics::PhiSpec::parse(text);
+}
+
+// A camera's own sensor images, one file of N channels per colour channel, as an acquisition.
+io::Acquisition plain_sensor_acquisition(const std::string& files, const optics::PhiSpec& spec) {
+  std::vector<torch::Tensor> channels;
+  std::stringstream list(files);
+  for (std::string file; std::getline(list, file, ',');) {
+    auto image = io::read_image_channels(file);
+    LFNET_CHECK_AS(ConfigError, image.size(0) == spec.n, file, " has ", image.size(0),
+                   " channel(s) but the Phi ", spec.label(), " measures N = ", spec.n,
+                   " per pixel: give one file of N channels per colour channel");
+    LFNET_CHECK_AS(ConfigError, channels.empty() || image.sizes() == channels[0].sizes(), file,
+                   " is ", image.size(1), "x", image.size(2), " but the first file is ",
+                   channels[0].size(1), "x", channels[0].size(2));
+    channels.push_back(image);
+  }
+  LFNET_CHECK_AS(ConfigError, !channels.empty(), "--sensor names no file");
+  io::Acquisition acq;
+  acq.sensor = torch::stack(channels);
+  acq.meta = {{"phi", spec.to_json()},
+              {"mode", "sensor"},
+              {"light_field",
+               {{"channels", acq.sensor.size(0)}, {"height", acq.sensor.size(2)},
+                {"width", acq.sensor.size(3)}}}};
+  return acq;
+}
+
+}  // namespace
+
+Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
+                                       const recon::ProgressCallback& progress,
+                                       ModelCache* cache) {
+  const std::string method = a.method;
+  const auto needs = recon::find_method(method).needs();
+  LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kTruth, method,
+                 " needs the true light field: it is a method of lfnet evaluate");
+  LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kDictionary || !a.dictionary.empty(),
+                 "method '", method, "' needs --dictionary FILE (e.g. models/dictionary.ckpt)");
+  ModelCache local;
+  ModelCache& files = cache ? *cache : local;
+  // The model first: its Phi is the default for plain sensor images.
+  ModelFile* model = nullptr;
+  if (needs == recon::MethodNeeds::kNetwork) {
+    LFNET_CHECK_AS(ConfigError, !a.model.empty(), "method '", method, "' needs --model");
+    model = &files.model(a.model);
+  }
+  const bool folder = fs::is_directory(a.sensor);
+  io::Acquisition acq;
+  optics::PhiSpec spec;
+  if (folder) {
+    acq = io::read_acquisition(a.sensor);
+    spec = optics::PhiSpec::from_json(acq.meta.at("phi"), a.sensor + "/sensor.json:$.phi");
+    LFNET_CHECK_AS(ConfigError, a.phi.empty() || parse_phi_argument(a.phi).label() == spec.label(),
+                   "--phi ", a.phi, " contradicts ", a.sensor, "/sensor.json, which says ",
+                   spec.label());
+  } else {
+    LFNET_CHECK_AS(IoError, fs::exists(a.sensor) || a.sensor.find(',') != std::string::npos,
+                   "--sensor ", a.sensor, " does not exist");
+    LFNET_CHECK_AS(ConfigError, !a.phi.empty() || model,
+                   "a plain sensor image needs --phi (or a --model, whose Phi is then used)");
+    spec = a.phi.empty() ? optics::PhiSpec::from_json(model->phi, a.model + ":$.phi")
+                         : parse_phi_argument(a.phi);
+    spec = optics::make_phi(spec)->spec();
+    acq = plain_sensor_acquisition(a.sensor, spec);
+  }
+  const auto phi = optics::make_phi(spec);
+  recon::ReconstructOptions o = a.options;
+  recon::PatchSolver solver;
+  double train_mean = 0;
+  const bool full = recon::parse_cnn_mode(a.cnn_mode) == recon::CnnMode::kFull;
+  LFNET_CHECK_AS(ConfigError, !full || method == "net" || method == "cnn",
+                 "--cnn-mode full needs --method net or cnn, not '", method, "'");
+  if (model) {
+    model->check_phi(spec.to_json());
+    o.patch_h = model->network.patch.height;
+    o.patch_w = model->network.patch.width;
+    if (model->net) {
+      model->net->to(parse_device(a.device));
+      nn::set_cnn_precision(model->net, nn::parse_precision(a.precision));
+    } else {
+      LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == "float32" && !full,
+                     "--device, --precision and --cnn-mode full apply to checkpoints; ", a.model,
+                     " is an exported TorchScript file");
+    }
+    train_mean = model->measurement_mean();
+  }
+  {
+    recon::MethodResources resources;
+    resources.phi = phi.get();
+    resources.patch_h = o.patch_h;
+    resources.patch_w = o.patch_w;
+    if (model) {
+      resources.net = model->net;
+      resources.script = model->script.get();
+    }
+    if (needs == recon::MethodNeeds::kDictionary) {
+      resources.dictionary = &files.dictionary(a.dictionary);
+      resources.coding.method = a.dict_method;
+    }
+    solver = recon::make_solver(method, resources);
+  }
+  LFNET_CHECK_AS(ConfigError, !a.match_mean || train_mean > 0,
+                 "--match-mean needs a model that records its training measurement mean");
+
+  const auto& lf_meta = acq.meta.at("light_field");
+  const int64_t c = lf_meta.at("channels").get<int64_t>();
+  const int64_t h = lf_meta.at("height").get<int64_t>(), w = lf_meta.at("width").get<int64_t>();
+  std::vector<torch::Tensor> channels;
+  double scale = 1.0;
+  Stopwatch clock;
+  if (acq.sensor.defined()) {
+    const int64_t per_channel = PatchGrid(h, w, o.patch_h, o.patch_w, o.stride).size();
+    for (int64_t ch = 0; ch < c; ++ch) {
+      auto sensor = acq.sensor[ch].clone();
+      if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
+      if (full) {
+        channels.push_back(recon::reconstruct_sensor_fully_convolutional(
+            model->net, method, *phi, sensor, o, a.tile));
+        if (progress) progress((ch + 1) * per_channel, c * per_channel);
+        continue;
+      }
+      channels.push_back(recon::reconstruct_sensor(
+          *phi, sensor, solver, o, [&](int64_t done, int64_t total) {
+            if (progress) progress(ch * per_channel + done, c * total);
+          }));
+    }
+  } else {
+    LFNET_CHECK_AS(ConfigError, !a.match_mean,
+                   "--match-mean applies to sensor images, not to per_patch measurements");
+    LFNET_CHECK_AS(ConfigError, !full,
+                   "--cnn-mode full needs a sensor image, not per-patch measurements");
+    const auto& g = acq.meta.at("grid");
+    const int64_t patch = g.at("patch").get<int64_t>();
+    o.stride = g.at("stride").get<int64_t>();
+    LFNET_CHECK_AS(ConfigError, patch == o.patch_h && patch == o.patch_w,
+                   "the measurements are of ", patch, "x", patch,
+                   " patches but the method reconstructs ", o.patch_h, "x", o.patch_w);
+    PatchGrid grid(h, w, patch, patch, o.stride);
+    for (int64_t ch = 0; ch < c; ++ch) {
+      auto source = [&](int64_t r0, int64_t r1) {
+        return optics::PatchMeasurements{
+            acq.measurements[ch].slice(0, r0 * grid.cols(), r1 * grid.cols()),
+            optics::patch_phases(*phi, grid, r0, r1)};
+      };
+      channels.push_back(recon::reconstruct_patches(
+          *phi, grid, source, solver, o, [&](int64_t done, int64_t total) {
+            if (progress) progress(ch * grid.size() + done, c * total);
+          }));
+    }
+  }
+  torch::Tensor lf = torch::cat(channels, 0);
+  if (a.post_filter) {
+    lf = recon::suppress_periodic(lf, o.stride);
+    if (o.clamp) lf.clamp_(0.0, 1.0);
+  }
+  const double seconds = clock.seconds();
+  Reconstruction r{LightField(lf), {}};
+  r.record = {{"method", method},
+              {"model", needs == recon::MethodNeeds::kNetwork      ? a.model
+                        : needs == recon::MethodNeeds::kDictionary ? a.dictionary
+                                                                   : ""},
+              {"sensor", a.sensor},
+              {"stride", o.stride},
+              {"seconds", seconds},
+              {"phi", spec.to_json()},
+              {"mode", acq.meta.value("mode", "sensor")},
+              {"shape", r.lf.shape_string()},
+              {"match_mean_scale", scale},
+              {"post_filter", a.post_filter},
+              {"window", o.window},
+              {"device", a.device},
+              {"cnn_mode", a.cnn_mode},
+              {"precision", a.precision},
+              {"lfnet_version", kVersion}};
+  return r;
+}
+
+void write_reconstruction(const Reconstruction& r, const std::string& out,
+                          const OutputFolderPolicy& policy) {
+  write_folder(out, policy, [&](const std::string& dir) {
+    io::write_light_field(r.lf, dir);
+    io::write_previews(r.lf, dir);
+    write_json_file((fs::path(dir) / "reconstruction.json").string(), r.record);
+  });
+}
+
+}  // namespace lfnet::pipeline

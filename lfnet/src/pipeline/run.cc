@@ -1,0 +1,217 @@
+#include "lfnet/pipeline/run.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
+#include "lfnet/core/runtime.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/stages.h"
+#include "lfnet/recon/method_registry.h"
+#include "lfnet/train/checkpoint.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+bool resumes_folder(const TrainRequest& request) {
+  return !request.resume.empty() && fs::is_directory(request.resume);
+}
+
+ExperimentConfig resolve_request(const TrainRequest& r) {
+  LFNET_CHECK_AS(ConfigError, r.resume.empty() || r.init.empty(),
+                 "give --resume or --init, not both");
+  LFNET_CHECK_AS(ConfigError, r.resume.empty() || fs::exists(r.resume), "--resume ", r.resume,
+                 " does not exist: give a run folder or a stage's last.ckpt");
+  LFNET_CHECK_AS(ConfigError, !(r.force && !r.resume.empty()),
+                 "--force starts a run afresh and --resume continues one: give one of them");
+  LFNET_CHECK_AS(ConfigError, r.init.empty() || fs::is_regular_file(r.init), "--init ", r.init,
+                 " is not a file: give a checkpoint");
+  ExperimentConfig config;
+  if (resumes_folder(r)) {
+    LFNET_CHECK_AS(ConfigError, r.scale.empty() && r.set.empty(), "--scale and --set apply to "
+                   "a new run; a resumed run keeps the config in ", r.resume, "/config.json");
+    config = ExperimentConfig::load_run(r.resume);
+    LFNET_CHECK_AS(ConfigError, r.out.empty() || fs::equivalent(r.out, r.resume), "--out ", r.out,
+                   " differs from the run folder --resume ", r.resume, " continues");
+  } else {
+    LFNET_CHECK_AS(ConfigError, !r.config.empty(), "give a config file (or --resume RUN_FOLDER)");
+    config = ExperimentConfig::load(r.config, r.scale, r.set);
+  }
+  if (!r.device.empty()) {
+    parse_device(r.device);  // a clear error before any data is prepared
+    config.training["device"] = r.device;
+    config.raw["training"]["device"] = r.device;
+  }
+  bool found = r.stage.empty();
+  for (const auto& s : config.stages) found |= s.name == r.stage;
+  LFNET_CHECK_AS(ConfigError, found, r.config, " has no stage '", r.stage, "'");
+  LFNET_CHECK_AS(ConfigError, r.resume.empty() || resumes_folder(r) || !r.stage.empty(),
+                 "--resume CHECKPOINT continues one stage: name it with --stage (or give the "
+                 "run folder to continue every stage)");
+  LFNET_CHECK_AS(ConfigError, !config.train_data.empty(), r.config,
+                 ": the config names no training data ($.data)");
+  return config;
+}
+
+std::string run_folder(const TrainRequest& r, const ExperimentConfig& config) {
+  if (resumes_folder(r)) return r.resume;
+  return r.out.empty() ? "out/" + config.name : r.out;
+}
+
+TrainResult train_experiment(const TrainRequest& request, std::shared_ptr<dist::Communicator> comm) {
+  if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
+  const bool lead = comm->rank() == 0;
+  ExperimentConfig config = resolve_request(request);
+  const std::string out = run_folder(request, config);
+  const bool continue_folder = resumes_folder(request);
+  // Resuming one stage from its checkpoint writes into the folder that holds it.
+  const bool continue_in_place = continue_folder || !request.resume.empty();
+  std::vector<StageConfig> stages;
+  for (const auto& s : config.stages) {
+    if (request.stage.empty() || s.name == request.stage) stages.push_back(s);
+  }
+  nlohmann::json resolved = config.raw;
+  resolved["scale"] = config.scale;
+  std::unique_ptr<RunFolder> folder;  // the other ranks write nothing
+  if (lead) {
+    OutputFolderPolicy policy;
+    policy.force = request.force;
+    policy.inputs = {request.config, request.init};
+    for (const auto& lf : config.train_data.light_fields) policy.inputs.push_back(lf);
+    folder = std::make_unique<RunFolder>(out, policy, continue_in_place);
+    fs::create_directories(fs::path(out) / "models");
+  }
+  const auto phi = optics::make_phi(config.phi);
+  spdlog::info("{}: Phi {}, {} stage(s), output in {}{}", config.name, config.phi.label(),
+               stages.size(), out,
+               comm->world_size() > 1
+                   ? " (" + std::to_string(comm->world_size()) + " data-parallel ranks)"
+                   : "");
+  auto model_of = [&](const StageConfig& s) {
+    return (fs::path(out) / "models" / (s.name + ".ckpt")).string();
+  };
+  auto last_of = [&](const StageConfig& s) {
+    return (fs::path(out) / "models" / s.name / "last.ckpt").string();
+  };
+  // The patch dataset (simulated measurements) is built only when a network is trained.
+  std::unique_ptr<data::PatchDataset> dataset;
+  const bool networks = std::any_of(stages.begin(), stages.end(), [&](const StageConfig& s) {
+    return is_network_stage(s.name) && !(continue_folder && fs::exists(model_of(s)));
+  });
+  if (lead && !continue_folder) write_json_file((fs::path(out) / "config.json").string(), resolved);
+  if (networks) dataset = make_dataset(config, *phi);
+  if (dataset) {
+    spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
+                 dataset->measurement_mean());
+  }
+  auto saved = [&] {
+    if (folder) folder->commit();
+  };
+  std::string last;
+  for (size_t i = 0; i < stages.size(); ++i) {
+    const auto& stage = stages[i];
+    if (continue_folder && fs::exists(model_of(stage))) {
+      spdlog::info("stage {}: done ({})", stage.name, model_of(stage));
+      last = model_of(stage);
+      continue;
+    }
+    if (!is_network_stage(stage.name)) {
+      LFNET_CHECK_AS(ConfigError, (request.resume.empty() || continue_folder) && request.init.empty(),
+                     "--resume and --init apply to network stages, not to '", stage.name, "'");
+      LFNET_CHECK_AS(ConfigError, comm->world_size() == 1, "the '", stage.name,
+                     "' stage does not train data-parallel: train it in one process (--stage ",
+                     stage.name, ")");
+      last = train_dictionary_stage(config, out, request.command_line);
+      saved();
+      continue;
+    }
+    std::string resume = continue_folder ? "" : request.resume;
+    if (continue_folder && fs::exists(last_of(stage))) {
+      resume = last_of(stage);
+      spdlog::info("stage {}: resuming from {}", stage.name, resume);
+    }
+    // --init applies to the first stage trained; later stages follow the usual chain.
+    last = train_stage(config, stage, *dataset, out, i == 0 ? request.init : "", resume,
+                       request.command_line, comm, saved);
+    spdlog::info("stage {} done: {}", stage.name, last);
+  }
+  saved();
+  comm->barrier();  // leave together: rank 0 hosts the rendezvous
+  config.raw = resolved;
+  return {config, out, last};
+}
+
+void evaluate_experiment(const ExperimentConfig& config, const std::string& out) {
+  const auto& ev = config.evaluation;
+  if (ev.data.empty()) {
+    spdlog::warn("the config names no evaluation data ($.evaluation.data): nothing evaluated");
+    return;
+  }
+  const auto phi = optics::make_phi(config.phi);
+  MethodContext context;
+  context.phi = phi.get();
+  // net, ae and cnn use the last network stage's model (or model_stage); dict uses the dict
+  // stage's dictionary.
+  std::string model;
+  for (const auto& s : config.stages) {
+    if (is_network_stage(s.name)) model = (fs::path(out) / "models" / (s.name + ".ckpt")).string();
+  }
+  if (!ev.model_stage.empty()) {
+    model = (fs::path(out) / "models" / (ev.model_stage + ".ckpt")).string();
+  }
+  if (!model.empty()) context.net = train::build_net(train::load_checkpoint(model), model);
+  const fs::path dictionary = fs::path(out) / "models" / "dict.ckpt";
+  if (fs::exists(dictionary)) context.dictionary = dictionary.string();
+  ModelCache cache;  // the dictionary is read once for every light field, stride, mode and noise
+  context.cache = &cache;
+  const std::string results = (fs::path(out) / "results.jsonl").string();
+  if (fs::exists(results)) {
+    spdlog::info("evaluations: done ({})", results);
+    return;
+  }
+  const auto truths = load_sources(ev.data, phi->rows(), phi->cols());
+  std::string lines;  // results.jsonl appears whole, once every evaluation is done
+  for (const auto& truth : truths) {
+    for (const auto& method : ev.methods) {
+      for (int64_t stride : ev.strides) {
+        for (const auto& mode : ev.modes) {
+          for (double noise : ev.noise) {
+            nn::PatchShape patch;
+            patch.height = config.dataset.patch_h;
+            patch.width = config.dataset.patch_w;
+            const eval::EvalOptions defaults;
+            const auto o = make_eval_options(mode, noise, defaults.seed, stride,
+                                             defaults.reconstruct.batch,
+                                             defaults.reconstruct.window, patch);
+            auto record = evaluate_method(truth, method, context, o);
+            record["experiment"] = config.name;
+            record["scale"] = config.scale;
+            const auto needs = recon::find_method(method).needs();
+            record["model"] = needs == recon::MethodNeeds::kNetwork      ? model
+                              : needs == recon::MethodNeeds::kDictionary ? context.dictionary
+                                                                         : "";
+            lines += record.dump() + "\n";
+            spdlog::info(
+                "{:<12} {:<14} stride {} {:<9} noise {:.2f}: PSNR {:.2f} dB, SSIM {:.4f}, "
+                "{:.2f} s",
+                method, truth.name, stride, mode, noise,
+                record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>(),
+                record["ssim"].get<double>(), record["seconds"].get<double>());
+          }
+        }
+      }
+    }
+  }
+  write_text_file(results, lines);
+  spdlog::info("results in {}", results);
+}
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,132 @@
+#include "lfnet/pipeline/sources.h"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <mutex>
+#include <set>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/parallax.h"
+#include "lfnet/core/progress.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/scene/random_scene.h"
+#include "lfnet/scene/render.h"
+#include "lfnet/scene/scene_spec.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+void LightFieldSources::read(JsonReader& r) {
+  r.get("light_fields", light_fields);
+  r.get("scenes", scenes);
+  r.get("random_scenes", random_scenes);
+  r.get("random_seed", random_seed);
+  r.get("random_options", random_options);
+  r.get("views", views);
+  r.get("orient", orient);
+  r.finish();
+  if (random_scenes < 0) throw ConfigError(r.path_of("random_scenes") + ": must be >= 0");
+  AngularOrientation::parse(orient, r.path_of("orient"));
+}
+
+nlohmann::json LightFieldSources::to_json() const {
+  return {{"light_fields", light_fields}, {"scenes", scenes},
+          {"random_scenes", random_scenes}, {"random_seed", random_seed},
+          {"random_options", random_options}, {"views", views}, {"orient", orient}};
+}
+
+LightField read_oriented(const std::string& dir, const std::string& orient,
+                         const std::string& what) {
+  const auto orientation = AngularOrientation::parse(orient, what);
+  LightField lf = reorient(io::read_light_field(dir), orientation);
+  const auto check = check_parallax(lf);
+  if (check.verdict == ParallaxVerdict::kDisagree) {
+    static std::mutex mutex;
+    static std::set<std::string> warned;
+    std::lock_guard<std::mutex> lock(mutex);
+    if (warned.insert(fs::absolute(dir).lexically_normal().string()).second) {
+      spdlog::warn("{}: {}; if its views are named from the bottom row, load it with {} flip-u "
+                   "(docs/conventions.md)",
+                   dir, check.summary(), what);
+    }
+  }
+  return lf;
+}
+
+namespace {
+LightField select_views(const LightField& lf, const std::string& views, int64_t rows,
+                        int64_t cols, const std::string& name) {
+  LightField out;
+  if (views.empty()) {
+    LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, name, " has ", lf.rows(),
+                   "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
+    const int64_t u0 = central_start(lf.rows(), rows), v0 = central_start(lf.cols(), cols);
+    out = lf.window({u0, u0 + rows}, {v0, v0 + cols});
+  } else {
+    auto [ru, rv] = parse_views(views);
+    out = lf.window(ru, rv);
+    LFNET_CHECK_AS(ConfigError, out.rows() == rows && out.cols() == cols, "views ", views,
+                   " select ", out.rows(), "x", out.cols(), " views but the Phi codes ", rows,
+                   "x", cols);
+  }
+  return out.grey();
+}
+}  // namespace
+
+std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
+                                          int64_t cols, bool whole_grids) {
+  std::vector<NamedLightField> out;
+  const int64_t total = static_cast<int64_t>(sources.light_fields.size() + sources.scenes.size()) +
+                        sources.random_scenes;
+  ProgressBar bar("loading light fields", total);
+  for (const auto& dir : sources.light_fields) {
+    auto lf = read_oriented(dir, sources.orient, "orient");
+    if (whole_grids && sources.views.empty()) {
+      LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, dir, " has ", lf.rows(),
+                     "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
+      out.push_back({fs::path(dir).filename().string(), lf.grey()});
+    } else {
+      out.push_back({fs::path(dir).filename().string(),
+                     select_views(lf, sources.views, rows, cols, dir)});
+    }
+    bar.advance();
+  }
+  for (const auto& path : sources.scenes) {
+    scene::SceneSpec spec;
+    try {
+      spec = scene::load_scene(path);
+    } catch (const ConfigError& e) {
+      throw ConfigError(path + ": " + e.what());
+    }
+    spec.color = false;
+    auto lf = scene::render_scene(spec, scene_render_options(path)).light_field;
+    out.push_back({fs::path(path).stem().string(), select_views(lf, "", rows, cols, path)});
+    bar.advance();
+  }
+  if (sources.random_scenes > 0) {
+    JsonReader reader(sources.random_options, "$.random_options");
+    auto options = scene::RandomSceneOptions::from_json(reader);
+    options.rows = rows;
+    options.cols = cols;
+    options.color = false;
+    for (int64_t i = 0; i < sources.random_scenes; ++i) {
+      const uint64_t seed = sources.random_seed + static_cast<uint64_t>(i);
+      auto lf = scene::render_scene(scene::random_scene(seed, options), scene_render_options(""))
+                    .light_field;
+      out.push_back({"random-" + std::to_string(seed), lf.grey()});
+      bar.advance();
+    }
+  }
+  return out;
+}
+
+scene::RenderOptions scene_render_options(const std::string& scene_file) {
+  scene::RenderOptions options;
+  options.image_loader = [](const std::string& path) { return io::read_image(path); };
+  if (!scene_file.empty()) options.base_dir = fs::path(scene_file).parent_path().string();
+  return options;
+}
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,149 @@
+#include "lfnet/pipeline/stages.h"
+
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/progress.h"
+#include "lfnet/core/runtime.h"
+#include "lfnet/dict/dictionary.h"
+#include "lfnet/dict/ksvd.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/train/checkpoint.h"
+#include "lfnet/train/trainer.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
+                                                 const optics::Phi& phi) {
+  auto named = load_sources(config.train_data, phi.rows(), phi.cols(),
+                            config.dataset.needs_whole_grids());
+  LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
+  std::vector<LightField> lfs;
+  for (auto& n : named) lfs.push_back(n.lf);
+  return std::make_unique<data::PatchDataset>(std::move(lfs), phi, config.dataset);
+}
+
+std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
+                        data::PatchDataset& dataset, const std::string& run_dir,
+                        const std::string& init, const std::string& resume,
+                        const std::string& command_line,
+                        std::shared_ptr<dist::Communicator> comm,
+                        const std::function<void()>& on_saved) {
+  if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
+  const bool lead = comm->rank() == 0;
+  const auto phi = optics::make_phi(config.phi);
+  auto options = config.stage_options(stage);
+  const std::string stage_dir = (fs::path(run_dir) / "models" / stage.name).string();
+  options.out_dir = stage_dir;
+  // LibTorch seeds its default generator from the OS: seed it from the config, so the same
+  // config gives the same initial weights and a run is reproducible (docs/robustness.md).
+  const uint64_t stage_code = stage.name == "ae" ? 1 : stage.name == "cnn" ? 2 : stage.name == "joint" ? 3 : 4;
+  torch::manual_seed(config.dataset.seed * 16 + stage_code);
+  nn::LightFieldNet net(config.stage_network(stage));
+  net->set_phi(optics::patch_matrix_stack(*phi, config.dataset.patch_h, config.dataset.patch_w));
+  train::RunInfo run;
+  run.config = config.raw;
+  run.config["resolved_stage"] = stage.name;
+  run.config["measurement_mean"] = dataset.measurement_mean();
+  run.phi = config.phi.to_json();
+  run.command_line = command_line;
+  train::Trainer trainer(net, options, run);
+  trainer.set_communicator(comm);
+  const std::string models = (fs::path(run_dir) / "models").string();
+  if (!lead) {
+    // Rank 0 reads what the stage starts from; fit() hands its state to this rank.
+  } else if (!resume.empty()) {
+    trainer.resume(resume);
+  } else if (!init.empty()) {
+    auto report = trainer.init_from(init);
+    spdlog::info("initialised from {}: {} copied, {} mapped, {} re-initialised", init,
+                 report.copied.size(), report.mapped.size(), report.reinitialised.size());
+  } else if (stage.name == "joint") {
+    const std::string ae = (fs::path(models) / "ae.ckpt").string();
+    const std::string cnn = (fs::path(models) / "cnn.ckpt").string();
+    if (fs::exists(ae) && fs::exists(cnn)) {
+      trainer.init_branches(ae, cnn);
+      spdlog::info("joint stage starts from the pretrained branches {} and {}", ae, cnn);
+    } else {
+      spdlog::warn("joint stage without pretrained ae.ckpt and cnn.ckpt: training from scratch");
+    }
+  }
+  train::TrainerHooks hooks;
+  hooks.on_epoch = [&](const train::EpochRecord& r) {
+    if (!lead) return;
+    if (on_saved) on_saved();
+    spdlog::info("{} epoch {}: train loss {:.5f}, validation PSNR {:.2f} dB{} ({:.0f} patches/s)",
+                 stage.name, r.epoch, r.train_loss, r.val_psnr_db, r.best ? " (best)" : "",
+                 r.patches_per_s);
+    append_jsonl((fs::path(run_dir) / "training.jsonl").string(),
+                 nlohmann::json{{"stage", stage.name}, {"record", r.to_json()}});
+  };
+  trainer.fit(dataset, hooks);
+  const std::string best = train::best_checkpoint_path(stage_dir);
+  const std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
+  if (!lead) return target;
+  std::error_code ec;
+  fs::copy_file(best, target + ".tmp", fs::copy_options::overwrite_existing, ec);
+  if (!ec) fs::rename(target + ".tmp", target, ec);
+  LFNET_CHECK_AS(IoError, !ec, "cannot copy ", best, " to ", target, ": ", ec.message());
+  return target;
+}
+
+std::string train_dictionary_stage(const ExperimentConfig& config, const std::string& run_dir,
+                                   const std::string& command_line) {
+  auto sampling = config.dictionary_sampling;
+  sampling.views = config.phi.rows;
+  sampling.patch_size = config.dataset.patch_h;
+  LFNET_CHECK_AS(ConfigError, config.phi.rows == config.phi.cols &&
+                                  config.dataset.patch_h == config.dataset.patch_w,
+                 "the dict stage needs square views and patches");
+  const auto named = load_sources(config.train_data, config.phi.rows, config.phi.cols);
+  LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
+  std::vector<LightField> lfs;
+  for (const auto& n : named) lfs.push_back(n.lf);
+  dict::PatchSamplingStats stats;
+  Stopwatch clock;
+  const torch::Tensor patches = dict::sample_patches(lfs, sampling, &stats);
+  spdlog::info("dict: {} training patches ({} drawn, {} flat ones dropped)", patches.size(0),
+               stats.drawn, stats.dropped);
+  const auto& ksvd = config.dictionary_ksvd;
+  ProgressBar bar("K-SVD", ksvd.iterations, "iterations");
+  nlohmann::json history = nlohmann::json::array();
+  auto result = dict::ksvd(patches, ksvd, [&](const dict::KsvdIteration& it) {
+    bar.advance(1);
+    history.push_back({{"iteration", it.iteration}, {"coding_rmse", it.coding_rmse},
+                       {"updated_rmse", it.updated_rmse}});
+    append_jsonl((fs::path(run_dir) / "training.jsonl").string(),
+                 nlohmann::json{{"stage", "dict"}, {"record", history.back()}});
+    return true;
+  });
+  bar.finish();
+  dict::Dictionary d;
+  d.atoms = result.dictionary.to(torch::kFloat32).contiguous();
+  d.patch_shape = {config.phi.rows, config.phi.cols, config.dataset.patch_h, config.dataset.patch_w};
+  nlohmann::json sources = nlohmann::json::array();
+  for (const auto& n : named) sources.push_back(n.name);
+  d.training = {{"ksvd", ksvd.to_json()},     {"sampling", sampling.to_json()},
+                {"light_fields", sources},    {"history", history},
+                {"command_line", command_line}, {"seconds", clock.seconds()}};
+  const std::string target = (fs::path(run_dir) / "models" / "dict.ckpt").string();
+  dict::save_dictionary(d, target);
+  spdlog::info("dict: {} atoms in {:.0f} s, coding RMSE {:.4f}: {}", d.size(), clock.seconds(),
+               history.empty() ? 0.0 : history.back()["coding_rmse"].get<double>(), target);
+  return target;
+}
+
+void append_jsonl(const std::string& path, const nlohmann::json& record) {
+  std::ofstream out(path, std::ios::app);
+  LFNET_CHECK_AS(IoError, out, "cannot append to ", path);
+  out << record.dump() << "\n";
+  LFNET_CHECK_AS(IoError, out.good(), "cannot append to ", path);
+}
+
+}  // namespace lfnet::pipeline

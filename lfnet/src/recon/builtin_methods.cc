@@ -1,0 +1,109 @@
+#include "lfnet/recon/builtin_methods.h"
+
+#include "lfnet/core/error.h"
+#include "lfnet/dict/omp.h"
+#include "lfnet/optics/measure.h"
+
+namespace lfnet::recon {
+
+// One factory per built-in method, each defined beside its class.
+std::unique_ptr<Method> make_network_method(const std::string& branch);  // net, ae or cnn
+std::unique_ptr<Method> make_dictionary_method();
+std::unique_ptr<Method> make_pinv_method();
+std::unique_ptr<Method> make_adjoint_method();  // adjoint_method.cc
+std::unique_ptr<Method> make_no_parallax_method();
+
+void register_builtin_methods(const MethodSink& add) {
+  add(make_network_method("net"));
+  add(make_network_method("ae"));
+  add(make_network_method("cnn"));
+  add(make_dictionary_method());
+  add(make_pinv_method());
+  add(make_adjoint_method());
+  add(make_no_parallax_method());
+}
+
+namespace {
+
+// net (both branches averaged), ae or cnn (one branch, plus the residual base).
+class NetworkMethod : public Method {
+ public:
+  explicit NetworkMethod(std::string branch) : branch_(std::move(branch)) {}
+  std::string name() const override { return branch_; }
+  std::string summary() const override {
+    return branch_ == "net" ? "the trained two-branch network (--model)"
+                            : "the trained network's " + branch_ + " branch alone (--model)";
+  }
+  MethodNeeds needs() const override { return MethodNeeds::kNetwork; }
+  PatchSolver solver(const MethodResources& r) const override {
+    return r.script ? script_solver(*r.script, branch_) : network_solver(r.net, branch_);
+  }
+  double patch_flops(const MethodResources& r) const override {
+    if (r.net.is_empty()) return 0;
+    nn::BranchSelection run;
+    run.ae = branch_ != "cnn";
+    run.cnn = branch_ != "ae";
+    return nn::patch_flops(r.net->options(), run);
+  }
+
+ private:
+  std::string branch_;
+};
+
+// dict: sparse coding in a learned dictionary (OMP or ADMM-LASSO).
+class DictionaryMethod : public Method {
+ public:
+  std::string name() const override { return "dict"; }
+  std::string summary() const override {
+    return "sparse coding in a K-SVD dictionary (--dictionary; OMP or ADMM)";
+  }
+  MethodNeeds needs() const override { return MethodNeeds::kDictionary; }
+  PatchSolver solver(const MethodResources& r) const override {
+    return dictionary_solver(*r.phi, *r.dictionary, r.coding, r.patch_h, r.patch_w, r.report);
+  }
+  double patch_flops(const MethodResources& r) const override {
+    if (!r.dictionary) return 0;
+    return dict::omp_patch_flops(static_cast<double>(r.phi->measurements() * r.patch_h * r.patch_w),
+                                 static_cast<double>(r.dictionary->dimension()),
+                                 static_cast<double>(r.dictionary->size()),
+                                 static_cast<double>(r.coding.omp.max_atoms));
+  }
+};
+
+// pinv: the Tikhonov-regularised pseudo-inverse of each patch matrix.
+class PinvMethod : public Method {
+ public:
+  std::string name() const override { return "pinv"; }
+  std::string summary() const override { return "the regularised pseudo-inverse (linear)"; }
+  PatchSolver solver(const MethodResources& r) const override {
+    return pinv_solver(optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w));
+  }
+  double patch_flops(const MethodResources& r) const override {
+    return 2.0 * static_cast<double>(r.phi->measurements() * r.patch_h * r.patch_w) *
+           static_cast<double>(r.phi->rows() * r.phi->cols() * r.patch_h * r.patch_w);
+  }
+};
+
+// no-parallax: every view is the truth's central view (an evaluation baseline).
+class NoParallaxMethod : public Method {
+ public:
+  std::string name() const override { return "no-parallax"; }
+  std::string summary() const override {
+    return "every view set to the true central view (a baseline of lfnet evaluate)";
+  }
+  MethodNeeds needs() const override { return MethodNeeds::kTruth; }
+  PatchSolver solver(const MethodResources&) const override {
+    throw ConfigError("no-parallax needs the true light field: it is a method of lfnet evaluate");
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<Method> make_network_method(const std::string& branch) {
+  return std::make_unique<NetworkMethod>(branch);
+}
+std::unique_ptr<Method> make_dictionary_method() { return std::make_unique<DictionaryMethod>(); }
+std::unique_ptr<Method> make_pinv_method() { return std::make_unique<PinvMethod>(); }
+std::unique_ptr<Method> make_no_parallax_method() { return std::make_unique<NoParallaxMethod>(); }
+
+}  // namespace lfnet::recon

@@ -1,0 +1,128 @@
+// The pipeline library: experiment configs (scales, --set overrides, run folders), and
+// reconstructing and evaluating without the program.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+#include <fstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/experiment.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/recon/methods.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using namespace lfnet;
+
+namespace {
+nlohmann::json small_config() {
+  return {{"name", "small"},
+          {"phi", "asp:2"},
+          {"data", {{"random_scenes", 2}}},
+          {"training", {{"epochs", 3}, {"batch_size", 64}}},
+          {"stages", {"cnn"}},
+          {"scales", {{"quick", {{"training", {{"epochs", 1}}}}}}},
+          {"default_scale", "quick"}};
+}
+}  // namespace
+
+TEST_CASE("a config's scale and --set overrides apply in order and are type-checked",
+          "[pipeline]") {
+  lfnet::test::TempDir tmp;
+  write_json_file(tmp / "c.json", small_config());
+  auto config = pipeline::ExperimentConfig::load(tmp / "c.json");
+  CHECK(config.scale == "quick");
+  CHECK(config.training["epochs"] == 1);
+  config = pipeline::ExperimentConfig::load(tmp / "c.json", "quick",
+                                            {"training.epochs=2", "dataset.seed=9", "name=other"});
+  CHECK(config.training["epochs"] == 2);
+  CHECK(config.dataset.seed == 9);
+  CHECK(config.name == "other");
+  CHECK(config.raw["training"]["epochs"] == 2);  // recorded in the run's config.json
+  // Validated like the file: the JSON path and the rule, before any work.
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "c.json", "", {"training.epochs=1.5"}),
+                    Catch::Contains("$.training.epochs"));
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "c.json", "", {"training.nosuch=1"}),
+                    Catch::Contains("nosuch"));
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "c.json", "", {"training.epochs"}),
+                    Catch::Contains("KEY.PATH=VALUE"));
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "c.json", "", {"name.x=1"}),
+                    Catch::Contains("not an object"));
+}
+
+TEST_CASE("a run folder's config.json reads back as the config it trained", "[pipeline]") {
+  lfnet::test::TempDir tmp;
+  write_json_file(tmp / "c.json", small_config());
+  const auto config = pipeline::ExperimentConfig::load(tmp / "c.json", "", {"training.lr=0.01"});
+  fs::create_directories(tmp.path() / "run");
+  nlohmann::json recorded = config.raw;
+  recorded["scale"] = config.scale;
+  write_json_file(tmp / "run/config.json", recorded);
+  const auto back = pipeline::ExperimentConfig::load_run(tmp / "run");
+  CHECK(back.scale == "quick");
+  CHECK(back.raw == config.raw);
+  CHECK(back.stage_options(back.stages[0]).lr == Approx(0.01));
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load_run(tmp.path().string()),
+                    Catch::Contains("not a run folder"));
+}
+
+TEST_CASE("reconstruct_acquisition with pinv equals the solver run directly", "[pipeline]") {
+  lfnet::test::TempDir tmp;
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  const auto lf = torch::rand({1, 5, 5, 27, 36});
+  const auto sensor = optics::simulate_sensor(*phi, lf[0]).unsqueeze(0);  // (C, N, H, W)
+  const std::string acq = tmp / "acq";
+  fs::create_directories(acq);
+  io::write_sensor_images(acq, sensor);
+  write_json_file((fs::path(acq) / io::kSidecarName).string(),
+                  {{"format", io::kAcquisitionFormat},
+                   {"format_version", io::kAcquisitionFormatVersion},
+                   {"mode", "sensor"},
+                   {"phi", phi->spec().to_json()},
+                   {"light_field", {{"channels", 1}, {"rows", 5}, {"cols", 5}, {"height", 27}, {"width", 36}}},
+                   {"sensor", {{"files", io::sensor_file_names(1)}, {"channels_per_file", 2}, {"dtype", "float32"}}}});
+  pipeline::ReconstructRequest request;
+  request.sensor = acq;
+  request.method = "pinv";
+  const auto r = pipeline::reconstruct_acquisition(request);
+  recon::ReconstructOptions o = request.options;
+  const auto direct =
+      recon::reconstruct_sensor(*phi, io::read_acquisition(acq).sensor[0],
+                                recon::linear_solver(*phi, "pinv", 9, 9), o);
+  REQUIRE(r.lf.data().sizes() == direct.sizes());
+  CHECK(torch::equal(r.lf.data(), direct));
+  CHECK(r.record["method"] == "pinv");
+  // The method's needs are checked before any work, with the option that supplies them.
+  request.method = "dict";
+  CHECK_THROWS_WITH(pipeline::reconstruct_acquisition(request), Catch::Contains("--dictionary"));
+  request.method = "no-parallax";
+  CHECK_THROWS_WITH(pipeline::reconstruct_acquisition(request), Catch::Contains("true light field"));
+  // Written by the output policy: never over its own input.
+  OutputFolderPolicy policy;
+  policy.inputs = {acq};
+  CHECK_THROWS_WITH(pipeline::write_reconstruction(r, acq, policy), Catch::Contains("is the input"));
+  pipeline::write_reconstruction(r, tmp / "rec", policy);
+  CHECK(fs::exists(tmp.path() / "rec/reconstruction.json"));
+}
+
+TEST_CASE("evaluate_method scores the registry's methods and the no-parallax baseline",
+          "[pipeline]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  pipeline::NamedLightField truth{"noise", LightField(torch::rand({1, 5, 5, 18, 18}))};
+  pipeline::MethodContext context;
+  context.phi = phi.get();
+  const auto o = pipeline::make_eval_options("sensor", 0.0, 0, 5, 256, false, std::nullopt);
+  const auto pinv = pipeline::evaluate_method(truth, "pinv", context, o, nullptr, false);
+  const auto adjoint = pipeline::evaluate_method(truth, "adjoint", context, o, nullptr, false);
+  const auto baseline = pipeline::evaluate_method(truth, "no-parallax", context, o, nullptr, false);
+  CHECK(pinv["light_field"] == "noise");
+  CHECK(pinv["method"] == "pinv");
+  CHECK(pinv["psnr_db"].get<double>() > adjoint["psnr_db"].get<double>());
+  CHECK(baseline["method"] == "no-parallax");
+  CHECK_THROWS_WITH(pipeline::evaluate_method(truth, "net", context, o, nullptr, false),
+                    Catch::Contains("--model"));
+}
