@@ -207,7 +207,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
     } else {
       LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
                      "evaluating light-field folders needs --model or --phi");
-      spec = optics::PhiSpec::parse(a.phi);
+      spec = pipeline::phi_from_argument(a.phi);
     }
     phi = optics::make_phi(spec);
     context.phi = phi.get();

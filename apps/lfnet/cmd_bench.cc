@@ -1,4 +1,4 @@
-// lfnet bench: how fast this machine runs lfnet (DESIGN section 7). One run measures LibTorch's
+// lfnet bench: how fast this machine runs lfnet (docs/performance.md). One run measures LibTorch's
 // GEMM FLOP/s, Conv4d FLOP/s at the default channel counts, and whole-light-field reconstruction
 // of a procedural 593 x 840 x 5 x 5 light field (the paper's test size) for each method and
 // stride. Each reconstruction runs in a child process of its own, so its peak resident memory is

@@ -56,7 +56,7 @@ void run_evaluate(const EvaluateArgs& a) {
     const auto model = pipeline::load_model(a.model, recon::needs_network(method));
     spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
     if (!a.phi.empty()) {
-      auto given = optics::PhiSpec::parse(a.phi);
+      auto given = pipeline::phi_from_argument(a.phi);
       LFNET_CHECK_AS(ConfigError, given.name == spec.name && given.n == spec.n, "--phi ", a.phi,
                      " does not match the model ", a.model, ", which was trained for ",
                      spec.label());
@@ -78,7 +78,7 @@ void run_evaluate(const EvaluateArgs& a) {
     LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
                    "' needs --model");
     LFNET_CHECK_AS(ConfigError, !a.phi.empty(), "--phi NAME[:N] is needed without --model");
-    spec = optics::PhiSpec::parse(a.phi);
+    spec = pipeline::phi_from_argument(a.phi);
   }
   pipeline::LightFieldSources sources;
   if (!a.lf.empty()) sources.light_fields = {a.lf};

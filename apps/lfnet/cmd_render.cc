@@ -95,7 +95,7 @@ torch::Tensor preview_image(const LightField& lf, const torch::Tensor& disparity
   const int64_t w = lf.width();
   const int64_t h = lf.height();
   const int64_t factor = std::max<int64_t>(1, (2 * w + gap + 639) / 640);
-  auto colour = [&](torch::Tensor x) {
+  auto colour = [&](const torch::Tensor& x) {
     return x.size(0) == 3 ? x : x.expand({3, x.size(1), x.size(2)});
   };
   auto top = torch::ones({3, h, 2 * w + gap});

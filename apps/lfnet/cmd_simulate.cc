@@ -117,10 +117,8 @@ std::pair<int64_t, int64_t> window_size(const SimulateArgs& args) {
 
 optics::PhiSpec resolve_phi(const std::string& arg, int64_t rows, int64_t cols) {
   optics::PhiSpec spec;
-  const bool is_file = arg.size() > 5 && arg.substr(arg.size() - 5) == ".json";
-  if (is_file) {
-    const auto j = read_json_file(arg);
-    spec = optics::PhiSpec::from_json(j, arg + ":$");
+  if (pipeline::phi_argument_is_file(arg)) {
+    spec = pipeline::phi_from_argument(arg);
     LFNET_CHECK_AS(ConfigError, spec.rows == rows && spec.cols == cols, arg, " codes ", spec.rows,
                    "x", spec.cols, " views, but the light field window has ", rows, "x", cols,
                    ": set rows and cols in the file or choose --views to match");

@@ -22,7 +22,7 @@ namespace {
 
 const cv::Scalar kBlack(0, 0, 0), kGrey(200, 200, 200), kFront(40, 40, 220);
 
-// Colours (BGR) by method, in the order of DESIGN section 5.
+// Colours (BGR) by method, in the order of docs/methods.md.
 cv::Scalar method_colour(const std::string& method) {
   static const std::map<std::string, cv::Scalar> colours = {
       {"net", {180, 90, 30}},  {"ae", {60, 160, 60}},     {"cnn", {40, 140, 230}},

@@ -1,5 +1,8 @@
 #include "lfnet/core/json.h"
 
+#include <set>
+#include <vector>
+
 #include "lfnet/core/output.h"
 
 #include <unistd.h>
@@ -83,6 +86,51 @@ void write_json_file(const std::string& path, const nlohmann::json& value) {
     out << value.dump(2) << "\n";
     if (!out.good()) throw IoError("cannot write " + path);
   });
+}
+
+namespace {
+void collect_differences(const nlohmann::json& a, const nlohmann::json& b, const std::string& path,
+                         const std::string& a_name, const std::string& b_name,
+                         std::vector<std::string>& out) {
+  if (a.is_object() && b.is_object()) {
+    std::set<std::string> keys;
+    for (const auto& [k, v] : a.items()) keys.insert(k);
+    for (const auto& [k, v] : b.items()) keys.insert(k);
+    for (const auto& k : keys) {
+      const std::string sub = path.empty() ? k : path + "." + k;
+      if (!a.contains(k)) {
+        out.push_back(sub + " (" + a_name + " none, " + b_name + " " + b[k].dump() + ")");
+      } else if (!b.contains(k)) {
+        out.push_back(sub + " (" + a_name + " " + a[k].dump() + ", " + b_name + " none)");
+      } else {
+        collect_differences(a[k], b[k], sub, a_name, b_name, out);
+      }
+    }
+    return;
+  }
+  if (a != b) {
+    out.push_back((path.empty() ? "$" : path) + " (" + a_name + " " + a.dump() + ", " + b_name +
+                  " " + b.dump() + ")");
+  }
+}
+}  // namespace
+
+std::string json_differences(const nlohmann::json& a, const nlohmann::json& b,
+                             const std::string& a_name, const std::string& b_name) {
+  std::vector<std::string> parts;
+  collect_differences(a, b, "", a_name, b_name, parts);
+  std::string out;
+  for (const auto& p : parts) out += (out.empty() ? "" : "; ") + p;
+  return out;
+}
+
+std::string phi_label(const nlohmann::json& spec) {
+  const auto part = [&](const char* key) {
+    if (!spec.is_object() || !spec.contains(key)) return std::string("?");
+    const auto& v = spec[key];
+    return v.is_string() ? v.get<std::string>() : v.dump();
+  };
+  return part("name") + ":" + part("n");
 }
 
 }  // namespace lfnet

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 
 namespace lfnet::nn {
@@ -602,9 +603,12 @@ ScriptedNetwork load_script(const std::string& path) {
 void check_script_phi(const ScriptedNetwork& net, const nlohmann::json& phi_spec) {
   if (net.meta.phi == phi_spec) return;
   throw CheckpointError("exported model " + net.path + " was trained for Phi " +
-                        net.meta.phi.dump() + " but the measurements come from Phi " +
-                        phi_spec.dump() + "; finetune the checkpoint for this Phi (train --init) "
-                        "and export it again");
+                        phi_label(net.meta.phi) + " but the measurements come from Phi " +
+                        phi_label(phi_spec) + ": they differ in " +
+                        json_differences(net.meta.phi, phi_spec, "model", "measurements") +
+                        ". Simulate with the model's Phi (--phi " + net.path +
+                        "), or finetune the checkpoint for this Phi (train --init) and export it "
+                        "again");
 }
 
 }  // namespace lfnet::nn

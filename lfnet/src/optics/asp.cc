@@ -207,7 +207,17 @@ torch::Tensor asp_weights(const PhiSpec& spec, const AspParams& params) {
 
 std::unique_ptr<Phi> make_asp(const PhiSpec& spec) {
   JsonReader r(spec.params, "$.params");
-  const AspParams params = AspParams::read(r);
+  AspParams params = AspParams::read(r);
+  // Grids without a quadrature row at the pair's orientation (a single row or column of
+  // views: the odd frequencies vanish) take the phase-0 pair unless a phase was asked for.
+  if (!r.has("pair_alpha")) {
+    try {
+      (void)asp_table(spec.rows, spec.cols, spec.n, params.layout == "pairs", params.pair_gamma,
+                      params.pair_alpha);
+    } catch (const ConfigError&) {
+      params.pair_alpha = 0.0;
+    }
+  }
   PhiSpec resolved = spec;
   resolved.params = params.to_json();
   auto weights = asp_weights(resolved, params);

@@ -51,7 +51,8 @@ struct AspParams {
   double edge = 0.2;                   // width of the disk's linear soft edge
   std::string layout = "independent";  // table layout: "independent" or "pairs"
   double pair_gamma = 0.0;             // orientation of the complementary pair, degrees
-  double pair_alpha = 0.0;             // phase of the pair's first row, degrees (0 or 90)
+  double pair_alpha = 90.0;            // phase of the pair's first row, degrees: 90 (the
+                                       // quadrature pair, odd in the view angle) or 0
 
   static AspParams read(JsonReader& r);
   nlohmann::json to_json() const;

@@ -132,10 +132,14 @@ std::unique_ptr<Phi> make_random(const PhiSpec& spec) {
       p[i] = gaussian ? rng.normal(k) : ((rng.bits(k) >> 63) != 0U ? 1.0 : -1.0);
     }
   });
-  // Rows get the mean norm of the asp rows at the same N (DESIGN section 2).
+  // Rows get the mean norm of the asp rows at the same N (docs/acquisition.md), of the table
+  // whose first pair has phase 0 (the random model's scale is fixed by it, whatever asp's
+  // default pair).
   PhiSpec asp_spec = spec;
   asp_spec.name = "asp";
-  auto asp = asp_weights(asp_spec, AspParams{}).view({spec.n, -1});
+  AspParams reference;
+  reference.pair_alpha = 0.0;
+  auto asp = asp_weights(asp_spec, reference).view({spec.n, -1});
   const double target = asp.norm(2, {1}).mean().item<double>();
   m *= target / m.norm(2, {1}).mean().item<double>();
   PhiSpec resolved = spec;

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
 
@@ -60,6 +61,27 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
     ++loads_;
   }
   return it->second;
+}
+
+bool phi_argument_is_file(const std::string& text) {
+  std::error_code ec;
+  return fs::path(text).extension() == ".json" || fs::is_regular_file(text, ec);
+}
+
+optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option) {
+  if (fs::path(text).extension() == ".json") {
+    return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
+  }
+  std::error_code ec;
+  if (!fs::is_regular_file(text, ec)) return optics::PhiSpec::parse(text);
+  ModelFile model;
+  try {
+    model = load_model(text, /*network=*/false);
+  } catch (const Error& e) {
+    throw ConfigError(option + " " + text + ": neither NAME[:N], a Phi spec (.json) nor a model: " +
+                      e.what());
+  }
+  return optics::PhiSpec::from_json(model.phi, text + ":$.phi");
 }
 
 }  // namespace lfnet::pipeline

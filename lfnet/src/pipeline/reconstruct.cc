@@ -21,14 +21,6 @@ namespace lfnet::pipeline {
 
 namespace {
 
-// A Phi spec from the command line: NAME[:N] or a JSON file holding a spec object.
-optics::PhiSpec parse_phi_argument(const std::string& text) {
-  if (fs::path(text).extension() == ".json") {
-    return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
-  }
-  return optics::PhiSpec::parse(text);
-}
-
 // A camera's own sensor images, one file of N channels per colour channel, as an acquisition.
 io::Acquisition plain_sensor_acquisition(const std::string& files, const optics::PhiSpec& spec) {
   std::vector<torch::Tensor> channels;
@@ -79,7 +71,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   if (folder) {
     acq = io::read_acquisition(a.sensor);
     spec = optics::PhiSpec::from_json(acq.meta.at("phi"), a.sensor + "/sensor.json:$.phi");
-    LFNET_CHECK_AS(ConfigError, a.phi.empty() || parse_phi_argument(a.phi).label() == spec.label(),
+    LFNET_CHECK_AS(ConfigError, a.phi.empty() || phi_from_argument(a.phi).label() == spec.label(),
                    "--phi ", a.phi, " contradicts ", a.sensor, "/sensor.json, which says ",
                    spec.label());
   } else {
@@ -88,7 +80,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     LFNET_CHECK_AS(ConfigError, !a.phi.empty() || model,
                    "a plain sensor image needs --phi (or a --model, whose Phi is then used)");
     spec = a.phi.empty() ? optics::PhiSpec::from_json(model->phi, a.model + ":$.phi")
-                         : parse_phi_argument(a.phi);
+                         : phi_from_argument(a.phi);
     spec = optics::make_phi(spec)->spec();
     acq = plain_sensor_acquisition(a.sensor, spec);
   }

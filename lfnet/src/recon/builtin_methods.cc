@@ -84,12 +84,12 @@ class PinvMethod : public Method {
   }
 };
 
-// no-parallax: every view is the truth's central view (an evaluation baseline).
+// no-parallax: every view is the angular mean of the truth (an evaluation baseline).
 class NoParallaxMethod : public Method {
  public:
   std::string name() const override { return "no-parallax"; }
   std::string summary() const override {
-    return "every view set to the true central view (a baseline of lfnet evaluate)";
+    return "every view set to the angular mean of the truth (a baseline of lfnet evaluate)";
   }
   MethodNeeds needs() const override { return MethodNeeds::kTruth; }
   PatchSolver solver(const MethodResources&) const override {

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 
 namespace lfnet::train {
@@ -382,9 +383,12 @@ nn::LightFieldNet build_net(const Checkpoint& checkpoint, const std::string& wha
 void check_phi(const Checkpoint& checkpoint, const nlohmann::json& phi_spec,
                const std::string& what) {
   if (checkpoint.phi == phi_spec) return;
-  throw CheckpointError(what + " was trained for Phi " + checkpoint.phi.dump() +
-                        " but the measurements come from Phi " + phi_spec.dump() +
-                        "; finetune it for this Phi (train --init) instead");
+  throw CheckpointError(what + " was trained for Phi " + phi_label(checkpoint.phi) +
+                        " but the measurements come from Phi " + phi_label(phi_spec) +
+                        ": they differ in " +
+                        json_differences(checkpoint.phi, phi_spec, "model", "measurements") +
+                        ". Simulate with the model's Phi (--phi " + what +
+                        "), or finetune the model for this Phi (train --init)");
 }
 
 }  // namespace lfnet::train

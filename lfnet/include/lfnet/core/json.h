@@ -103,4 +103,12 @@ nlohmann::json read_json_file(const std::string& path);
 // Writes `value` to `path` atomically (temporary file, then rename), pretty-printed.
 void write_json_file(const std::string& path, const nlohmann::json& value);
 
+// The fields in which two JSON documents differ, as "params.pair_alpha (A 90, B 0)" joined by
+// "; " (`a_name`, `b_name` label the values); "" when equal.
+std::string json_differences(const nlohmann::json& a, const nlohmann::json& b,
+                             const std::string& a_name, const std::string& b_name);
+
+// "name:n" of a Phi spec object (its "name" and "n" fields), for messages; "?" for parts missing.
+std::string phi_label(const nlohmann::json& spec);
+
 }  // namespace lfnet

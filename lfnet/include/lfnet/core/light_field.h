@@ -1,4 +1,4 @@
-// The light field: the one place that defines lfnet's tensor layout (DESIGN section 1).
+// The light field: the one place that defines lfnet's tensor layout (docs/conventions.md).
 #pragma once
 
 #include <torch/types.h>
@@ -53,7 +53,7 @@ class LightField {
   // The views [u.begin, u.end) x [v.begin, v.end).
   LightField window(AngularRange u, AngularRange v) const;
 
-  // The central n x n views, following the paper's protocol for even grids (DESIGN 1).
+  // The central n x n views, following the paper's protocol for even grids (docs/conventions.md).
   LightField central(int64_t n) const;
 
   // Angular mean of every pixel, broadcast back to every view: what a conventional camera

@@ -1,4 +1,4 @@
-// Image quality metrics exactly as DESIGN section 1 defines them.
+// Image quality metrics exactly as docs/conventions.md defines them.
 #pragma once
 
 #include <torch/types.h>

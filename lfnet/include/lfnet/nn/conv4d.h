@@ -1,4 +1,4 @@
-// 4D convolution over light-field patches (DESIGN section 4): a K x K x K x K kernel over
+// 4D convolution over light-field patches (docs/training.md): a K x K x K x K kernel over
 // (u, v, y, x) with same padding, computed with 3D convolutions over (v, y, x).
 #pragma once
 

@@ -1,4 +1,4 @@
-// Training losses (DESIGN section 4): the paper's view-weighted L2, plain L2 and L1.
+// Training losses (docs/training.md): the paper's view-weighted L2, plain L2 and L1.
 #pragma once
 
 #include <nlohmann/json.hpp>

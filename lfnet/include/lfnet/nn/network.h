@@ -1,4 +1,4 @@
-// The two-branch reconstruction network of Gupta et al. 2017 (DESIGN section 4): an
+// The two-branch reconstruction network of Gupta et al. 2017 (docs/training.md): an
 // autoencoder branch on the measurement vector and a 4D CNN branch on Phi^T y, averaged.
 //
 // The Phi^T step is part of the net: it holds the patch matrices of its Phi as the buffer
@@ -79,7 +79,7 @@ struct NetworkOptions {
   std::vector<double> head_weights = {0.5, 0.5};
   // A fixed linear estimate added to the output, so the branches learn a correction:
   // "none" (the paper), "pinv" (Tikhonov pseudo-inverse, lambda = pinv_lambda) or "adjoint"
-  // (the scaled Phi^T y). Off by default: DESIGN section 9 saw no gain from it.
+  // (the scaled Phi^T y). Off by default: docs/models.md saw no gain from it.
   std::string residual = "none";
   double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
 

@@ -29,9 +29,9 @@ struct AspRow {
 // rows of self-conjugate (Nyquist) frequencies vanish and are left out.
 // With `pairs`, every row after the first pair is followed by its complement (alpha + pi), as
 // in a tile of differential ASPs; the pair adds only the constant, so rank grows half as fast.
-// `pair_gamma` and `pair_alpha` (degrees) choose the row of the complementary pair: the default
-// (0, 0) is even in the view angle, so at N = 2 it cannot tell the sign of the parallax; a
-// quadrature pair (alpha 90) is odd and can, at 45 degrees along both view axes. The table's
+// `pair_gamma` and `pair_alpha` (degrees) choose the row of the complementary pair: (0, 0) is
+// even in the view angle, so at N = 2 it cannot tell the sign of the parallax; the quadrature
+// pair (alpha 90, the `asp` model's default) is odd and can. The table's
 // other rows keep their order, without the pair's row, so the set of rows is unchanged.
 std::vector<AspRow> asp_table(int64_t rows, int64_t cols, int64_t n, bool pairs = false,
                               double pair_gamma = 0.0, double pair_alpha = 0.0);

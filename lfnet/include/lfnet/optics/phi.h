@@ -1,4 +1,4 @@
-// Coded acquisition: the measurement models Phi of DESIGN section 2, behind one interface.
+// Coded acquisition: the measurement models Phi of docs/acquisition.md, behind one interface.
 // The models, their parameters and normalisation are described in docs/acquisition.md.
 #pragma once
 

@@ -1,5 +1,5 @@
 // Evaluating a method on a light field with known truth: simulate the sensor, reconstruct,
-// score (docs/evaluation.md).
+// score (docs/reconstruction.md).
 #pragma once
 
 #include <nlohmann/json.hpp>

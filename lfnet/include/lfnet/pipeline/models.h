@@ -12,6 +12,7 @@
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
+#include "lfnet/optics/phi.h"
 #include "lfnet/recon/reconstruct.h"
 
 namespace lfnet::pipeline {
@@ -49,5 +50,13 @@ class ModelCache {
   std::map<std::string, dict::Dictionary> dictionaries_;
   int64_t loads_ = 0;
 };
+
+// A Phi named on the command line: NAME[:N] (e.g. asp:2), a JSON file holding a spec, or a
+// model file (an lfnet checkpoint or an exported model), whose Phi it takes: `--phi
+// models/asp-n2.ckpt` simulates exactly the camera the model was trained for.
+optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option = "--phi");
+
+// True when `text` names a file (a spec or a model) rather than NAME[:N].
+bool phi_argument_is_file(const std::string& text);
 
 }  // namespace lfnet::pipeline

@@ -1,5 +1,5 @@
 // Light-field sources of a config: folders, scene files and random scenes, loaded as grey
-// light fields of the Phi's angular size (docs/pipeline.md).
+// light fields of the Phi's angular size (docs/architecture.md).
 #pragma once
 
 #include <nlohmann/json.hpp>

@@ -1,5 +1,5 @@
 // Reconstruction with the CNN branch run once over the whole light field (in tiles) rather
-// than once per patch (DESIGN section 7; docs/performance.md).
+// than once per patch (docs/performance.md; docs/performance.md).
 //
 // Patch stitching runs the CNN on every patch separately, zero-padded at the patch border, and
 // averages the overlapping estimates: at stride s every pixel is computed about (9 / s)^2 times.

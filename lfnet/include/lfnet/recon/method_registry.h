@@ -1,6 +1,6 @@
 // The reconstruction methods by name (docs/methods.md): one class per method, registered once.
 // Commands, bench, batch and the report read the list from here. Adding a method takes its
-// class and one registration line (docs/extending.md).
+// class and one registration line (docs/methods.md).
 #pragma once
 
 #include <memory>

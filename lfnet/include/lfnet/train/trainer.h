@@ -1,4 +1,4 @@
-// The training loop (DESIGN section 4, STYLE item 7): Adam with a learning-rate schedule,
+// The training loop (docs/training.md, STYLE item 7): Adam with a learning-rate schedule,
 // validation PSNR every epoch, last/best checkpoints, exact resume, finetuning with Phi
 // switching, and detection of non-finite numbers. Logging plugs in through hooks.
 #pragma once
