@@ -3,7 +3,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake ninja-build pkg-config
+  build-essential cmake ninja-build pkg-config clang-format clang-tidy
   libtorch-dev libopenblas0-openmp libgloo-dev
   libopencv-dev libopenimageio-dev openimageio-tools
   nlohmann-json3-dev libspdlog-dev libfmt-dev catch2 libcli11-dev

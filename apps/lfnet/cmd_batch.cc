@@ -16,18 +16,18 @@
 #include "command.h"
 #include "dist_flags.h"
 #include "lfnet/core/error.h"
-#include "lfnet/core/output.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
-#include "lfnet/recon/method_registry.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/pipeline/stages.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
 
@@ -73,7 +73,8 @@ std::vector<BatchItem> discover_items(const std::string& root) {
     const fs::path dir = pending.back();
     pending.pop_back();
     std::string name = fs::relative(dir, root).generic_string();
-    if (name.empty() || name == ".") name = fs::absolute(dir).lexically_normal().filename().string();
+    if (name.empty() || name == ".")
+      name = fs::absolute(dir).lexically_normal().filename().string();
     std::error_code canonical_error;
     const auto canonical = fs::canonical(dir, canonical_error);
     if (canonical_error) {
@@ -107,8 +108,9 @@ std::vector<BatchItem> discover_items(const std::string& root) {
       if (is_link && kind_error) {
         const std::string rel = fs::relative(path, root).generic_string();
         items.push_back({path.string(), rel, "unreadable",
-                         kind_error.value() == ELOOP ? "a link that loops"
-                                                     : "a broken link (" + kind_error.message() + ")"});
+                         kind_error.value() == ELOOP
+                             ? "a link that loops"
+                             : "a broken link (" + kind_error.message() + ")"});
       } else if (fs::is_directory(status)) {
         pending.push_back(path);
       }
@@ -133,7 +135,8 @@ std::string csv_field(const nlohmann::json& v) {
   std::string s = v.is_null() ? "" : v.is_string() ? v.get<std::string>() : v.dump();
   if (s.find_first_of(",\"\n") != std::string::npos) {
     std::string q = "\"";
-    for (char c : s) q += c == '"' ? std::string("\"\"") : c == '\n' ? std::string(" ") : std::string(1, c);
+    for (char c : s)
+      q += c == '"' ? std::string("\"\"") : c == '\n' ? std::string(" ") : std::string(1, c);
     return q + "\"";
   }
   return s;
@@ -223,8 +226,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
   }
   for (const auto& method : methods) {
     try {
-      const auto o = pipeline::make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
-                                       patch);
+      const auto o =
+          pipeline::make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
       auto record = pipeline::evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
       record["path"] = item.path;
@@ -242,9 +245,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
 }
 
 void write_summary(const std::string& out_dir, const std::vector<nlohmann::json>& records) {
-  const std::vector<std::string> columns = {"item",    "kind",  "method", "status", "psnr_db",
-                                            "ssim",    "seconds", "stride", "mode", "output",
-                                            "error"};
+  const std::vector<std::string> columns = {"item",    "kind",   "method",  "status",
+                                            "psnr_db", "ssim",   "seconds", "stride",
+                                            "mode",    "output", "error"};
   const fs::path csv = fs::path(out_dir) / "summary.csv";
   std::ostringstream f;
   {
@@ -292,7 +295,8 @@ void run_batch(const BatchArgs& a) {
   int64_t reconstruct = 0;
   for (const auto& it : items) reconstruct += it.kind == "reconstruct";
   spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
-               items.size(), a.in, reconstruct, items.size() - reconstruct, a.methods.empty() ? methods[0] : a.methods);
+               items.size(), a.in, reconstruct, items.size() - reconstruct,
+               a.methods.empty() ? methods[0] : a.methods);
 
   // Rank r takes items r, r + W, r + 2W, ... of the sorted list: neighbours in the list (often
   // alike in size) go to different ranks.
@@ -314,7 +318,8 @@ void run_batch(const BatchArgs& a) {
     for (auto& r : process_item(item, a, methods, a.out, cache)) {
       const bool ok = r["status"] == "ok";
       failures += !ok;
-      const std::string file = safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
+      const std::string file =
+          safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
       write_json_file((records_dir / file).string(), r);
       if (folder) folder->commit();  // a record lasts: the batch keeps its folder from now on
       if (ok && r.contains("psnr_db")) {
@@ -358,10 +363,12 @@ void run_batch(const BatchArgs& a) {
   }
   write_summary(a.out, records);
   if (folder) folder->commit();
-  spdlog::info("batch: {} record(s), {} failed; summary in {}/summary.csv; {} model or dictionary file(s) read",
-               records.size(), failures, a.out, cache.loads());
-  LFNET_CHECK(failures == 0, failures, " of ", records.size(),
-              " item-method pair(s) failed; see ", a.out, "/summary.csv (the others are done)");
+  spdlog::info(
+      "batch: {} record(s), {} failed; summary in {}/summary.csv; {} model or dictionary file(s) "
+      "read",
+      records.size(), failures, a.out, cache.loads());
+  LFNET_CHECK(failures == 0, failures, " of ", records.size(), " item-method pair(s) failed; see ",
+              a.out, "/summary.csv (the others are done)");
 }
 
 }  // namespace
@@ -378,14 +385,16 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
       ->required();
   cmd->add_option("--methods", a->methods,
                   "comma-separated methods (default net with --model, pinv without)");
-  cmd->add_option("--model", a->model, "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
+  cmd->add_option("--model", a->model,
+                  "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for dict");
   cmd->add_option("--dict-method", a->dict_method, "sparse coding for dict: omp or admm")
       ->check(CLI::IsMember({"omp", "admm"}));
   cmd->add_option("--phi", a->phi, "Phi for evaluation without --model: NAME[:N]");
   cmd->add_option("--mode", a->mode, "simulation mode of evaluations: sensor or per_patch")
       ->check(CLI::IsMember({"sensor", "per_patch"}));
-  cmd->add_option("--noise", a->noise, "Gaussian noise sigma of evaluations")->check(kFiniteNonNegative);
+  cmd->add_option("--noise", a->noise, "Gaussian noise sigma of evaluations")
+      ->check(kFiniteNonNegative);
   cmd->add_option("--seed", a->seed, "noise seed of evaluations");
   cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(kStride);
   cmd->add_option("--batch", a->batch, "patches per solver call")->check(CLI::PositiveNumber);

@@ -20,8 +20,8 @@
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/dict/patch_sampling.h"
 #include "lfnet/optics/measure.h"
-#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/pipeline/sources.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
 #include "lfnet/scene/random_scene.h"
 #include "lfnet/scene/render.h"
@@ -43,10 +43,10 @@ struct BenchArgs {
   int64_t height = 593, width = 840;
   std::string phi = "asp:2";
   int64_t batch = 1024;
-  std::string model;       // trained checkpoint; default an untrained net of the default shape
-  std::string dictionary;  // dictionary file; default a small K-SVD dictionary
+  std::string model;            // trained checkpoint; default an untrained net of the default shape
+  std::string dictionary;       // dictionary file; default a small K-SVD dictionary
   std::string save_dictionary;  // write the bench's K-SVD dictionary here
-  std::string scene;       // scene spec file; default random_scene(seed) at height x width
+  std::string scene;            // scene spec file; default random_scene(seed) at height x width
   int64_t dict_atoms = 1000;
   uint64_t seed = 7;
   int64_t conv_batch = 256;
@@ -118,7 +118,6 @@ double gemm_flops(int reps, const torch::Device& device) {
   return 2.0 * n * n * n / t;
 }
 
-
 LightField bench_light_field(const BenchArgs& a) {
   if (!a.scene.empty()) {
     return scene::render_scene(scene::load_scene(a.scene), pipeline::scene_render_options(a.scene))
@@ -179,8 +178,8 @@ nlohmann::json run_case(const BenchArgs& a, const std::string& method, int64_t s
   }
   const auto phi = optics::make_phi(spec);
   if (net && a.model.empty()) {
-    net->set_phi(optics::patch_matrix_stack(*phi, net->options().patch.height,
-                                            net->options().patch.width));
+    net->set_phi(
+        optics::patch_matrix_stack(*phi, net->options().patch.height, net->options().patch.width));
   }
   const int64_t patch = net ? net->options().patch.height : 9;
   recon::ReconstructOptions o;
@@ -221,8 +220,9 @@ nlohmann::json run_case(const BenchArgs& a, const std::string& method, int64_t s
   const double rss_before = status_mb("VmRSS");
   const auto cpu0 = cpu_seconds();
   Stopwatch clock;
-  auto est = full ? recon::reconstruct_sensor_fully_convolutional(net, method, *phi, sensor, o, a.tile)
-                  : recon::reconstruct_sensor(*phi, sensor, solver, o);
+  auto est =
+      full ? recon::reconstruct_sensor_fully_convolutional(net, method, *phi, sensor, o, a.tile)
+           : recon::reconstruct_sensor(*phi, sensor, solver, o);
   const double seconds = clock.seconds();
   const auto cpu1 = cpu_seconds();
   const double user = cpu1.first - cpu0.first, system = cpu1.second - cpu0.second;
@@ -236,27 +236,26 @@ nlohmann::json run_case(const BenchArgs& a, const std::string& method, int64_t s
     flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), a.tile) -
              nn::cnn_patch_flops(net->options()) * static_cast<double>(grid.size());
   }
-  nlohmann::json r = {
-      {"method", method},
-      {"stride", stride},
-      {"patches", grid.size()},
-      {"seconds", seconds},
-      {"patches_per_second", grid.size() / seconds},
-      {"cpu_utilisation", cpu / seconds / thread_count()},
-      {"cpu_user_seconds", user},
-      {"cpu_system_seconds", system},
-      {"batch", a.batch},
-      {"peak_rss_mb", peak},
-      {"rss_before_mb", rss_before},
-      {"peak_is_reconstruction_only", isolated_peak},
-      {"setup_peak_rss_mb", setup_peak},
-      {"setup_seconds", setup_seconds},
-      {"flops_per_patch", flops_per_patch},
-      {"gflops", flops / seconds / 1e9},
-      {"gemm_fraction", a.gemm > 0 ? flops / seconds / a.gemm : 0.0},
-      {"psnr_db", psnr(LightField(est), truth)},
-      {"phi", spec.label()},
-      {"device", a.device}};
+  nlohmann::json r = {{"method", method},
+                      {"stride", stride},
+                      {"patches", grid.size()},
+                      {"seconds", seconds},
+                      {"patches_per_second", grid.size() / seconds},
+                      {"cpu_utilisation", cpu / seconds / thread_count()},
+                      {"cpu_user_seconds", user},
+                      {"cpu_system_seconds", system},
+                      {"batch", a.batch},
+                      {"peak_rss_mb", peak},
+                      {"rss_before_mb", rss_before},
+                      {"peak_is_reconstruction_only", isolated_peak},
+                      {"setup_peak_rss_mb", setup_peak},
+                      {"setup_seconds", setup_seconds},
+                      {"flops_per_patch", flops_per_patch},
+                      {"gflops", flops / seconds / 1e9},
+                      {"gemm_fraction", a.gemm > 0 ? flops / seconds / a.gemm : 0.0},
+                      {"psnr_db", psnr(LightField(est), truth)},
+                      {"phi", spec.label()},
+                      {"device", a.device}};
   if (method == "net") r["paper_ratio"] = kPaperNetSeconds / seconds;
   if (method == "dict") r["paper_ratio"] = kPaperDictSeconds / seconds;
   r.update(extra);
@@ -266,8 +265,10 @@ nlohmann::json run_case(const BenchArgs& a, const std::string& method, int64_t s
 std::string shell_quote(const std::string& s) {
   std::string out = "'";
   for (char c : s) {
-    if (c == '\'') out += "'\\''";
-    else out += c;
+    if (c == '\'')
+      out += "'\\''";
+    else
+      out += c;
   }
   return out + "'";
 }
@@ -284,15 +285,36 @@ nlohmann::json run_child(const BenchArgs& a, const std::string& method, int64_t 
   const ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
   LFNET_CHECK_AS(IoError, n > 0, "bench: cannot find this program's path (/proc/self/exe)");
   exe[n] = '\0';
-  std::vector<std::string> args = {
-      shell_quote(exe), "--threads", std::to_string(thread_count()), "--log-level", "warn", "bench",
-      "--case", shell_quote(method + ":" + std::to_string(stride)),
-      "--gemm", std::to_string(a.gemm), "--height", std::to_string(a.height),
-      "--width", std::to_string(a.width), "--phi", shell_quote(a.phi),
-      "--batch", std::to_string(a.batch), "--seed", std::to_string(a.seed),
-      "--dict-atoms", std::to_string(a.dict_atoms), "--device", shell_quote(a.device),
-      "--cnn-mode", shell_quote(a.cnn_mode), "--tile", std::to_string(a.tile),
-      "--precision", shell_quote(a.precision)};
+  std::vector<std::string> args = {shell_quote(exe),
+                                   "--threads",
+                                   std::to_string(thread_count()),
+                                   "--log-level",
+                                   "warn",
+                                   "bench",
+                                   "--case",
+                                   shell_quote(method + ":" + std::to_string(stride)),
+                                   "--gemm",
+                                   std::to_string(a.gemm),
+                                   "--height",
+                                   std::to_string(a.height),
+                                   "--width",
+                                   std::to_string(a.width),
+                                   "--phi",
+                                   shell_quote(a.phi),
+                                   "--batch",
+                                   std::to_string(a.batch),
+                                   "--seed",
+                                   std::to_string(a.seed),
+                                   "--dict-atoms",
+                                   std::to_string(a.dict_atoms),
+                                   "--device",
+                                   shell_quote(a.device),
+                                   "--cnn-mode",
+                                   shell_quote(a.cnn_mode),
+                                   "--tile",
+                                   std::to_string(a.tile),
+                                   "--precision",
+                                   shell_quote(a.precision)};
   if (!a.model.empty()) args.insert(args.end(), {"--model", shell_quote(a.model)});
   if (!a.dictionary.empty()) args.insert(args.end(), {"--dictionary", shell_quote(a.dictionary)});
   if (!a.save_dictionary.empty()) {
@@ -307,12 +329,14 @@ nlohmann::json run_child(const BenchArgs& a, const std::string& method, int64_t 
   const int status = pclose(pipe);
   const auto at = output.find(kCaseTag);
   if (status != 0 || at == std::string::npos) {
-    return {{"method", method}, {"stride", stride},
+    return {{"method", method},
+            {"stride", stride},
             {"error", "the child process failed (status " + std::to_string(status) + ")"}};
   }
   const auto end = output.find('\n', at);
-  return nlohmann::json::parse(output.substr(at + std::string(kCaseTag).size(),
-                                             end == std::string::npos ? end : end - at - std::string(kCaseTag).size()));
+  return nlohmann::json::parse(
+      output.substr(at + std::string(kCaseTag).size(),
+                    end == std::string::npos ? end : end - at - std::string(kCaseTag).size()));
 }
 
 // GFLOP/s of the Conv4d layers of the default CNN branch and of the whole branch, forward, in
@@ -333,7 +357,10 @@ nlohmann::json conv_kernels(const BenchArgs& a, const torch::Device& device) {
       if (device.is_cuda()) y.cpu();
     });
     const double f = nn::conv4d_flops(b, cin, cout, p.rows, p.cols, p.height, p.width, 3);
-    out.push_back({{"layer", name}, {"batch", b}, {"seconds", t}, {"gflops", f / t / 1e9},
+    out.push_back({{"layer", name},
+                   {"batch", b},
+                   {"seconds", t},
+                   {"gflops", f / t / 1e9},
                    {"gemm_fraction", f / t / a.gemm}});
   };
   run("1->" + std::to_string(c), 1, c);
@@ -342,15 +369,19 @@ nlohmann::json conv_kernels(const BenchArgs& a, const torch::Device& device) {
   nn::CnnBranch cnn(o);
   cnn->eval();
   cnn->to(device);
-  auto x = torch::rand({b, 1, p.rows, p.cols, p.height, p.width}, torch::TensorOptions().device(device));
+  auto x =
+      torch::rand({b, 1, p.rows, p.cols, p.height, p.width}, torch::TensorOptions().device(device));
   const double t = best_seconds(a.reps, [&] {
     auto y = cnn->forward(x);
     if (device.is_cuda()) y.cpu();
   });
   const double f = b * nn::cnn_patch_flops(o);
   out.push_back({{"layer", "cnn branch (" + std::to_string(o.cnn.depth) + " layers)"},
-                 {"batch", b}, {"seconds", t}, {"gflops", f / t / 1e9},
-                 {"gemm_fraction", f / t / a.gemm}, {"patches_per_second", b / t}});
+                 {"batch", b},
+                 {"seconds", t},
+                 {"gflops", f / t / 1e9},
+                 {"gemm_fraction", f / t / a.gemm},
+                 {"patches_per_second", b / t}});
   return out;
 }
 
@@ -394,7 +425,8 @@ void run_bench(BenchArgs a) {
     const auto colon = a.one_case.find(':');
     LFNET_CHECK_AS(ConfigError, colon != std::string::npos, "--case takes method:stride, got '",
                    a.one_case, "'");
-    const auto r = run_case(a, a.one_case.substr(0, colon), std::stoll(a.one_case.substr(colon + 1)));
+    const auto r =
+        run_case(a, a.one_case.substr(0, colon), std::stoll(a.one_case.substr(colon + 1)));
     std::printf("%s%s\n", kCaseTag, r.dump().c_str());
     return;
   }
@@ -406,8 +438,9 @@ void run_bench(BenchArgs a) {
                        {"device", a.device},
                        {"load_average_1min_start", load_average()}};
   report["light_field"] = {{"height", a.height}, {"width", a.width}, {"views", "5x5"},
-                           {"seed", a.seed}, {"channels", 1}, {"phi", a.phi}};
-  if (!a.scene.empty()) report["light_field"] = {{"scene", a.scene}, {"channels", 1}, {"phi", a.phi}};
+                           {"seed", a.seed},     {"channels", 1},    {"phi", a.phi}};
+  if (!a.scene.empty())
+    report["light_field"] = {{"scene", a.scene}, {"channels", 1}, {"phi", a.phi}};
   std::printf("lfnet bench: %s, %d threads, device %s, load %.2f\n", machine_name().c_str(),
               thread_count(), a.device.c_str(), load_average());
   a.gemm = gemm_flops(a.reps, device);
@@ -462,28 +495,45 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--methods", a->methods, "methods to time (net, ae, cnn, dict, pinv, adjoint)")
       ->delimiter(',');
   cmd->add_option("--strides", a->strides, "patch strides (9: non-overlapping 9x9 patches)")
-      ->delimiter(',')->check(CLI::PositiveNumber);
-  cmd->add_option("--height", a->height, "light-field height (default 593)")->check(CLI::PositiveNumber);
-  cmd->add_option("--width", a->width, "light-field width (default 840)")->check(CLI::PositiveNumber);
+      ->delimiter(',')
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--height", a->height, "light-field height (default 593)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--width", a->width, "light-field width (default 840)")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--phi", a->phi, "measurement model name[:N] (default asp:2)");
-  cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")->check(CLI::PositiveNumber);
-  cmd->add_option("--model", a->model, "trained checkpoint (default: an untrained default network)");
-  cmd->add_option("--dictionary", a->dictionary, "dictionary file (default: a small K-SVD dictionary)");
-  cmd->add_option("--save-dictionary", a->save_dictionary, "write the bench's K-SVD dictionary to this file");
-  cmd->add_option("--scene", a->scene, "scene spec to render instead of a random scene (its own size)");
-  cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")->check(CLI::PositiveNumber);
+  cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--model", a->model,
+                  "trained checkpoint (default: an untrained default network)");
+  cmd->add_option("--dictionary", a->dictionary,
+                  "dictionary file (default: a small K-SVD dictionary)");
+  cmd->add_option("--save-dictionary", a->save_dictionary,
+                  "write the bench's K-SVD dictionary to this file");
+  cmd->add_option("--scene", a->scene,
+                  "scene spec to render instead of a random scene (its own size)");
+  cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)");
-  cmd->add_option("--conv-batch", a->conv_batch, "patches per Conv4d timing (default 256)")->check(CLI::PositiveNumber);
-  cmd->add_option("--reps", a->reps, "repetitions of the kernel timings (best is kept)")->check(CLI::PositiveNumber);
+  cmd->add_option("--conv-batch", a->conv_batch, "patches per Conv4d timing (default 256)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--reps", a->reps, "repetitions of the kernel timings (best is kept)")
+      ->check(CLI::PositiveNumber);
   cmd->add_option("--device", a->device, "cpu or cuda (default cpu)");
-  cmd->add_option("--cnn-mode", a->cnn_mode, "CNN branch per patch ('patches', the default) or once over the light field ('full')")
+  cmd->add_option(
+         "--cnn-mode", a->cnn_mode,
+         "CNN branch per patch ('patches', the default) or once over the light field ('full')")
       ->check(CLI::IsMember({"patches", "full"}));
-  cmd->add_option("--tile", a->tile, "tile size of --cnn-mode full (default 128)")->check(CLI::PositiveNumber);
-  cmd->add_option("--precision", a->precision, "float32 or bfloat16 for the CNN branch's convolutions")
+  cmd->add_option("--tile", a->tile, "tile size of --cnn-mode full (default 128)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--precision", a->precision,
+                  "float32 or bfloat16 for the CNN branch's convolutions")
       ->check(CLI::IsMember({"float32", "bfloat16"}));
-  cmd->add_flag("--in-process", a->in_process, "run every case in this process (peak memory is then a running maximum)");
+  cmd->add_flag("--in-process", a->in_process,
+                "run every case in this process (peak memory is then a running maximum)");
   cmd->add_flag("--skip-kernels", a->skip_kernels, "skip the Conv4d timings");
-  cmd->add_option("--case", a->one_case, "run one case method:stride and print it as JSON (used by the parent run)")
+  cmd->add_option("--case", a->one_case,
+                  "run one case method:stride and print it as JSON (used by the parent run)")
       ->group("");
   cmd->add_option("--gemm", a->gemm, "GEMM FLOP/s measured by the parent run")->group("");
   cmd->callback([a] { run_bench(*a); });

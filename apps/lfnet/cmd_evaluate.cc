@@ -7,20 +7,20 @@
 #include <optional>
 
 #include "command.h"
-#include "lfnet/core/parallax.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/parallax.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
-#include "lfnet/recon/method_registry.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/pipeline/stages.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
 
@@ -99,9 +99,10 @@ void run_evaluate(const EvaluateArgs& a) {
   const auto truths = pipeline::load_sources(sources, phi->rows(), phi->cols());
 
   const auto o = pipeline::make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
-                                   network_patch);
+                                             network_patch);
   torch::Tensor estimate;
-  auto record = pipeline::evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
+  auto record =
+      pipeline::evaluate_method(truths[0], method, context, o, a.out.empty() ? nullptr : &estimate);
   if (!a.model.empty()) record["model"] = a.model;
   record["device"] = a.device;
   if (recon::needs_network(method)) record["precision"] = a.precision;
@@ -126,13 +127,15 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd = app.add_subcommand(
       "evaluate", "Simulate a light field's measurements, reconstruct them and report PSNR/SSIM");
   auto a = std::make_shared<EvaluateArgs>();
-  cmd->add_option("--model", a->model, "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
+  cmd->add_option("--model", a->model,
+                  "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--lf", a->lf, "light field folder with the truth");
   cmd->add_option("--scene", a->scene, "or a procedural scene spec");
   cmd->add_option("--phi", a->phi, "NAME[:N]: needed without --model; must match the model");
   cmd->add_option("--views", a->views, "angular window R0:R1,C0:C1 (1-based; default central)");
-  cmd->add_option("--orient", a->orient,
-                  "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
+  cmd->add_option(
+      "--orient", a->orient,
+      "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
   cmd->add_option("--noise", a->noise, "Gaussian noise sigma, relative to a white scene's mean")
       ->check(kFiniteNonNegative);
   cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(kStride);

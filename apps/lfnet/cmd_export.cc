@@ -55,8 +55,8 @@ void run_export(const ExportArgs& a) {
                  phi->measurements() == o.measurements && phi->rows() == o.patch.rows &&
                      phi->cols() == o.patch.cols,
                  a.model, ": its Phi ", spec.label(), " (", phi->rows(), "x", phi->cols(),
-                 " views) does not fit its network (N = ", o.measurements, ", ", o.patch.rows,
-                 "x", o.patch.cols, " views)");
+                 " views) does not fit its network (N = ", o.measurements, ", ", o.patch.rows, "x",
+                 o.patch.cols, " views)");
   nn::ScriptMetadata meta;
   meta.phi = ckpt.phi;
   meta.config = ckpt.config;
@@ -68,7 +68,8 @@ void run_export(const ExportArgs& a) {
                  {"epoch", ckpt.training.epoch},
                  {"step", ckpt.training.step},
                  {"lfnet_version", kVersion}};
-  if (std::isfinite(ckpt.training.best_metric)) meta.source["best_psnr_db"] = ckpt.training.best_metric;
+  if (std::isfinite(ckpt.training.best_metric))
+    meta.source["best_psnr_db"] = ckpt.training.best_metric;
   nn::export_network(net, meta, a.out);
 
   // Read the file back and compare it with the checkpoint's net on realistic inputs.
@@ -83,12 +84,12 @@ void run_export(const ExportArgs& a) {
     LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
                    diff, " on ", a.check, " patches (more than 1e-5): please report this");
   }
-  std::printf("exported %s (%s, %s, %lld phases) to %s: %.2f MB; max |exported - checkpoint| "
-              "on %lld patches: %.3g\n",
-              a.model.c_str(), spec.label().c_str(), o.branches.c_str(),
-              static_cast<long long>(net->phases()), a.out.c_str(),
-              static_cast<double>(fs::file_size(a.out)) / 1e6, static_cast<long long>(a.check),
-              diff);
+  std::printf(
+      "exported %s (%s, %s, %lld phases) to %s: %.2f MB; max |exported - checkpoint| "
+      "on %lld patches: %.3g\n",
+      a.model.c_str(), spec.label().c_str(), o.branches.c_str(),
+      static_cast<long long>(net->phases()), a.out.c_str(),
+      static_cast<double>(fs::file_size(a.out)) / 1e6, static_cast<long long>(a.check), diff);
 }
 }  // namespace
 

@@ -12,12 +12,14 @@
 namespace lfnet::app {
 
 void add_info_command(CLI::App& app, const GlobalOptions& global) {
-  auto* cmd = app.add_subcommand("info", "Print the shape, value range, naming scheme and grid of a light field folder");
+  auto* cmd = app.add_subcommand(
+      "info", "Print the shape, value range, naming scheme and grid of a light field folder");
   auto dir = std::make_shared<std::string>();
   auto orient = std::make_shared<std::string>();
   cmd->add_option("--lf", *dir, "light field folder of sub-aperture images")->required();
-  cmd->add_option("--orient", *orient,
-                  "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
+  cmd->add_option(
+      "--orient", *orient,
+      "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
   cmd->callback([dir, orient] {
     const auto orientation = AngularOrientation::parse(*orient, "--orient");
     const auto layout = io::scan_folder(*dir);
@@ -41,9 +43,10 @@ void add_info_command(CLI::App& app, const GlobalOptions& global) {
     const auto parallax = check_parallax(lf);
     std::printf("parallax:  %s\n", parallax.summary().c_str());
     if (parallax.verdict == ParallaxVerdict::kDisagree) {
-      spdlog::warn("{}: one angular axis looks reversed; load it with --orient flip-u "
-                   "(docs/conventions.md)",
-                   *dir);
+      spdlog::warn(
+          "{}: one angular axis looks reversed; load it with --orient flip-u "
+          "(docs/conventions.md)",
+          *dir);
     }
   });
 }

@@ -67,14 +67,15 @@ bool drain(int& fd, std::string& buffer) {
 
 std::string describe(int status) {
   if (WIFEXITED(status)) return "exited with status " + std::to_string(WEXITSTATUS(status));
-  if (WIFSIGNALED(status)) return std::string("was killed by signal ") + strsignal(WTERMSIG(status));
+  if (WIFSIGNALED(status))
+    return std::string("was killed by signal ") + strsignal(WTERMSIG(status));
   return "ended";
 }
 
 Child start_rank(const std::vector<std::string>& argv) {
   int out[2], err[2];
-  LFNET_CHECK_AS(IoError, ::pipe(out) == 0 && ::pipe(err) == 0, "cannot create a pipe: ",
-                 std::strerror(errno));
+  LFNET_CHECK_AS(IoError, ::pipe(out) == 0 && ::pipe(err) == 0,
+                 "cannot create a pipe: ", std::strerror(errno));
   std::vector<char*> c_argv;
   for (const auto& a : argv) c_argv.push_back(const_cast<char*>(a.c_str()));
   c_argv.push_back(nullptr);
@@ -121,8 +122,7 @@ void run_launch(const LaunchArgs& a, const GlobalOptions& global) {
   // Every rank computing with every core would oversubscribe the host: share the cores.
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   const int threads =
-      global.threads > 0 ? global.threads
-                         : std::max(1, cores / static_cast<int>(a.ranks));
+      global.threads > 0 ? global.threads : std::max(1, cores / static_cast<int>(a.ranks));
   spdlog::info("launching {} ranks of 'lfnet {}' on {} with {} thread(s) each", a.ranks, verb,
                master, threads);
   std::vector<Child> children;
@@ -130,9 +130,9 @@ void run_launch(const LaunchArgs& a, const GlobalOptions& global) {
     std::vector<std::string> argv{"lfnet", "--threads", std::to_string(threads), "--log-level",
                                   global.log_level};
     argv.insert(argv.end(), a.command.begin(), a.command.end());
-    for (const auto& extra : {std::string("--world-size"), std::to_string(a.ranks),
-                              std::string("--rank"), std::to_string(r), std::string("--master"),
-                              master}) {
+    for (const auto& extra :
+         {std::string("--world-size"), std::to_string(a.ranks), std::string("--rank"),
+          std::to_string(r), std::string("--master"), master}) {
       argv.push_back(extra);
     }
     children.push_back(start_rank(argv));
@@ -153,8 +153,10 @@ void run_launch(const LaunchArgs& a, const GlobalOptions& global) {
         which.emplace_back(r, true);
       }
     }
-    if (!fds.empty()) ::poll(fds.data(), fds.size(), 100);
-    else std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (!fds.empty())
+      ::poll(fds.data(), fds.size(), 100);
+    else
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
     for (size_t i = 0; i < fds.size(); ++i) {
       if (!(fds[i].revents & (POLLIN | POLLHUP | POLLERR))) continue;
       auto& c = children[which[i].first];
@@ -191,8 +193,10 @@ void run_launch(const LaunchArgs& a, const GlobalOptions& global) {
     }
   }
   for (auto& c : children) {  // output left after the processes ended
-    while (c.out >= 0 && drain(c.out, c.out_buffer)) {}
-    while (c.err >= 0 && drain(c.err, c.err_buffer)) {}
+    while (c.out >= 0 && drain(c.out, c.out_buffer)) {
+    }
+    while (c.err >= 0 && drain(c.err, c.err_buffer)) {
+    }
   }
   for (size_t r = 0; r < children.size(); ++r) {
     const std::string prefix = "[rank " + std::to_string(r) + "] ";

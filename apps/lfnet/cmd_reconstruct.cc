@@ -56,7 +56,8 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "Phi of a plain sensor image: NAME[:N] or a JSON spec file (default: the "
                   "model's)");
   cmd->add_option("--method", q.method, "net, ae, cnn, dict, pinv or adjoint (default net)");
-  cmd->add_option("--model", q.model, "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
+  cmd->add_option("--model", q.model,
+                  "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   cmd->add_option("--dict-method", q.dict_method, "sparse coding for dict: omp or admm")
       ->check(CLI::IsMember({"omp", "admm"}));

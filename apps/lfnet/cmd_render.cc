@@ -169,7 +169,8 @@ void run_render(const RenderArgs& args) {
   policy.inputs = {args.scene, args.random_options};
   check_output_folder(args.out, policy);
 
-  const scene::RenderOptions render_options = pipeline::scene_render_options(random ? "" : args.scene);
+  const scene::RenderOptions render_options =
+      pipeline::scene_render_options(random ? "" : args.scene);
   const auto start = std::chrono::steady_clock::now();
   const scene::RenderResult result = scene::render_scene(spec, render_options);
   const double seconds =

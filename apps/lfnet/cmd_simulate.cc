@@ -11,12 +11,6 @@
 #include <optional>
 
 #include "command.h"
-#include "lfnet/pipeline/evaluate.h"
-#include "lfnet/pipeline/experiment.h"
-#include "lfnet/pipeline/models.h"
-#include "lfnet/pipeline/reconstruct.h"
-#include "lfnet/pipeline/sources.h"
-#include "lfnet/pipeline/stages.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
@@ -28,6 +22,12 @@
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
 #include "lfnet/optics/weights_image.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/experiment.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/pipeline/stages.h"
 #include "lfnet/scene/render.h"
 #include "lfnet/scene/scene_spec.h"
 
@@ -45,7 +45,7 @@ struct SimulateArgs {
   double noise = -1;  // < 0: not given
   uint64_t seed = 0;
   std::string out;
-  std::string views;  // R0:R1,C0:C1, 1-based; default the central 5 x 5
+  std::string views;   // R0:R1,C0:C1, 1-based; default the central 5 x 5
   std::string orient;  // angular reorientation of the folder (docs/conventions.md)
   bool color = false;
   std::string effects;  // EFFECTS.json
@@ -174,9 +174,9 @@ void describe(const optics::Phi& phi) {
               static_cast<long long>(spec.cols), 100.0 * spec.n / (spec.rows * spec.cols));
   std::printf("spec:       %s\n", spec.to_json().dump().c_str());
   if (spec.name == "asp") {
-    const auto table =
-        optics::asp_table(spec.rows, spec.cols, spec.n, spec.params.value("layout", "") == "pairs",
-                          spec.params.value("pair_gamma", 0.0), spec.params.value("pair_alpha", 0.0));
+    const auto table = optics::asp_table(
+        spec.rows, spec.cols, spec.n, spec.params.value("layout", "") == "pairs",
+        spec.params.value("pair_gamma", 0.0), spec.params.value("pair_alpha", 0.0));
     std::printf("asp table:\n   n   beta (rad)  gamma (deg)  alpha (deg)  k (theta, phi)  role\n");
     for (size_t i = 0; i < table.size(); ++i) {
       const auto& r = table[i];
@@ -348,7 +348,8 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
       "simulate", "Simulate coded capture of a light field with a Phi model and sensor effects");
   auto args = std::make_shared<SimulateArgs>();
   cmd->add_option("--lf", args->lf, "light field folder of sub-aperture images");
-  cmd->add_option("--scene", args->scene, "procedural scene spec to render and simulate (configs/scenes)");
+  cmd->add_option("--scene", args->scene,
+                  "procedural scene spec to render and simulate (configs/scenes)");
   cmd->add_option("--phi", args->phi,
                   "Phi model NAME[:N] (asp, mask, aperture, random, lenslet) or a PHI.json spec")
       ->capture_default_str();
@@ -364,8 +365,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)");
   cmd->add_option("--views", args->views,
                   "angular window R0:R1,C0:C1, 1-based inclusive (default: the central 5x5)");
-  cmd->add_option("--orient", args->orient,
-                  "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
+  cmd->add_option(
+      "--orient", args->orient,
+      "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
   cmd->add_flag("--color", args->color, "simulate every colour channel (default: grey luma)");
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
   cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")

@@ -36,7 +36,8 @@ void check_config(const TrainArgs& a) {
   const auto config = pipeline::resolve_request(a.request);
   std::string names;
   for (const auto& s : config.stages) {
-    if (pipeline::is_network_stage(s.name)) (void)config.stage_network(s), (void)config.stage_options(s);
+    if (pipeline::is_network_stage(s.name))
+      (void)config.stage_network(s), (void)config.stage_options(s);
     names += (names.empty() ? "" : ", ") + s.name;
   }
   std::printf("%s: %s, scale '%s', Phi %s, stages %s; the config is valid\n",

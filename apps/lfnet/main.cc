@@ -35,7 +35,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "lfnet 0.1.0");
   GlobalOptions global;
-  app.add_option("--threads", global.threads, "CPU threads (default: OMP_NUM_THREADS, else every core)")
+  app.add_option("--threads", global.threads,
+                 "CPU threads (default: OMP_NUM_THREADS, else every core)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
@@ -50,10 +51,9 @@ int main(int argc, char** argv) {
   });
 
   const std::vector<CommandFactory> commands = {
-      add_info_command,  add_render_command,     add_simulate_command,
-      add_train_command, add_experiment_command, add_evaluate_command,
-      add_reconstruct_command, add_batch_command, add_report_command,
-      add_export_command, add_launch_command, add_bench_command};
+      add_info_command,       add_render_command,   add_simulate_command,    add_train_command,
+      add_experiment_command, add_evaluate_command, add_reconstruct_command, add_batch_command,
+      add_report_command,     add_export_command,   add_launch_command,      add_bench_command};
   for (const auto& add : commands) add(app, global);
 
   try {

@@ -25,8 +25,8 @@ const cv::Scalar kBlack(0, 0, 0), kGrey(200, 200, 200), kFront(40, 40, 220);
 // Colours (BGR) by method, in the order of docs/methods.md.
 cv::Scalar method_colour(const std::string& method) {
   static const std::map<std::string, cv::Scalar> colours = {
-      {"net", {180, 90, 30}},  {"ae", {60, 160, 60}},     {"cnn", {40, 140, 230}},
-      {"dict", {150, 60, 150}}, {"pinv", {60, 60, 200}},  {"adjoint", {120, 120, 120}},
+      {"net", {180, 90, 30}},    {"ae", {60, 160, 60}},   {"cnn", {40, 140, 230}},
+      {"dict", {150, 60, 150}},  {"pinv", {60, 60, 200}}, {"adjoint", {120, 120, 120}},
       {"no-parallax", {0, 0, 0}}};
   auto it = colours.find(method);
   return it == colours.end() ? cv::Scalar(100, 100, 100) : it->second;
@@ -64,7 +64,7 @@ void mark_pareto_front(std::vector<ParetoPoint>& points) {
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     return points[a].seconds != points[b].seconds ? points[a].seconds < points[b].seconds
-                                                   : points[a].psnr_db > points[b].psnr_db;
+                                                  : points[a].psnr_db > points[b].psnr_db;
   });
   double best = -INFINITY;
   for (size_t i : order) {
@@ -142,10 +142,11 @@ void plot_pareto(const std::vector<ParetoPoint>& points, const std::string& titl
     const cv::Point c(px(p->seconds), py(p->psnr_db));
     int baseline = 0;
     const cv::Size size = cv::getTextSize(p->label, cv::FONT_HERSHEY_SIMPLEX, 0.38, 1, &baseline);
-    for (const cv::Point at : {c + cv::Point(9, -6), c + cv::Point(9, size.height + 6),
-                               c + cv::Point(-9 - size.width, -6),
-                               c + cv::Point(-9 - size.width, size.height + 6)}) {
-      const cv::Rect box(at.x - 1, at.y - size.height - 1, size.width + 2, size.height + baseline + 2);
+    for (const cv::Point at :
+         {c + cv::Point(9, -6), c + cv::Point(9, size.height + 6),
+          c + cv::Point(-9 - size.width, -6), c + cv::Point(-9 - size.width, size.height + 6)}) {
+      const cv::Rect box(at.x - 1, at.y - size.height - 1, size.width + 2,
+                         size.height + baseline + 2);
       const bool inside = box.x >= left && box.x + box.width <= width - right && box.y >= top &&
                           box.y + box.height <= height - bottom;
       const bool free = std::none_of(taken.begin(), taken.end(),
@@ -235,15 +236,18 @@ void plot_views(const std::vector<LightField>& lfs, const std::vector<std::strin
     epi = epi.repeat_interleave(epi_scale, 0);
     cv::Mat epi_img;
     cv::cvtColor(to_mat(epi), epi_img, cv::COLOR_GRAY2BGR);
-    epi_img.copyTo(img(cv::Rect(x, title_h + static_cast<int>(h) + gap, panel_w, static_cast<int>(epi_h))));
+    epi_img.copyTo(
+        img(cv::Rect(x, title_h + static_cast<int>(h) + gap, panel_w, static_cast<int>(epi_h))));
     // |error| of the centre view against the truth; 0.1 and above is white.
-    auto err = (data[cu][cv_] - truth[cu][cv_]).abs().slice(0, y0, y0 + h).slice(1, x0, x0 + w) * 10.0;
+    auto err =
+        (data[cu][cv_] - truth[cu][cv_]).abs().slice(0, y0, y0 + h).slice(1, x0, x0 + w) * 10.0;
     cv::Mat err_img;
     cv::applyColorMap(to_mat(err), err_img, cv::COLORMAP_INFERNO);
     err_img.copyTo(img(cv::Rect(x, title_h + static_cast<int>(h + gap + epi_h + gap), panel_w,
                                 static_cast<int>(h))));
   }
-  put_text(img, "rows: centre view, horizontal EPI (views x columns), |error| x 10 of the centre view",
+  put_text(img,
+           "rows: centre view, horizontal EPI (views x columns), |error| x 10 of the centre view",
            {gap, total_h - 5}, 0.4);
   write_png(path, img);
 }
@@ -260,34 +264,37 @@ void write_parallax_gif(const LightField& lf, const std::string& path, int64_t c
   for (int64_t u = U - 2; u >= 1; --u) loop.push_back({u, 0});
   fs::create_directories(fs::path(path).parent_path());
   write_file_atomically(path, [&](const std::string& tmp) {
-  auto out = OIIO::ImageOutput::create(tmp);
-  LFNET_CHECK_AS(IoError, out != nullptr, "cannot write GIF files: ", OIIO::geterror());
-  // GIF frames are RGB: the grey view in all three channels.
-  OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), 3, OIIO::TypeDesc::UINT8);
-  const int fps[2] = {8, 1};
-  spec.attribute("FramesPerSecond", OIIO::TypeRational, fps);
-  spec.attribute("oiio:Movie", 1);
-  spec.attribute("gif:LoopCount", 0);
-  std::vector<OIIO::ImageSpec> specs(loop.size(), spec);
-  LFNET_CHECK_AS(IoError, out->open(tmp, static_cast<int>(specs.size()), specs.data()),
-                 "cannot write ", tmp, ": ", out->geterror());
-  const auto data = lf.data()[0];
-  for (size_t i = 0; i < loop.size(); ++i) {
-    if (i > 0) {
-      LFNET_CHECK_AS(IoError, out->open(tmp, spec, OIIO::ImageOutput::AppendSubimage),
+    auto out = OIIO::ImageOutput::create(tmp);
+    LFNET_CHECK_AS(IoError, out != nullptr, "cannot write GIF files: ", OIIO::geterror());
+    // GIF frames are RGB: the grey view in all three channels.
+    OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), 3, OIIO::TypeDesc::UINT8);
+    const int fps[2] = {8, 1};
+    spec.attribute("FramesPerSecond", OIIO::TypeRational, fps);
+    spec.attribute("oiio:Movie", 1);
+    spec.attribute("gif:LoopCount", 0);
+    std::vector<OIIO::ImageSpec> specs(loop.size(), spec);
+    LFNET_CHECK_AS(IoError, out->open(tmp, static_cast<int>(specs.size()), specs.data()),
+                   "cannot write ", tmp, ": ", out->geterror());
+    const auto data = lf.data()[0];
+    for (size_t i = 0; i < loop.size(); ++i) {
+      if (i > 0) {
+        LFNET_CHECK_AS(IoError, out->open(tmp, spec, OIIO::ImageOutput::AppendSubimage),
+                       "cannot write ", tmp, ": ", out->geterror());
+      }
+      auto frame = (data[loop[i].first][loop[i].second]
+                        .slice(0, y0, y0 + h)
+                        .slice(1, x0, x0 + w)
+                        .clamp(0, 1) *
+                    255.0)
+                       .round()
+                       .to(torch::kUInt8)
+                       .unsqueeze(-1)
+                       .expand({h, w, 3})
+                       .contiguous();
+      LFNET_CHECK_AS(IoError, out->write_image(OIIO::TypeDesc::UINT8, frame.data_ptr()),
                      "cannot write ", tmp, ": ", out->geterror());
     }
-    auto frame = (data[loop[i].first][loop[i].second].slice(0, y0, y0 + h).slice(1, x0, x0 + w)
-                      .clamp(0, 1) * 255.0)
-                     .round()
-                     .to(torch::kUInt8)
-                     .unsqueeze(-1)
-                     .expand({h, w, 3})
-                     .contiguous();
-    LFNET_CHECK_AS(IoError, out->write_image(OIIO::TypeDesc::UINT8, frame.data_ptr()),
-                   "cannot write ", tmp, ": ", out->geterror());
-  }
-  LFNET_CHECK_AS(IoError, out->close(), "cannot write ", tmp, ": ", out->geterror());
+    LFNET_CHECK_AS(IoError, out->close(), "cannot write ", tmp, ": ", out->geterror());
   });
 }
 

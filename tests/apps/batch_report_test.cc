@@ -40,7 +40,8 @@ TEST_CASE("batch reconstructs and evaluates every item, records bad ones and goe
   std::string out;
   write_test_light_field(tmp / "in/lf_a", 36, 45);
   REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "in/lf_a") + " --phi asp:2 --out " +
-                          (tmp / "in/cam/shot1"), out) == 0);
+                          (tmp / "in/cam/shot1"),
+                      out) == 0);
   fs::create_directories(tmp / "in/broken");
   std::ofstream(tmp / "in/broken/sensor.json") << "{ not json";
   const std::string cmd = lfnet + "batch --input " + (tmp / "in") + " --out " + (tmp / "out") +
@@ -90,14 +91,20 @@ TEST_CASE("reconstruct takes a plain sensor image with --phi, and the post-filte
   const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
   std::string out;
   write_test_light_field(tmp / "lf", 45, 45);
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"), out) == 0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"),
+                  out) == 0);
   // The acquisition's sensor.tif on its own, as a camera would give it.
   REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq/sensor.tif") +
-                          " --out " + (tmp / "plain"), out) != 0);
+                          " --out " + (tmp / "plain"),
+                      out) != 0);
   CHECK(out.find("--phi") != std::string::npos);
-  REQUIRE(run_command(lfnet + "reconstruct --method pinv --phi asp:2 --sensor " + (tmp / "acq/sensor.tif") +
-                          " --out " + (tmp / "plain") + " --post-filter", out) == 0);
-  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") + " --out " + (tmp / "folder"), out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --phi asp:2 --sensor " +
+                          (tmp / "acq/sensor.tif") + " --out " + (tmp / "plain") + " --post-filter",
+                      out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") + " --out " +
+                          (tmp / "folder"),
+                      out) == 0);
   const auto a = lfnet::io::read_light_field(tmp / "plain");
   const auto b = lfnet::io::read_light_field(tmp / "folder");
   REQUIRE(a.data().sizes() == b.data().sizes());
@@ -105,8 +112,9 @@ TEST_CASE("reconstruct takes a plain sensor image with --phi, and the post-filte
   const double diff = (a.data() - b.data()).abs().mean().item<double>();
   CHECK(diff < 0.02);
   // A wrong channel count is an error naming the Phi.
-  CHECK(run_command(lfnet + "reconstruct --method pinv --phi asp:3 --sensor " + (tmp / "acq/sensor.tif") +
-                        " --out " + (tmp / "x"), out) != 0);
+  CHECK(run_command(lfnet + "reconstruct --method pinv --phi asp:3 --sensor " +
+                        (tmp / "acq/sensor.tif") + " --out " + (tmp / "x"),
+                    out) != 0);
   CHECK(out.find("N = 3") != std::string::npos);
 }
 
@@ -121,11 +129,14 @@ TEST_CASE("the dict stage learns a dictionary that evaluate uses", "[app][slow]"
   })";
   const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
   std::string out;
-  REQUIRE(run_command(lfnet + "train " + (tmp / "dict.json") + " --out " + (tmp / "run"), out) == 0);
+  REQUIRE(run_command(lfnet + "train " + (tmp / "dict.json") + " --out " + (tmp / "run"), out) ==
+          0);
   REQUIRE(fs::exists(tmp / "run/models/dict.ckpt"));
   write_test_light_field(tmp / "lf", 36, 36);
-  REQUIRE(run_command(lfnet + "evaluate --lf " + (tmp / "lf") + " --phi asp:2 --method dict --stride 9 --dictionary " +
-                          (tmp / "run/models/dict.ckpt") + " --json " + (tmp / "r.json"), out) == 0);
+  REQUIRE(run_command(lfnet + "evaluate --lf " + (tmp / "lf") +
+                          " --phi asp:2 --method dict --stride 9 --dictionary " +
+                          (tmp / "run/models/dict.ckpt") + " --json " + (tmp / "r.json"),
+                      out) == 0);
   std::ifstream in(tmp / "r.json");
   const auto r = nlohmann::json::parse(in);
   CHECK(r["method"] == "dict");
@@ -152,25 +163,32 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   auto record = [](const std::string& method, double psnr, double seconds) {
     nlohmann::json pv = nlohmann::json::array();
     for (int u = 0; u < 5; ++u) pv.push_back(std::vector<double>(5, psnr + u));
-    return nlohmann::json{{"method", method}, {"psnr_db", psnr}, {"ssim", 0.9}, {"seconds", seconds},
-                          {"stride", 5}, {"mode", "sensor"}, {"measurements", 2}, {"noise_sigma", 0.0},
-                          {"phi", {{"name", "asp"}, {"n", 2}}}, {"light_field", "x"},
-                          {"per_view_psnr_db", pv}}.dump();
+    return nlohmann::json{
+        {"method", method},   {"psnr_db", psnr},       {"ssim", 0.9},
+        {"seconds", seconds}, {"stride", 5},           {"mode", "sensor"},
+        {"measurements", 2},  {"noise_sigma", 0.0},    {"phi", {{"name", "asp"}, {"n", 2}}},
+        {"light_field", "x"}, {"per_view_psnr_db", pv}}
+        .dump();
   };
-  rec << record("net", 30.0, 10.0) << "\n" << record("pinv", 29.0, 1.0) << "\n"
-      << record("no-parallax", 28.5, 0.1) << "\n" << record("dict", 29.5, 100.0) << "\n";
+  rec << record("net", 30.0, 10.0) << "\n"
+      << record("pinv", 29.0, 1.0) << "\n"
+      << record("no-parallax", 28.5, 0.1) << "\n"
+      << record("dict", 29.5, 100.0) << "\n";
   rec.close();
   // A section whose records say how long their model trained gets a "training s" column.
   fs::create_directories(tmp / "results/b");
-  std::ofstream(tmp / "results/b/section.json") << R"({"title": "Switching", "order": 2, "pareto": false,
+  std::ofstream(tmp / "results/b/section.json")
+      << R"({"title": "Switching", "order": 2, "pareto": false,
     "heatmaps": [{"method": "net", "variant": "finetuned", "label": "fine tuned"}, {"method": "net", "variant": "none"}]})";
   auto trained = nlohmann::json::parse(record("net", 27.0, 5.0));
   trained["training_seconds"] = 321.4;
   trained["variant"] = "finetuned";
-  std::ofstream(tmp / "results/b/records.jsonl") << trained.dump() << "\n" << record("no-parallax", 26.0, 0.1) << "\n";
+  std::ofstream(tmp / "results/b/records.jsonl") << trained.dump() << "\n"
+                                                 << record("no-parallax", 26.0, 0.1) << "\n";
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
-                          (tmp / "docs/RESULTS.md"), out) == 0);
+                          (tmp / "docs/RESULTS.md"),
+                      out) == 0);
   std::ifstream md_in(tmp / "docs/RESULTS.md");
   std::stringstream md;
   md << md_in.rdbuf();
@@ -184,12 +202,15 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   // Differences: net - pinv = +1.00 against 2 to 3 dB; net - dict = +0.50 against 0.55 (within
   // 0.1 dB); pinv - dict = -0.50 against a drop of 0.1; pinv - net = -1.00 against +1; ae has no
   // record.
-  CHECK(text.find("| Held out | net beats pinv | +2.0 to +3.0 | +1.00 | direction only (-1.00 dB) | s. 3 |") != std::string::npos);
+  CHECK(text.find("| Held out | net beats pinv | +2.0 to +3.0 | +1.00 | direction only (-1.00 dB) "
+                  "| s. 3 |") != std::string::npos);
   CHECK(text.find("| net beats dict | +0.6 | +0.50 | yes |") != std::string::npos);
   CHECK(text.find("| net barely drops | -0.1 | -0.50 | no (-0.40 dB) |") != std::string::npos);
   CHECK(text.find("| pinv beats net | +1.0 | -1.00 | no (-2.00 dB) |") != std::string::npos);
-  CHECK(text.find("| method | variant | mode | PSNR dB | SSIM | seconds | training s |") != std::string::npos);
-  CHECK(text.find("| net | finetuned | sensor | 27.00 | 0.900 | 5.00 | 321 |") != std::string::npos);
+  CHECK(text.find("| method | variant | mode | PSNR dB | SSIM | seconds | training s |") !=
+        std::string::npos);
+  CHECK(text.find("| net | finetuned | sensor | 27.00 | 0.900 | 5.00 | 321 |") !=
+        std::string::npos);
   CHECK(text.find("Reproduced: 1 of 1 PSNR figures, 1 of 1 times.") != std::string::npos);
   CHECK(text.find("Reproduced: 1 of 5 claims; 1 more in direction only.") != std::string::npos);
   CHECK(text.find("| missing | +1.0 |  | not measured (records missing) |") != std::string::npos);
@@ -200,7 +221,8 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(fs::file_size(tmp / "docs/images/results/a_views_net.png") > 500);
   // A heatmap chosen by a selector; one that matches no record draws nothing.
   CHECK(fs::file_size(tmp / "docs/images/results/b_views_fine_tuned.png") > 500);
-  CHECK(text.find("![fine tuned per-view PSNR](images/results/b_views_fine_tuned.png)") != std::string::npos);
+  CHECK(text.find("![fine tuned per-view PSNR](images/results/b_views_fine_tuned.png)") !=
+        std::string::npos);
   CHECK(!fs::exists(tmp / "docs/images/results/b_views_net__none_.png"));
   // A missing results folder is one clear error.
   CHECK(run_command(lfnet_binary() + " report " + (tmp / "nothing"), out) != 0);
@@ -213,13 +235,17 @@ TEST_CASE("every shipped config is valid", "[app]") {
   for (const char* dir : {"configs", "configs/models", "configs/paper"}) {
     const fs::path root = fs::path(LFNET_SOURCE_DIR) / dir;
     for (const auto& entry : fs::recursive_directory_iterator(root)) {
-      if (entry.path().extension() != ".json" || entry.path().string().find("/scenes/") != std::string::npos) continue;
+      if (entry.path().extension() != ".json" ||
+          entry.path().string().find("/scenes/") != std::string::npos)
+        continue;
       if (std::string(dir) == "configs" && entry.path().parent_path() != root) continue;
       std::string stages[2];
       for (int k = 0; k < 2; ++k) {
         const char* scale = k == 0 ? "quick" : "paper";
         INFO(entry.path().string() << " " << scale);
-        CHECK(run_command(lfnet_binary() + " train " + entry.path().string() + " --check --scale " + scale, out) == 0);
+        CHECK(run_command(
+                  lfnet_binary() + " train " + entry.path().string() + " --check --scale " + scale,
+                  out) == 0);
         INFO(out);
         CHECK(out.find("the config is valid") != std::string::npos);
         const auto at = out.find("stages ");

@@ -15,7 +15,8 @@ TEST_CASE("lfnet bench reports every case with its own figures", "[app]") {
   const std::string json = tmp / "bench.json";
   REQUIRE(run_command(lfnet_binary() +
                           " --threads 1 bench --height 36 --width 45 --methods net,cnn,pinv,dict"
-                          " --strides 9,4 --dict-atoms 40 --conv-batch 4 --reps 1 --json " + json,
+                          " --strides 9,4 --dict-atoms 40 --conv-batch 4 --reps 1 --json " +
+                          json,
                       out) == 0);
   INFO(out);
   const auto report = lfnet::read_json_file(json);
@@ -51,11 +52,12 @@ TEST_CASE("lfnet bench runs the CNN fully convolutionally on request", "[app]") 
   lfnet::test::TempDir tmp;
   std::string out;
   const std::string json = tmp / "bench.json";
-  REQUIRE(run_command(lfnet_binary() +
-                          " --threads 1 bench --height 30 --width 30 --methods cnn --strides 3"
-                          " --skip-kernels --reps 1 --cnn-mode full --tile 16 --in-process --json " +
-                          json,
-                      out) == 0);
+  REQUIRE(
+      run_command(lfnet_binary() +
+                      " --threads 1 bench --height 30 --width 30 --methods cnn --strides 3"
+                      " --skip-kernels --reps 1 --cnn-mode full --tile 16 --in-process --json " +
+                      json,
+                  out) == 0);
   INFO(out);
   const auto c = lfnet::read_json_file(json)["cases"][0];
   CHECK(c["cnn_mode"] == "full");

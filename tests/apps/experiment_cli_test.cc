@@ -33,21 +33,24 @@ nlohmann::json read_lines(const std::string& path) {
 }
 }  // namespace
 
-TEST_CASE("experiment trains, evaluates and writes its outputs, and evaluate and reconstruct use the model",
-          "[app][slow]") {
+TEST_CASE(
+    "experiment trains, evaluates and writes its outputs, and evaluate and reconstruct use the "
+    "model",
+    "[app][slow]") {
   lfnet::test::TempDir tmp;
   std::ofstream(tmp / "tiny.json") << kTinyConfig;
   const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
   std::string out;
-  REQUIRE(run_command(lfnet + "experiment " + (tmp / "tiny.json") + " --out " + (tmp / "run"), out) == 0);
+  REQUIRE(run_command(lfnet + "experiment " + (tmp / "tiny.json") + " --out " + (tmp / "run"),
+                      out) == 0);
   CHECK(fs::exists(tmp / "run/config.json"));
   CHECK(fs::exists(tmp / "run/models/cnn.ckpt"));
   auto results = read_lines(tmp / "run/results.jsonl");
   REQUIRE(results.size() == 3);
   for (const auto& r : results) {
-    for (const char* key : {"psnr_db", "ssim", "seconds", "patches", "per_view_psnr_db", "method",
-                            "stride", "phi", "measurements", "noise_sigma", "mode", "threads",
-                            "device"}) {
+    for (const char* key :
+         {"psnr_db", "ssim", "seconds", "patches", "per_view_psnr_db", "method", "stride", "phi",
+          "measurements", "noise_sigma", "mode", "threads", "device"}) {
       INFO(key);
       CHECK(r.contains(key));
     }
@@ -55,7 +58,8 @@ TEST_CASE("experiment trains, evaluates and writes its outputs, and evaluate and
     CHECK(r["mode"] == "sensor");
   }
   // A second run into the same folder is refused without --force; the first one stays.
-  CHECK(run_command(lfnet + "experiment " + (tmp / "tiny.json") + " --out " + (tmp / "run"), out) != 0);
+  CHECK(run_command(lfnet + "experiment " + (tmp / "tiny.json") + " --out " + (tmp / "run"), out) !=
+        0);
   CHECK(out.find("lfnet: error:") != std::string::npos);
   CHECK(fs::exists(tmp / "run/models/cnn.ckpt"));
 
@@ -68,17 +72,22 @@ TEST_CASE("experiment trains, evaluates and writes its outputs, and evaluate and
   auto record = nlohmann::json::parse(std::ifstream(tmp / "eval.json"));
   CHECK(record["method"] == "net");
   CHECK(record["psnr_db"].get<double>() > 10.0);
-  CHECK(run_command(lfnet + "evaluate --model " + model + " --lf " + (tmp / "lf") + " --phi mask:2", out) != 0);
+  CHECK(run_command(lfnet + "evaluate --model " + model + " --lf " + (tmp / "lf") + " --phi mask:2",
+                    out) != 0);
   CHECK(out.find("does not match") != std::string::npos);
 
   // reconstruct reads what simulate writes, and refuses another Phi's measurements.
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"), out) == 0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"),
+                  out) == 0);
   REQUIRE(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acq") +
                           " --out " + (tmp / "rec"),
                       out) == 0);
   CHECK(fs::exists(tmp / "rec/lf_3_3.png"));
   CHECK(fs::exists(tmp / "rec/grid.png"));
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm"), out) == 0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm"),
+                  out) == 0);
   CHECK(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acqm") +
                         " --out " + (tmp / "recm"),
                     out) != 0);

@@ -54,13 +54,16 @@ double max_abs_diff(const torch::Tensor& a, const torch::Tensor& b) {
   return (a - b).abs().max().item<double>();
 }
 
-nlohmann::json read_json(const std::string& path) { return nlohmann::json::parse(std::ifstream(path)); }
+nlohmann::json read_json(const std::string& path) {
+  return nlohmann::json::parse(std::ifstream(path));
+}
 
 }  // namespace
 
-TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch and Python "
-          "run like the checkpoint",
-          "[app][export]") {
+TEST_CASE(
+    "export writes a TorchScript file that reconstruct, evaluate, LibTorch and Python "
+    "run like the checkpoint",
+    "[app][export]") {
   lfnet::test::TempDir tmp;
   const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
   const std::string ckpt = tmp / "net.ckpt", pt = tmp / "net.pt";
@@ -98,7 +101,9 @@ TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch
 
   // reconstruct and evaluate take the file as --model and give the checkpoint's results.
   REQUIRE(run_command(lfnet + "render --random 7 --size 40x40 --out " + (tmp / "lf"), out) == 0);
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"), out) == 0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"),
+                  out) == 0);
   for (const auto& [model, name] : {std::pair{ckpt, "rec_ck"}, std::pair{pt, "rec_pt"}}) {
     REQUIRE(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acq") +
                             " --stride 4 --out " + (tmp / name),
@@ -112,8 +117,8 @@ TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch
   for (const std::string method : {"net", "ae"}) {
     INFO(method);
     for (const auto& [model, name] : {std::pair{ckpt, "ck.json"}, std::pair{pt, "pt.json"}}) {
-      REQUIRE(run_command(lfnet + "evaluate --model " + model + " --method " + method +
-                              " --lf " + (tmp / "lf") + " --stride 9 --json " + (tmp / name),
+      REQUIRE(run_command(lfnet + "evaluate --model " + model + " --method " + method + " --lf " +
+                              (tmp / "lf") + " --stride 9 --json " + (tmp / name),
                           out) == 0);
     }
     const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
@@ -121,19 +126,22 @@ TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch
     CHECK(std::abs(a["ssim"].get<double>() - b["ssim"].get<double>()) < 1e-6);
   }
   // Another Phi's measurements are refused as for the checkpoint.
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm"), out) == 0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm"),
+                  out) == 0);
   CHECK(run_command(lfnet + "reconstruct --model " + pt + " --sensor " + (tmp / "acqm") +
                         " --out " + (tmp / "recm"),
                     out) != 0);
   CHECK(out.find("trained for Phi") != std::string::npos);
-  CHECK(run_command(lfnet + "evaluate --model " + pt + " --lf " + (tmp / "lf") + " --phi mask:2", out) != 0);
+  CHECK(run_command(lfnet + "evaluate --model " + pt + " --lf " + (tmp / "lf") + " --phi mask:2",
+                    out) != 0);
   CHECK(out.find("does not match") != std::string::npos);
 
   // Python: Debian's python3-torch loads the file and gives the same numbers.
   const std::string python = lfnet::test::python_with("torch");
   const auto file_bytes = fs::file_size(pt);
-  std::printf("export: %s is %.3f MB; max |C++ TorchScript - C++ checkpoint| = %.3g\n",
-              pt.c_str(), static_cast<double>(file_bytes) / 1e6, cpp_diff);
+  std::printf("export: %s is %.3f MB; max |C++ TorchScript - C++ checkpoint| = %.3g\n", pt.c_str(),
+              static_cast<double>(file_bytes) / 1e6, cpp_diff);
   if (python.empty()) {
     WARN("python3 with torch not found: the Python half of the export test is skipped");
     return;
@@ -143,7 +151,8 @@ TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch
   lfnet::recon::ReconstructOptions o;
   o.stride = 4;
   o.clamp = false;
-  auto recon = lfnet::recon::reconstruct_sensor(*phi, sensor, lfnet::recon::network_solver(net, "net"), o)[0];
+  auto recon = lfnet::recon::reconstruct_sensor(*phi, sensor,
+                                                lfnet::recon::network_solver(net, "net"), o)[0];
   const std::string dir = tmp / "reference";
   fs::create_directories(dir);
   write_raw(dir + "/y.f32", y);
@@ -153,17 +162,18 @@ TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch
   write_raw(dir + "/recon.f32", recon);
   write_raw(dir + "/lf.f32", lf);
   write_raw(dir + "/simulated.f32", sensor);
-  lfnet::write_json_file(dir + "/reference.json",
-                         {{"stride", 4},
-                          {"shapes", {{"y", y.sizes().vec()},
-                                      {"phase", phase.sizes().vec()},
-                                      {"want", want.sizes().vec()},
-                                      {"sensor", sensor.sizes().vec()},
-                                      {"recon", recon.sizes().vec()},
-                                      {"lf", lf.sizes().vec()},
-                                      {"simulated", sensor.sizes().vec()}}}});
-  REQUIRE(run_command(python + " " + LFNET_SOURCE_DIR + "/tests/apps/check_export.py " + pt + " " + dir,
-                      out) == 0);
+  lfnet::write_json_file(dir + "/reference.json", {{"stride", 4},
+                                                   {"shapes",
+                                                    {{"y", y.sizes().vec()},
+                                                     {"phase", phase.sizes().vec()},
+                                                     {"want", want.sizes().vec()},
+                                                     {"sensor", sensor.sizes().vec()},
+                                                     {"recon", recon.sizes().vec()},
+                                                     {"lf", lf.sizes().vec()},
+                                                     {"simulated", sensor.sizes().vec()}}}});
+  REQUIRE(
+      run_command(python + " " + LFNET_SOURCE_DIR + "/tests/apps/check_export.py " + pt + " " + dir,
+                  out) == 0);
   INFO(out);
   const auto result = nlohmann::json::parse(out.substr(out.rfind("\n{") + 1));
   CHECK(result["forward_max_diff"].get<double>() <= 1e-5);
@@ -188,11 +198,12 @@ TEST_CASE("export writes a TorchScript file that reconstruct, evaluate, LibTorch
         std::string::npos);
   CHECK(out.find("sensor (2, 64, 64) -> light field (5, 5, 64, 64), PSNR") != std::string::npos);
   CHECK(out.find("one patch -> (1, 5, 5, 9, 9)") != std::string::npos);
-  std::printf("export: max |Python TorchScript - C++ checkpoint| = %.3g (forward), %.3g "
-              "(reconstruct), %.3g (simulate vs Phi::forward); Python torch %s\n",
-              result["forward_max_diff"].get<double>(), result["reconstruct_max_diff"].get<double>(),
-              result["simulate_max_diff"].get<double>(),
-              result["torch_version"].get<std::string>().c_str());
+  std::printf(
+      "export: max |Python TorchScript - C++ checkpoint| = %.3g (forward), %.3g "
+      "(reconstruct), %.3g (simulate vs Phi::forward); Python torch %s\n",
+      result["forward_max_diff"].get<double>(), result["reconstruct_max_diff"].get<double>(),
+      result["simulate_max_diff"].get<double>(),
+      result["torch_version"].get<std::string>().c_str());
 }
 
 TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[app][export]") {
@@ -248,11 +259,12 @@ TEST_CASE("sizes of exported default nets", "[.][export-sizes]") {
     meta.block = phi->block();
     meta.local = phi->local();
     lfnet::nn::export_network(net, meta, tmp / "m.pt");
-    std::printf("%-9s phases %3lld  parameters %lld  checkpoint (weights only) %.2f MB  "
-                "exported %.2f MB\n",
-                name.c_str(), static_cast<long long>(net->phases()),
-                static_cast<long long>(lfnet::nn::parameter_count(*net)),
-                static_cast<double>(fs::file_size(tmp / "m.ckpt")) / 1e6,
-                static_cast<double>(fs::file_size(tmp / "m.pt")) / 1e6);
+    std::printf(
+        "%-9s phases %3lld  parameters %lld  checkpoint (weights only) %.2f MB  "
+        "exported %.2f MB\n",
+        name.c_str(), static_cast<long long>(net->phases()),
+        static_cast<long long>(lfnet::nn::parameter_count(*net)),
+        static_cast<double>(fs::file_size(tmp / "m.ckpt")) / 1e6,
+        static_cast<double>(fs::file_size(tmp / "m.pt")) / 1e6);
   }
 }

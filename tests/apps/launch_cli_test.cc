@@ -20,9 +20,11 @@ std::string tiny_config(int64_t epochs, int64_t train_patches) {
   return R"({
   "name": "tiny", "phi": "asp:2",
   "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
-  "dataset": {"train_patches": )" + std::to_string(train_patches) + R"(, "validation_patches": 64, "seed": 2},
+  "dataset": {"train_patches": )" +
+         std::to_string(train_patches) + R"(, "validation_patches": 64, "seed": 2},
   "network": {"residual": "pinv", "cnn": {"channels": 4}},
-  "training": {"epochs": )" + std::to_string(epochs) + R"(, "batch_size": 32, "progress": false},
+  "training": {"epochs": )" +
+         std::to_string(epochs) + R"(, "batch_size": 32, "progress": false},
   "stages": ["cnn"]
 })";
 }
@@ -69,8 +71,9 @@ TEST_CASE("launch trains on 2 ranks and stops the job when a rank fails", "[app]
   // epoch-1 loss of this config varies by a few per cent between identical runs), so the
   // weight equivalence of 1 and 2 ranks is checked in tests/dist, within one process; here the
   // program's plumbing.
-  REQUIRE(run_command(lfnet + "launch -n 2 -- train " + (tmp / "tiny.json") + " --out " +
-                          (tmp / "two"), out) == 0);
+  REQUIRE(
+      run_command(lfnet + "launch -n 2 -- train " + (tmp / "tiny.json") + " --out " + (tmp / "two"),
+                  out) == 0);
   CHECK(out.find("[rank 0] ") != std::string::npos);
   CHECK(out.find("[rank 1] ") != std::string::npos);
   CHECK(out.find("2 data-parallel ranks") != std::string::npos);
@@ -91,8 +94,9 @@ TEST_CASE("launch trains on 2 ranks and stops the job when a rank fails", "[app]
   // Rank 0 refuses the non-empty run folder; launch stops rank 1 rather than let it wait for
   // the 300 s default timeout.
   const auto start = std::chrono::steady_clock::now();
-  CHECK(run_command(lfnet + "launch -n 2 -- train " + (tmp / "tiny.json") + " --out " +
-                        (tmp / "two"), out) != 0);
+  CHECK(
+      run_command(lfnet + "launch -n 2 -- train " + (tmp / "tiny.json") + " --out " + (tmp / "two"),
+                  out) != 0);
   CHECK(seconds_since(start) < 120);
   CHECK(out.find("[rank 0] lfnet: error: --out ") != std::string::npos);
   CHECK(out.find("exists and is not empty") != std::string::npos);
@@ -108,7 +112,8 @@ TEST_CASE("a rank killed mid-training makes the other fail with a clear error", 
   // Rank 1 is killed (SIGKILL: no chance to say goodbye) once rank 0 has finished an epoch;
   // rank 0 must then fail well within its 60 s timeout.
   const std::string script = std::string(R"(
-    cd )") + tmp.path().string() + R"( || exit 90
+    cd )") + tmp.path().string() +
+                             R"( || exit 90
     port=$(( 20000 + $$ % 20000 ))
     common="--threads 1 train long.json --world-size 2 --master 127.0.0.1:$port --dist-timeout 60"
     )" + lfnet_binary() + R"( $common --rank 0 --out r0 > rank0.log 2>&1 & p0=$!
@@ -148,8 +153,8 @@ TEST_CASE("batch on 2 ranks shares the items and gathers one summary on rank 0",
   const std::string lfnet = lfnet_binary() + " ";
   const std::string args = " --input " + (tmp / "in") + " --phi asp:2 --methods pinv --stride 9";
   std::string out;
-  CHECK(run_command(lfnet + "--threads 1 --log-level warn batch" + args + " --out " +
-                        (tmp / "one"), out) != 0);
+  CHECK(run_command(lfnet + "--threads 1 --log-level warn batch" + args + " --out " + (tmp / "one"),
+                    out) != 0);
   CHECK(out.find("lfnet: error: 1 of 4") != std::string::npos);
   CHECK(run_command(lfnet + "launch -n 2 -- batch" + args + " --out " + (tmp / "two"), out) != 0);
   // Rank 0 reports the job's failures, counted over both ranks' items.

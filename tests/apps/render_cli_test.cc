@@ -61,7 +61,8 @@ TEST_CASE("lfnet render writes the light field, disparity, previews and resolved
   CHECK(lfnet::scene::SceneSpec::from_json(record).to_json() == spec.to_json());
 }
 
-TEST_CASE("lfnet render refuses a non-empty folder unless forced, then replaces it", "[app][scene]") {
+TEST_CASE("lfnet render refuses a non-empty folder unless forced, then replaces it",
+          "[app][scene]") {
   lfnet::test::TempDir tmp;
   fs::create_directories(tmp / "out");
   { std::ofstream(tmp / "out/notes.txt") << "keep me"; }

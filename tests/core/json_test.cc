@@ -42,7 +42,8 @@ TEST_CASE("the JSON reader is type-strict: no silent rounding, casting or wrappi
       "neg": -1, "huge": 1e300, "text": 7, "yes": true, "list": [1, 2.5], "num": 4})");
   lfnet::JsonReader r(doc, "$.x");
   int64_t i = 0;
-  CHECK_THROWS_WITH(r.get("half", i), Catch::Contains("$.x.half") && Catch::Contains("whole number"));
+  CHECK_THROWS_WITH(r.get("half", i),
+                    Catch::Contains("$.x.half") && Catch::Contains("whole number"));
   REQUIRE(r.get("whole", i));
   CHECK(i == 3);
   REQUIRE(r.get("big", i));

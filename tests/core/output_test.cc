@@ -2,9 +2,9 @@
 // exclusive writers, stale temporaries removed, failed starts undone.
 #include "lfnet/core/output.h"
 
-#include <catch2/catch.hpp>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <catch2/catch.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -126,8 +126,7 @@ TEST_CASE("temporaries of dead writers are removed, a live writer's are kept", "
   CHECK_FALSE(fs::exists(old));
 }
 
-TEST_CASE("output files: refused when taken or a folder, replaced with force",
-          "[core][output]") {
+TEST_CASE("output files: refused when taken or a folder, replaced with force", "[core][output]") {
   lfnet::test::TempDir tmp;
   lfnet::OutputFolderPolicy policy;
   policy.option = "--json";

@@ -57,8 +57,7 @@ TEST_CASE("stitching in bands equals stitching at once", "[core][patches]") {
   Stitcher bands(grid, 1, 2, 2);
   for (int64_t r = 0; r < grid.rows(); r += 3) {
     const int64_t e = std::min(grid.rows(), r + 3);
-    bands.add(grid.extract(data, r, e) +
-                  estimates.slice(0, r * grid.cols(), e * grid.cols()) -
+    bands.add(grid.extract(data, r, e) + estimates.slice(0, r * grid.cols(), e * grid.cols()) -
                   grid.extract(data, r, e),
               r, e);
   }

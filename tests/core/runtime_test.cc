@@ -1,7 +1,7 @@
 #include "lfnet/core/runtime.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include "lfnet/core/error.h"
 

@@ -100,7 +100,8 @@ TEST_CASE("augmentation keeps the angular and spatial axes consistent", "[data]"
   auto base = torch::rand({80, 80});
   auto lf = torch::empty({1, 5, 5, 60, 60});
   for (int64_t u = 0; u < 5; ++u)
-    for (int64_t v = 0; v < 5; ++v) lf[0][u][v] = base.slice(0, 10 + u, 70 + u).slice(1, 10 + v, 70 + v);
+    for (int64_t v = 0; v < 5; ++v)
+      lf[0][u][v] = base.slice(0, 10 + u, 70 + u).slice(1, 10 + v, 70 + v);
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto o = small_options();
   data::PatchDataset ds({LightField(lf)}, *phi, o);
@@ -112,16 +113,19 @@ TEST_CASE("augmentation keeps the angular and spatial axes consistent", "[data]"
   auto fwd = t.slice(1, 1, 5).slice(3, 0, 8);
   auto a2 = t.slice(1, 1, 5).slice(3, 1, 9);
   auto bwd = t.slice(1, 0, 4).slice(3, 0, 8);
-  auto ok = ((a - fwd).abs().amax({1, 2, 3, 4}) < 1e-6) | ((a2 - bwd).abs().amax({1, 2, 3, 4}) < 1e-6);
+  auto ok =
+      ((a - fwd).abs().amax({1, 2, 3, 4}) < 1e-6) | ((a2 - bwd).abs().amax({1, 2, 3, 4}) < 1e-6);
   CHECK(ok.all().item<bool>());
 }
 
 TEST_CASE("light fields too small to split are a clear error", "[data]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
-  CHECK_THROWS_AS(data::PatchDataset({LightField(torch::rand({1, 5, 5, 12, 40}))}, *phi, small_options()),
-                  ConfigError);
-  CHECK_THROWS_AS(data::PatchDataset({LightField(torch::rand({1, 3, 3, 40, 40}))}, *phi, small_options()),
-                  ConfigError);
+  CHECK_THROWS_AS(
+      data::PatchDataset({LightField(torch::rand({1, 5, 5, 12, 40}))}, *phi, small_options()),
+      ConfigError);
+  CHECK_THROWS_AS(
+      data::PatchDataset({LightField(torch::rand({1, 3, 3, 40, 40}))}, *phi, small_options()),
+      ConfigError);
 }
 
 namespace {
@@ -148,8 +152,7 @@ std::tuple<int64_t, int64_t, int64_t> window_of(const torch::Tensor& patch) {
 }
 }  // namespace
 
-TEST_CASE("training patches come from every angular window and step of a wider grid",
-          "[data]") {
+TEST_CASE("training patches come from every angular window and step of a wider grid", "[data]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto o = small_options();
   o.augment = false;
@@ -193,8 +196,7 @@ TEST_CASE("training patches come from every angular window and step of a wider g
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("angular_steps"));
 }
 
-TEST_CASE("photometric jitter varies patches and their measurements stay consistent",
-          "[data]") {
+TEST_CASE("photometric jitter varies patches and their measurements stay consistent", "[data]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto o = small_options();
   o.augment = false;

@@ -2,8 +2,8 @@
 // c10d process group, exactly as separate processes would have.
 #include "lfnet/dist/communicator.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <chrono>
 #include <filesystem>
@@ -11,12 +11,12 @@
 #include <future>
 #include <thread>
 
+#include "../train/synthetic.h"
 #include "lfnet/core/error.h"
 #include "lfnet/data/patch_dataset.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/train/trainer.h"
 #include "support/test_support.h"
-#include "../train/synthetic.h"
 
 using namespace lfnet;
 
@@ -92,8 +92,7 @@ double max_difference(const torch::nn::Module& a, const torch::nn::Module& b) {
 
 }  // namespace
 
-TEST_CASE("shard_range splits n items into contiguous parts differing by at most one",
-          "[dist]") {
+TEST_CASE("shard_range splits n items into contiguous parts differing by at most one", "[dist]") {
   CHECK(dist::shard_range(10, 0, 3) == std::pair<int64_t, int64_t>{0, 4});
   CHECK(dist::shard_range(10, 1, 3) == std::pair<int64_t, int64_t>{4, 7});
   CHECK(dist::shard_range(10, 2, 3) == std::pair<int64_t, int64_t>{7, 10});
@@ -214,7 +213,7 @@ TEST_CASE("2 ranks with batch b take the steps of 1 rank with batch 2b", "[dist]
   REQUIRE(errors == std::vector<std::string>{"", ""});
   const double error = max_difference(*single, *nets[0]);
   WARN("2 ranks x 4 vs 1 rank x 8, " << want.back().step << " steps: max |weight difference| "
-                                      << error);
+                                     << error);
   CHECK(want.back().step == 12);  // 6 batches an epoch, the last of 3 patches
   CHECK(error < 1e-5);
   CHECK(max_difference(*nets[0], *nets[1]) == 0.0);  // the ranks agree bit for bit
@@ -307,8 +306,8 @@ TEST_CASE("a rank that dies or stalls makes the others fail with a clear error",
         /*timeout_s=*/2.0);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    WARN((stall ? "stalled" : "died") << ": rank 0 failed after " << seconds << " s: "
-                                      << errors[0]);
+    WARN((stall ? "stalled" : "died")
+         << ": rank 0 failed after " << seconds << " s: " << errors[0]);
     CHECK_THAT(errors[0], Catch::Contains("rank 0 of 2") &&
                               Catch::Contains("another rank has died, stalled or failed"));
     CHECK(seconds < 30);

@@ -14,8 +14,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size > 8192) return 0;  // configs are small; longer inputs only slow the search
-  static const std::string path =
-      "/tmp/lfnet-fuzz-config-" + std::to_string(::getpid()) + ".json";
+  static const std::string path = "/tmp/lfnet-fuzz-config-" + std::to_string(::getpid()) + ".json";
   {
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(size));

@@ -21,10 +21,19 @@ namespace {
 std::string view_name(int scheme, int64_t u, int64_t v, int64_t cols, const char* ext) {
   char name[96];
   switch (scheme) {
-    case 0: std::snprintf(name, sizeof name, "lf_%lld_%lld.%s", (long long)u + 1, (long long)v + 1, ext); break;
-    case 1: std::snprintf(name, sizeof name, "input_Cam%03lld.%s", (long long)(u * cols + v), ext); break;
-    case 2: std::snprintf(name, sizeof name, "TM_%02lld_%02lld.%s", (long long)u + 1, (long long)v + 1, ext); break;
-    default: std::snprintf(name, sizeof name, "scene-%02lld.%s", (long long)(u * cols + v + 1), ext); break;
+    case 0:
+      std::snprintf(name, sizeof name, "lf_%lld_%lld.%s", (long long)u + 1, (long long)v + 1, ext);
+      break;
+    case 1:
+      std::snprintf(name, sizeof name, "input_Cam%03lld.%s", (long long)(u * cols + v), ext);
+      break;
+    case 2:
+      std::snprintf(name, sizeof name, "TM_%02lld_%02lld.%s", (long long)u + 1, (long long)v + 1,
+                    ext);
+      break;
+    default:
+      std::snprintf(name, sizeof name, "scene-%02lld.%s", (long long)(u * cols + v + 1), ext);
+      break;
   }
   return name;
 }
@@ -36,8 +45,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // Headers claiming huge images are refused before allocation either way; a low limit keeps
   // the search from spending its time allocating and filling gigabytes.
   lfnet::io::set_image_value_limit(int64_t{1} << 22);
-  static const fs::path dir = fs::temp_directory_path() /
-                              ("lfnet-fuzz-folder-" + std::to_string(::getpid()));
+  static const fs::path dir =
+      fs::temp_directory_path() / ("lfnet-fuzz-folder-" + std::to_string(::getpid()));
   std::error_code ec;
   fs::remove_all(dir, ec);
   fs::create_directories(dir);
@@ -63,8 +72,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   } catch (const lfnet::Error&) {
     // A clear rejection.
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "fuzz_light_field_folder: unexpected %s exception: %s\n",
-                 typeid(e).name(), e.what());
+    std::fprintf(stderr, "fuzz_light_field_folder: unexpected %s exception: %s\n", typeid(e).name(),
+                 e.what());
     std::abort();
   }
   fs::remove_all(dir, ec);

@@ -22,8 +22,8 @@
 namespace fs = std::filesystem;
 using lfnet::test::lfnet_binary;
 using lfnet::test::read_bytes;
-using lfnet::test::write_bytes;
 using lfnet::test::run_command;
+using lfnet::test::write_bytes;
 
 namespace {
 
@@ -63,8 +63,7 @@ void expect_error(const std::string& args, const std::string& what, const fs::pa
 // A 5 x 5-view grey light field of 18 x 18 pixels, written as 8-bit PNGs.
 void write_light_field(const std::string& dir) {
   torch::manual_seed(2);
-  lfnet::io::write_light_field(lfnet::LightField(torch::rand({1, 5, 5, 18, 18})), dir,
-                               {"png", 8});
+  lfnet::io::write_light_field(lfnet::LightField(torch::rand({1, 5, 5, 18, 18})), dir, {"png", 8});
 }
 
 // A small untrained model for `phi` written as a checkpoint, as `lfnet train` writes it.
@@ -96,7 +95,8 @@ const char* kTinyConfig = R"({
 
 }  // namespace
 
-TEST_CASE("malformed configs and unknown keys name the file and the JSON path", "[app][bad_input]") {
+TEST_CASE("malformed configs and unknown keys name the file and the JSON path",
+          "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   const auto cfg = tmp / "c.json";
   auto base = nlohmann::json::parse(kTinyConfig);
@@ -126,8 +126,10 @@ TEST_CASE("malformed configs and unknown keys name the file and the JSON path", 
       {with("/scales", nlohmann::json{{"quick", 5}}), "$.scales.quick"},
       {with("/phi", "asp:99999999999999999999999"), "asp:99999999999999999999999"},
       {with("/phi", nlohmann::json{{"name", "asp"}, {"rows", 100000}, {"cols", 100000}}), "1..64"},
-      {with("/phi", nlohmann::json{{"name", "random"}, {"n", 25}, {"params", {{"block", 32}}}}), "2^27"},
-      {with("/stages", nlohmann::json::array({{{"name", "cnn"}, {"training", 5}}})), "$.stages[0].training"},
+      {with("/phi", nlohmann::json{{"name", "random"}, {"n", 25}, {"params", {{"block", 32}}}}),
+       "2^27"},
+      {with("/stages", nlohmann::json::array({{{"name", "cnn"}, {"training", 5}}})),
+       "$.stages[0].training"},
       {with("/data", nlohmann::json::object()), "no training data"},
       // Fractions where whole numbers belong are refused, not rounded.
       {with("/phi", nlohmann::json{{"name", "asp"}, {"n", 2.5}}), "$.phi.n"},
@@ -215,11 +217,16 @@ TEST_CASE("truncated and foreign checkpoints, and another Phi's measurements, ar
   write_light_field(tmp / "lf");
   write_model(tmp / "asp.ckpt", "asp:2");
   std::string out;
-  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")), out) == 0);
-  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm")), out) == 0);
+  REQUIRE(
+      run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")),
+                  out) == 0);
+  REQUIRE(run_command(
+              program("simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm")),
+              out) == 0);
   // The model works on its own Phi's measurements (so the failures below are the input's).
   REQUIRE(run_command(program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
-                            (tmp / "acq") + " --out " + (tmp / "ok")), out) == 0);
+                              (tmp / "acq") + " --out " + (tmp / "ok")),
+                      out) == 0);
   auto reconstruct = [&](const std::string& model, const std::string& sensor) {
     return "reconstruct --model " + model + " --sensor " + sensor + " --out " + (tmp / "rec");
   };
@@ -272,13 +279,16 @@ TEST_CASE("existing and unwritable output folders are never overwritten without 
   write_light_field(tmp / "lf");
   write_model(tmp / "asp.ckpt", "asp:2");
   std::string out;
-  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")), out) == 0);
+  REQUIRE(
+      run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")),
+                  out) == 0);
   fs::create_directories(tmp / "taken");
   write_bytes(tmp / "taken/notes.txt", "keep me");
   write_bytes(tmp / "file", "a file, not a folder");
   write_bytes(tmp / "c.json", kTinyConfig);
   const std::string sim = "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out ";
-  const std::string rec = "reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " + (tmp / "acq") + " --out ";
+  const std::string rec =
+      "reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " + (tmp / "acq") + " --out ";
   const std::string render = "render --random 3 --size 20x20 --out ";
   const std::string train = "train " + (tmp / "c.json") + " --out ";
   for (const auto& cmd : {sim, rec, render, train}) {
@@ -287,7 +297,8 @@ TEST_CASE("existing and unwritable output folders are never overwritten without 
     expect_error(cmd + (tmp / "file/sub"), "file/sub", root);
   }
   // An existing acquisition is not replaced by a failing run, even with --force.
-  expect_error(sim + (tmp / "acq") + " --force --effects " + (tmp / "nosuch.json"), "nosuch.json", root);
+  expect_error(sim + (tmp / "acq") + " --force --effects " + (tmp / "nosuch.json"), "nosuch.json",
+               root);
   expect_error(rec + (tmp / "taken") + " --force --method nosuch", "nosuch", root);
   // With --force the folder is replaced.
   REQUIRE(run_command(program(sim + (tmp / "taken") + " --force"), out) == 0);

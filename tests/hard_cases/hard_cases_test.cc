@@ -106,8 +106,8 @@ torch::Tensor shifted_views(const torch::Tensor& texture, int64_t disparity) {
   auto lf = torch::empty({1, kU, kV, kSize, kSize});
   for (int64_t u = 0; u < kU; ++u) {
     for (int64_t v = 0; v < kV; ++v) {
-      lf[0][u][v] = torch::roll(texture, {disparity * (u - kU / 2), disparity * (v - kV / 2)},
-                                {0, 1});
+      lf[0][u][v] =
+          torch::roll(texture, {disparity * (u - kU / 2), disparity * (v - kV / 2)}, {0, 1});
     }
   }
   return lf;
@@ -189,8 +189,7 @@ bool finite(const torch::Tensor& t) { return torch::isfinite(t).all().item<bool>
 // every clamped output lies in [0, 1]; returns the raw outputs by method.
 using Solvers = std::vector<std::pair<std::string, recon::PatchSolver>>;
 
-std::map<std::string, torch::Tensor> reconstruct_all(const optics::Phi& phi,
-                                                     const Solvers& methods,
+std::map<std::string, torch::Tensor> reconstruct_all(const optics::Phi& phi, const Solvers& methods,
                                                      const torch::Tensor& sensor,
                                                      const std::string& label,
                                                      int64_t* cases = nullptr) {
@@ -338,8 +337,7 @@ TEST_CASE("measurements scaled by 1e-6 and 1e6 stay finite and scale the linear 
   }
 }
 
-TEST_CASE("non-finite measurements are a NumericalError, never a NaN light field",
-          "[hard_cases]") {
+TEST_CASE("non-finite measurements are a NumericalError, never a NaN light field", "[hard_cases]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto sensor = optics::simulate_sensor(*phi, hard_scenes()["random"][0]);
   for (double bad : {NAN, INFINITY}) {
@@ -390,7 +388,8 @@ TEST_CASE("OMP and ADMM stop within their bounds and report non-convergence", "[
       auto a = dict::SparseCoder(d.atoms, admm).code(c.a, c.y);
       CHECK(finite(a.patches));
       CHECK(a.iterations.max().item<int64_t>() <= limit);
-      if (limit == 3 && c.y.abs().max().item<double>() > 0 && c.name.find("blind") == std::string::npos) {
+      if (limit == 3 && c.y.abs().max().item<double>() > 0 &&
+          c.name.find("blind") == std::string::npos) {
         // Three iterations are far too few for a real patch: reported, not hidden.
         CHECK(a.unconverged() == 1);
       }
@@ -415,16 +414,15 @@ TEST_CASE("the dict method reports patches that did not converge", "[hard_cases]
   // With room to converge, ADMM does; OMP on a black scene ends normally (nothing to explain).
   admm.admm.max_iterations = 5000;
   auto enough = std::make_shared<recon::SolverReport>();
-  recon::reconstruct_sensor(*phi, sensor,
-                            recon::dictionary_solver(*phi, d, admm, kPatch, kPatch, enough),
-                            raw_options());
+  recon::reconstruct_sensor(
+      *phi, sensor, recon::dictionary_solver(*phi, d, admm, kPatch, kPatch, enough), raw_options());
   CHECK(enough->patches == patches);
   CHECK(enough->unconverged == 0);
   dict::SparseCodingOptions omp;
   auto black = std::make_shared<recon::SolverReport>();
   auto zero = recon::reconstruct_sensor(
-      *phi, torch::zeros_like(sensor), recon::dictionary_solver(*phi, d, omp, kPatch, kPatch, black),
-      raw_options());
+      *phi, torch::zeros_like(sensor),
+      recon::dictionary_solver(*phi, d, omp, kPatch, kPatch, black), raw_options());
   CHECK(max_abs(zero) == 0.0);
   CHECK(black->unconverged == 0);
 }

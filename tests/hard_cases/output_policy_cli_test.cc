@@ -30,10 +30,13 @@ std::string program(const std::string& args) {
 nlohmann::json two_stage_config(double lr = 1e-3) {
   return {{"name", "two"},
           {"phi", "asp:2"},
-          {"data", {{"random_scenes", 1}, {"random_seed", 5},
-                    {"random_options", {{"height", 64}, {"width", 64}}}}},
+          {"data",
+           {{"random_scenes", 1},
+            {"random_seed", 5},
+            {"random_options", {{"height", 64}, {"width", 64}}}}},
           {"dataset", {{"train_patches", 64}, {"validation_patches", 32}, {"seed", 2}}},
-          {"network", {{"ae", {{"hidden", {64, 32, 64, 32, 64}}}}, {"cnn", {{"depth", 2}, {"channels", 4}}}}},
+          {"network",
+           {{"ae", {{"hidden", {64, 32, 64, 32, 64}}}}, {"cnn", {{"depth", 2}, {"channels", 4}}}}},
           {"training", {{"epochs", 1}, {"batch_size", 32}, {"lr", lr}, {"progress", false}}},
           {"stages", {"ae", "cnn"}}};
 }
@@ -62,35 +65,48 @@ TEST_CASE("no command writes over its inputs, even with --force", "[app][bad_inp
   REQUIRE(run_command(program("render --random 1 --size 24x24 --grey --out " + lf), out) == 0);
   const std::string view = read_bytes(lf + "/lf_1_1.png");
   // evaluate --out into its own light field, or into a folder inside it.
-  CHECK(run_command(program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + lf + " --force"), out) != 0);
+  CHECK(run_command(
+            program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + lf + " --force"),
+            out) != 0);
   expect_one_error(out, "is the input");
-  CHECK(run_command(program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + lf + "/rec"), out) != 0);
+  CHECK(run_command(
+            program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + lf + "/rec"),
+            out) != 0);
   expect_one_error(out, "lies inside the input");
   CHECK(read_bytes(lf + "/lf_1_1.png") == view);
   CHECK_FALSE(fs::exists(lf + "/rec"));
   // evaluate --out: an existing non-empty folder only with --force, and then replaced whole.
   fs::create_directories(tmp.path() / "ev");
   std::ofstream(tmp / "ev/old.txt") << "old";
-  CHECK(run_command(program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + (tmp / "ev")), out) != 0);
+  CHECK(run_command(
+            program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + (tmp / "ev")),
+            out) != 0);
   expect_one_error(out, "--force");
-  REQUIRE(run_command(program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + (tmp / "ev") + " --force"), out) == 0);
+  REQUIRE(run_command(program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " +
+                              (tmp / "ev") + " --force"),
+                      out) == 0);
   CHECK_FALSE(fs::exists(tmp.path() / "ev/old.txt"));
   CHECK(fs::exists(tmp.path() / "ev/evaluation.json"));
   // reconstruct --out its own acquisition keeps sensor.tif and sensor.json.
   const std::string acq = tmp / "acq";
   REQUIRE(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + acq), out) == 0);
   const std::string sidecar = read_bytes(acq + "/sensor.json");
-  CHECK(run_command(program("reconstruct --sensor " + acq + " --method pinv --out " + acq + " --force"), out) != 0);
+  CHECK(run_command(
+            program("reconstruct --sensor " + acq + " --method pinv --out " + acq + " --force"),
+            out) != 0);
   expect_one_error(out, "is the input");
   CHECK(read_bytes(acq + "/sensor.json") == sidecar);
   CHECK(fs::exists(acq + "/sensor.tif"));
   // simulate into the light field it reads; export over its checkpoint.
-  CHECK(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + lf + " --force"), out) != 0);
+  CHECK(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + lf + " --force"),
+                    out) != 0);
   expect_one_error(out, "is the input");
   // A dead writer's half-written output is removed by the next writer of that output.
   const fs::path stale = tmp.path() / (".rec.tmp" + std::to_string(dead_pid()));
   fs::create_directories(stale);
-  REQUIRE(run_command(program("reconstruct --sensor " + acq + " --method pinv --out " + (tmp / "rec")), out) == 0);
+  REQUIRE(
+      run_command(program("reconstruct --sensor " + acq + " --method pinv --out " + (tmp / "rec")),
+                  out) == 0);
   CHECK_FALSE(fs::exists(stale));
   CHECK(fs::exists(tmp.path() / "rec/reconstruction.json"));
 }
@@ -105,21 +121,28 @@ TEST_CASE("a training run that fails before its first checkpoint leaves nothing 
   CHECK_FALSE(fs::exists(tmp.path() / "run"));
   // The same command with a sane config then runs: nothing was left to refuse it.
   lfnet::write_json_file(tmp / "good.json", two_stage_config());
-  REQUIRE(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "run") + " --stage ae"), out) == 0);
+  REQUIRE(run_command(
+              program("train " + (tmp / "good.json") + " --out " + (tmp / "run") + " --stage ae"),
+              out) == 0);
   // --resume of something that does not exist fails before any data is loaded, and creates
   // nothing.
-  CHECK(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "new") + " --resume " + (tmp / "nosuch")), out) != 0);
+  CHECK(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "new") +
+                            " --resume " + (tmp / "nosuch")),
+                    out) != 0);
   expect_one_error(out, "--resume");
   CHECK_FALSE(fs::exists(tmp.path() / "new"));
   // --force with a failing config keeps the old run as it was.
   const std::string ae = read_bytes(tmp / "run/models/ae.ckpt");
-  CHECK(run_command(program("train " + (tmp / "wild.json") + " --out " + (tmp / "run") + " --force"), out) != 0);
+  CHECK(
+      run_command(program("train " + (tmp / "wild.json") + " --out " + (tmp / "run") + " --force"),
+                  out) != 0);
   CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
 }
 
-TEST_CASE("train --resume RUN continues the remaining stages, --force starts afresh, --set is "
-          "recorded",
-          "[app][bad_input]") {
+TEST_CASE(
+    "train --resume RUN continues the remaining stages, --force starts afresh, --set is "
+    "recorded",
+    "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   std::string out;
   lfnet::write_json_file(tmp / "two.json", two_stage_config());
@@ -145,13 +168,17 @@ TEST_CASE("train --resume RUN continues the remaining stages, --force starts afr
   REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
   CHECK(read_bytes(tmp / "run/models/cnn.ckpt") == cnn);
   // --set values are validated like the file; --force and --resume exclude each other.
-  CHECK(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "x") + " --set training.epochs=1.5"), out) != 0);
+  CHECK(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "x") +
+                            " --set training.epochs=1.5"),
+                    out) != 0);
   expect_one_error(out, "$.training.epochs");
   CHECK_FALSE(fs::exists(tmp.path() / "x"));
   CHECK(run_command(program("train --resume " + (tmp / "run") + " --force"), out) != 0);
   expect_one_error(out, "--force");
   // --force starts the run afresh: the old models and log are gone once it trains.
-  REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae --force"), out) == 0);
+  REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
+                              " --stage ae --force"),
+                      out) == 0);
   CHECK_FALSE(fs::exists(tmp.path() / "run/models/cnn.ckpt"));
   size_t lines = 0;
   std::ifstream fresh(tmp / "run/training.jsonl");
@@ -164,19 +191,26 @@ TEST_CASE("batch records unreadable entries as failed items and goes on", "[app]
   std::string out;
   const fs::path in = tmp.path() / "in";
   fs::create_directories(in);
-  REQUIRE(run_command(program("render --random 2 --size 24x24 --grey --out " + (in / "good").string()), out) == 0);
+  REQUIRE(
+      run_command(program("render --random 2 --size 24x24 --grey --out " + (in / "good").string()),
+                  out) == 0);
   fs::create_symlink(in / "nowhere", in / "broken");
   fs::create_symlink(in, in / "loop");  // a link back to the root
-  REQUIRE(run_command(program("batch --input " + in.string() + " --phi asp:2 --methods pinv --out " + (tmp / "b")), out) != 0);
+  REQUIRE(run_command(program("batch --input " + in.string() +
+                              " --phi asp:2 --methods pinv --out " + (tmp / "b")),
+                      out) != 0);
   CHECK(out.find("2 of 3 item-method pair(s) failed") != std::string::npos);
   const auto summary = lfnet::read_json_file(tmp / "b/summary.json");
   REQUIRE(summary.size() == 3);
   std::map<std::string, std::string> status;
-  for (const auto& r : summary) status[r["item"].get<std::string>()] = r["status"].get<std::string>();
+  for (const auto& r : summary)
+    status[r["item"].get<std::string>()] = r["status"].get<std::string>();
   CHECK(status["good"] == "ok");
   CHECK(status["broken"] == "error");
   CHECK(status["loop"] == "error");
   // The output may not lie inside the input (the batch would find its own outputs).
-  CHECK(run_command(program("batch --input " + in.string() + " --phi asp:2 --out " + (in / "out").string()), out) != 0);
+  CHECK(run_command(
+            program("batch --input " + in.string() + " --phi asp:2 --out " + (in / "out").string()),
+            out) != 0);
   expect_one_error(out, "lies inside the input");
 }

@@ -37,10 +37,13 @@ std::string program(const std::string& args) {
 nlohmann::json tiny_config(int64_t epochs, int64_t ae_width, double lr = 1e-3) {
   return {{"name", "tiny"},
           {"phi", "asp:2"},
-          {"data", {{"random_scenes", 1}, {"random_seed", 5},
-                    {"random_options", {{"height", 64}, {"width", 64}}}}},
+          {"data",
+           {{"random_scenes", 1},
+            {"random_seed", 5},
+            {"random_options", {{"height", 64}, {"width", 64}}}}},
           {"dataset", {{"train_patches", 64}, {"validation_patches", 32}, {"seed", 2}}},
-          {"network", {{"ae", {{"hidden", {ae_width, ae_width / 2, ae_width, ae_width / 2, ae_width}}}}}},
+          {"network",
+           {{"ae", {{"hidden", {ae_width, ae_width / 2, ae_width, ae_width / 2, ae_width}}}}}},
           {"training", {{"epochs", epochs}, {"batch_size", 32}, {"lr", lr}, {"progress", false}}},
           {"stages", {"ae"}}};
 }
@@ -54,8 +57,8 @@ bool writing_checkpoint(const fs::path& dir) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const auto name = it->path().filename().string();
-    if (name.rfind(".", 0) == 0 && name.find(".tmp") != std::string::npos &&
-        name.size() > 5 && name.compare(name.size() - 5, 5, ".ckpt") == 0) {
+    if (name.rfind(".", 0) == 0 && name.find(".tmp") != std::string::npos && name.size() > 5 &&
+        name.compare(name.size() - 5, 5, ".ckpt") == 0) {
       return true;
     }
   }
@@ -108,7 +111,7 @@ TEST_CASE("training killed while writing a checkpoint resumes from the previous 
   write_config(tmp / "resume.json", tiny_config(epoch + 1, 1024));
   std::string out;
   REQUIRE(run_command(program("train " + (tmp / "resume.json") + " --out " + (tmp / "run") +
-                            " --stage ae --resume " + last.string()),
+                              " --stage ae --resume " + last.string()),
                       out) == 0);
   CHECK(lfnet::train::load_checkpoint(last.string()).training.epoch == epoch + 1);
   CHECK(fs::exists(tmp.path() / "run/models/ae.ckpt"));
@@ -116,11 +119,13 @@ TEST_CASE("training killed while writing a checkpoint resumes from the previous 
   CHECK_FALSE(writing_checkpoint(stage_dir));
 }
 
-TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live ones", "[app][bad_input]") {
+TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live ones",
+          "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   write_config(tmp / "one.json", tiny_config(1, 64));
   std::string out;
-  REQUIRE(run_command(program("train " + (tmp / "one.json") + " --out " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(program("train " + (tmp / "one.json") + " --out " + (tmp / "run")), out) ==
+          0);
   const fs::path dir = tmp.path() / "run/models/ae";
   // A dead writer (a child that has exited and been reaped) and a live one (this process).
   const pid_t dead = fork();
@@ -132,27 +137,29 @@ TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live o
   for (const auto& p : {stale, live, other}) std::ofstream(p) << "partial";
   write_config(tmp / "two.json", tiny_config(2, 64));
   REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
-                            " --stage ae --resume " + (dir / "last.ckpt").string()),
+                              " --stage ae --resume " + (dir / "last.ckpt").string()),
                       out) == 0);
   CHECK_FALSE(fs::exists(stale));
   CHECK(fs::exists(live));
   CHECK(fs::exists(other));
 }
 
-TEST_CASE("a far too large learning rate stops with a clear message; the last good checkpoint resumes",
-          "[app][bad_input]") {
+TEST_CASE(
+    "a far too large learning rate stops with a clear message; the last good checkpoint resumes",
+    "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   write_config(tmp / "good.json", tiny_config(1, 64));
   std::string out;
-  REQUIRE(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "run")), out) ==
+          0);
   const std::string last = tmp / "run/models/ae/last.ckpt";
   const std::string good = read_bytes(last);
   // Three more epochs at a learning rate of 1e12: diverges, and says so on one line.
   write_config(tmp / "wild.json", tiny_config(4, 64, 1e12));
-  const int rc = run_command(lfnet_binary() + " --threads 2 --log-level off train " +
-                                 (tmp / "wild.json") + " --out " + (tmp / "run") +
-                                 " --stage ae --resume " + last,
-                             out);
+  const int rc =
+      run_command(lfnet_binary() + " --threads 2 --log-level off train " + (tmp / "wild.json") +
+                      " --out " + (tmp / "run") + " --stage ae --resume " + last,
+                  out);
   INFO(out);
   CHECK(rc != 0);
   CHECK(out.rfind("lfnet: error: ", 0) == 0);
@@ -162,7 +169,7 @@ TEST_CASE("a far too large learning rate stops with a clear message; the last go
   CHECK(read_bytes(last) == good);
   write_config(tmp / "sane.json", tiny_config(2, 64));
   REQUIRE(run_command(program("train " + (tmp / "sane.json") + " --out " + (tmp / "run") +
-                            " --stage ae --resume " + last),
+                              " --stage ae --resume " + last),
                       out) == 0);
   CHECK(lfnet::train::load_checkpoint(last).training.epoch == 2);
 }
@@ -185,7 +192,8 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
       REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") +
                               " --phi asp:2 --noise 0.05 --seed 9 --out " + dir + "/acq",
                           out) == 0);
-      REQUIRE(run_command(lfnet + "train " + (tmp / "c.json") + " --out " + dir + "/run", out) == 0);
+      REQUIRE(run_command(lfnet + "train " + (tmp / "c.json") + " --out " + dir + "/run", out) ==
+              0);
       REQUIRE(run_command(lfnet + "reconstruct --model " + dir + "/run/models/ae.ckpt --sensor " +
                               dir + "/acq --stride 3 --out " + dir + "/rec",
                           out) == 0);
@@ -193,7 +201,8 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
   }
   for (const char* threads : {"1", "2"}) {
     INFO(threads << " thread(s), run to run");
-    const std::string a = tmp / (std::string("a") + threads), b = tmp / (std::string("b") + threads);
+    const std::string a = tmp / (std::string("a") + threads),
+                      b = tmp / (std::string("b") + threads);
     // TIFF headers carry the time of writing: compare the pixels.
     CHECK(torch::equal(lfnet::io::read_image_channels(a + "/acq/sensor.tif"),
                        lfnet::io::read_image_channels(b + "/acq/sensor.tif")));
@@ -233,8 +242,8 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
   // 16-bit views: a rounding flip moves a value by one code.
   lfnet::test::require_close(rec2, rec1, 2.0 / 65535);
   // A different seed gives a different sensor image (the comparison can fail).
-  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --noise 0.05 --seed 10 --out " +
-                            (tmp / "c/acq")),
+  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") +
+                              " --phi asp:2 --noise 0.05 --seed 10 --out " + (tmp / "c/acq")),
                       out) == 0);
   CHECK_FALSE(torch::equal(lfnet::io::read_image_channels(one + "/acq/sensor.tif"),
                            lfnet::io::read_image_channels(tmp / "c/acq/sensor.tif")));

@@ -97,13 +97,16 @@ TEST_CASE("after loading, horizontal and vertical parallax agree in sign for eve
   REQUIRE(lfnet::check_parallax(lf).verdict == lfnet::ParallaxVerdict::kAgree);
   // Each scheme's files as its own camera writes them: the MIT archive's 01 is the bottom-left
   // camera (X = -2.5, Y = -2.5 cm in its README), 05 bottom-right, 21 top-left.
-  const std::vector<std::pair<std::string, std::function<std::string(int64_t, int64_t)>>> schemes = {
-      {"hci", [](int64_t u, int64_t v) { return fmt("input_Cam%03lld.png", 5 * u + v); }},
-      {"rowcol", [](int64_t u, int64_t v) { return fmt("lf_%lld_%lld.png", u + 1, v + 1); }},
-      {"tm", [](int64_t u, int64_t v) { return fmt("TM_%02lld_%02lld.png", u + 1, v + 1); }},
-      {"name", [](int64_t u, int64_t v) { return fmt("2067_%02lld_%02lld.png", u + 1, v + 1); }},
-      {"mit", [](int64_t u, int64_t v) { return fmt("scene-%02lld.png", 5 * (4 - u) + v + 1); }},
-  };
+  const std::vector<std::pair<std::string, std::function<std::string(int64_t, int64_t)>>> schemes =
+      {
+          {"hci", [](int64_t u, int64_t v) { return fmt("input_Cam%03lld.png", 5 * u + v); }},
+          {"rowcol", [](int64_t u, int64_t v) { return fmt("lf_%lld_%lld.png", u + 1, v + 1); }},
+          {"tm", [](int64_t u, int64_t v) { return fmt("TM_%02lld_%02lld.png", u + 1, v + 1); }},
+          {"name",
+           [](int64_t u, int64_t v) { return fmt("2067_%02lld_%02lld.png", u + 1, v + 1); }},
+          {"mit",
+           [](int64_t u, int64_t v) { return fmt("scene-%02lld.png", 5 * (4 - u) + v + 1); }},
+      };
   for (const auto& [name, namer] : schemes) {
     INFO(name);
     write_views(lf, tmp / name, namer);
@@ -149,9 +152,8 @@ TEST_CASE("broken folders give errors that name the file", "[io]") {
     CHECK_THROWS_WITH(io::read_light_field(tmp / "trunc"), Catch::Contains("lf_2_2.png"));
   }
   SECTION("gap in an index scheme") {
-    write_views(lf, tmp / "hci", [](int64_t u, int64_t v) {
-      return fmt("input_Cam%03lld.png", 2 * u + v);
-    });
+    write_views(lf, tmp / "hci",
+                [](int64_t u, int64_t v) { return fmt("input_Cam%03lld.png", 2 * u + v); });
     fs::remove(tmp / "hci/input_Cam001.png");
     CHECK_THROWS_WITH(io::read_light_field(tmp / "hci"), Catch::Contains("numbered 1"));
   }
@@ -206,7 +208,8 @@ TEST_CASE("grid images and EPIs place the views", "[io]") {
 TEST_CASE("writing never leaves partial files behind", "[io]") {
   lfnet::test::TempDir tmp;
   CHECK_THROWS_AS(io::write_image(tmp / "x.unknownformat", torch::rand({1, 4, 4})), lfnet::IoError);
-  CHECK_THROWS_AS(io::write_image(tmp / "missing_dir/x.png", torch::rand({1, 4, 4})), lfnet::IoError);
+  CHECK_THROWS_AS(io::write_image(tmp / "missing_dir/x.png", torch::rand({1, 4, 4})),
+                  lfnet::IoError);
   int files = 0;
   for (auto& e : fs::recursive_directory_iterator(tmp.path())) files += e.is_regular_file();
   CHECK(files == 0);
@@ -241,6 +244,7 @@ TEST_CASE("<name>_RR_CC folders: either separator, 0- or 1-based, any digit coun
   io::write_image(tmp / "two/b_0_0.png", lf.view(0, 0));
   CHECK_THROWS_WITH(io::scan_folder(tmp / "two"), Catch::Contains("two light fields"));
   // A grid starting at 2 is not guessed at.
-  write_views(lf, tmp / "late", [](int64_t u, int64_t v) { return fmt("x_%lld_%lld.png", u + 2, v + 2); });
+  write_views(lf, tmp / "late",
+              [](int64_t u, int64_t v) { return fmt("x_%lld_%lld.png", u + 2, v + 2); });
   CHECK_THROWS_WITH(io::scan_folder(tmp / "late"), Catch::Contains("0- or 1-based"));
 }

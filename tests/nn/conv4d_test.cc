@@ -1,7 +1,7 @@
 #include "lfnet/nn/conv4d.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <functional>
 #include <random>

@@ -1,7 +1,7 @@
 #include "lfnet/nn/loss.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <cmath>
 
@@ -13,11 +13,11 @@ using lfnet::nn::ReconstructionLoss;
 
 TEST_CASE("view weights reproduce the paper's 5 x 5 table", "[nn][loss]") {
   const double r2 = std::sqrt(2.0), r3 = std::sqrt(3.0), r5 = std::sqrt(5.0);
-  auto paper = torch::tensor({r5, 2.0, r3, 2.0, r5,  //
-                              2.0, r3, r2, r3, 2.0,  //
-                              r3, r2, 1.0, r2, r3,   //
-                              2.0, r3, r2, r3, 2.0,  //
-                              r5, 2.0, r3, 2.0, r5},
+  auto paper = torch::tensor({r5,  2.0, r3,  2.0, r5,   //
+                              2.0, r3,  r2,  r3,  2.0,  //
+                              r3,  r2,  1.0, r2,  r3,   //
+                              2.0, r3,  r2,  r3,  2.0,  //
+                              r5,  2.0, r3,  2.0, r5},
                              torch::kFloat64)
                    .view({5, 5});
   auto w = lfnet::nn::view_weights(5, 5);
@@ -63,7 +63,7 @@ TEST_CASE("weighted L2 of a one-hot error is W(u, v)", "[nn][loss]") {
 TEST_CASE("plain L2 and L1 match hand computation", "[nn][loss]") {
   auto target = torch::zeros({2, 1, 3, 3, 2, 2});
   auto pred = target.clone();
-  pred[0][0][0][0][0][0] = 0.5;   // corner view: the weight must not apply
+  pred[0][0][0][0][0][0] = 0.5;  // corner view: the weight must not apply
   pred[1][0][1][2][1][1] = -2.0;
   LossOptions l2;
   l2.name = "l2";
@@ -93,9 +93,9 @@ TEST_CASE("the weighted loss has the gradient 2 W (l_hat - l) / n", "[nn][loss]"
 TEST_CASE("loss options are strict and name the bad field", "[nn][loss]") {
   CHECK(LossOptions::from_json(nlohmann::json::parse(R"({"name": "l1"})")).kind() ==
         lfnet::nn::LossKind::kL1);
-  CHECK_THROWS_WITH(LossOptions::from_json(nlohmann::json::parse(R"({"name": "ssim"})"),
-                                           "$.train.loss"),
-                    Catch::Contains("$.train.loss.name") && Catch::Contains("weighted_l2, l2, l1"));
+  CHECK_THROWS_WITH(
+      LossOptions::from_json(nlohmann::json::parse(R"({"name": "ssim"})"), "$.train.loss"),
+      Catch::Contains("$.train.loss.name") && Catch::Contains("weighted_l2, l2, l1"));
   CHECK_THROWS_WITH(LossOptions::from_json(nlohmann::json::parse(R"({"reduce": "sum"})")),
                     Catch::Contains("$.reduce"));
   ReconstructionLoss loss(LossOptions{}, 5, 5);

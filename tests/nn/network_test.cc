@@ -1,7 +1,7 @@
 #include "lfnet/nn/network.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <set>
 
@@ -53,8 +53,8 @@ TEST_CASE("each branch and the two-branch net give (B, 1, U, V, h, w)", "[nn][ne
 
 TEST_CASE("the default net has the documented parameter count and names", "[nn][network]") {
   LightFieldNet net(NetworkOptions{});
-  const int64_t ae = (162 * 256 + 256) + (256 * 128 + 128) + (128 * 256 + 256) +
-                     (256 * 128 + 128) + (128 * 256 + 256) + (256 * 2025 + 2025) + (81 + 1);
+  const int64_t ae = (162 * 256 + 256) + (256 * 128 + 128) + (128 * 256 + 256) + (256 * 128 + 128) +
+                     (128 * 256 + 256) + (256 * 2025 + 2025) + (81 + 1);
   const int64_t cnn = (16 * 81 + 16) + 3 * (16 * 16 * 81 + 16) + (16 * 81 + 1);
   CHECK(lfnet::nn::parameter_count(*net->ae) == ae);
   CHECK(lfnet::nn::parameter_count(*net->cnn) == cnn);
@@ -94,8 +94,7 @@ TEST_CASE("the head averages the branch outputs with the configured weights", "[
   }
 }
 
-TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it",
-          "[nn][network]") {
+TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it", "[nn][network]") {
   torch::manual_seed(2);
   auto o = small_options("net");
   LightFieldNet net(o);
@@ -206,9 +205,9 @@ TEST_CASE("network options parse strictly, round-trip and validate", "[nn][netwo
   CHECK(o.head_weights[1] == 0.75);
   CHECK(NetworkOptions::from_json(o.to_json()).to_json() == o.to_json());
 
-  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"cnn": {"chanels": 3}})"),
-                                              "$.network"),
-                    Catch::Contains("$.network.cnn.chanels"));
+  CHECK_THROWS_WITH(
+      NetworkOptions::from_json(nlohmann::json::parse(R"({"cnn": {"chanels": 3}})"), "$.network"),
+      Catch::Contains("$.network.cnn.chanels"));
   CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"branches": "both"})")),
                     Catch::Contains("$.branches") && Catch::Contains("net, ae, cnn"));
   CHECK_THROWS_WITH(
@@ -220,8 +219,7 @@ TEST_CASE("network options parse strictly, round-trip and validate", "[nn][netwo
                   lfnet::ConfigError);
 }
 
-TEST_CASE("the net rejects measurement vectors and Phi stacks of the wrong size",
-          "[nn][network]") {
+TEST_CASE("the net rejects measurement vectors and Phi stacks of the wrong size", "[nn][network]") {
   auto o = small_options("net");
   LightFieldNet net(o);
   CHECK_THROWS_WITH(net->forward(torch::rand({2, 7})), Catch::Contains("(B, 50)"));

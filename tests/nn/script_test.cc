@@ -1,8 +1,8 @@
 #include "lfnet/nn/script.h"
 
-#include <catch2/catch.hpp>
 #include <torch/script.h>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -245,10 +245,12 @@ TEST_CASE("exported nets report bad inputs, and bad files are clear errors", "[n
   torch::jit::Module plain("__torch__.Plain");
   plain.register_buffer("x", torch::ones({1}));
   plain.save(tmp / "plain.pt");
-  CHECK_THROWS_WITH(lfnet::nn::load_script(tmp / "plain.pt"), Catch::Contains("without lfnet metadata"));
+  CHECK_THROWS_WITH(lfnet::nn::load_script(tmp / "plain.pt"),
+                    Catch::Contains("without lfnet metadata"));
   auto m = lfnet::nn::script_network(net, metadata_for(2));
   auto meta = nlohmann::json::parse(m.attr("metadata").toStringRef());
   meta["format_version"] = 99;
   m.save(tmp / "future.pt", {{lfnet::nn::kScriptMetadataFile, meta.dump()}});
-  CHECK_THROWS_WITH(lfnet::nn::load_script(tmp / "future.pt"), Catch::Contains("format version 99"));
+  CHECK_THROWS_WITH(lfnet::nn::load_script(tmp / "future.pt"),
+                    Catch::Contains("format version 99"));
 }

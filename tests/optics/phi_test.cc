@@ -213,7 +213,7 @@ TEST_CASE("ASP weights follow the documented formula", "[optics][asp]") {
   auto spec = spec_of("asp", 15);
   spec.params = {{"depth", 0.8}};
   auto w = make_phi(spec)->pixel_weights(2, 3, 1, 1, torch::kFloat64).view({15, 5, 5});
-  auto table = lfnet::optics::asp_table(5, 5, 15);
+  auto table = lfnet::optics::asp_table(5, 5, 15, false, 0.0, 90.0);  // the default pair
   auto want = torch::empty({15, 5, 5}, torch::kFloat64);
   for (int n = 0; n < 15; ++n) {
     for (int u = 0; u < 5; ++u) {
@@ -357,9 +357,11 @@ TEST_CASE("bad Phi specs are ConfigErrors that say what is wrong", "[optics][spe
 }
 
 TEST_CASE("an ASP quadrature pair is odd in the view angle and still sums to a pixel", "[optics]") {
-  lfnet::optics::PhiSpec even = lfnet::optics::PhiSpec::parse("asp:2");
-  lfnet::optics::PhiSpec odd = even;
-  odd.params = {{"pair_alpha", 90.0}};
+  // asp:2 is the quadrature pair; pair_alpha 0 gives the even one.
+  lfnet::optics::PhiSpec odd = lfnet::optics::PhiSpec::parse("asp:2");
+  lfnet::optics::PhiSpec even = odd;
+  even.params = {{"pair_alpha", 0.0}};
+  CHECK(lfnet::optics::make_phi(odd)->spec().params["pair_alpha"] == 90.0);
   auto we = lfnet::optics::make_phi(even)->pixel_weights(0, 0, 1, 1).squeeze(-1).squeeze(-1);
   auto wo = lfnet::optics::make_phi(odd)->pixel_weights(0, 0, 1, 1).squeeze(-1).squeeze(-1);
   // (N, U, V): the difference of the pair flips sign when theta does for the odd pair only.
@@ -375,4 +377,12 @@ TEST_CASE("an ASP quadrature pair is odd in the view angle and still sums to a p
   REQUIRE(full_odd.size() == full_even.size());
   CHECK(full_odd[0].alpha != full_even[0].alpha);
   CHECK_THROWS_AS(lfnet::optics::asp_table(5, 5, 2, false, 10.0, 0.0), lfnet::ConfigError);
+  // On 2 x 2 views the frequency along the rows is Nyquist, which has no odd row: asp:2 then
+  // takes the even pair, and its resolved spec says so.
+  auto column = lfnet::optics::PhiSpec::parse("asp:2");
+  column.rows = 2;
+  column.cols = 2;
+  CHECK(lfnet::optics::make_phi(column)->spec().params["pair_alpha"] == 0.0);
+  column.params = {{"pair_alpha", 90.0}};  // asked for explicitly: an error
+  CHECK_THROWS_AS(lfnet::optics::make_phi(column), lfnet::ConfigError);
 }

@@ -78,21 +78,22 @@ TEST_CASE("reconstruct_acquisition with pinv equals the solver run directly", "[
   const std::string acq = tmp / "acq";
   fs::create_directories(acq);
   io::write_sensor_images(acq, sensor);
-  write_json_file((fs::path(acq) / io::kSidecarName).string(),
-                  {{"format", io::kAcquisitionFormat},
-                   {"format_version", io::kAcquisitionFormatVersion},
-                   {"mode", "sensor"},
-                   {"phi", phi->spec().to_json()},
-                   {"light_field", {{"channels", 1}, {"rows", 5}, {"cols", 5}, {"height", 27}, {"width", 36}}},
-                   {"sensor", {{"files", io::sensor_file_names(1)}, {"channels_per_file", 2}, {"dtype", "float32"}}}});
+  write_json_file(
+      (fs::path(acq) / io::kSidecarName).string(),
+      {{"format", io::kAcquisitionFormat},
+       {"format_version", io::kAcquisitionFormatVersion},
+       {"mode", "sensor"},
+       {"phi", phi->spec().to_json()},
+       {"light_field", {{"channels", 1}, {"rows", 5}, {"cols", 5}, {"height", 27}, {"width", 36}}},
+       {"sensor",
+        {{"files", io::sensor_file_names(1)}, {"channels_per_file", 2}, {"dtype", "float32"}}}});
   pipeline::ReconstructRequest request;
   request.sensor = acq;
   request.method = "pinv";
   const auto r = pipeline::reconstruct_acquisition(request);
   recon::ReconstructOptions o = request.options;
-  const auto direct =
-      recon::reconstruct_sensor(*phi, io::read_acquisition(acq).sensor[0],
-                                recon::linear_solver(*phi, "pinv", 9, 9), o);
+  const auto direct = recon::reconstruct_sensor(*phi, io::read_acquisition(acq).sensor[0],
+                                                recon::linear_solver(*phi, "pinv", 9, 9), o);
   REQUIRE(r.lf.data().sizes() == direct.sizes());
   CHECK(torch::equal(r.lf.data(), direct));
   CHECK(r.record["method"] == "pinv");
@@ -100,11 +101,13 @@ TEST_CASE("reconstruct_acquisition with pinv equals the solver run directly", "[
   request.method = "dict";
   CHECK_THROWS_WITH(pipeline::reconstruct_acquisition(request), Catch::Contains("--dictionary"));
   request.method = "no-parallax";
-  CHECK_THROWS_WITH(pipeline::reconstruct_acquisition(request), Catch::Contains("true light field"));
+  CHECK_THROWS_WITH(pipeline::reconstruct_acquisition(request),
+                    Catch::Contains("true light field"));
   // Written by the output policy: never over its own input.
   OutputFolderPolicy policy;
   policy.inputs = {acq};
-  CHECK_THROWS_WITH(pipeline::write_reconstruction(r, acq, policy), Catch::Contains("is the input"));
+  CHECK_THROWS_WITH(pipeline::write_reconstruction(r, acq, policy),
+                    Catch::Contains("is the input"));
   pipeline::write_reconstruction(r, tmp / "rec", policy);
   CHECK(fs::exists(tmp.path() / "rec/reconstruction.json"));
 }

@@ -66,9 +66,10 @@ TEST_CASE("with a 1x1x1x1 kernel and non-overlapping patches, full equals patch 
   o.batch = 5;
   o.clamp = false;
   for (const auto& [branches, method, residual] :
-       std::vector<std::tuple<std::string, std::string, std::string>>{
-           {"net", "net", "none"}, {"net", "cnn", "pinv"}, {"cnn", "cnn", "adjoint"},
-           {"net", "net", "pinv"}}) {
+       std::vector<std::tuple<std::string, std::string, std::string>>{{"net", "net", "none"},
+                                                                      {"net", "cnn", "pinv"},
+                                                                      {"cnn", "cnn", "adjoint"},
+                                                                      {"net", "net", "pinv"}}) {
     INFO(branches << " " << method << " " << residual);
     auto net = make_net(*phi, 1, branches, residual);
     auto patches = recon::reconstruct_sensor(*phi, sensor, recon::network_solver(net, method), o);

@@ -73,7 +73,8 @@ TEST_CASE("a method registered from outside is listed and reconstructs", "[recon
   r.phi = phi.get();
   const auto sensor = optics::simulate_sensor(*phi, torch::rand({1, 5, 5, 18, 18})[0]);
   recon::ReconstructOptions o;
-  const auto est = recon::reconstruct_sensor(*phi, sensor, recon::make_solver("half-grey-test", r), o);
+  const auto est =
+      recon::reconstruct_sensor(*phi, sensor, recon::make_solver("half-grey-test", r), o);
   CHECK(est.sizes() == torch::IntArrayRef({1, 5, 5, 18, 18}));
   CHECK(est.min().item<float>() == Approx(0.5f));
   CHECK(est.max().item<float>() == Approx(0.5f));

@@ -1,5 +1,5 @@
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <cmath>
 
@@ -21,7 +21,9 @@ torch::Tensor smooth_field(int64_t h, int64_t w) {
   return torch::stack(views).view({1, 2, 2, h, w}).to(torch::kFloat32);
 }
 
-double rms(const torch::Tensor& t) { return std::sqrt(t.to(torch::kFloat64).pow(2).mean().item<double>()); }
+double rms(const torch::Tensor& t) {
+  return std::sqrt(t.to(torch::kFloat64).pow(2).mean().item<double>());
+}
 
 }  // namespace
 
@@ -31,7 +33,8 @@ TEST_CASE("the post-filter removes an artefact that repeats with the stride", "[
     torch::manual_seed(3);
     auto tile = torch::rand({5, 5}) - 0.5;
     tile -= tile.mean();
-    const auto pattern = 0.05 * tile.repeat({(h + 4) / 5, (w + 4) / 5}).slice(0, 0, h).slice(1, 0, w);
+    const auto pattern =
+        0.05 * tile.repeat({(h + 4) / 5, (w + 4) / 5}).slice(0, 0, h).slice(1, 0, w);
     const auto noisy = clean + pattern.view({1, 1, 1, h, w});
     const auto out = suppress_periodic(noisy, 5);
     REQUIRE(out.sizes() == noisy.sizes());

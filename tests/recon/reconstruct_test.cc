@@ -18,7 +18,8 @@ torch::Tensor smooth_lf(int64_t h, int64_t w) {
   auto lf = torch::empty({1, 5, 5, h, w});
   for (int64_t u = 0; u < 5; ++u) {
     for (int64_t v = 0; v < 5; ++v) {
-      lf[0][u][v] = base.slice(0, 4 + (u - 2), 4 + (u - 2) + h).slice(1, 4 + (v - 2), 4 + (v - 2) + w);
+      lf[0][u][v] =
+          base.slice(0, 4 + (u - 2), 4 + (u - 2) + h).slice(1, 4 + (v - 2), 4 + (v - 2) + w);
     }
   }
   return lf;
@@ -64,7 +65,8 @@ TEST_CASE("per-patch and sensor modes agree for a local Phi without noise", "[re
   auto solver = recon::linear_solver(*phi, "pinv", 9, 9);
   recon::ReconstructOptions o;
   auto source = [&](int64_t r0, int64_t r1) {
-    return optics::measure_patches(*phi, lf, grid, optics::SimulationMode::kPerPatch, {}, 0, r0, r1);
+    return optics::measure_patches(*phi, lf, grid, optics::SimulationMode::kPerPatch, {}, 0, r0,
+                                   r1);
   };
   auto per_patch = recon::reconstruct_patches(*phi, grid, source, solver, o);
   auto sensor = recon::reconstruct_sensor(*phi, optics::simulate_sensor(*phi, lf[0]), solver, o);

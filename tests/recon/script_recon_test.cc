@@ -33,9 +33,8 @@ nn::NetworkOptions small_options() {
 TEST_CASE("an exported net's reconstruct and simulate match lfnet's sensor pipeline",
           "[recon][script]") {
   lfnet::test::TempDir tmp;
-  const std::vector<Case> cases = {{"asp:2", {}, 17, 23, 3},
-                                   {"mask:2", {}, 21, 19, 4},
-                                   {"random:2", {{"block", 5}}, 20, 25, 5}};
+  const std::vector<Case> cases = {
+      {"asp:2", {}, 17, 23, 3}, {"mask:2", {}, 21, 19, 4}, {"random:2", {{"block", 5}}, 20, 25, 5}};
   int index = 0;
   for (const auto& c : cases) {
     INFO(c.phi);
@@ -73,13 +72,14 @@ TEST_CASE("an exported net's reconstruct and simulate match lfnet's sensor pipel
       o.window = window;
       o.clamp = false;
       auto want = recon::reconstruct_sensor(*phi, sensor, recon::network_solver(net, "net"), o)[0];
-      auto got = loaded.module.get_method("reconstruct")({sensor, c.stride, 7, window, false})
-                     .toTensor();
+      auto got =
+          loaded.module.get_method("reconstruct")({sensor, c.stride, 7, window, false}).toTensor();
       REQUIRE(got.sizes() == want.sizes());
       CHECK(want.std().item<double>() > 1e-3);
       test::require_close(got, want, 1e-5);
       // The solver that lfnet reconstruct runs on exported files gives the same.
-      auto via_solver = recon::reconstruct_sensor(*phi, sensor, recon::script_solver(loaded, "net"), o)[0];
+      auto via_solver =
+          recon::reconstruct_sensor(*phi, sensor, recon::script_solver(loaded, "net"), o)[0];
       test::require_close(via_solver, want, 1e-5);
     }
     // Clamped by default.

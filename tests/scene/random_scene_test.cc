@@ -130,10 +130,12 @@ TEST_CASE("random scene options are validated and parsed strictly", "[scene][ran
   CHECK(spec.layers.back().name.rfind("occluder", 0) == 0);
 }
 
-TEST_CASE("random scenes take regions of natural images as textures when asked", "[scene][random]") {
+TEST_CASE("random scenes take regions of natural images as textures when asked",
+          "[scene][random]") {
   lfnet::test::TempDir tmp;
   // Two "photographs" (only their names matter to the generator) and a stray file.
-  for (const char* name : {"b.png", "a.jpg", "notes.txt"}) lfnet::test::write_bytes(tmp / name, "x");
+  for (const char* name : {"b.png", "a.jpg", "notes.txt"})
+    lfnet::test::write_bytes(tmp / name, "x");
   RandomSceneOptions o;
   o.height = 48;
   o.width = 48;
@@ -179,10 +181,18 @@ TEST_CASE("an image texture's zoom and offset choose the region it shows", "[sce
   // A 1 x 100 ramp fitted to a 20-pixel-wide scene: zoom 2 shows half of it, offset -1 / +1
   // its left / right half.
   auto scene_json = [](double zoom, double offset) {
-    return nlohmann::json{{"height", 20}, {"width", 20}, {"rows", 1}, {"cols", 1}, {"color", false},
-                          {"layers", {{{"texture", {{"kind", "image"}, {"path", "ramp.png"},
-                                                    {"fit", "stretch"}, {"zoom", zoom},
-                                                    {"offset", {offset, 0.0}}}}}}}};
+    return nlohmann::json{{"height", 20},
+                          {"width", 20},
+                          {"rows", 1},
+                          {"cols", 1},
+                          {"color", false},
+                          {"layers",
+                           {{{"texture",
+                              {{"kind", "image"},
+                               {"path", "ramp.png"},
+                               {"fit", "stretch"},
+                               {"zoom", zoom},
+                               {"offset", {offset, 0.0}}}}}}}};
   };
   lfnet::scene::RenderOptions render;
   render.image_loader = [](const std::string&) {

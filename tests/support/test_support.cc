@@ -2,6 +2,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <sys/wait.h>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -9,7 +10,6 @@
 #include <iterator>
 #include <random>
 #include <sstream>
-#include <sys/wait.h>
 
 namespace lfnet::test {
 

@@ -1,7 +1,7 @@
 #include "lfnet/train/checkpoint.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -96,8 +96,8 @@ TEST_CASE("save then load gives identical outputs for every model", "[train][che
         o.residual = residual;
         o.ae.input = case_index % 2 ? "adjoint" : "measurements";
         LightFieldNet net(o);
-        net->set_phi(lfnet::test::gaussian_phi(phases, o.measurement_size(), o.patch.size(),
-                                               case_index));
+        net->set_phi(
+            lfnet::test::gaussian_phi(phases, o.measurement_size(), o.patch.size(), case_index));
         const auto path = dir / ("m" + std::to_string(case_index++) + ".ckpt");
         lfnet::train::save_checkpoint(checkpoint_of(net, {{"name", "random"}}), path);
         auto loaded = lfnet::train::build_net(lfnet::train::load_checkpoint(path));

@@ -37,8 +37,7 @@ torch::Tensor gaussian_phi(int64_t phases, int64_t m, int64_t d, uint64_t seed) 
   return torch::randn({phases, m, d}, gen) / std::sqrt(static_cast<double>(d));
 }
 
-torch::Tensor per_pixel_phi(int64_t phases, int64_t n, const nn::PatchShape& shape,
-                            uint64_t seed) {
+torch::Tensor per_pixel_phi(int64_t phases, int64_t n, const nn::PatchShape& shape, uint64_t seed) {
   auto gen = torch::make_generator<at::CPUGeneratorImpl>(seed);
   const int64_t views = shape.rows * shape.cols, pixels = shape.pixels();
   auto weights = torch::rand({phases, n, pixels, views}, gen) * (2.0 / views);
@@ -78,8 +77,8 @@ nn::NetworkOptions small_net_options(const std::string& branches) {
 }
 
 nlohmann::json synthetic_phi_spec(const std::string& name, int64_t n, uint64_t seed) {
-  return {{"name", name}, {"n", n}, {"rows", 3}, {"cols", 3}, {"seed", seed},
-          {"params", nlohmann::json::object()}};
+  return {{"name", name}, {"n", n},       {"rows", 3},
+          {"cols", 3},    {"seed", seed}, {"params", nlohmann::json::object()}};
 }
 
 }  // namespace lfnet::test

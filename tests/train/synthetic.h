@@ -1,8 +1,8 @@
 // Synthetic training data for the train tests: smooth patches with parallax and random Phis.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/torch.h>
+#include <nlohmann/json.hpp>
 
 #include <memory>
 
@@ -20,8 +20,7 @@ torch::Tensor gaussian_phi(int64_t phases, int64_t m, int64_t d, uint64_t seed);
 
 // A stack (P, N h w, U V h w) of per-pixel matrices: measurement n at pixel (y, x) weighs the
 // views of that pixel with random non-negative weights (like asp or a coded mask).
-torch::Tensor per_pixel_phi(int64_t phases, int64_t n, const nn::PatchShape& shape,
-                            uint64_t seed);
+torch::Tensor per_pixel_phi(int64_t phases, int64_t n, const nn::PatchShape& shape, uint64_t seed);
 
 // Measures `patches` with `phi` (phase i % P for patch i) and wraps them in a batch source.
 std::unique_ptr<train::InMemoryBatchSource> make_source(const torch::Tensor& patches,

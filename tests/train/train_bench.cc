@@ -93,18 +93,30 @@ int main(int argc, char** argv) {
       if (i + 1 >= argc) throw std::runtime_error(arg + " needs a value");
       return argv[++i];
     };
-    if (arg == "--threads") threads = std::stoi(next());
-    else if (arg == "--batch") batch = std::stoll(next());
-    else if (arg == "--conv-batch") conv_batch = std::stoll(next());
-    else if (arg == "--channels") channels = parse_list(next());
-    else if (arg == "--steps") steps = std::stoll(next());
-    else if (arg == "--skip-conv") skip_conv = true;
-    else if (arg == "--skip-train") skip_train = true;
-    else if (arg == "--thin") thin = true;
-    else if (arg == "--cpu-time") g_cpu_time = true;
-    else if (arg == "--reps") g_reps = std::stoi(next());
-    else if (arg == "--all-algorithms") all_algorithms = true;
-    else if (arg == "--json") json_path = next();
+    if (arg == "--threads")
+      threads = std::stoi(next());
+    else if (arg == "--batch")
+      batch = std::stoll(next());
+    else if (arg == "--conv-batch")
+      conv_batch = std::stoll(next());
+    else if (arg == "--channels")
+      channels = parse_list(next());
+    else if (arg == "--steps")
+      steps = std::stoll(next());
+    else if (arg == "--skip-conv")
+      skip_conv = true;
+    else if (arg == "--skip-train")
+      skip_train = true;
+    else if (arg == "--thin")
+      thin = true;
+    else if (arg == "--cpu-time")
+      g_cpu_time = true;
+    else if (arg == "--reps")
+      g_reps = std::stoi(next());
+    else if (arg == "--all-algorithms")
+      all_algorithms = true;
+    else if (arg == "--json")
+      json_path = next();
     else {
       std::fprintf(stderr, "unknown argument %s\n", arg.c_str());
       return 2;
@@ -149,9 +161,8 @@ int main(int argc, char** argv) {
           lfnet::nn::conv4d_u_major(x, w, b, algorithm);
         });
         // Backward of a conv: input and weight gradients, twice the forward FLOPs.
-        const double both = best_time([&] {
-          lfnet::nn::conv4d_u_major(x, w, b, algorithm).sum().backward();
-        });
+        const double both =
+            best_time([&] { lfnet::nn::conv4d_u_major(x, w, b, algorithm).sum().backward(); });
         std::printf("%3lld->%-3lld %-13s %10.3f %10.1f %12.3f %12.1f %6.2f\n",
                     static_cast<long long>(cin), static_cast<long long>(cout),
                     lfnet::nn::to_string(algorithm).c_str(), fwd, flops / fwd / 1e9, both,
@@ -173,8 +184,9 @@ int main(int argc, char** argv) {
     if (!json_path.empty()) std::ofstream(json_path) << report.dump(2) << "\n";
     return 0;
   }
-  std::printf("\nTraining steps (forward, weighted L2, backward, Adam), batch %lld, default sizes\n",
-              static_cast<long long>(batch));
+  std::printf(
+      "\nTraining steps (forward, weighted L2, backward, Adam), batch %lld, default sizes\n",
+      static_cast<long long>(batch));
   std::printf("%-5s %12s %10s %12s %14s %6s\n", "net", "parameters", "step s", "patches/s",
               "CNN GF/s", "util");
   lfnet::nn::NetworkOptions options;
@@ -198,11 +210,11 @@ int main(int argc, char** argv) {
                             }) /
                             static_cast<double>(n);
     const int64_t c = options.cnn.channels;
-    const double cnn_flops =
-        branches == "ae" ? 0.0
-                         : 3 * (lfnet::nn::conv4d_flops(batch, 1, c, 5, 5, 9, 9, 3) +
-                                3 * lfnet::nn::conv4d_flops(batch, c, c, 5, 5, 9, 9, 3) +
-                                lfnet::nn::conv4d_flops(batch, c, 1, 5, 5, 9, 9, 3));
+    const double cnn_flops = branches == "ae"
+                                 ? 0.0
+                                 : 3 * (lfnet::nn::conv4d_flops(batch, 1, c, 5, 5, 9, 9, 3) +
+                                        3 * lfnet::nn::conv4d_flops(batch, c, c, 5, 5, 9, 9, 3) +
+                                        lfnet::nn::conv4d_flops(batch, c, 1, 5, 5, 9, 9, 3));
     std::printf("%-5s %12lld %10.4f %12.1f %14.1f %6.2f\n", branches.c_str(),
                 static_cast<long long>(lfnet::nn::parameter_count(*net)), per_step,
                 static_cast<double>(batch) / per_step, cnn_flops / per_step / 1e9, g_util);
@@ -225,8 +237,8 @@ int main(int argc, char** argv) {
           per_pixel[0].index_put_({rows, cols}, torch::rand({pixels}) * (2.0 / views));
         }
       }
-      for (const auto& [label, stack] : {std::pair<std::string, torch::Tensor>{"dense", phi},
-                                         {"per-pixel", per_pixel}}) {
+      for (const auto& [label, stack] :
+           {std::pair<std::string, torch::Tensor>{"dense", phi}, {"per-pixel", per_pixel}}) {
         net->set_phi(stack);
         lfnet::train::Checkpoint ck;
         ck.network = options.to_json();
@@ -245,10 +257,11 @@ int main(int argc, char** argv) {
         lfnet::train::save_checkpoint(ck, path);
         const auto model_only = std::filesystem::file_size(path);
         std::filesystem::remove(path);
-        std::printf("checkpoint, %s Phi: full %.2f MB (save %.3f s, load %.3f s), model only "
-                    "%.2f MB\n",
-                    label.c_str(), static_cast<double>(full) / 1e6, save_s, load_s,
-                    static_cast<double>(model_only) / 1e6);
+        std::printf(
+            "checkpoint, %s Phi: full %.2f MB (save %.3f s, load %.3f s), model only "
+            "%.2f MB\n",
+            label.c_str(), static_cast<double>(full) / 1e6, save_s, load_s,
+            static_cast<double>(model_only) / 1e6);
         report["checkpoint"].push_back(
             {{"phi", label}, {"full_bytes", full}, {"model_only_bytes", model_only}});
       }

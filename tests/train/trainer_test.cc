@@ -1,7 +1,7 @@
 #include "lfnet/train/trainer.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <cmath>
 #include <filesystem>
@@ -16,8 +16,7 @@ using lfnet::train::TrainerOptions;
 
 namespace {
 
-TrainerOptions quick_options(const std::string& stage, const std::string& out_dir,
-                             int64_t epochs) {
+TrainerOptions quick_options(const std::string& stage, const std::string& out_dir, int64_t epochs) {
   TrainerOptions o;
   o.stage = stage;
   o.epochs = epochs;
@@ -107,9 +106,9 @@ TEST_CASE("trainer options parse strictly and name the bad field", "[train][trai
   CHECK(o.schedule.gamma == 0.5);
   CHECK(o.loss.name == "l1");
   CHECK(TrainerOptions::from_json(o.to_json()).to_json() == o.to_json());
-  CHECK_THROWS_WITH(TrainerOptions::from_json(nlohmann::json::parse(R"({"learning_rate": 1})"),
-                                              "$.train"),
-                    Catch::Contains("$.train.learning_rate"));
+  CHECK_THROWS_WITH(
+      TrainerOptions::from_json(nlohmann::json::parse(R"({"learning_rate": 1})"), "$.train"),
+      Catch::Contains("$.train.learning_rate"));
   CHECK_THROWS_WITH(TrainerOptions::from_json(nlohmann::json::parse(R"({"stage": "both"})")),
                     Catch::Contains("$.stage"));
   CHECK_THROWS_WITH(
@@ -117,9 +116,8 @@ TEST_CASE("trainer options parse strictly and name the bad field", "[train][trai
       Catch::Contains("$.schedule.name"));
   CHECK_THROWS_WITH(TrainerOptions::from_json(nlohmann::json::parse(R"({"lr": -1})")),
                     Catch::Contains("$.lr"));
-  CHECK_THROWS_WITH(
-      TrainerOptions::from_json(nlohmann::json::parse(R"({"loss": {"name": "l3"}})")),
-      Catch::Contains("$.loss.name"));
+  CHECK_THROWS_WITH(TrainerOptions::from_json(nlohmann::json::parse(R"({"loss": {"name": "l3"}})")),
+                    Catch::Contains("$.loss.name"));
 }
 
 TEST_CASE("the stage must match the net's branches", "[train][trainer]") {
@@ -157,12 +155,10 @@ TEST_CASE("training on synthetic patches reduces the validation loss", "[train][
   CHECK(last.patches_per_s > 0);
   CHECK(trainer.state().epoch == 8);
   CHECK(trainer.state().history.size() == 8);
-  CHECK(trainer.state().best_metric == Approx(std::max_element(records.begin(), records.end(),
-                                                               [](auto& a, auto& b) {
-                                                                 return a.val_psnr_db <
-                                                                        b.val_psnr_db;
-                                                               })
-                                                  ->val_psnr_db));
+  CHECK(trainer.state().best_metric ==
+        Approx(std::max_element(records.begin(), records.end(), [](auto& a, auto& b) {
+                 return a.val_psnr_db < b.val_psnr_db;
+               })->val_psnr_db));
 }
 
 TEST_CASE("two epochs equal one epoch, resume, one epoch, bit for bit", "[train][trainer]") {
@@ -315,7 +311,7 @@ TEST_CASE("the joint stage starts from two branch checkpoints", "[train][trainer
   const auto spec = lfnet::test::synthetic_phi_spec("random", 2, 20);
   std::map<std::string, LightFieldNet> branch_nets;
   for (const std::string stage : {"ae", "cnn"}) {
-    Trainer t(make_net(lfnet::test::small_net_options(stage), phi, 22), 
+    Trainer t(make_net(lfnet::test::small_net_options(stage), phi, 22),
               quick_options(stage, dir / stage, 1), run_info(spec));
     t.fit(*source);
     branch_nets.emplace(stage, t.net());

@@ -9,15 +9,16 @@
 
 #include <cmath>
 #include <filesystem>
-#include <iomanip>
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 
 namespace lfnet {
 
 JsonReader::JsonReader(const nlohmann::json& object, std::string path)
     : object_(object), path_(std::move(path)) {
-  if (!object_.is_object()) throw ConfigError(path_ + ": expected a JSON object, got " + object_.dump());
+  if (!object_.is_object())
+    throw ConfigError(path_ + ": expected a JSON object, got " + object_.dump());
 }
 
 JsonReader JsonReader::child(const std::string& key) {
@@ -27,8 +28,8 @@ JsonReader JsonReader::child(const std::string& key) {
   return JsonReader(*it, path_of(key));
 }
 
-void JsonReader::check_integer(const nlohmann::json& value, const std::string& path,
-                               long double lo, long double hi) {
+void JsonReader::check_integer(const nlohmann::json& value, const std::string& path, long double lo,
+                               long double hi) {
   long double v = 0;
   if (value.is_number_unsigned()) {
     v = static_cast<long double>(value.get<uint64_t>());

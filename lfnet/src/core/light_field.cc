@@ -16,8 +16,8 @@ LightField::LightField(torch::Tensor data) {
 }
 
 torch::Tensor LightField::view(int64_t u, int64_t v) const {
-  LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v,
-              ") outside the ", rows(), "x", cols(), " grid");
+  LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
+              rows(), "x", cols(), " grid");
   return data_.select(axis::kU, u).select(axis::kU, v);
 }
 
@@ -28,16 +28,16 @@ LightField LightField::grey() const {
 }
 
 LightField LightField::window(AngularRange u, AngularRange v) const {
-  LFNET_CHECK(u.begin >= 0 && u.end <= rows() && u.size() > 0 && v.begin >= 0 &&
-                  v.end <= cols() && v.size() > 0,
+  LFNET_CHECK(u.begin >= 0 && u.end <= rows() && u.size() > 0 && v.begin >= 0 && v.end <= cols() &&
+                  v.size() > 0,
               "angular window rows ", u.begin + 1, ":", u.end, ", columns ", v.begin + 1, ":",
               v.end, " (1-based) does not fit the ", rows(), "x", cols(), " grid");
   return LightField(data_.slice(axis::kU, u.begin, u.end).slice(axis::kV, v.begin, v.end));
 }
 
 LightField LightField::central(int64_t n) const {
-  LFNET_CHECK(n <= rows() && n <= cols(), "cannot take the central ", n, "x", n,
-              " views of a ", rows(), "x", cols(), " grid");
+  LFNET_CHECK(n <= rows() && n <= cols(), "cannot take the central ", n, "x", n, " views of a ",
+              rows(), "x", cols(), " grid");
   int64_t u0 = central_start(rows(), n);
   int64_t v0 = central_start(cols(), n);
   return window({u0, u0 + n}, {v0, v0 + n});

@@ -70,8 +70,8 @@ double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOpti
   auto y = (b.dim() == 2 ? b.unsqueeze(0) : b).to(torch::kFloat64);
   const auto radius = static_cast<int64_t>(options.truncate * options.sigma + 0.5);
   const int64_t win = 2 * radius + 1;
-  LFNET_CHECK(x.size(1) >= win && x.size(2) >= win, "SSIM needs images of at least ", win, "x",
-              win, " pixels, got ", x.size(1), "x", x.size(2));
+  LFNET_CHECK(x.size(1) >= win && x.size(2) >= win, "SSIM needs images of at least ", win, "x", win,
+              " pixels, got ", x.size(1), "x", x.size(2));
   const double np = static_cast<double>(win * win);
   const double cov_norm = options.sample_covariance ? np / (np - 1.0) : 1.0;
   const double c1 = std::pow(options.k1 * options.data_range, 2);

@@ -148,7 +148,8 @@ OutputLock::OutputLock(const std::string& output, const std::string& option) {
                      "another output");
       throw IoError("cannot lock " + path_ + ": " + std::strerror(why));
     }
-    struct stat held {}, named {};
+    struct stat held {
+    }, named{};
     if (::fstat(fd_, &held) == 0 && ::stat(path_.c_str(), &named) == 0 &&
         held.st_ino == named.st_ino && held.st_dev == named.st_dev) {
       return;

@@ -36,9 +36,9 @@ torch::Tensor covered(const std::vector<int64_t>& origins, int64_t begin, int64_
 
 torch::Tensor PatchGrid::extract(const torch::Tensor& lf, int64_t row_begin,
                                  int64_t row_end) const {
-  LFNET_CHECK(lf.dim() == axis::kRank && lf.size(axis::kH) == height_ &&
-                  lf.size(axis::kW) == width_,
-              "patch grid of ", height_, "x", width_, " applied to a light field of another size");
+  LFNET_CHECK(
+      lf.dim() == axis::kRank && lf.size(axis::kH) == height_ && lf.size(axis::kW) == width_,
+      "patch grid of ", height_, "x", width_, " applied to a light field of another size");
   LFNET_CHECK(row_begin >= 0 && row_begin <= row_end && row_end <= rows(), "patch rows [",
               row_begin, ", ", row_end, ") outside [0, ", rows(), ")");
   const int64_t c = lf.size(axis::kC), u = lf.size(axis::kU), v = lf.size(axis::kV);
@@ -57,9 +57,9 @@ Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_
     : grid_(grid), channels_(channels), rows_(rows), cols_(cols) {
   auto opts = torch::TensorOptions().dtype(torch::kFloat64);
   if (weight.defined()) {
-    LFNET_CHECK(weight.dim() == 2 && weight.size(0) == grid.patch_h() &&
-                    weight.size(1) == grid.patch_w(),
-                "stitching window must be (h, w) = (", grid.patch_h(), ", ", grid.patch_w(), ")");
+    LFNET_CHECK(
+        weight.dim() == 2 && weight.size(0) == grid.patch_h() && weight.size(1) == grid.patch_w(),
+        "stitching window must be (h, w) = (", grid.patch_h(), ", ", grid.patch_w(), ")");
     weight_ = weight.to(torch::kFloat64).reshape({-1}).contiguous();
   } else {
     weight_ = torch::ones({grid.patch_h() * grid.patch_w()}, opts);
@@ -85,8 +85,8 @@ void Stitcher::add(const torch::Tensor& patches, int64_t row_begin, int64_t row_
   LFNET_CHECK(patches.dim() == 5 && patches.size(0) == channels_ * ny * nx &&
                   patches.size(1) == rows_ && patches.size(2) == cols_ && patches.size(3) == h &&
                   patches.size(4) == w,
-              "stitching expected ", channels_ * ny * nx, " patches of ", rows_, "x", cols_, "x",
-              h, "x", w);
+              "stitching expected ", channels_ * ny * nx, " patches of ", rows_, "x", cols_, "x", h,
+              "x", w);
   auto idx = flat_indices(row_begin, row_end);
   // (C, ny, nx, U, V, h, w) -> (C, U, V, ny * nx * h * w), weighted
   auto src = patches.to(torch::kFloat64)

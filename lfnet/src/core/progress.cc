@@ -78,9 +78,9 @@ void ProgressBar::draw(bool force) {
   std::fprintf(stderr, "%s%s [%s] %lld/%lld %3.0f%% %.1f%s/s %s %s%s%s", tty_ ? "\r" : "",
                label_.c_str(), bar.c_str(), static_cast<long long>(done_),
                static_cast<long long>(total_), 100 * frac, rate,
-               unit_.empty() ? "" : (" " + unit_).c_str(),
-               done_ >= total_ ? "in" : "ETA", clock_text(done_ >= total_ ? elapsed : eta).c_str(),
-               note_.empty() ? "" : "  ", note_.c_str());
+               unit_.empty() ? "" : (" " + unit_).c_str(), done_ >= total_ ? "in" : "ETA",
+               clock_text(done_ >= total_ ? elapsed : eta).c_str(), note_.empty() ? "" : "  ",
+               note_.c_str());
   if (!tty_) std::fputc('\n', stderr);
   std::fflush(stderr);
 }

@@ -46,8 +46,8 @@ c10::Device parse_device(const std::string& name) {
   LFNET_CHECK_AS(ConfigError, name == "cpu" || cuda, "unknown device '", name,
                  "' (known: cpu, cuda, cuda:K)");
   if (!cuda) return c10::Device(c10::kCPU);
-  LFNET_CHECK_AS(ConfigError, torch::cuda::is_available(),
-                 "device '", name, "' asked for, but CUDA is not available (this LibTorch was "
+  LFNET_CHECK_AS(ConfigError, torch::cuda::is_available(), "device '", name,
+                 "' asked for, but CUDA is not available (this LibTorch was "
                  "built without CUDA or the machine has no GPU); use --device cpu");
   try {
     c10::Device device(name);

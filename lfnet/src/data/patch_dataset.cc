@@ -57,8 +57,17 @@ nlohmann::json DatasetOptions::to_json() const {
 
 void DatasetOptions::validate() const {
   if (patch_h < 1 || patch_w < 1) throw ConfigError("patch size must be positive");
-  if (train_patches < 1) throw ConfigError("train_patches must be at least 1");
-  if (validation_patches < 1) throw ConfigError("validation_patches must be at least 1");
+  // An epoch is drawn and simulated patch by patch: beyond these counts a run would take
+  // days per epoch on any machine, so they are refused rather than left to hang.
+  constexpr int64_t kMaxTrainPatches = 100'000'000, kMaxValidationPatches = 10'000'000;
+  if (train_patches < 1 || train_patches > kMaxTrainPatches) {
+    throw ConfigError("dataset.train_patches must be from 1 to 100,000,000 per epoch, got " +
+                      std::to_string(train_patches));
+  }
+  if (validation_patches < 1 || validation_patches > kMaxValidationPatches) {
+    throw ConfigError("dataset.validation_patches must be from 1 to 10,000,000, got " +
+                      std::to_string(validation_patches));
+  }
   if (!(validation_fraction > 0 && validation_fraction < 1)) {
     throw ConfigError("validation_fraction must lie in (0, 1)");
   }
@@ -126,8 +135,8 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
                    ") is too small for a train/validation split with ", options_.patch_h, "x",
                    options_.patch_w, " patches");
     split_row_.push_back(split);
-    train_weight_.push_back(static_cast<double>((split - options_.patch_h + 1) *
-                                                (lf.width() - options_.patch_w + 1)));
+    train_weight_.push_back(
+        static_cast<double>((split - options_.patch_h + 1) * (lf.width() - options_.patch_w + 1)));
   }
   if (phi_.local()) {
     weights_ = optics::pixel_weight_stack(phi_, options_.patch_h, options_.patch_w);
@@ -234,7 +243,8 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
   auto phase = torch::tensor(phases, torch::kInt64);
   torch::Tensor y;
   if (phi_.local()) {
-    // Each sensor pixel sums its own rays: y[b, n, y, x] = sum_uv W[phase_b, n, u, v, y, x] L[b, u, v, y, x].
+    // Each sensor pixel sums its own rays: y[b, n, y, x] = sum_uv W[phase_b, n, u, v, y, x] L[b, u,
+    // v, y, x].
     auto weights = weights_.index_select(0, phase);  // (B, N, U, V, h, w)
     y = (weights * target.unsqueeze(1)).sum({2, 3}).reshape({b, -1});
   } else {

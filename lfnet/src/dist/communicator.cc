@@ -37,7 +37,8 @@ int DistOptions::port() const {
 }
 
 void DistOptions::validate() const {
-  if (world_size < 1) throw ConfigError("world_size: must be >= 1, got " + std::to_string(world_size));
+  if (world_size < 1)
+    throw ConfigError("world_size: must be >= 1, got " + std::to_string(world_size));
   if (rank < 0 || rank >= world_size) {
     throw ConfigError("rank: must lie in [0, " + std::to_string(world_size - 1) + "], got " +
                       std::to_string(rank));
@@ -118,7 +119,8 @@ class GlooCommunicator : public Communicator {
       throw CommunicationError(where_ + ": the rendezvous at " + o.master + " failed within " +
                                std::to_string(o.timeout_s) +
                                " s (did every rank start, with the same --world-size and "
-                               "--master, and can this host reach it?): " + first_line(e.what()));
+                               "--master, and can this host reach it?): " +
+                               first_line(e.what()));
     }
   }
 
@@ -187,7 +189,8 @@ class GlooCommunicator : public Communicator {
     } catch (const std::exception& e) {
       throw CommunicationError(where_ + ": " + what +
                                " failed; another rank has died, stalled or failed (see its "
-                               "output): " + first_line(e.what()));
+                               "output): " +
+                               first_line(e.what()));
     }
   }
 

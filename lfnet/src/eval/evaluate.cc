@@ -11,7 +11,9 @@ namespace lfnet::eval {
 
 namespace {
 // PSNR may be +inf for a perfect view; JSON has no inf, so such values are written as null.
-nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+nlohmann::json finite_or_null(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
 
 nlohmann::json base_record(const optics::Phi& phi, const std::string& method, const EvalOptions& o,
                            int64_t patches, double seconds) {

@@ -24,11 +24,16 @@ namespace lfnet::io {
 
 std::string to_string(NamingScheme scheme) {
   switch (scheme) {
-    case NamingScheme::kHciCam: return "input_CamNNN (HCI)";
-    case NamingScheme::kRowCol: return "lf_R_C";
-    case NamingScheme::kTmRowCol: return "TM_RR_CC";
-    case NamingScheme::kNameRowCol: return "<name>_RR_CC";
-    case NamingScheme::kMitIndex: return "<name>-NN (MIT)";
+    case NamingScheme::kHciCam:
+      return "input_CamNNN (HCI)";
+    case NamingScheme::kRowCol:
+      return "lf_R_C";
+    case NamingScheme::kTmRowCol:
+      return "TM_RR_CC";
+    case NamingScheme::kNameRowCol:
+      return "<name>_RR_CC";
+    case NamingScheme::kMitIndex:
+      return "<name>-NN (MIT)";
   }
   return "unknown";
 }
@@ -54,8 +59,7 @@ struct Candidate {
 };
 
 FolderLayout layout_from_pairs(NamingScheme scheme, const std::vector<Candidate>& found,
-                               const std::string& dir, int64_t base,
-                               const std::string& example) {
+                               const std::string& dir, int64_t base, const std::string& example) {
   FolderLayout layout;
   layout.scheme = scheme;
   std::map<std::pair<int64_t, int64_t>, std::string> grid;
@@ -99,16 +103,16 @@ FolderLayout layout_from_index(NamingScheme scheme, std::vector<Candidate> found
     max_index = std::max(max_index, c.a - base);
   }
   const int64_t n = square_side(max_index + 1);
-  LFNET_CHECK_AS(IoError, n > 0, "light field folder ", dir, ": ", what, " views are numbered up to ",
-                 max_index + base, ", which is not a square grid");
+  LFNET_CHECK_AS(IoError, n > 0, "light field folder ", dir, ": ", what,
+                 " views are numbered up to ", max_index + base, ", which is not a square grid");
   FolderLayout layout;
   layout.scheme = scheme;
   layout.rows = layout.cols = n;
   for (int64_t i = 0; i < n * n; ++i) {
     auto it = by_index.find(i);
     LFNET_CHECK_AS(IoError, it != by_index.end(), "light field folder ", dir, " has a gap in its ",
-                   n, "x", n, " grid: the ", what, " view numbered ", i + base,
-                   " (row ", i / n + 1, ", column ", i % n + 1, ") is missing");
+                   n, "x", n, " grid: the ", what, " view numbered ", i + base, " (row ", i / n + 1,
+                   ", column ", i % n + 1, ") is missing");
     const int64_t row = rows_up ? n - 1 - i / n : i / n;
     layout.views.push_back({row, i % n, it->second});
   }
@@ -160,24 +164,28 @@ FolderLayout scan_folder(const std::string& dir) {
     }
   }
   if (found.empty()) {
-    throw IoError("no light field views found in " + dir +
-                  ": expected input_CamNNN.png, lf_R_C.png, TM_RR_CC.png, <name>_RR_CC.png (or -RR-CC) or "
-                  "<name>-NN.png files");
+    throw IoError(
+        "no light field views found in " + dir +
+        ": expected input_CamNNN.png, lf_R_C.png, TM_RR_CC.png, <name>_RR_CC.png (or -RR-CC) or "
+        "<name>-NN.png files");
   }
   if (found.size() > 1) {
     std::string schemes;
-    for (const auto& [scheme, files] : found) schemes += (schemes.empty() ? "" : ", ") + to_string(scheme);
+    for (const auto& [scheme, files] : found)
+      schemes += (schemes.empty() ? "" : ", ") + to_string(scheme);
     throw IoError("light field folder " + dir + " mixes naming schemes (" + schemes +
                   "): keep one light field per folder");
   }
   auto& [scheme, files] = *found.begin();
   switch (scheme) {
-    case NamingScheme::kHciCam: return layout_from_index(scheme, files, dir, 0, "input_Cam");
+    case NamingScheme::kHciCam:
+      return layout_from_index(scheme, files, dir, 0, "input_Cam");
     // The MIT archive's README places file 01 at camera Y = -2.5 cm and 21 at +2.5 cm with Y
     // growing upward: its first row of files is the bottom row of views.
     case NamingScheme::kMitIndex:
       return layout_from_index(scheme, files, dir, 1, "<name>-NN", /*rows_up=*/true);
-    case NamingScheme::kRowCol: return layout_from_pairs(scheme, files, dir, 1, "lf_%lld_%lld.png");
+    case NamingScheme::kRowCol:
+      return layout_from_pairs(scheme, files, dir, 1, "lf_%lld_%lld.png");
     case NamingScheme::kTmRowCol:
       return layout_from_pairs(scheme, files, dir, 1, "TM_%02lld_%02lld.png");
     case NamingScheme::kNameRowCol: {
@@ -240,9 +248,9 @@ LightField read_light_field(const std::string& dir, int threads) {
     if (images[i].sizes().vec() != ref) {
       auto s = images[i].sizes();
       throw IoError("view " + layout.views[i].path + " is " + std::to_string(s[2]) + "x" +
-                    std::to_string(s[1]) + " with " + std::to_string(s[0]) +
-                    " channels, but " + layout.views[0].path + " is " + std::to_string(ref[2]) +
-                    "x" + std::to_string(ref[1]) + " with " + std::to_string(ref[0]) +
+                    std::to_string(s[1]) + " with " + std::to_string(s[0]) + " channels, but " +
+                    layout.views[0].path + " is " + std::to_string(ref[2]) + "x" +
+                    std::to_string(ref[1]) + " with " + std::to_string(ref[0]) +
                     ": every view must have the same size and channels");
     }
   }
@@ -250,7 +258,6 @@ LightField read_light_field(const std::string& dir, int threads) {
   auto stacked = torch::stack(images, 0).view({layout.rows, layout.cols, ref[0], ref[1], ref[2]});
   return LightField(stacked.permute({2, 0, 1, 3, 4}).contiguous());
 }
-
 
 void write_image(const std::string& path, const torch::Tensor& image, int bits) {
   LFNET_CHECK(image.dim() == 2 || image.dim() == 3, "write_image takes (H, W) or (C, H, W)");
@@ -280,8 +287,8 @@ void write_light_field(const LightField& lf, const std::string& dir, const Write
                  ec.message());
   for (int64_t u = 0; u < lf.rows(); ++u) {
     for (int64_t v = 0; v < lf.cols(); ++v) {
-      auto name = "lf_" + std::to_string(u + 1) + "_" + std::to_string(v + 1) + "." +
-                  options.extension;
+      auto name =
+          "lf_" + std::to_string(u + 1) + "_" + std::to_string(v + 1) + "." + options.extension;
       write_image((fs::path(dir) / name).string(), lf.view(u, v), options.bits);
     }
   }
@@ -292,7 +299,8 @@ torch::Tensor grid_image(const LightField& lf, int64_t gap) {
   auto out = torch::ones({c, u * (h + gap) - gap, v * (w + gap) - gap});
   for (int64_t i = 0; i < u; ++i) {
     for (int64_t j = 0; j < v; ++j) {
-      out.slice(1, i * (h + gap), i * (h + gap) + h).slice(2, j * (w + gap), j * (w + gap) + w)
+      out.slice(1, i * (h + gap), i * (h + gap) + h)
+          .slice(2, j * (w + gap), j * (w + gap) + w)
           .copy_(lf.view(i, j));
     }
   }
@@ -338,8 +346,8 @@ torch::Tensor read_pfm(const std::string& path) {
   const auto header_end = static_cast<int64_t>(in.tellg());
   std::error_code ec;
   const auto file_size = static_cast<int64_t>(fs::file_size(path, ec));
-  LFNET_CHECK_AS(IoError, !ec && w <= file_size && h <= file_size &&
-                              w * h * c * 4 <= file_size - header_end,
+  LFNET_CHECK_AS(IoError,
+                 !ec && w <= file_size && h <= file_size && w * h * c * 4 <= file_size - header_end,
                  "PFM file ", path, " is truncated: its header claims ", w, "x", h, "x", c,
                  " floats, more than the file holds");
   auto data = torch::empty({h, w, c}, torch::kFloat32);

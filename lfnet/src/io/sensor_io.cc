@@ -42,7 +42,8 @@ void check_png_complete(const std::string& path) {
   unsigned char head[8] = {}, tail[12] = {};
   if (!in.read(reinterpret_cast<char*>(head), 8) || std::memcmp(head, kSignature, 8) != 0) return;
   in.seekg(-12, std::ios::end);
-  const bool complete = in.read(reinterpret_cast<char*>(tail), 12) && std::memcmp(tail, kEnd, 12) == 0;
+  const bool complete =
+      in.read(reinterpret_cast<char*>(tail), 12) && std::memcmp(tail, kEnd, 12) == 0;
   LFNET_CHECK_AS(IoError, complete, "cannot read image ", path,
                  ": the PNG file is truncated (it does not end with an IEND chunk)");
 }
@@ -85,8 +86,8 @@ torch::Tensor read_image_channels(const std::string& path) {
   LFNET_CHECK_AS(IoError, h > 0 && w > 0 && nc > 0, "image ", path, " is empty");
   // A corrupt header can claim any size: refuse what no light field view needs before
   // allocating it.
-  LFNET_CHECK_AS(IoError, nc <= 64 && h * w <= image_value_limit() / nc, "image ", path,
-                 " claims ", w, "x", h, " pixels with ", nc,
+  LFNET_CHECK_AS(IoError, nc <= 64 && h * w <= image_value_limit() / nc, "image ", path, " claims ",
+                 w, "x", h, " pixels with ", nc,
                  " channels, more than lfnet reads (corrupt header?)");
   auto pixels = torch::empty({h, w, nc}, torch::kFloat32);
   if (!input->read_image(0, 0, 0, static_cast<int>(nc), OIIO::TypeDesc::FLOAT,

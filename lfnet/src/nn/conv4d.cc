@@ -20,16 +20,20 @@ Conv4dAlgorithm parse_conv4d_algorithm(const std::string& name) {
 
 std::string to_string(Conv4dAlgorithm algorithm) {
   switch (algorithm) {
-    case Conv4dAlgorithm::kStacked: return "stacked";
-    case Conv4dAlgorithm::kFusedOutput: return "fused_output";
-    case Conv4dAlgorithm::kFusedInput: return "fused_input";
-    case Conv4dAlgorithm::kAuto: return "auto";
+    case Conv4dAlgorithm::kStacked:
+      return "stacked";
+    case Conv4dAlgorithm::kFusedOutput:
+      return "fused_output";
+    case Conv4dAlgorithm::kFusedInput:
+      return "fused_input";
+    case Conv4dAlgorithm::kAuto:
+      return "auto";
   }
   return "?";
 }
 
-double conv4d_flops(int64_t batch, int64_t in_channels, int64_t out_channels, int64_t u,
-                    int64_t v, int64_t h, int64_t w, int64_t kernel) {
+double conv4d_flops(int64_t batch, int64_t in_channels, int64_t out_channels, int64_t u, int64_t v,
+                    int64_t h, int64_t w, int64_t kernel) {
   const double k2 = static_cast<double>(kernel * kernel);
   return 2.0 * static_cast<double>(batch * u * v * h * w) *
          static_cast<double>(in_channels * out_channels) * k2 * k2;
@@ -104,8 +108,8 @@ torch::Tensor fused_output(const torch::Tensor& x, const torch::Tensor& weight,
   // (Cout, Cin, Ku, ...) -> (Ku * Cout, Cin, Kv, Kh, Kw): output block i is offset i along u.
   auto wk = weight.permute({2, 0, 1, 3, 4, 5}).reshape({k * cout, cin, k, k, k});
   auto y = conv3d(x.reshape(in_shape), wk, {}, p).view(y_shape);
-  auto out = bias.defined() ? y.select(2, p) + bias.view({1, 1, cout, 1, 1, 1})
-                            : y.select(2, p).clone();
+  auto out =
+      bias.defined() ? y.select(2, p) + bias.view({1, 1, cout, 1, 1, 1}) : y.select(2, p).clone();
   for (int64_t i = 0; i < k; ++i) {
     if (i != p) add_shifted(out, y.select(2, i), i - p);
   }
@@ -147,14 +151,17 @@ torch::Tensor conv4d_u_major(const torch::Tensor& x, const torch::Tensor& weight
                              const torch::Tensor& bias, Conv4dAlgorithm algorithm) {
   check_arguments(x, weight, bias);
   switch (resolve_conv4d_algorithm(algorithm, weight.size(1), weight.size(0))) {
-    case Conv4dAlgorithm::kStacked: return stacked(x, weight, bias);
-    case Conv4dAlgorithm::kFusedOutput: return fused_output(x, weight, bias);
-    default: return fused_input(x, weight, bias);
+    case Conv4dAlgorithm::kStacked:
+      return stacked(x, weight, bias);
+    case Conv4dAlgorithm::kFusedOutput:
+      return fused_output(x, weight, bias);
+    default:
+      return fused_input(x, weight, bias);
   }
 }
 
-torch::Tensor conv4d(const torch::Tensor& x, const torch::Tensor& weight,
-                     const torch::Tensor& bias, Conv4dAlgorithm algorithm) {
+torch::Tensor conv4d(const torch::Tensor& x, const torch::Tensor& weight, const torch::Tensor& bias,
+                     Conv4dAlgorithm algorithm) {
   LFNET_CHECK(x.dim() == 6, "conv4d: input must be 6-D (B, Cin, U, V, h, w), got ", x.sizes());
   return conv4d_u_major(x.transpose(1, 2), weight, bias, algorithm).transpose(1, 2).contiguous();
 }

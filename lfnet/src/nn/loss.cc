@@ -53,9 +53,7 @@ void LossOptions::read(JsonReader& reader) {
   }
 }
 
-nlohmann::json LossOptions::to_json() const {
-  return {{"name", name}, {"reduction", reduction}};
-}
+nlohmann::json LossOptions::to_json() const { return {{"name", name}, {"reduction", reduction}}; }
 
 void LossOptions::validate() const {
   kind();
@@ -90,8 +88,7 @@ torch::Tensor ReconstructionLoss::operator()(const torch::Tensor& prediction,
                                              const torch::Tensor& target) const {
   LFNET_CHECK(prediction.sizes() == target.sizes(), "loss: prediction ", prediction.sizes(),
               " and target ", target.sizes(), " differ in shape");
-  LFNET_CHECK(prediction.dim() >= 5 && prediction.size(-4) == rows_ &&
-                  prediction.size(-3) == cols_,
+  LFNET_CHECK(prediction.dim() >= 5 && prediction.size(-4) == rows_ && prediction.size(-3) == cols_,
               "loss: expected patches (B, ..., ", rows_, ", ", cols_, ", h, w), got ",
               prediction.sizes());
   auto diff = prediction - target;

@@ -88,15 +88,9 @@ void NetworkOptions::read(JsonReader& reader) {
 }
 
 nlohmann::json NetworkOptions::to_json() const {
-  return {{"patch", patch.to_json()},
-          {"measurements", measurements},
-          {"branches", branches},
-          {"kernel", kernel},
-          {"conv_algorithm", conv_algorithm},
-          {"ae", ae.to_json()},
-          {"cnn", cnn.to_json()},
-          {"head_weights", head_weights},
-          {"residual", residual},
+  return {{"patch", patch.to_json()},  {"measurements", measurements},     {"branches", branches},
+          {"kernel", kernel},          {"conv_algorithm", conv_algorithm}, {"ae", ae.to_json()},
+          {"cnn", cnn.to_json()},      {"head_weights", head_weights},     {"residual", residual},
           {"pinv_lambda", pinv_lambda}};
 }
 
@@ -154,8 +148,8 @@ AutoencoderBranchImpl::AutoencoderBranchImpl(const NetworkOptions& options)
   widths.insert(widths.end(), options.ae.hidden.begin(), options.ae.hidden.end());
   widths.push_back(options.patch.size());
   for (size_t i = 0; i + 1 < widths.size(); ++i) {
-    fc.push_back(register_module("fc" + std::to_string(i + 1),
-                                 torch::nn::Linear(widths[i], widths[i + 1])));
+    fc.push_back(
+        register_module("fc" + std::to_string(i + 1), torch::nn::Linear(widths[i], widths[i + 1])));
   }
   Conv4dOptions conv_options;
   conv_options.kernel = options.kernel;
@@ -278,10 +272,10 @@ LightFieldNetImpl::LightFieldNetImpl(NetworkOptions options) : options_(std::mov
 void LightFieldNetImpl::set_phi(const torch::Tensor& stack) {
   const int64_t m = options_.measurement_size(), d = options_.patch.size();
   LFNET_CHECK(stack.dim() == 3 && stack.size(0) >= 1 && stack.size(1) == m && stack.size(2) == d,
-              "set_phi: expected patch matrices (P, ", m, ", ", d, ") for N = ",
-              options_.measurements, " and a ", options_.patch.rows, "x", options_.patch.cols,
-              "x", options_.patch.height, "x", options_.patch.width, " patch, got ",
-              stack.sizes());
+              "set_phi: expected patch matrices (P, ", m, ", ", d,
+              ") for N = ", options_.measurements, " and a ", options_.patch.rows, "x",
+              options_.patch.cols, "x", options_.patch.height, "x", options_.patch.width,
+              " patch, got ", stack.sizes());
   LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
                  "set_phi: the patch matrices contain NaN or inf");
   torch::NoGradGuard no_grad;
@@ -307,10 +301,10 @@ torch::Tensor LightFieldNetImpl::check_phase(const torch::Tensor& y,
                 " phases; give the phase of every patch");
     return {};
   }
-  LFNET_CHECK(phase.dim() == 1 && phase.size(0) == y.size(0) &&
-                  phase.scalar_type() == torch::kInt64,
-              "LightFieldNet: phase must be (", y.size(0), ") int64, got ", phase.sizes(), " ",
-              phase.scalar_type());
+  LFNET_CHECK(
+      phase.dim() == 1 && phase.size(0) == y.size(0) && phase.scalar_type() == torch::kInt64,
+      "LightFieldNet: phase must be (", y.size(0), ") int64, got ", phase.sizes(), " ",
+      phase.scalar_type());
   if (phase.numel() > 0) {
     const auto lo = phase.min().item<int64_t>(), hi = phase.max().item<int64_t>();
     LFNET_CHECK(lo >= 0 && hi < phases(), "LightFieldNet: phases must lie in [0, ", phases(),
@@ -350,7 +344,8 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   if (out.ae.defined() && out.cnn.defined()) {
     const double a = options_.head_weights[0], b = options_.head_weights[1];
     // One fused kernel: lerp(cnn, ae, a) = (1 - a) cnn + a ae when the weights sum to 1.
-    out.output = a + b == 1.0 ? torch::lerp(out.cnn, out.ae, a) : torch::add(out.cnn * b, out.ae, a);
+    out.output =
+        a + b == 1.0 ? torch::lerp(out.cnn, out.ae, a) : torch::add(out.cnn * b, out.ae, a);
   } else {
     out.output = out.ae.defined() ? out.ae : out.cnn;
   }
@@ -370,8 +365,8 @@ double cnn_patch_flops(const NetworkOptions& o) {
   const int64_t c = o.cnn.channels;
   double flops = 0;
   for (int64_t i = 0; i < o.cnn.depth; ++i) {
-    flops += conv4d_flops(1, i == 0 ? 1 : c, i + 1 == o.cnn.depth ? 1 : c, p.rows, p.cols,
-                              p.height, p.width, o.kernel);
+    flops += conv4d_flops(1, i == 0 ? 1 : c, i + 1 == o.cnn.depth ? 1 : c, p.rows, p.cols, p.height,
+                          p.width, o.kernel);
   }
   return flops;
 }

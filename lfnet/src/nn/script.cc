@@ -307,7 +307,8 @@ std::string network_source(const NetworkOptions& o) {
     }
     s << "    s = self.patch_shape\n"
       << "    x = x.view([b, 1, s[0], s[1], s[2], s[3]])\n"
-      << "    z = " << conv_call(resolve_conv4d_algorithm(algorithm, 1, 1), "x.transpose(1, 2)", "self.ae.conv")
+      << "    z = "
+      << conv_call(resolve_conv4d_algorithm(algorithm, 1, 1), "x.transpose(1, 2)", "self.ae.conv")
       << "\n    return z.transpose(1, 2).contiguous()\n\n";
   }
   if (o.has_cnn()) {
@@ -330,7 +331,9 @@ std::string network_source(const NetworkOptions& o) {
     << "    shape = [y.size(0), 1, ps[0], ps[1], ps[2], ps[3]]\n"
     << "    parts: Dict[str, Tensor] = {}\n";
   if (need_adjoint) s << "    x0 = self._adjoint(y, ph)\n";
-  if (o.has_ae()) s << "    ae = self._ae(" << (o.ae.input == "adjoint" ? "x0" : "y") << ")\n    parts[\"ae\"] = ae\n";
+  if (o.has_ae())
+    s << "    ae = self._ae(" << (o.ae.input == "adjoint" ? "x0" : "y")
+      << ")\n    parts[\"ae\"] = ae\n";
   if (o.has_cnn()) s << "    cnn = self._cnn(x0.view(shape))\n    parts[\"cnn\"] = cnn\n";
   if (o.has_ae() && o.has_cnn()) {
     const double a = o.head_weights[0], b = o.head_weights[1];
@@ -370,7 +373,8 @@ std::string register_stack(jit::Module& m, const std::string& name, const std::s
   }
   m.register_buffer(name + "_index", index.to(torch::kInt32).contiguous());
   m.register_buffer(name + "_values", flat.index_select(0, index).contiguous());
-  m.register_attribute(name + "_shape", c10::ListType::ofInts(), c10::List<int64_t>(t.sizes().vec()));
+  m.register_attribute(name + "_shape", c10::ListType::ofInts(),
+                       c10::List<int64_t>(t.sizes().vec()));
   m.register_attribute(name + "_cache", c10::OptionalType::create(c10::TensorType::get()),
                        c10::IValue());
   s << "    cached = self." << name << "_cache\n"
@@ -402,9 +406,9 @@ struct ScriptResolver : jit::Resolver {
 // TorchScript source compiled from C++ has no Python `torch` module to take dtypes from; in
 // compiled code a dtype is its ScalarType number, so the names are replaced by those.
 std::string with_dtypes(std::string source) {
-  const std::pair<const char*, torch::ScalarType> names[] = {
-      {"torch.int64", torch::kInt64}, {"torch.float32", torch::kFloat32},
-      {"torch.float64", torch::kFloat64}};
+  const std::pair<const char*, torch::ScalarType> names[] = {{"torch.int64", torch::kInt64},
+                                                             {"torch.float32", torch::kFloat32},
+                                                             {"torch.float64", torch::kFloat64}};
   for (const auto& [name, type] : names) {
     const std::string value = std::to_string(static_cast<int>(type));
     for (auto at = source.find(name); at != std::string::npos; at = source.find(name, at)) {
@@ -470,8 +474,8 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
     if (path.empty()) return root;
     auto it = children.find(path);
     if (it == children.end()) {
-      it = children.emplace(path, jit::Module(c10::QualifiedName(class_name(path)), cu, true))
-               .first;
+      it =
+          children.emplace(path, jit::Module(c10::QualifiedName(class_name(path)), cu, true)).first;
     }
     return it->second;
   };
@@ -523,8 +527,7 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
   return root;
 }
 
-void export_network(const LightFieldNet& net, const ScriptMetadata& meta,
-                    const std::string& path) {
+void export_network(const LightFieldNet& net, const ScriptMetadata& meta, const std::string& path) {
   auto module = script_network(net, meta);
   write_file_atomically(path, [&](const std::string& tmp) {
     try {

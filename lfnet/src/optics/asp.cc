@@ -80,8 +80,8 @@ AspRow row_of(const Frequency& f, double alpha, const char* role) {
 
 }  // namespace
 
-std::vector<AspRow> asp_table(int64_t rows, int64_t cols, int64_t n, bool pairs,
-                              double pair_gamma, double pair_alpha) {
+std::vector<AspRow> asp_table(int64_t rows, int64_t cols, int64_t n, bool pairs, double pair_gamma,
+                              double pair_alpha) {
   LFNET_CHECK_AS(ConfigError, rows >= 1 && cols >= 1, "asp needs at least one view, got ", rows,
                  "x", cols);
   LFNET_CHECK_AS(ConfigError, n >= 1 && n <= rows * cols, "asp on ", rows, "x", cols,
@@ -168,19 +168,14 @@ AspParams AspParams::read(JsonReader& r) {
 }
 
 nlohmann::json AspParams::to_json() const {
-  return {{"depth", depth},
-          {"aperture", aperture},
-          {"radius", radius},
-          {"edge", edge},
-          {"layout", layout},
-          {"pair_gamma", pair_gamma},
-          {"pair_alpha", pair_alpha}};
+  return {{"depth", depth},   {"aperture", aperture},     {"radius", radius},        {"edge", edge},
+          {"layout", layout}, {"pair_gamma", pair_gamma}, {"pair_alpha", pair_alpha}};
 }
 
 torch::Tensor asp_weights(const PhiSpec& spec, const AspParams& params) {
   const int64_t u_n = spec.rows, v_n = spec.cols;
-  const auto table = asp_table(u_n, v_n, spec.n, params.layout == "pairs", params.pair_gamma,
-                               params.pair_alpha);
+  const auto table =
+      asp_table(u_n, v_n, spec.n, params.layout == "pairs", params.pair_gamma, params.pair_alpha);
   auto angle = [](int64_t i, int64_t count) {
     return count > 1 ? -1.0 + 2.0 * static_cast<double>(i) / static_cast<double>(count - 1) : 0.0;
   };

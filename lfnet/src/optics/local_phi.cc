@@ -89,8 +89,8 @@ torch::Tensor tikhonov_pinv(const torch::Tensor& a, double lambda) {
 
 void check_code_size(const PhiSpec& spec, int64_t values, const std::string& what) {
   constexpr int64_t kMaxValues = int64_t{1} << 27;
-  LFNET_CHECK_AS(ConfigError, values <= kMaxValues, "Phi '", spec.label(), "' on ", spec.rows,
-                 "x", spec.cols, " views needs ", what, " of ", values,
+  LFNET_CHECK_AS(ConfigError, values <= kMaxValues, "Phi '", spec.label(), "' on ", spec.rows, "x",
+                 spec.cols, " views needs ", what, " of ", values,
                  " values, more than the 2^27 lfnet builds: use fewer views, measurements or a "
                  "smaller period");
 }

@@ -38,11 +38,10 @@ PhiSpec PhiSpec::from_json(const nlohmann::json& j, const std::string& path) {
                    ": expected a JSON object of model parameters");
   }
   r.finish();
-  LFNET_CHECK_AS(ConfigError,
-                 spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews &&
-                     spec.cols <= kMaxViews,
-                 path, ": rows and cols must be in 1..", kMaxViews, ", got ", spec.rows, "x",
-                 spec.cols);
+  LFNET_CHECK_AS(
+      ConfigError,
+      spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews && spec.cols <= kMaxViews, path,
+      ": rows and cols must be in 1..", kMaxViews, ", got ", spec.rows, "x", spec.cols);
   LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.rows * spec.cols, r.path_of("n"),
                  ": N must be in 1..", spec.rows * spec.cols, " (U V) for ", spec.rows, "x",
                  spec.cols, " views, got ", spec.n);
@@ -145,10 +144,11 @@ std::unique_ptr<Phi> make_phi(const PhiSpec& spec) {
     for (const auto& name : phi_names()) known += (known.empty() ? "" : ", ") + name;
     throw ConfigError("unknown Phi model '" + spec.name + "' (known: " + known + ")");
   }
-  LFNET_CHECK_AS(ConfigError, spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews &&
-                                  spec.cols <= kMaxViews,
-                 "Phi '", spec.label(), "': the angular grid must be 1x1 to ", kMaxViews, "x",
-                 kMaxViews, ", got ", spec.rows, "x", spec.cols);
+  LFNET_CHECK_AS(
+      ConfigError,
+      spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews && spec.cols <= kMaxViews, "Phi '",
+      spec.label(), "': the angular grid must be 1x1 to ", kMaxViews, "x", kMaxViews, ", got ",
+      spec.rows, "x", spec.cols);
   LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.rows * spec.cols, "Phi '", spec.label(),
                  "': N must be in 1..", spec.rows * spec.cols, " for ", spec.rows, "x", spec.cols,
                  " views");

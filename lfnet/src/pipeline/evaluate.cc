@@ -37,8 +37,8 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   const auto& phi = *context.phi;
   eval::EvalResult result;
   std::shared_ptr<recon::SolverReport> report;  // iterative methods: non-convergence
-  const std::string label = method + " " + truth.name + " stride " +
-                            std::to_string(options.reconstruct.stride);
+  const std::string label =
+      method + " " + truth.name + " stride " + std::to_string(options.reconstruct.stride);
   const auto needs = recon::find_method(method).needs();
   if (needs == recon::MethodNeeds::kTruth) {
     result = eval::evaluate_no_parallax(truth.lf, phi, options);
@@ -51,7 +51,8 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     resources.script = context.script.get();
     ModelCache local;
     if (needs == recon::MethodNeeds::kDictionary && !context.dictionary.empty()) {
-      resources.dictionary = &(context.cache ? *context.cache : local).dictionary(context.dictionary);
+      resources.dictionary =
+          &(context.cache ? *context.cache : local).dictionary(context.dictionary);
       resources.coding.method = context.dict_method;
       report = std::make_shared<recon::SolverReport>();
       resources.report = report;

@@ -43,7 +43,8 @@ void apply_override(nlohmann::json& config, const std::string& text) {
   size_t start = 0;
   while (true) {
     const size_t dot = key.find('.', start);
-    const std::string part = key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+    const std::string part =
+        key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
     LFNET_CHECK_AS(ConfigError, !part.empty(), "--set ", text, ": empty key in '", key, "'");
     LFNET_CHECK_AS(ConfigError, node->is_object(), "--set ", text, ": $.",
                    key.substr(0, start ? start - 1 : 0), " is not an object");
@@ -166,7 +167,8 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
       d.get("sampling", sampling);
       d.get("ksvd", ksvd);
       d.finish();
-      c.dictionary_sampling = dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
+      c.dictionary_sampling =
+          dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
       c.dictionary_ksvd = dict::KsvdOptions::from_json(ksvd, "$.dictionary.ksvd");
     }
     if (r.has("evaluation")) {

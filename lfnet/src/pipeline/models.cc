@@ -1,6 +1,8 @@
 #include "lfnet/pipeline/models.h"
 
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -11,10 +13,29 @@ namespace fs = std::filesystem;
 
 namespace lfnet::pipeline {
 
+ModelFileKind model_file_kind(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  LFNET_CHECK_AS(IoError, in.good(), "cannot read ", path, ": no such file or not readable");
+  char head[8] = {0};
+  in.read(head, 8);
+  if (in.gcount() == 8 && std::memcmp(head, "LFNETCKP", 8) == 0) return ModelFileKind::kCheckpoint;
+  if (in.gcount() < 4 || std::memcmp(head, "PK\x03\x04", 4) != 0) return ModelFileKind::kOther;
+  // Dictionaries and exported models are both zip archives: a dictionary loads as one.
+  try {
+    (void)dict::load_dictionary(path);
+    return ModelFileKind::kDictionary;
+  } catch (const Error&) {
+    return ModelFileKind::kExported;
+  }
+}
+
 ModelFile load_model(const std::string& path, bool network) {
   ModelFile model;
   model.path = path;
-  model.scripted = nn::is_script_file(path);
+  const auto kind = model_file_kind(path);
+  LFNET_CHECK_AS(ConfigError, kind != ModelFileKind::kDictionary, "--model ", path,
+                 " is a dictionary (for --method dict): give it as --dictionary");
+  model.scripted = kind == ModelFileKind::kExported;
   if (model.scripted) {
     model.script = std::make_shared<nn::ScriptedNetwork>(nn::load_script(path));
     model.phi = model.script->meta.phi;
@@ -57,6 +78,11 @@ ModelFile& ModelCache::model(const std::string& path) {
 const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   auto it = dictionaries_.find(path);
   if (it == dictionaries_.end()) {
+    const auto kind = model_file_kind(path);
+    LFNET_CHECK_AS(ConfigError, kind != ModelFileKind::kCheckpoint && kind != ModelFileKind::kExported,
+                   "--dictionary ", path, " is a ",
+                   kind == ModelFileKind::kCheckpoint ? "network checkpoint" : "exported network",
+                   ": give it as --model (with --method net, ae or cnn)");
     it = dictionaries_.emplace(path, dict::load_dictionary(path)).first;
     ++loads_;
   }
@@ -78,8 +104,8 @@ optics::PhiSpec phi_from_argument(const std::string& text, const std::string& op
   try {
     model = load_model(text, /*network=*/false);
   } catch (const Error& e) {
-    throw ConfigError(option + " " + text + ": neither NAME[:N], a Phi spec (.json) nor a model: " +
-                      e.what());
+    throw ConfigError(option + " " + text +
+                      ": neither NAME[:N], a Phi spec (.json) nor a model: " + e.what());
   }
   return optics::PhiSpec::from_json(model.phi, text + ":$.phi");
 }

@@ -41,7 +41,8 @@ io::Acquisition plain_sensor_acquisition(const std::string& files, const optics:
   acq.meta = {{"phi", spec.to_json()},
               {"mode", "sensor"},
               {"light_field",
-               {{"channels", acq.sensor.size(0)}, {"height", acq.sensor.size(2)},
+               {{"channels", acq.sensor.size(0)},
+                {"height", acq.sensor.size(2)},
                 {"width", acq.sensor.size(3)}}}};
   return acq;
 }
@@ -49,8 +50,7 @@ io::Acquisition plain_sensor_acquisition(const std::string& files, const optics:
 }  // namespace
 
 Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
-                                       const recon::ProgressCallback& progress,
-                                       ModelCache* cache) {
+                                       const recon::ProgressCallback& progress, ModelCache* cache) {
   const std::string method = a.method;
   const auto needs = recon::find_method(method).needs();
   LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kTruth, method,
@@ -135,13 +135,13 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
       auto sensor = acq.sensor[ch].clone();
       if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
       if (full) {
-        channels.push_back(recon::reconstruct_sensor_fully_convolutional(
-            model->net, method, *phi, sensor, o, a.tile));
+        channels.push_back(recon::reconstruct_sensor_fully_convolutional(model->net, method, *phi,
+                                                                         sensor, o, a.tile));
         if (progress) progress((ch + 1) * per_channel, c * per_channel);
         continue;
       }
-      channels.push_back(recon::reconstruct_sensor(
-          *phi, sensor, solver, o, [&](int64_t done, int64_t total) {
+      channels.push_back(
+          recon::reconstruct_sensor(*phi, sensor, solver, o, [&](int64_t done, int64_t total) {
             if (progress) progress(ch * per_channel + done, c * total);
           }));
     }

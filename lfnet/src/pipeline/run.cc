@@ -36,8 +36,10 @@ ExperimentConfig resolve_request(const TrainRequest& r) {
                  " is not a file: give a checkpoint");
   ExperimentConfig config;
   if (resumes_folder(r)) {
-    LFNET_CHECK_AS(ConfigError, r.scale.empty() && r.set.empty(), "--scale and --set apply to "
-                   "a new run; a resumed run keeps the config in ", r.resume, "/config.json");
+    LFNET_CHECK_AS(ConfigError, r.scale.empty() && r.set.empty(),
+                   "--scale and --set apply to "
+                   "a new run; a resumed run keeps the config in ",
+                   r.resume, "/config.json");
     config = ExperimentConfig::load_run(r.resume);
     LFNET_CHECK_AS(ConfigError, r.out.empty() || fs::equivalent(r.out, r.resume), "--out ", r.out,
                    " differs from the run folder --resume ", r.resume, " continues");
@@ -66,7 +68,8 @@ std::string run_folder(const TrainRequest& r, const ExperimentConfig& config) {
   return r.out.empty() ? "out/" + config.name : r.out;
 }
 
-TrainResult train_experiment(const TrainRequest& request, std::shared_ptr<dist::Communicator> comm) {
+TrainResult train_experiment(const TrainRequest& request,
+                             std::shared_ptr<dist::Communicator> comm) {
   if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
   const bool lead = comm->rank() == 0;
   ExperimentConfig config = resolve_request(request);
@@ -124,7 +127,8 @@ TrainResult train_experiment(const TrainRequest& request, std::shared_ptr<dist::
       continue;
     }
     if (!is_network_stage(stage.name)) {
-      LFNET_CHECK_AS(ConfigError, (request.resume.empty() || continue_folder) && request.init.empty(),
+      LFNET_CHECK_AS(ConfigError,
+                     (request.resume.empty() || continue_folder) && request.init.empty(),
                      "--resume and --init apply to network stages, not to '", stage.name, "'");
       LFNET_CHECK_AS(ConfigError, comm->world_size() == 1, "the '", stage.name,
                      "' stage does not train data-parallel: train it in one process (--stage ",
@@ -188,9 +192,9 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
             patch.height = config.dataset.patch_h;
             patch.width = config.dataset.patch_w;
             const eval::EvalOptions defaults;
-            const auto o = make_eval_options(mode, noise, defaults.seed, stride,
-                                             defaults.reconstruct.batch,
-                                             defaults.reconstruct.window, patch);
+            const auto o =
+                make_eval_options(mode, noise, defaults.seed, stride, defaults.reconstruct.batch,
+                                  defaults.reconstruct.window, patch);
             auto record = evaluate_method(truth, method, context, o);
             record["experiment"] = config.name;
             record["scale"] = config.scale;

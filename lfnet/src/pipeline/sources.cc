@@ -32,9 +32,13 @@ void LightFieldSources::read(JsonReader& r) {
 }
 
 nlohmann::json LightFieldSources::to_json() const {
-  return {{"light_fields", light_fields}, {"scenes", scenes},
-          {"random_scenes", random_scenes}, {"random_seed", random_seed},
-          {"random_options", random_options}, {"views", views}, {"orient", orient}};
+  return {{"light_fields", light_fields},
+          {"scenes", scenes},
+          {"random_scenes", random_scenes},
+          {"random_seed", random_seed},
+          {"random_options", random_options},
+          {"views", views},
+          {"orient", orient}};
 }
 
 LightField read_oriented(const std::string& dir, const std::string& orient,
@@ -47,17 +51,18 @@ LightField read_oriented(const std::string& dir, const std::string& orient,
     static std::set<std::string> warned;
     std::lock_guard<std::mutex> lock(mutex);
     if (warned.insert(fs::absolute(dir).lexically_normal().string()).second) {
-      spdlog::warn("{}: {}; if its views are named from the bottom row, load it with {} flip-u "
-                   "(docs/conventions.md)",
-                   dir, check.summary(), what);
+      spdlog::warn(
+          "{}: {}; if its views are named from the bottom row, load it with {} flip-u "
+          "(docs/conventions.md)",
+          dir, check.summary(), what);
     }
   }
   return lf;
 }
 
 namespace {
-LightField select_views(const LightField& lf, const std::string& views, int64_t rows,
-                        int64_t cols, const std::string& name) {
+LightField select_views(const LightField& lf, const std::string& views, int64_t rows, int64_t cols,
+                        const std::string& name) {
   LightField out;
   if (views.empty()) {
     LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, name, " has ", lf.rows(),
@@ -68,8 +73,8 @@ LightField select_views(const LightField& lf, const std::string& views, int64_t 
     auto [ru, rv] = parse_views(views);
     out = lf.window(ru, rv);
     LFNET_CHECK_AS(ConfigError, out.rows() == rows && out.cols() == cols, "views ", views,
-                   " select ", out.rows(), "x", out.cols(), " views but the Phi codes ", rows,
-                   "x", cols);
+                   " select ", out.rows(), "x", out.cols(), " views but the Phi codes ", rows, "x",
+                   cols);
   }
   return out.grey();
 }
@@ -88,8 +93,8 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
                      "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
       out.push_back({fs::path(dir).filename().string(), lf.grey()});
     } else {
-      out.push_back({fs::path(dir).filename().string(),
-                     select_views(lf, sources.views, rows, cols, dir)});
+      out.push_back(
+          {fs::path(dir).filename().string(), select_views(lf, sources.views, rows, cols, dir)});
     }
     bar.advance();
   }

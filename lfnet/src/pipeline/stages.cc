@@ -21,8 +21,8 @@ namespace lfnet::pipeline {
 
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi) {
-  auto named = load_sources(config.train_data, phi.rows(), phi.cols(),
-                            config.dataset.needs_whole_grids());
+  auto named =
+      load_sources(config.train_data, phi.rows(), phi.cols(), config.dataset.needs_whole_grids());
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
   for (auto& n : named) lfs.push_back(n.lf);
@@ -32,8 +32,7 @@ std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
 std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
                         data::PatchDataset& dataset, const std::string& run_dir,
                         const std::string& init, const std::string& resume,
-                        const std::string& command_line,
-                        std::shared_ptr<dist::Communicator> comm,
+                        const std::string& command_line, std::shared_ptr<dist::Communicator> comm,
                         const std::function<void()>& on_saved) {
   if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
   const bool lead = comm->rank() == 0;
@@ -43,7 +42,10 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   options.out_dir = stage_dir;
   // LibTorch seeds its default generator from the OS: seed it from the config, so the same
   // config gives the same initial weights and a run is reproducible (docs/robustness.md).
-  const uint64_t stage_code = stage.name == "ae" ? 1 : stage.name == "cnn" ? 2 : stage.name == "joint" ? 3 : 4;
+  const uint64_t stage_code = stage.name == "ae"      ? 1
+                              : stage.name == "cnn"   ? 2
+                              : stage.name == "joint" ? 3
+                                                      : 4;
   torch::manual_seed(config.dataset.seed * 16 + stage_code);
   nn::LightFieldNet net(config.stage_network(stage));
   net->set_phi(optics::patch_matrix_stack(*phi, config.dataset.patch_h, config.dataset.patch_w));
@@ -100,9 +102,10 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
   auto sampling = config.dictionary_sampling;
   sampling.views = config.phi.rows;
   sampling.patch_size = config.dataset.patch_h;
-  LFNET_CHECK_AS(ConfigError, config.phi.rows == config.phi.cols &&
-                                  config.dataset.patch_h == config.dataset.patch_w,
-                 "the dict stage needs square views and patches");
+  LFNET_CHECK_AS(
+      ConfigError,
+      config.phi.rows == config.phi.cols && config.dataset.patch_h == config.dataset.patch_w,
+      "the dict stage needs square views and patches");
   const auto named = load_sources(config.train_data, config.phi.rows, config.phi.cols);
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
@@ -117,7 +120,8 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
   nlohmann::json history = nlohmann::json::array();
   auto result = dict::ksvd(patches, ksvd, [&](const dict::KsvdIteration& it) {
     bar.advance(1);
-    history.push_back({{"iteration", it.iteration}, {"coding_rmse", it.coding_rmse},
+    history.push_back({{"iteration", it.iteration},
+                       {"coding_rmse", it.coding_rmse},
                        {"updated_rmse", it.updated_rmse}});
     append_jsonl((fs::path(run_dir) / "training.jsonl").string(),
                  nlohmann::json{{"stage", "dict"}, {"record", history.back()}});
@@ -126,11 +130,12 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
   bar.finish();
   dict::Dictionary d;
   d.atoms = result.dictionary.to(torch::kFloat32).contiguous();
-  d.patch_shape = {config.phi.rows, config.phi.cols, config.dataset.patch_h, config.dataset.patch_w};
+  d.patch_shape = {config.phi.rows, config.phi.cols, config.dataset.patch_h,
+                   config.dataset.patch_w};
   nlohmann::json sources = nlohmann::json::array();
   for (const auto& n : named) sources.push_back(n.name);
-  d.training = {{"ksvd", ksvd.to_json()},     {"sampling", sampling.to_json()},
-                {"light_fields", sources},    {"history", history},
+  d.training = {{"ksvd", ksvd.to_json()},       {"sampling", sampling.to_json()},
+                {"light_fields", sources},      {"history", history},
                 {"command_line", command_line}, {"seconds", clock.seconds()}};
   const std::string target = (fs::path(run_dir) / "models" / "dict.ckpt").string();
   dict::save_dictionary(d, target);

@@ -37,12 +37,13 @@ torch::Tensor cnn_over_light_field(nn::CnnBranch cnn, const torch::Tensor& x, in
       const int64_t tw = std::min(tile, width - x0);
       const int64_t ph = th + 2 * halo, pw = tw + 2 * halo;
       // u-major (1, U, C = 1, V, h, w)
-      auto z = padded.narrow(2, y0, ph).narrow(3, x0, pw).unsqueeze(0).unsqueeze(2).to(device, dtype);
+      auto z =
+          padded.narrow(2, y0, ph).narrow(3, x0, pw).unsqueeze(0).unsqueeze(2).to(device, dtype);
       // 1 inside the light field, 0 outside: activations there must act as zero padding.
       auto mask =
           inside.narrow(0, y0, ph).narrow(1, x0, pw).to(device, dtype).view({1, 1, 1, 1, ph, pw});
-      const bool at_border = y0 < halo || x0 < halo || y0 + th + halo > height ||
-                             x0 + tw + halo > width;
+      const bool at_border =
+          y0 < halo || x0 < halo || y0 + th + halo > height || x0 + tw + halo > width;
       for (size_t i = 0; i < cnn->convs.size(); ++i) {
         z = cnn->convs[i]->forward_u_major(z);
         if (i + 1 < cnn->convs.size()) {
@@ -50,28 +51,24 @@ torch::Tensor cnn_over_light_field(nn::CnnBranch cnn, const torch::Tensor& x, in
           if (at_border) z.mul_(mask);
         }
       }
-      out.narrow(2, y0, th)
-          .narrow(3, x0, tw)
-          .copy_(z.squeeze(2).squeeze(0).narrow(2, halo, th).narrow(3, halo, tw));
+      out.narrow(2, y0, th).narrow(3, x0, tw).copy_(
+          z.squeeze(2).squeeze(0).narrow(2, halo, th).narrow(3, halo, tw));
     }
   }
   return out;
 }
 
-torch::Tensor reconstruct_sensor_fully_convolutional(nn::LightFieldNet net,
-                                                     const std::string& method,
-                                                     const optics::Phi& phi,
-                                                     const torch::Tensor& sensor,
-                                                     const ReconstructOptions& options,
-                                                     int64_t tile) {
+torch::Tensor reconstruct_sensor_fully_convolutional(
+    nn::LightFieldNet net, const std::string& method, const optics::Phi& phi,
+    const torch::Tensor& sensor, const ReconstructOptions& options, int64_t tile) {
   options.validate();
   LFNET_CHECK_AS(ConfigError, method == "net" || method == "cnn",
                  "a fully convolutional CNN pass needs the method net or cnn, not '", method, "'");
   const auto& o = net->options();
   LFNET_CHECK_AS(ConfigError, o.has_cnn(), "the model was trained as '", o.branches,
                  "' and has no CNN branch to run fully convolutionally");
-  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != "ae", "the model has no '",
-                 method, "' branch");
+  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != "ae", "the model has no '", method,
+                 "' branch");
   net->eval();
   // Everything here is inference: the tensors made under the guard are updated in place.
   torch::InferenceMode inference;
@@ -81,8 +78,7 @@ torch::Tensor reconstruct_sensor_fully_convolutional(nn::LightFieldNet net,
   // The CNN's input: the stitched scaled adjoint of the patches.
   PatchSolver adjoint = [&](const torch::Tensor& y, const torch::Tensor& phase) {
     torch::InferenceMode guard;
-    return net->adjoint(y.to(device), phase.defined() ? phase.to(device) : phase)
-        .to(torch::kCPU);
+    return net->adjoint(y.to(device), phase.defined() ? phase.to(device) : phase).to(torch::kCPU);
   };
   auto x0 = reconstruct_sensor(phi, sensor, adjoint, raw);  // (1, U, V, H, W)
   const double cnn_weight = method == "net" && o.branches == "net" ? o.head_weights[1] : 1.0;

@@ -82,8 +82,8 @@ PatchSolver make_solver(const std::string& name, const MethodResources& resource
   LFNET_CHECK(resources.phi != nullptr, "method '", name, "' without a Phi");
   switch (method.needs()) {
     case MethodNeeds::kNetwork:
-      LFNET_CHECK_AS(ConfigError, resources.script || !resources.net.is_empty(), "method '",
-                     name, "' needs a trained model: give --model");
+      LFNET_CHECK_AS(ConfigError, resources.script || !resources.net.is_empty(), "method '", name,
+                     "' needs a trained model: give --model");
       break;
     case MethodNeeds::kDictionary:
       LFNET_CHECK_AS(ConfigError, resources.dictionary != nullptr, "method '", name,

@@ -58,11 +58,11 @@ PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& di
                               int64_t patch_w, std::shared_ptr<SolverReport> report) {
   dictionary.validate();
   const std::array<int64_t, 4> shape{phi.rows(), phi.cols(), patch_h, patch_w};
-  LFNET_CHECK_AS(ConfigError, dictionary.patch_shape == shape,
-                 "the dictionary's atoms are ", dictionary.patch_shape[0], "x",
-                 dictionary.patch_shape[1], "x", dictionary.patch_shape[2], "x",
-                 dictionary.patch_shape[3], " patches, but the reconstruction uses ", phi.rows(),
-                 "x", phi.cols(), "x", patch_h, "x", patch_w);
+  LFNET_CHECK_AS(ConfigError, dictionary.patch_shape == shape, "the dictionary's atoms are ",
+                 dictionary.patch_shape[0], "x", dictionary.patch_shape[1], "x",
+                 dictionary.patch_shape[2], "x", dictionary.patch_shape[3],
+                 " patches, but the reconstruction uses ", phi.rows(), "x", phi.cols(), "x",
+                 patch_h, "x", patch_w);
   auto matrices = optics::patch_matrix_stack(phi, patch_h, patch_w);
   auto coder = std::make_shared<dict::SparseCoder>(dictionary.atoms, options);
   return [matrices, coder, report](const torch::Tensor& y, const torch::Tensor& phase) {

@@ -15,15 +15,13 @@ void ReconstructOptions::validate() const {
   if (stride < 1 || stride > side) {
     // A stride beyond the patch would leave pixels between patches that no patch covers.
     throw ConfigError("stride must lie in 1.." + std::to_string(side) + " (the " +
-                      std::to_string(patch_h) + "x" + std::to_string(patch_w) +
-                      " patch), got " + std::to_string(stride));
+                      std::to_string(patch_h) + "x" + std::to_string(patch_w) + " patch), got " +
+                      std::to_string(stride));
   }
   if (batch < 1) throw ConfigError("batch must be at least 1, got " + std::to_string(batch));
 }
 
-namespace {
-
-}  // namespace
+namespace {}  // namespace
 
 torch::Tensor by_phase(const torch::Tensor& x, const torch::Tensor& phase, int64_t out_dim,
                        const std::function<torch::Tensor(const torch::Tensor&, int64_t)>& fn) {

@@ -1,9 +1,9 @@
 #include "lfnet/scene/random_scene.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
-#include <cctype>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -345,7 +345,8 @@ std::vector<std::string> texture_image_files(const std::vector<std::string>& pat
   namespace fs = std::filesystem;
   auto is_image = [](const fs::path& f) {
     std::string ext = f.extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
     return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff";
   };
   std::vector<std::string> files;
@@ -371,8 +372,9 @@ std::vector<std::string> texture_image_files(const std::vector<std::string>& pat
 
 SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& o) {
   o.validate();
-  const std::vector<std::string> images =
-      o.image_probability > 0.0 ? texture_image_files(o.texture_images) : std::vector<std::string>{};
+  const std::vector<std::string> images = o.image_probability > 0.0
+                                              ? texture_image_files(o.texture_images)
+                                              : std::vector<std::string>{};
   Rng rng(detail::derive_seed(seed, 0x72616e646f6dULL));
   SceneSpec s;
   s.name = "random-" + std::to_string(seed);

@@ -227,9 +227,9 @@ torch::Tensor image_texture(const TextureSpec& t, const Canvas& canvas, bool col
   const double out_w = static_cast<double>(canvas.image_width);
   const double out_h = static_cast<double>(canvas.image_height);
   // Shrinking: average integer blocks first, so that bilinear sampling does not alias.
-  const double shrink = std::min(static_cast<double>(img.size(2)) / out_w,
-                                  static_cast<double>(img.size(1)) / out_h) /
-                         t.zoom;
+  const double shrink =
+      std::min(static_cast<double>(img.size(2)) / out_w, static_cast<double>(img.size(1)) / out_h) /
+      t.zoom;
   const auto pool = static_cast<int64_t>(std::floor(shrink));
   if (pool >= 2) img = torch::avg_pool2d(img.unsqueeze(0), pool).squeeze(0);
   img = img.contiguous();

@@ -14,14 +14,14 @@ void BatchSource::set_shard(int64_t rank, int64_t world) {
                  "this batch source cannot be split across ranks (world size ", world, ")");
 }
 
-InMemoryBatchSource::InMemoryBatchSource(torch::Tensor y, torch::Tensor phase,
-                                         torch::Tensor target, double validation_fraction,
-                                         uint64_t seed, int64_t validation_batch_size)
+InMemoryBatchSource::InMemoryBatchSource(torch::Tensor y, torch::Tensor phase, torch::Tensor target,
+                                         double validation_fraction, uint64_t seed,
+                                         int64_t validation_batch_size)
     : y_(std::move(y)), phase_(std::move(phase)), target_(std::move(target)), seed_(seed) {
-  LFNET_CHECK(y_.dim() == 2 && target_.dim() == 6 && target_.size(0) == y_.size(0) &&
-                  target_.size(1) == 1,
-              "InMemoryBatchSource: expected y (n, N h w) and target (n, 1, U, V, h, w), got ",
-              y_.sizes(), " and ", target_.sizes());
+  LFNET_CHECK(
+      y_.dim() == 2 && target_.dim() == 6 && target_.size(0) == y_.size(0) && target_.size(1) == 1,
+      "InMemoryBatchSource: expected y (n, N h w) and target (n, 1, U, V, h, w), got ", y_.sizes(),
+      " and ", target_.sizes());
   LFNET_CHECK(!phase_.defined() || (phase_.dim() == 1 && phase_.size(0) == y_.size(0) &&
                                     phase_.scalar_type() == torch::kInt64),
               "InMemoryBatchSource: phase must be (n) int64");
@@ -37,7 +37,8 @@ InMemoryBatchSource::InMemoryBatchSource(torch::Tensor y, torch::Tensor phase,
   order_ = train_index_;
   auto val_index = std::get<0>(perm.narrow(0, 0, n_val).sort());  // validation in data order
   for (int64_t i = 0; i < n_val; i += validation_batch_size) {
-    validation_.push_back(gather(val_index.narrow(0, i, std::min(validation_batch_size, n_val - i))));
+    validation_.push_back(
+        gather(val_index.narrow(0, i, std::min(validation_batch_size, n_val - i))));
   }
 }
 

@@ -53,12 +53,18 @@ T get_at(const std::string& in, size_t offset) {
 
 std::string dtype_name(torch::ScalarType t) {
   switch (t) {
-    case torch::kFloat32: return "float32";
-    case torch::kFloat64: return "float64";
-    case torch::kInt64: return "int64";
-    case torch::kInt32: return "int32";
-    case torch::kUInt8: return "uint8";
-    default: break;
+    case torch::kFloat32:
+      return "float32";
+    case torch::kFloat64:
+      return "float64";
+    case torch::kInt64:
+      return "int64";
+    case torch::kInt32:
+      return "int32";
+    case torch::kUInt8:
+      return "uint8";
+    default:
+      break;
   }
   throw Error(std::string("checkpoint: cannot store tensors of type ") + c10::toString(t));
 }
@@ -89,8 +95,8 @@ void append_bytes(std::string& payload, const torch::Tensor& t, nlohmann::json& 
 // Appends `t` to the payload and returns its header record.
 nlohmann::json encode(const std::string& name, const torch::Tensor& tensor, std::string& payload) {
   auto t = tensor.detach().to(torch::kCPU).contiguous();
-  nlohmann::json record = {{"name", name}, {"dtype", dtype_name(t.scalar_type())},
-                           {"shape", t.sizes().vec()}};
+  nlohmann::json record = {
+      {"name", name}, {"dtype", dtype_name(t.scalar_type())}, {"shape", t.sizes().vec()}};
   const bool is_float = t.scalar_type() == torch::kFloat32 || t.scalar_type() == torch::kFloat64;
   if (is_float && t.numel() >= kSparseMinNumel) {
     // Non-zero by bit pattern, so -0.0 survives the round trip.
@@ -206,11 +212,11 @@ TrainingState TrainingState::from_json(const nlohmann::json& j) {
 
 // ---- file ----------------------------------------------------------------------------------
 
-
 void save_checkpoint(const Checkpoint& checkpoint, const std::string& path) {
   std::string payload;
   nlohmann::json records = nlohmann::json::array();
-  for (const auto& [name, t] : checkpoint.model) records.push_back(encode("model/" + name, t, payload));
+  for (const auto& [name, t] : checkpoint.model)
+    records.push_back(encode("model/" + name, t, payload));
   for (const auto& [name, t] : checkpoint.optimizer) {
     records.push_back(encode("optimizer/" + name, t, payload));
   }
@@ -265,8 +271,7 @@ Checkpoint load_checkpoint(const std::string& path) {
   const auto version = get_at<uint32_t>(file, 8);
   if (version != kCheckpointFormatVersion) {
     throw CheckpointError(where + " has format version " + std::to_string(version) +
-                          "; this lfnet reads version " +
-                          std::to_string(kCheckpointFormatVersion) +
+                          "; this lfnet reads version " + std::to_string(kCheckpointFormatVersion) +
                           (version > kCheckpointFormatVersion ? " (it was written by a newer lfnet)"
                                                               : " (re-train or convert it)"));
   }
@@ -344,8 +349,8 @@ void check_architecture(const nn::LightFieldNet& net, const TensorMap& state,
     // The Phi buffers may hold another number of phases.
     if (is_phi_buffer(name) && !want.empty() && want.size() == got.size()) want[0] = got[0];
     if (want != got) {
-      problems.push_back(name + " is " + shape_text(it->second.sizes()) +
-                         " there but " + shape_text(t.sizes()) + " here");
+      problems.push_back(name + " is " + shape_text(it->second.sizes()) + " there but " +
+                         shape_text(t.sizes()) + " here");
     }
   };
   for (const auto& p : net->named_parameters()) compare(p.key(), p.value());

@@ -34,9 +34,7 @@ std::string param_key(const torch::Tensor& p) {
   return c10::guts::to_string(p.unsafeGetTensorImpl());
 }
 
-std::string branches_of_stage(const std::string& stage) {
-  return stage == "joint" ? "net" : stage;
-}
+std::string branches_of_stage(const std::string& stage) { return stage == "joint" ? "net" : stage; }
 
 // The global L2 norm of the gradients (NaN or inf when any is).
 double gradient_norm(const torch::nn::Module& module) {
@@ -48,7 +46,9 @@ double gradient_norm(const torch::nn::Module& module) {
   return std::sqrt(total.item<double>());
 }
 
-bool all_finite(const torch::Tensor& t) { return !t.defined() || torch::isfinite(t).all().item<bool>(); }
+bool all_finite(const torch::Tensor& t) {
+  return !t.defined() || torch::isfinite(t).all().item<bool>();
+}
 
 std::string format_double(double v) {
   std::ostringstream out;
@@ -180,12 +180,11 @@ void TrainerOptions::validate() const {
   if (max_skipped_batches < 0) fail("max_skipped_batches", "must be >= 0");
 }
 
-double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch,
-                     int64_t batches) {
+double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch, int64_t batches) {
   const auto& s = options.schedule;
-  const double progress = (static_cast<double>(epoch) +
-                           static_cast<double>(batch) / static_cast<double>(batches)) /
-                          static_cast<double>(options.epochs);
+  const double progress =
+      (static_cast<double>(epoch) + static_cast<double>(batch) / static_cast<double>(batches)) /
+      static_cast<double>(options.epochs);
   double factor = 1.0;
   if (s.name == "step") {
     factor = std::pow(s.gamma, static_cast<double>(epoch / s.step_epochs));
@@ -409,12 +408,9 @@ Checkpoint Trainer::checkpoint() const {
   ck.command_line = run_.command_line;
   ck.model = module_state(*net_);
   ck.optimizer = adam_state(*optimizer_, *net_);
-  ck.optimizer_options = {{"type", "adam"},
-                          {"lr", options_.lr},
-                          {"beta1", options_.beta1},
-                          {"beta2", options_.beta2},
-                          {"eps", options_.eps},
-                          {"weight_decay", options_.weight_decay}};
+  ck.optimizer_options = {{"type", "adam"},          {"lr", options_.lr},
+                          {"beta1", options_.beta1}, {"beta2", options_.beta2},
+                          {"eps", options_.eps},     {"weight_decay", options_.weight_decay}};
   ck.training = state_;
   auto gen = at::detail::getDefaultCPUGenerator();
   {
@@ -435,11 +431,13 @@ void Trainer::resume(const std::string& path) {
   }
   check_architecture(net_, ck.model, what);
   if (!torch::equal(ck.model.at("phi"), net_->phi.to(torch::kCPU))) {
-    throw CheckpointError(what + " has other Phi matrices than this run although the Phi spec "
+    throw CheckpointError(what +
+                          " has other Phi matrices than this run although the Phi spec "
                           "is the same (did the Phi implementation change?); finetune with --init");
   }
   if (ck.optimizer.empty() && ck.training.step > 0) {
-    throw CheckpointError(what + " holds no optimizer state (best.ckpt keeps the model only); "
+    throw CheckpointError(what +
+                          " holds no optimizer state (best.ckpt keeps the model only); "
                           "resume from last.ckpt, or finetune from it with --init");
   }
   load_net_state(net_, ck.model, what);
@@ -475,11 +473,9 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
       const auto& src = it->second;
       if (name == "ae.fc1.weight" && fc1_reads_measurements && phi_changed) {
         // fc1 reads the measurements of the old Phi: carry it over, or start it afresh.
-        if (old_phi.defined() && old_phi.size(0) == 1 && net_->phases() == 1 &&
-            src.dim() == 2 && src.size(0) == p.value().size(0) &&
-            src.size(1) == old_phi.size(1)) {
-          p.value().copy_(nn::map_measurement_weights(src, old_phi[0],
-                                                      net_->phi[0].to(torch::kCPU),
+        if (old_phi.defined() && old_phi.size(0) == 1 && net_->phases() == 1 && src.dim() == 2 &&
+            src.size(0) == p.value().size(0) && src.size(1) == old_phi.size(1)) {
+          p.value().copy_(nn::map_measurement_weights(src, old_phi[0], net_->phi[0].to(torch::kCPU),
                                                       net_->options().pinv_lambda));
           report.mapped.push_back(name);
         } else {
@@ -500,8 +496,7 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   }
   if (report.copied.empty() && report.mapped.empty()) {
     throw CheckpointError(what + " shares no parameters" +
-                          (prefix.empty() ? "" : " named " + prefix + "*") +
-                          " with this network");
+                          (prefix.empty() ? "" : " named " + prefix + "*") + " with this network");
   }
   optimizer_ = make_adam(net_, options_);
   auto origin = state_.origin;
@@ -509,8 +504,11 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   state_.stage = options_.stage;
   state_.origin = origin;
   state_.origin[prefix.empty() ? "all" : prefix.substr(0, prefix.size() - 1)] = {
-      {"checkpoint", path}, {"phi", ck.phi}, {"stage", ck.training.stage},
-      {"epoch", ck.training.epoch}, {"report", report.to_json()}};
+      {"checkpoint", path},
+      {"phi", ck.phi},
+      {"stage", ck.training.stage},
+      {"epoch", ck.training.epoch},
+      {"report", report.to_json()}};
   last_written_.clear();
   return report;
 }
@@ -539,8 +537,8 @@ void Trainer::check_batch(const Batch& batch, const std::string& where) const {
                   batch.y.size(1) == o.measurement_size(),
               where, ": y must be (B, ", o.measurement_size(), "), got ",
               batch.y.defined() ? batch.y.sizes() : torch::IntArrayRef{});
-  LFNET_CHECK(batch.y.scalar_type() == net_->phi.scalar_type() &&
-                  batch.target.defined() && batch.target.scalar_type() == net_->phi.scalar_type(),
+  LFNET_CHECK(batch.y.scalar_type() == net_->phi.scalar_type() && batch.target.defined() &&
+                  batch.target.scalar_type() == net_->phi.scalar_type(),
               where, ": y and target must be ", net_->phi.scalar_type(), " like the net, got ",
               batch.y.scalar_type(), " and ",
               batch.target.defined() ? c10::toString(batch.target.scalar_type()) : "nothing");
@@ -598,8 +596,9 @@ Evaluation Trainer::evaluate(BatchSource& source) {
   }
   net_->train();
   if (world > 1) {
-    auto sums = torch::tensor({loss_sum, squared, static_cast<double>(patches),
-                               static_cast<double>(elements)}, torch::kFloat64);
+    auto sums = torch::tensor(
+        {loss_sum, squared, static_cast<double>(patches), static_cast<double>(elements)},
+        torch::kFloat64);
     comm_->all_reduce_sum(sums);
     loss_sum = sums[0].item<double>();
     squared = sums[1].item<double>();

@@ -49,12 +49,11 @@ std::string concat(const Args&... args) {
 }  // namespace lfnet
 
 // Throws ErrorType with the message parts and the throwing file:line when cond is false.
-#define LFNET_CHECK_AS(ErrorType, cond, ...)                                               \
-  do {                                                                                     \
-    if (!(cond)) {                                                                         \
-      throw ErrorType(::lfnet::detail::concat(__VA_ARGS__, " [", __FILE__, ":", __LINE__, \
-                                              "]"));                                       \
-    }                                                                                      \
+#define LFNET_CHECK_AS(ErrorType, cond, ...)                                                     \
+  do {                                                                                           \
+    if (!(cond)) {                                                                               \
+      throw ErrorType(::lfnet::detail::concat(__VA_ARGS__, " [", __FILE__, ":", __LINE__, "]")); \
+    }                                                                                            \
   } while (false)
 
 // Internal invariant or argument check; throws lfnet::Error.

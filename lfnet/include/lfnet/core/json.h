@@ -65,7 +65,8 @@ class JsonReader {
   template <typename T>
   static void check_kind(const nlohmann::json& value, const std::string& path) {
     if constexpr (std::is_same_v<T, bool>) {
-      if (!value.is_boolean()) throw ConfigError(path + ": expected true or false, got " + value.dump());
+      if (!value.is_boolean())
+        throw ConfigError(path + ": expected true or false, got " + value.dump());
     } else if constexpr (std::is_integral_v<T>) {
       check_integer(value, path, static_cast<long double>(std::numeric_limits<T>::min()),
                     static_cast<long double>(std::numeric_limits<T>::max()));

@@ -38,10 +38,10 @@ class LightField {
   torch::Tensor& data() { return data_; }
 
   int64_t channels() const { return data_.size(axis::kC); }
-  int64_t rows() const { return data_.size(axis::kU); }      // U
-  int64_t cols() const { return data_.size(axis::kV); }      // V
-  int64_t height() const { return data_.size(axis::kH); }    // H
-  int64_t width() const { return data_.size(axis::kW); }     // W
+  int64_t rows() const { return data_.size(axis::kU); }    // U
+  int64_t cols() const { return data_.size(axis::kV); }    // V
+  int64_t height() const { return data_.size(axis::kH); }  // H
+  int64_t width() const { return data_.size(axis::kW); }   // W
   bool defined() const { return data_.defined(); }
 
   // One sub-aperture view (C, H, W); u, v are 0-based.

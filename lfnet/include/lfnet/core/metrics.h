@@ -17,9 +17,9 @@ torch::Tensor per_view_psnr(const LightField& estimate, const LightField& truth)
 // Options of SSIM; defaults match scikit-image's structural_similarity(gaussian_weights=True,
 // sigma=1.5, use_sample_covariance=True, data_range=1).
 struct SsimOptions {
-  double sigma = 1.5;         // Gaussian window standard deviation
-  double truncate = 3.5;      // window radius = int(truncate * sigma + 0.5): 11 x 11 at 1.5
-  double data_range = 1.0;    // L in C1 = (K1 L)^2, C2 = (K2 L)^2
+  double sigma = 1.5;       // Gaussian window standard deviation
+  double truncate = 3.5;    // window radius = int(truncate * sigma + 0.5): 11 x 11 at 1.5
+  double data_range = 1.0;  // L in C1 = (K1 L)^2, C2 = (K2 L)^2
   double k1 = 0.01;
   double k2 = 0.03;
   bool sample_covariance = true;  // scale (co)variances by n / (n - 1), n = window pixels

@@ -91,7 +91,7 @@ class RunFolder {
  private:
   std::string dir_;
   OutputLock lock_;
-  bool created_ = false;        // the folder did not exist (or was moved aside)
+  bool created_ = false;         // the folder did not exist (or was moved aside)
   std::filesystem::path aside_;  // where the replaced folder waits for commit()
   bool committed_ = false;
 };

@@ -1,8 +1,8 @@
 // Training patches: random (U, V, h, w) patches of light fields, simulated on the fly.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <functional>
@@ -22,13 +22,13 @@ namespace lfnet::data {
 
 // Options of the patch data set.
 struct DatasetOptions {
-  int64_t patch_h = 9;                 // spatial patch height
-  int64_t patch_w = 9;                 // spatial patch width
-  int64_t train_patches = 50000;       // patches drawn per training epoch (paper: 50,000)
-  int64_t validation_patches = 4000;   // fixed validation patches, drawn once
-  double validation_fraction = 0.15;   // share of every light field's rows kept for validation
-  bool augment = true;                 // flips and transposes that keep angular axes consistent
-  double min_std = 0.0;                // drop training patches flatter than this (0: keep all)
+  int64_t patch_h = 9;                // spatial patch height
+  int64_t patch_w = 9;                // spatial patch width
+  int64_t train_patches = 50000;      // patches drawn per training epoch (paper: 50,000)
+  int64_t validation_patches = 4000;  // fixed validation patches, drawn once
+  double validation_fraction = 0.15;  // share of every light field's rows kept for validation
+  bool augment = true;                // flips and transposes that keep angular axes consistent
+  double min_std = 0.0;               // drop training patches flatter than this (0: keep all)
   // Which U x V windows of a wider light field training patches come from: "central" (the
   // central window at each step) or "any" (every window that fits). `angular_steps` are the
   // view spacings: 2 takes every second view, which doubles the baseline and the disparity.
@@ -41,8 +41,8 @@ struct DatasetOptions {
   double jitter_gamma = 0.0;
   double jitter_contrast = 0.0;
   double jitter_brightness = 0.0;
-  uint64_t seed = 1;                   // patch draws, augmentation and noise
-  optics::SensorOptions effects;       // sensor effects on the measurements (none by default)
+  uint64_t seed = 1;              // patch draws, augmentation and noise
+  optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
 
   // Whether training draws windows other than the central one at step 1, so that light
   // fields should come with their whole angular grid.
@@ -63,8 +63,8 @@ struct DatasetOptions {
 // from (seed, epoch) alone, so resumed training is exact.
 class PatchDataset : public train::BatchSource {
  public:
-  PatchDataset(std::vector<LightField> light_fields, const optics::Phi& phi,
-               DatasetOptions options, int64_t validation_batch_size = 256);
+  PatchDataset(std::vector<LightField> light_fields, const optics::Phi& phi, DatasetOptions options,
+               int64_t validation_batch_size = 256);
   ~PatchDataset() override;
 
   void start_epoch(int64_t epoch, int64_t batch_size) override;
@@ -99,10 +99,10 @@ class PatchDataset : public train::BatchSource {
   std::vector<LightField> lfs_;
   const optics::Phi& phi_;
   DatasetOptions options_;
-  torch::Tensor weights_;           // local Phi: (P, N, U, V, h, w) per-pixel weights
-  torch::Tensor matrix_;            // block Phi: (N h w, U V h w)
+  torch::Tensor weights_;                     // local Phi: (P, N, U, V, h, w) per-pixel weights
+  torch::Tensor matrix_;                      // block Phi: (N h w, U V h w)
   std::vector<std::vector<Window>> windows_;  // per light field; [0]: central, step 1
-  std::vector<int64_t> split_row_;  // first validation row of every light field
+  std::vector<int64_t> split_row_;            // first validation row of every light field
   std::vector<double> train_weight_;
   std::mt19937_64 rng_;
   int64_t epoch_ = 0, batch_size_ = 64, served_ = 0;

@@ -1,8 +1,8 @@
 // Simulate-then-reconstruct evaluation of a method on a light field with known truth.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <string>
@@ -19,8 +19,8 @@ namespace lfnet::eval {
 struct EvalOptions {
   // sensor: crops of one sensor image; per_patch: the paper's protocol.
   optics::SimulationMode mode = optics::SimulationMode::kSensor;
-  optics::SensorOptions effects;  // noise and other sensor effects; none by default
-  uint64_t seed = 0;              // noise seed
+  optics::SensorOptions effects;          // noise and other sensor effects; none by default
+  uint64_t seed = 0;                      // noise seed
   recon::ReconstructOptions reconstruct;  // stride, patch size, batch, window
 };
 

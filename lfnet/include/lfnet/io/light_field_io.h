@@ -13,13 +13,13 @@ namespace lfnet::io {
 
 // File naming schemes of sub-aperture folders (see ../shared/data/README.md).
 enum class NamingScheme {
-  kHciCam,    // input_CamNNN.ext, NNN = rows * row + col, 0-based (HCI benchmark)
-  kRowCol,    // lf_R_C.ext, 1-based (Stanford Lytro archive, deepulfcam; lfnet's own writer)
-  kTmRowCol,  // TM_RR_CC.ext, 1-based, two digits (Lytro Illum validation set)
+  kHciCam,      // input_CamNNN.ext, NNN = rows * row + col, 0-based (HCI benchmark)
+  kRowCol,      // lf_R_C.ext, 1-based (Stanford Lytro archive, deepulfcam; lfnet's own writer)
+  kTmRowCol,    // TM_RR_CC.ext, 1-based, two digits (Lytro Illum validation set)
   kNameRowCol,  // <name>_RR_CC.ext or <name>-RR-CC.ext: row then column, 0- or 1-based (the
                 // lowest index found), any digit count (Lytro exports such as 2067_01_01.png)
-  kMitIndex,  // <name>-NN.ext, NN 1-based row-major from the BOTTOM row of views (MIT Synthetic
-              // LF Archive: camera Y grows upward), read with its rows reversed
+  kMitIndex,    // <name>-NN.ext, NN 1-based row-major from the BOTTOM row of views (MIT Synthetic
+                // LF Archive: camera Y grows upward), read with its rows reversed
 };
 std::string to_string(NamingScheme scheme);
 
@@ -64,7 +64,7 @@ void write_image(const std::string& path, const torch::Tensor& image, int bits =
 // Options of write_light_field.
 struct WriteOptions {
   std::string extension = "png";  // png, tif, exr
-  int bits = 16;                   // 8 or 16 for png/tif, 32 for float tif; exr is float
+  int bits = 16;                  // 8 or 16 for png/tif, 32 for float tif; exr is float
 };
 
 // Writes views as DIR/lf_R_C.ext (1-based). The folder must not hold views already.

@@ -43,8 +43,8 @@ torch::Tensor conv4d_u_major(const torch::Tensor& x, const torch::Tensor& weight
 
 // Multiply-adds of one 4D convolution, counted at every output position (border zeros
 // included), times 2: the FLOP count that GFLOP/s figures refer to.
-double conv4d_flops(int64_t batch, int64_t in_channels, int64_t out_channels, int64_t u,
-                    int64_t v, int64_t h, int64_t w, int64_t kernel);
+double conv4d_flops(int64_t batch, int64_t in_channels, int64_t out_channels, int64_t u, int64_t v,
+                    int64_t h, int64_t w, int64_t kernel);
 
 // The shape of a Conv4d layer.
 struct Conv4dOptions {

@@ -1,8 +1,8 @@
 // Training losses (docs/training.md): the paper's view-weighted L2, plain L2 and L1.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <string>

@@ -11,11 +11,11 @@
 //   cnn.conv1 .. cnn.conv<depth> (.weight, .bias)
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/nn/module.h>
 #include <torch/nn/modules/linear.h>
 #include <torch/nn/pimpl.h>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <string>
@@ -68,11 +68,12 @@ struct CnnOptions {
 
 // Everything that defines a LightFieldNet; stored in every checkpoint as "network".
 struct NetworkOptions {
-  PatchShape patch;               // the patch the net reconstructs
-  int64_t measurements = 2;       // N: measurement channels per pixel
-  std::string branches = "net";   // net (both branches, averaged), ae or cnn (one branch)
-  int64_t kernel = 3;             // Conv4d kernel size (odd)
-  std::string conv_algorithm = "auto";  // Conv4d algorithm: auto, stacked, fused_output, fused_input
+  PatchShape patch;              // the patch the net reconstructs
+  int64_t measurements = 2;      // N: measurement channels per pixel
+  std::string branches = "net";  // net (both branches, averaged), ae or cnn (one branch)
+  int64_t kernel = 3;            // Conv4d kernel size (odd)
+  std::string conv_algorithm =
+      "auto";  // Conv4d algorithm: auto, stacked, fused_output, fused_input
   AutoencoderOptions ae;
   CnnOptions cnn;
   // Weights of the (ae, cnn) outputs in the two-branch head; they apply to "net" only.

@@ -21,9 +21,9 @@
 // phi; the module rebuilds the dense stack on first use.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/csrc/jit/api/module.h>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <string>
@@ -56,8 +56,7 @@ struct ScriptMetadata {
 torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata& meta);
 
 // script_network, written to `path` atomically (a temporary file, then rename).
-void export_network(const LightFieldNet& net, const ScriptMetadata& meta,
-                    const std::string& path);
+void export_network(const LightFieldNet& net, const ScriptMetadata& meta, const std::string& path);
 
 // Whether `path` is a TorchScript archive (a zip file) rather than an lfnet checkpoint.
 // IoError when the file cannot be read.

@@ -1,4 +1,5 @@
-// Patch measurements for training and reconstruction, in both simulation modes (docs/acquisition.md):
+// Patch measurements for training and reconstruction, in both simulation modes
+// (docs/acquisition.md):
 //   sensor:    one sensor image of the whole light field; each patch's measurements are a
 //              crop of it, what a real camera gives;
 //   per_patch: each patch multiplied by its own patch matrix, the paper's protocol (for

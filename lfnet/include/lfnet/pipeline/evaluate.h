@@ -2,8 +2,8 @@
 // score (docs/reconstruction.md).
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/torch.h>
+#include <nlohmann/json.hpp>
 
 #include <memory>
 #include <optional>
@@ -21,10 +21,11 @@ namespace lfnet::pipeline {
 // What a method needs besides the measurements.
 struct MethodContext {
   const optics::Phi* phi = nullptr;
-  nn::LightFieldNet net{nullptr};  // for net, ae, cnn
+  nn::LightFieldNet net{nullptr};               // for net, ae, cnn
   std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported net (used when set)
-  std::string dictionary;          // for dict: a dictionary file
-  ModelCache* cache = nullptr;     // where to read it (and keep it) for many calls; none: read it each call
+  std::string dictionary;                       // for dict: a dictionary file
+  ModelCache* cache =
+      nullptr;  // where to read it (and keep it) for many calls; none: read it each call
   std::string dict_method = "omp";  // for dict: omp or admm
 };
 

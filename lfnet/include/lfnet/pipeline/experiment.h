@@ -20,13 +20,13 @@ namespace lfnet::pipeline {
 
 // One training stage of an experiment.
 struct StageConfig {
-  std::string name;          // ae, cnn, joint, joint_scratch or dict (a K-SVD dictionary)
+  std::string name;  // ae, cnn, joint, joint_scratch or dict (a K-SVD dictionary)
   nlohmann::json training = nlohmann::json::object();  // overrides of the common training options
 };
 
 // What to evaluate after training.
 struct EvaluationConfig {
-  LightFieldSources data;                       // held-out light fields
+  LightFieldSources data;  // held-out light fields
   std::vector<std::string> methods = {"net", "no-parallax"};
   std::vector<int64_t> strides = {5};
   std::vector<std::string> modes = {"sensor"};

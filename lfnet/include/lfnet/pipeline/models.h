@@ -21,9 +21,9 @@ namespace lfnet::pipeline {
 // (told apart by content).
 struct ModelFile {
   std::string path;
-  bool scripted = false;                        // an exported TorchScript file
-  nlohmann::json phi;                           // the Phi spec it was trained for
-  nlohmann::json config;                        // the resolved config of its training run
+  bool scripted = false;  // an exported TorchScript file
+  nlohmann::json phi;     // the Phi spec it was trained for
+  nlohmann::json config;  // the resolved config of its training run
   nn::NetworkOptions network;
   nn::LightFieldNet net{nullptr};               // checkpoints (when the network was asked for)
   std::shared_ptr<nn::ScriptedNetwork> script;  // exported files
@@ -34,7 +34,12 @@ struct ModelFile {
   double measurement_mean() const;
 };
 
+// What a model file is, by its content.
+enum class ModelFileKind { kCheckpoint, kExported, kDictionary, kOther };
+ModelFileKind model_file_kind(const std::string& path);
+
 // Loads --model; `network`: build the checkpoint's network too (exported files always are).
+// A dictionary given as a model is a ConfigError that says to give it as --dictionary.
 ModelFile load_model(const std::string& path, bool network);
 
 // Models and dictionaries loaded once for many reconstructions (lfnet batch, the evaluations

@@ -13,16 +13,16 @@ namespace lfnet::pipeline {
 
 // What `lfnet train` and `lfnet experiment` were asked to do.
 struct TrainRequest {
-  std::string config;               // config file ("" when resuming a run folder: its config)
-  std::string scale;                // "" = the config's default_scale
-  std::vector<std::string> set;     // KEY.PATH=VALUE overrides (apply_override)
-  std::string out;                  // run folder ("" = out/<config name>)
-  std::string resume;               // a stage's last.ckpt (with stage), or a run folder
-  std::string init;                 // first stage starts from this checkpoint
-  std::string stage;                // train only this stage ("" = all)
-  std::string device;               // overrides training.device ("" keeps it)
-  bool force = false;               // replace an existing run folder (start afresh)
-  std::string command_line;         // recorded in checkpoints
+  std::string config;            // config file ("" when resuming a run folder: its config)
+  std::string scale;             // "" = the config's default_scale
+  std::vector<std::string> set;  // KEY.PATH=VALUE overrides (apply_override)
+  std::string out;               // run folder ("" = out/<config name>)
+  std::string resume;            // a stage's last.ckpt (with stage), or a run folder
+  std::string init;              // first stage starts from this checkpoint
+  std::string stage;             // train only this stage ("" = all)
+  std::string device;            // overrides training.device ("" keeps it)
+  bool force = false;            // replace an existing run folder (start afresh)
+  std::string command_line;      // recorded in checkpoints
 };
 
 // The config a request trains (the run folder's own config when it resumes a folder), with

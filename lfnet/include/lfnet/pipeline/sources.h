@@ -16,14 +16,14 @@ namespace lfnet::pipeline {
 
 // Light fields named in a config: real folders, scene specs and random scenes.
 struct LightFieldSources {
-  std::vector<std::string> light_fields;  // folders of sub-aperture images
-  std::vector<std::string> scenes;        // scene spec files (configs/scenes)
-  int64_t random_scenes = 0;              // procedural random scenes
-  uint64_t random_seed = 1;               // seed of the first random scene
+  std::vector<std::string> light_fields;                     // folders of sub-aperture images
+  std::vector<std::string> scenes;                           // scene spec files (configs/scenes)
+  int64_t random_scenes = 0;                                 // procedural random scenes
+  uint64_t random_seed = 1;                                  // seed of the first random scene
   nlohmann::json random_options = nlohmann::json::object();  // scene::RandomSceneOptions
-  std::string views;                      // R0:R1,C0:C1 (1-based); "" = central U x V
-  std::string orient;                     // angular reorientation of the folders on loading:
-                                          // flip-u, flip-v, transpose (docs/conventions.md)
+  std::string views;   // R0:R1,C0:C1 (1-based); "" = central U x V
+  std::string orient;  // angular reorientation of the folders on loading:
+                       // flip-u, flip-v, transpose (docs/conventions.md)
 
   void read(JsonReader& r);
   nlohmann::json to_json() const;

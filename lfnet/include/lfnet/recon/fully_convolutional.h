@@ -50,11 +50,8 @@ torch::Tensor cnn_over_light_field(nn::CnnBranch cnn, const torch::Tensor& x,
 // cnn_over_light_field over the stitched scaled adjoint. The autoencoder branch (weighted by
 // its head weight) and the residual base are computed per patch and stitched as in
 // reconstruct_sensor with `options`.
-torch::Tensor reconstruct_sensor_fully_convolutional(nn::LightFieldNet net,
-                                                     const std::string& method,
-                                                     const optics::Phi& phi,
-                                                     const torch::Tensor& sensor,
-                                                     const ReconstructOptions& options,
-                                                     int64_t tile = kDefaultCnnTile);
+torch::Tensor reconstruct_sensor_fully_convolutional(
+    nn::LightFieldNet net, const std::string& method, const optics::Phi& phi,
+    const torch::Tensor& sensor, const ReconstructOptions& options, int64_t tile = kDefaultCnnTile);
 
 }  // namespace lfnet::recon

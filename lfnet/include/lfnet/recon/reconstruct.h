@@ -16,19 +16,20 @@ namespace lfnet::recon {
 // Maps a batch of measurement vectors y (B, N h w) and their patch phases (B) int64 — indices
 // into the stack of distinct patch matrices (see patch_phase) — to light-field patches
 // (B, U V h w), flattened (u, v, y, x).
-using PatchSolver = std::function<torch::Tensor(const torch::Tensor& y, const torch::Tensor& phase)>;
+using PatchSolver =
+    std::function<torch::Tensor(const torch::Tensor& y, const torch::Tensor& phase)>;
 
 // Called after every band with (patches done, patches in all).
 using ProgressCallback = std::function<void(int64_t done, int64_t total)>;
 
 // Options of patch-wise reconstruction.
 struct ReconstructOptions {
-  int64_t patch_h = 9;       // spatial patch height h
-  int64_t patch_w = 9;       // spatial patch width w
-  int64_t stride = 5;        // patch stride; = patch size for non-overlapping patches
-  int64_t batch = 1024;      // patches per solver call; with the band, bounds peak memory
-  bool window = false;       // weight patch estimates by a separable Hann-like window when stitching
-  bool clamp = true;         // clamp the result to [0, 1]
+  int64_t patch_h = 9;   // spatial patch height h
+  int64_t patch_w = 9;   // spatial patch width w
+  int64_t stride = 5;    // patch stride; = patch size for non-overlapping patches
+  int64_t batch = 1024;  // patches per solver call; with the band, bounds peak memory
+  bool window = false;   // weight patch estimates by a separable Hann-like window when stitching
+  bool clamp = true;     // clamp the result to [0, 1]
   void validate() const;
 };
 

@@ -24,8 +24,8 @@ struct RenderOptions {
 
 // What the renderer produced.
 struct RenderResult {
-  LightField light_field;                // (C, U, V, H, W) in [0, 1]
-  torch::Tensor disparity;               // (H, W) float32: px per view step, centre view
+  LightField light_field;   // (C, U, V, H, W) in [0, 1]
+  torch::Tensor disparity;  // (H, W) float32: px per view step, centre view
   // What ran, in this order: "occlusion" (more than one layer), then "defocus", "specular",
   // "vignetting" for those the scene names and no others.
   std::vector<std::string> effects_run;

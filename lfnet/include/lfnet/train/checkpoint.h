@@ -9,8 +9,8 @@
 // a per-pixel Phi has 1 / (h w) non-zeros) are stored as flat indices and values.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/types.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <limits>
@@ -29,14 +29,14 @@ using TensorMap = std::map<std::string, torch::Tensor>;
 
 // Where training stands; saved with every checkpoint.
 struct TrainingState {
-  std::string stage;          // ae, cnn or joint
-  int64_t epoch = 0;          // epochs completed
-  int64_t step = 0;           // optimizer steps taken
+  std::string stage;                                              // ae, cnn or joint
+  int64_t epoch = 0;                                              // epochs completed
+  int64_t step = 0;                                               // optimizer steps taken
   double best_metric = -std::numeric_limits<double>::infinity();  // best validation PSNR, dB
-  int64_t best_epoch = 0;     // the epoch that reached best_metric (0: none yet)
+  int64_t best_epoch = 0;  // the epoch that reached best_metric (0: none yet)
   nlohmann::json history = nlohmann::json::array();  // one EpochRecord (JSON) per epoch
   nlohmann::json origin = nlohmann::json::object();  // what the weights were initialised from
-  torch::Tensor rng_state;    // LibTorch's default CPU generator (uint8), may be undefined
+  torch::Tensor rng_state;  // LibTorch's default CPU generator (uint8), may be undefined
 
   nlohmann::json to_json() const;  // everything but rng_state
   static TrainingState from_json(const nlohmann::json& j);
@@ -45,7 +45,7 @@ struct TrainingState {
 // The contents of one checkpoint file.
 struct Checkpoint {
   uint32_t format_version = kCheckpointFormatVersion;
-  nlohmann::json config = nlohmann::json::object();  // the resolved config of the run
+  nlohmann::json config = nlohmann::json::object();   // the resolved config of the run
   nlohmann::json network = nlohmann::json::object();  // nn::NetworkOptions::to_json()
   nlohmann::json phi = nlohmann::json::object();      // the Phi spec the net was trained for
   std::string command_line;

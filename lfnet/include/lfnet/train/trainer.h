@@ -3,8 +3,8 @@
 // switching, and detection of non-finite numbers. Logging plugs in through hooks.
 #pragma once
 
-#include <nlohmann/json.hpp>
 #include <torch/optim/adam.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdint>
 #include <functional>
@@ -47,8 +47,8 @@ struct TrainerOptions {
   double eps = 1e-8;
   double weight_decay = 0.0;  // L2 penalty added to the gradient (torch's Adam)
   LrScheduleOptions schedule;
-  nn::LossOptions loss;           // weighted_l2 by default (the paper's)
-  double clip_grad_norm = 0.0;    // clip the global gradient norm to this (0: off)
+  nn::LossOptions loss;         // weighted_l2 by default (the paper's)
+  double clip_grad_norm = 0.0;  // clip the global gradient norm to this (0: off)
   // What a non-finite loss or gradient does: "stop" throws NumericalError; "skip" drops the
   // batch, at most max_skipped_batches per epoch. Diverged weights always stop.
   std::string on_nonfinite = "stop";
@@ -69,8 +69,7 @@ struct TrainerOptions {
 
 // The learning rate at batch `batch` of epoch `epoch` (0-based) of `batches` per epoch. A pure
 // function of its arguments, so resumed runs follow the same schedule.
-double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch,
-                     int64_t batches);
+double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch, int64_t batches);
 
 // One completed epoch, given to the on_epoch hook and kept in the checkpoint's history.
 struct EpochRecord {
