@@ -8,6 +8,7 @@ packages=(
   libopencv-dev libopenimageio-dev openimageio-tools
   nlohmann-json3-dev libspdlog-dev libfmt-dev catch2 libcli11-dev
   python3 python3-numpy python3-skimage python3-sklearn python3-torch python3-imageio
+  python3-matplotlib
 )
 
 missing=()

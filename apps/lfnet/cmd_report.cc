@@ -23,6 +23,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/recon/method_registry.h"
 #include "report_figures.h"
+#include "report_run.h"
 
 namespace fs = std::filesystem;
 
@@ -282,10 +283,14 @@ std::string margins(const Section& s) {
 struct ReportArgs {
   std::string results = "results";
   std::string out = "docs/RESULTS.md";
-  std::string figures;  // default: images/results beside --out
+  bool out_given = false;  // a run folder's report goes to RUN_DIR/report.md by default
+  std::string figures;     // default: images/results beside --out
 };
 
 void run_report(const ReportArgs& a) {
+  if (is_run_folder(a.results)) {
+    return report_run(a.results, a.out_given ? a.out : "", a.figures);
+  }
   const auto sections = read_sections(a.results);
   const fs::path out_dir =
       fs::path(a.out).parent_path().empty() ? fs::path(".") : fs::path(a.out).parent_path();
@@ -469,11 +474,18 @@ void add_report_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd =
       app.add_subcommand("report", "Write docs/RESULTS.md and its figures from result records");
   auto a = std::make_shared<ReportArgs>();
-  cmd->add_option("results", a->results, "folder of result sections (default results)");
-  cmd->add_option("--out", a->out, "the Markdown file to write (default docs/RESULTS.md)");
+  cmd->add_option("results", a->results,
+                  "folder of result sections (default results), or the run folder of an "
+                  "lfnet train / experiment");
+  auto* out = cmd->add_option("--out", a->out,
+                              "the Markdown file to write (default docs/RESULTS.md; for a run "
+                              "folder RUN/report.md)");
   cmd->add_option("--figures", a->figures,
                   "folder for the figures (default images/results beside --out)");
-  cmd->callback([a] { run_report(*a); });
+  cmd->callback([a, out] {
+    a->out_given = out->count() > 0;
+    run_report(*a);
+  });
 }
 
 }  // namespace lfnet::app

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 #include "support/test_support.h"
 
@@ -62,6 +63,22 @@ TEST_CASE(
         0);
   CHECK(out.find("lfnet: error:") != std::string::npos);
   CHECK(fs::exists(tmp / "run/models/cnn.ckpt"));
+
+  // lfnet report RUN: the run's own report with its training and evaluation tables.
+  REQUIRE(run_command(lfnet + "report " + (tmp / "run"), out) == 0);
+  std::ifstream report_file(tmp / "run/report.md");
+  const std::string report((std::istreambuf_iterator<char>(report_file)),
+                           std::istreambuf_iterator<char>());
+  CHECK(report.find("## Training") != std::string::npos);
+  CHECK(report.find("| cnn | 1 |") != std::string::npos);  // one epoch of the cnn stage
+  CHECK(report.find("over no-parallax") != std::string::npos);
+  CHECK(report.find("| no-parallax |") != std::string::npos);
+  CHECK(report.find("| pinv |") != std::string::npos);
+  CHECK(fs::exists(tmp / "run/figures/pareto.png"));
+  if (report.find("No training curves") == std::string::npos) {
+    CHECK(fs::exists(tmp / "run/figures/training.png"));
+    CHECK(fs::exists(tmp / "run/figures/training.svg"));
+  }
 
   // evaluate --json with the model; a --phi that contradicts the model is an error.
   const std::string model = tmp / "run/models/cnn.ckpt";

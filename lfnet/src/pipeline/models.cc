@@ -79,7 +79,8 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   auto it = dictionaries_.find(path);
   if (it == dictionaries_.end()) {
     const auto kind = model_file_kind(path);
-    LFNET_CHECK_AS(ConfigError, kind != ModelFileKind::kCheckpoint && kind != ModelFileKind::kExported,
+    LFNET_CHECK_AS(ConfigError,
+                   kind != ModelFileKind::kCheckpoint && kind != ModelFileKind::kExported,
                    "--dictionary ", path, " is a ",
                    kind == ModelFileKind::kCheckpoint ? "network checkpoint" : "exported network",
                    ": give it as --model (with --method net, ae or cnn)");
