@@ -66,8 +66,8 @@ std::string plot_script() {
 std::string plot_training(const fs::path& log, const fs::path& stem) {
   const std::string script = plot_script();
   if (script.empty()) return "scripts/plot_training.py not found (set LFNET_SCRIPTS)";
-  const std::string command = "/usr/bin/python3 '" + script + "' '" + log.string() + "' '" +
-                              stem.string() + "' 2>&1";
+  const std::string command =
+      "/usr/bin/python3 '" + script + "' '" + log.string() + "' '" + stem.string() + "' 2>&1";
   FILE* pipe = ::popen(command.c_str(), "r");
   if (!pipe) return "cannot run /usr/bin/python3";
   std::string output;
@@ -97,7 +97,8 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
   check_output_file(out, policy);
   fs::create_directories(figures);
   const std::string figures_link =
-      fs::relative(fs::absolute(figures), fs::absolute(fs::path(out).parent_path())).generic_string();
+      fs::relative(fs::absolute(figures), fs::absolute(fs::path(out).parent_path()))
+          .generic_string();
 
   std::ostringstream md;
   md << "# " << config.name << "\n\n"
@@ -134,7 +135,8 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
         if (r.contains("val_psnr_db") && r["val_psnr_db"].is_number()) {
           best = std::max(best, r["val_psnr_db"].get<double>());
         }
-        if (r.contains("seconds") && r["seconds"].is_number()) seconds += r["seconds"].get<double>();
+        if (r.contains("seconds") && r["seconds"].is_number())
+          seconds += r["seconds"].get<double>();
       }
       const auto& last = records.back();
       md << "| " << stage << " | " << records.size() << " | "
@@ -165,14 +167,15 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
     auto rank = [&](const std::string& m) {
       return std::find(order.begin(), order.end(), m) - order.begin();
     };
-    std::stable_sort(rows.begin(), rows.end(), [&](const nlohmann::json& x, const nlohmann::json& y) {
-      const auto kx = std::make_tuple(x.value("light_field", ""), x.value("mode", ""),
-                                      x.value("noise_sigma", 0.0), x.value("stride", 0));
-      const auto ky = std::make_tuple(y.value("light_field", ""), y.value("mode", ""),
-                                      y.value("noise_sigma", 0.0), y.value("stride", 0));
-      if (kx != ky) return kx < ky;
-      return rank(x.value("method", "")) < rank(y.value("method", ""));
-    });
+    std::stable_sort(
+        rows.begin(), rows.end(), [&](const nlohmann::json& x, const nlohmann::json& y) {
+          const auto kx = std::make_tuple(x.value("light_field", ""), x.value("mode", ""),
+                                          x.value("noise_sigma", 0.0), x.value("stride", 0));
+          const auto ky = std::make_tuple(y.value("light_field", ""), y.value("mode", ""),
+                                          y.value("noise_sigma", 0.0), y.value("stride", 0));
+          if (kx != ky) return kx < ky;
+          return rank(x.value("method", "")) < rank(y.value("method", ""));
+        });
     // The no-parallax PSNR of each light field, mode and noise: the margin every row reports.
     std::map<std::string, double> baseline;
     auto key = [](const nlohmann::json& r) {
@@ -205,7 +208,8 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
         points.push_back(p);
       }
     }
-    md << "\nSimulation mode per row as given; the margin is over the `no-parallax` baseline of the "
+    md << "\nSimulation mode per row as given; the margin is over the `no-parallax` baseline of "
+          "the "
           "same light field, mode and noise.\n";
     if (points.size() >= 2) {
       mark_pareto_front(points);

@@ -22,9 +22,7 @@ using lfnet::test::run_command;
 
 namespace {
 
-std::string program(const std::string& args) {
-  return lfnet_binary() + " --threads 2 --log-level warn " + args;
-}
+std::string program(const std::string& args) { return lfnet::test::lfnet_program(args); }
 
 // A config of two quick stages.
 nlohmann::json two_stage_config(double lr = 1e-3) {

@@ -28,9 +28,7 @@ using lfnet::test::run_command;
 
 namespace {
 
-std::string program(const std::string& args) {
-  return lfnet_binary() + " --threads 2 --log-level warn " + args;
-}
+std::string program(const std::string& args) { return lfnet::test::lfnet_program(args); }
 
 // A tiny config; `ae_width` sets the autoencoder's widths (wide ones make checkpoint writes
 // take long enough to be interrupted).

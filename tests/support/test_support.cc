@@ -73,6 +73,10 @@ std::string read_bytes(const std::string& path) {
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
+std::string lfnet_program(const std::string& args) {
+  return lfnet_binary() + " --threads 2 --log-level warn " + args;
+}
+
 void write_bytes(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary) << bytes;
 }

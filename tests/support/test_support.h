@@ -40,6 +40,9 @@ std::string python_with(const std::string& module);
 // The lfnet program under test.
 std::string lfnet_binary();
 
+// The program with two threads and warnings only, followed by `args`: a command line.
+std::string lfnet_program(const std::string& args);
+
 // The whole content of a file, byte for byte ("" when it cannot be read).
 std::string read_bytes(const std::string& path);
 

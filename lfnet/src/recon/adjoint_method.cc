@@ -13,10 +13,7 @@ class AdjointMethod : public Method {
   PatchSolver solver(const MethodResources& r) const override {
     return adjoint_solver(optics::patch_matrix_stack(*r.phi, r.patch_h, r.patch_w));
   }
-  double patch_flops(const MethodResources& r) const override {
-    return 2.0 * static_cast<double>(r.phi->measurements() * r.patch_h * r.patch_w) *
-           static_cast<double>(r.phi->rows() * r.phi->cols() * r.patch_h * r.patch_w);
-  }
+  double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }
 };
 
 }  // namespace

@@ -13,6 +13,11 @@ std::unique_ptr<Method> make_pinv_method();
 std::unique_ptr<Method> make_adjoint_method();  // adjoint_method.cc
 std::unique_ptr<Method> make_no_parallax_method();
 
+double linear_patch_flops(const MethodResources& r) {
+  return 2.0 * static_cast<double>(r.phi->measurements() * r.patch_h * r.patch_w) *
+         static_cast<double>(r.phi->rows() * r.phi->cols() * r.patch_h * r.patch_w);
+}
+
 void register_builtin_methods(const MethodSink& add) {
   add(make_network_method("net"));
   add(make_network_method("ae"));
@@ -78,10 +83,7 @@ class PinvMethod : public Method {
   PatchSolver solver(const MethodResources& r) const override {
     return pinv_solver(optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w));
   }
-  double patch_flops(const MethodResources& r) const override {
-    return 2.0 * static_cast<double>(r.phi->measurements() * r.patch_h * r.patch_w) *
-           static_cast<double>(r.phi->rows() * r.phi->cols() * r.patch_h * r.patch_w);
-  }
+  double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }
 };
 
 // no-parallax: every view is the angular mean of the truth (an evaluation baseline).
