@@ -14,6 +14,7 @@
 
 #include "command.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/metrics.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
@@ -421,6 +422,14 @@ void print_table(const nlohmann::json& report) {
 }
 
 void run_bench(BenchArgs a) {
+  if (!a.json.empty() && a.json != "-" && a.one_case.empty()) {
+    // The report is rewritten on each run; it may not be one of the files the bench reads.
+    OutputFolderPolicy policy;
+    policy.option = "--json";
+    policy.force = true;
+    policy.inputs = {a.model, a.dictionary, a.scene};
+    check_output_file(a.json, policy);
+  }
   if (!a.one_case.empty()) {
     const auto colon = a.one_case.find(':');
     LFNET_CHECK_AS(ConfigError, colon != std::string::npos, "--case takes method:stride, got '",
