@@ -40,9 +40,10 @@ void check_config(const TrainArgs& a) {
       (void)config.stage_network(s), (void)config.stage_options(s);
     names += (names.empty() ? "" : ", ") + s.name;
   }
-  std::printf("%s: %s, scale '%s', Phi %s, stages %s; the config is valid\n",
-              a.request.config.c_str(), config.name.c_str(), config.scale.c_str(),
-              config.phi.label().c_str(), names.c_str());
+  std::printf(
+      "%s: %s, scale '%s', Phi %s, stages %s; the config is valid\n",
+      (a.request.config.empty() ? a.request.resume + "/config.json" : a.request.config).c_str(),
+      config.name.c_str(), config.scale.c_str(), config.phi.label().c_str(), names.c_str());
 }
 
 void add_train_args(CLI::App* cmd, TrainArgs& a) {
