@@ -14,8 +14,8 @@
 
 #include "command.h"
 #include "lfnet/core/error.h"
-#include "lfnet/core/output.h"
 #include "lfnet/core/metrics.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/dict/ksvd.h"

@@ -28,7 +28,8 @@ namespace lfnet::app {
 
 namespace {
 struct EvaluateArgs {
-  std::string model, lf, scene, phi, views, orient, mode = "sensor", method, dictionary, json, out;
+  std::string model, lf, scene, phi, views, orient, layout, mode = "sensor", method, dictionary,
+                                                            json, out;
   double noise = 0;
   int64_t stride = 5;
   int64_t batch = 1024;
@@ -85,7 +86,9 @@ void run_evaluate(const EvaluateArgs& a) {
   if (!a.scene.empty()) sources.scenes = {a.scene};
   sources.views = a.views;
   sources.orient = a.orient;
-  AngularOrientation::parse(a.orient, "--orient");  // before any work
+  sources.layout = a.layout;
+  if (!a.layout.empty()) io::parse_layout(a.layout);  // before any work
+  AngularOrientation::parse(a.orient, "--orient");    // before any work
   if (!a.views.empty()) {
     auto [ru, rv] = parse_views(a.views);
     if (a.model.empty()) {
@@ -136,6 +139,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option(
       "--orient", a->orient,
       "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
+  cmd->add_option("--layout", a->layout,
+                  "file-naming pattern of --lf: view_{row}_{col}.png, or "
+                  "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
   cmd->add_option("--noise", a->noise, "Gaussian noise sigma, relative to a white scene's mean")
       ->check(kFiniteNonNegative);
   cmd->add_option("--stride", a->stride, "patch stride (default 5)")->check(kStride);

@@ -16,15 +16,19 @@ void add_info_command(CLI::App& app, const GlobalOptions& global) {
       "info", "Print the shape, value range, naming scheme and grid of a light field folder");
   auto dir = std::make_shared<std::string>();
   auto orient = std::make_shared<std::string>();
+  auto layout_text = std::make_shared<std::string>();
   cmd->add_option("--lf", *dir, "light field folder of sub-aperture images")->required();
   cmd->add_option(
       "--orient", *orient,
       "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
-  cmd->callback([dir, orient] {
+  cmd->add_option("--layout", *layout_text,
+                  "file-naming pattern for other folders: view_{row}_{col}.png, or "
+                  "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
+  cmd->callback([dir, orient, layout_text] {
     const auto orientation = AngularOrientation::parse(*orient, "--orient");
-    const auto layout = io::scan_folder(*dir);
+    const auto layout = io::scan_folder(*dir, *layout_text);
     const auto start = std::chrono::steady_clock::now();
-    const LightField lf = reorient(io::read_light_field(*dir), orientation);
+    const LightField lf = reorient(io::read_light_field(*dir, 0, *layout_text), orientation);
     const double seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const auto& d = lf.data();

@@ -47,6 +47,7 @@ struct SimulateArgs {
   std::string out;
   std::string views;   // R0:R1,C0:C1, 1-based; default the central 5 x 5
   std::string orient;  // angular reorientation of the folder (docs/conventions.md)
+  std::string layout;  // file-naming pattern of the folder (io::parse_layout)
   bool color = false;
   std::string effects;  // EFFECTS.json
   int64_t stride = 5;
@@ -80,9 +81,10 @@ Input load_input(const SimulateArgs& args) {
     in.scene_effects = spec.sensor;
     in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}};
   } else {
-    lf = pipeline::read_oriented(args.lf, args.orient, "--orient");
+    lf = pipeline::read_oriented(args.lf, args.orient, "--orient", args.layout);
     in.source = {{"kind", "light_field"}, {"path", fs::absolute(args.lf).string()}};
     if (!args.orient.empty()) in.source["orient"] = args.orient;
+    if (!args.layout.empty()) in.source["layout"] = args.layout;
   }
   AngularRange ru, rv;
   if (args.views.empty()) {
@@ -368,6 +370,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option(
       "--orient", args->orient,
       "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
+  cmd->add_option("--layout", args->layout,
+                  "file-naming pattern of --lf: view_{row}_{col}.png, or "
+                  "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
   cmd->add_flag("--color", args->color, "simulate every colour channel (default: grey luma)");
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
   cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -34,6 +35,8 @@ std::string to_string(NamingScheme scheme) {
       return "<name>_RR_CC";
     case NamingScheme::kMitIndex:
       return "<name>-NN (MIT)";
+    case NamingScheme::kCustom:
+      return "--layout pattern";
   }
   return "unknown";
 }
@@ -124,7 +127,137 @@ FolderLayout layout_from_index(NamingScheme scheme, std::vector<Candidate> found
 
 }  // namespace
 
-FolderLayout scan_folder(const std::string& dir) {
+CustomLayout parse_layout(const std::string& text, const std::string& what) {
+  CustomLayout l;
+  l.text = text;
+  std::vector<std::string> parts;
+  size_t start = 0;
+  for (size_t colon; (colon = text.find(':', start)) != std::string::npos; start = colon + 1) {
+    parts.push_back(text.substr(start, colon - start));
+  }
+  parts.push_back(text.substr(start));
+  l.pattern = parts[0];
+  for (size_t i = 1; i < parts.size(); ++i) {
+    if (parts[i] == "col-major") {
+      l.col_major = true;
+    } else if (parts[i].rfind("cols=", 0) == 0) {
+      const std::string n = parts[i].substr(5);
+      LFNET_CHECK_AS(
+          ConfigError,
+          !n.empty() && n.size() <= 3 && n.find_first_not_of("0123456789") == std::string::npos,
+          what, " ", text, ": cols= takes the grid's width, 1 to 999");
+      l.cols = std::stoll(n);
+    } else {
+      throw ConfigError(what + " " + text + ": unknown option '" + parts[i] +
+                        "' (known: cols=N, col-major)");
+    }
+  }
+  const bool row = l.pattern.find("{row}") != std::string::npos;
+  const bool col = l.pattern.find("{col}") != std::string::npos;
+  l.index = l.pattern.find("{index}") != std::string::npos;
+  LFNET_CHECK_AS(ConfigError, l.pattern.find('/') == std::string::npos, what, " ", text,
+                 ": a pattern names files inside the folder, without '/'");
+  LFNET_CHECK_AS(ConfigError, (row && col && !l.index) || (l.index && !row && !col), what, " ",
+                 text,
+                 ": give {row} and {col}, or {index} with cols=N (e.g. view_{row}_{col}.png, "
+                 "img{index}.png:cols=9)");
+  LFNET_CHECK_AS(ConfigError, !l.index || l.cols >= 1, what, " ", text,
+                 ": an {index} pattern needs the grid's width, e.g. :cols=9");
+  LFNET_CHECK_AS(ConfigError, l.index || (l.cols == 0 && !l.col_major), what, " ", text,
+                 ": cols= and col-major apply to {index} patterns");
+  return l;
+}
+
+namespace {
+
+// The files of `dir` that match a --layout pattern, as (row, col) candidates.
+FolderLayout scan_custom(const std::string& dir, const std::vector<std::string>& names,
+                         const CustomLayout& l) {
+  // The pattern as a regex: literal text escaped, fields as digit groups, '*' as any text.
+  std::string re = "^";
+  std::vector<std::string> fields;
+  for (size_t i = 0; i < l.pattern.size();) {
+    bool field = false;
+    for (const char* f : {"{row}", "{col}", "{index}"}) {
+      if (l.pattern.compare(i, std::strlen(f), f) == 0) {
+        re += "(\\d{1,6})";
+        fields.emplace_back(f);
+        i += std::strlen(f);
+        field = true;
+        break;
+      }
+    }
+    if (field) continue;
+    const char c = l.pattern[i++];
+    if (c == '*') {
+      re += ".*";
+    } else if (std::isalnum(static_cast<unsigned char>(c)) != 0) {
+      re += c;
+    } else {
+      re += std::string("\\") + c;
+    }
+  }
+  re += "$";
+  const std::regex matcher(re);
+  std::vector<Candidate> found;
+  std::smatch m;
+  int64_t base = -1;
+  for (const auto& name : names) {
+    if (!std::regex_match(name, m, matcher)) continue;
+    Candidate c;
+    c.path = (fs::path(dir) / name).string();
+    for (size_t f = 0; f < fields.size(); ++f) {
+      const int64_t value = std::stoll(m[f + 1].str());
+      if (fields[f] == "{col}") {
+        c.b = value;
+      } else {
+        c.a = value;  // {row} or {index}
+      }
+    }
+    base =
+        base < 0 ? std::min(c.a, l.index ? c.a : c.b) : std::min({base, c.a, l.index ? c.a : c.b});
+    found.push_back(c);
+  }
+  LFNET_CHECK_AS(IoError, !found.empty(), "no file in ", dir, " matches --layout ", l.text);
+  LFNET_CHECK_AS(IoError, base == 0 || base == 1, "light field folder ", dir,
+                 ": its --layout indices start at ", base, "; lfnet reads 0- or 1-based grids");
+  if (l.index) {
+    int64_t last = 0;
+    for (const auto& c : found) last = std::max(last, c.a - base);
+    const int64_t count = last + 1;
+    LFNET_CHECK_AS(IoError, count % l.cols == 0, "light field folder ", dir,
+                   ": views numbered up to ", last + base, " do not fill whole rows of ", l.cols,
+                   " (--layout ", l.text, ")");
+    const int64_t rows = count / l.cols;
+    for (auto& c : found) {
+      const int64_t i = c.a - base;
+      c.a = (l.col_major ? i % rows : i / l.cols) + base;
+      c.b = (l.col_major ? i / rows : i % l.cols) + base;
+    }
+  }
+  std::string example;  // the pattern as printf text for the missing-view message
+  for (size_t i = 0; i < l.pattern.size();) {
+    if (l.pattern.compare(i, 5, "{row}") == 0 || l.pattern.compare(i, 5, "{col}") == 0) {
+      example += "%lld";
+      i += 5;
+    } else if (l.pattern[i] == '%') {
+      example += "%%";
+      ++i;
+    } else {
+      example += l.pattern[i++];
+    }
+  }
+  if (l.index) example = "(row %lld, column %lld of --layout " + l.text + ")";
+  if (!l.index && l.pattern.find("{col}") < l.pattern.find("{row}")) {
+    // The fields print in pattern order; the message gives (row, col).
+    example = "(row %lld, column %lld of --layout " + l.text + ")";
+  }
+  return layout_from_pairs(NamingScheme::kCustom, found, dir, base, example);
+}
+
+}  // namespace
+
+FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
   std::error_code ec;
   LFNET_CHECK_AS(IoError, fs::is_directory(dir, ec), "light field folder ", dir,
                  " does not exist or is not a folder");
@@ -134,6 +267,7 @@ FolderLayout scan_folder(const std::string& dir) {
   }
   LFNET_CHECK_AS(IoError, !ec, "cannot list ", dir, ": ", ec.message());
   std::sort(names.begin(), names.end());
+  if (!layout.empty()) return scan_custom(dir, names, parse_layout(layout));
 
   std::map<NamingScheme, std::vector<Candidate>> found;
   std::string generic_prefix;  // <name>_ of <name>_RR_CC, which every such file must share
@@ -218,8 +352,8 @@ torch::Tensor read_image(const std::string& path) {
   return chw;
 }
 
-LightField read_light_field(const std::string& dir, int threads) {
-  const FolderLayout layout = scan_folder(dir);
+LightField read_light_field(const std::string& dir, int threads, const std::string& naming) {
+  const FolderLayout layout = scan_folder(dir, naming);
   const int64_t n = static_cast<int64_t>(layout.views.size());
   std::vector<torch::Tensor> images(n);
   std::atomic<int64_t> next{0};

@@ -26,9 +26,11 @@ void LightFieldSources::read(JsonReader& r) {
   r.get("random_options", random_options);
   r.get("views", views);
   r.get("orient", orient);
+  r.get("layout", layout);
   r.finish();
   if (random_scenes < 0) throw ConfigError(r.path_of("random_scenes") + ": must be >= 0");
   AngularOrientation::parse(orient, r.path_of("orient"));
+  if (!layout.empty()) io::parse_layout(layout, r.path_of("layout"));
 }
 
 nlohmann::json LightFieldSources::to_json() const {
@@ -38,13 +40,14 @@ nlohmann::json LightFieldSources::to_json() const {
           {"random_seed", random_seed},
           {"random_options", random_options},
           {"views", views},
-          {"orient", orient}};
+          {"orient", orient},
+          {"layout", layout}};
 }
 
-LightField read_oriented(const std::string& dir, const std::string& orient,
-                         const std::string& what) {
+LightField read_oriented(const std::string& dir, const std::string& orient, const std::string& what,
+                         const std::string& layout) {
   const auto orientation = AngularOrientation::parse(orient, what);
-  LightField lf = reorient(io::read_light_field(dir), orientation);
+  LightField lf = reorient(io::read_light_field(dir, 0, layout), orientation);
   const auto check = check_parallax(lf);
   if (check.verdict == ParallaxVerdict::kDisagree) {
     static std::mutex mutex;
@@ -87,7 +90,7 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
                         sources.random_scenes;
   ProgressBar bar("loading light fields", total);
   for (const auto& dir : sources.light_fields) {
-    auto lf = read_oriented(dir, sources.orient, "orient");
+    auto lf = read_oriented(dir, sources.orient, "orient", sources.layout);
     if (whole_grids && sources.views.empty()) {
       LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, dir, " has ", lf.rows(),
                      "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");

@@ -20,6 +20,7 @@ enum class NamingScheme {
                 // lowest index found), any digit count (Lytro exports such as 2067_01_01.png)
   kMitIndex,    // <name>-NN.ext, NN 1-based row-major from the BOTTOM row of views (MIT Synthetic
                 // LF Archive: camera Y grows upward), read with its rows reversed
+  kCustom,      // a --layout pattern (parse_layout)
 };
 std::string to_string(NamingScheme scheme);
 
@@ -38,14 +39,31 @@ struct FolderLayout {
   std::vector<ViewFile> views;
 };
 
+// A naming pattern for folders no built-in scheme reads (--layout, docs/conventions.md):
+// the file name with `{row}` and `{col}` fields (e.g. `view_{row}x{col}.png`), or with one
+// `{index}` field and the grid's width, `img{index}.png:cols=9`, numbered row-major unless
+// `:col-major` follows. Fields are decimal numbers, 0- or 1-based (the lowest found); `*`
+// matches any text. Flips and transposes are --orient's.
+struct CustomLayout {
+  std::string text;
+  std::string pattern;  // the file-name part
+  bool index = false;   // one {index} field instead of {row} and {col}
+  int64_t cols = 0;     // with index: the width of the grid
+  bool col_major = false;
+};
+// Parses a --layout text; a ConfigError names what is wrong (`what`: the option).
+CustomLayout parse_layout(const std::string& text, const std::string& what = "--layout");
+
 // Recognises the naming scheme of a folder and checks the grid is complete. Throws IoError
-// naming the folder or the missing file.
-FolderLayout scan_folder(const std::string& dir);
+// naming the folder or the missing file. A non-empty `layout` (parse_layout) replaces the
+// recognition.
+FolderLayout scan_folder(const std::string& dir, const std::string& layout = "");
 
 // Reads every view of a folder into a light field (C, U, V, H, W) with C = 3 (RGB; alpha
 // dropped) or 1 (grey). Views of different sizes or channel counts are an IoError naming the
 // file. `threads` <= 0 uses every core.
-LightField read_light_field(const std::string& dir, int threads = 0);
+LightField read_light_field(const std::string& dir, int threads = 0,
+                            const std::string& layout = "");
 
 // Reads one image as (C, H, W) float32: integer formats scaled to [0, 1], floats as stored.
 torch::Tensor read_image(const std::string& path);

@@ -22,6 +22,8 @@ struct LightFieldSources {
   uint64_t random_seed = 1;                                  // seed of the first random scene
   nlohmann::json random_options = nlohmann::json::object();  // scene::RandomSceneOptions
   std::string views;   // R0:R1,C0:C1 (1-based); "" = central U x V
+  std::string layout;  // a file-naming pattern for folders no built-in scheme reads
+                       // (io::parse_layout, docs/conventions.md); "" recognises the scheme
   std::string orient;  // angular reorientation of the folders on loading:
                        // flip-u, flip-v, transpose (docs/conventions.md)
 
@@ -39,8 +41,8 @@ struct NamedLightField {
 // Reads a light-field folder and reorients its angular axes (`orient`, parsed as `what`: an
 // option or JSON path); warns once per folder when its horizontal and vertical parallax
 // disagree in sign (docs/conventions.md).
-LightField read_oriented(const std::string& dir, const std::string& orient,
-                         const std::string& what);
+LightField read_oriented(const std::string& dir, const std::string& orient, const std::string& what,
+                         const std::string& layout = "");
 
 // Loads every source as a grey light field of rows x cols views, with a progress bar. With
 // `whole_grids`, folders without a `views` window keep every view (at least rows x cols), for
