@@ -79,9 +79,10 @@ FolderLayout layout_from_pairs(NamingScheme scheme, const std::vector<Candidate>
     for (int64_t v = 0; v < layout.cols; ++v) {
       auto it = grid.find({u, v});
       if (it == grid.end()) {
-        char name[64];
-        std::snprintf(name, sizeof name, example.c_str(), static_cast<long long>(u + base),
-                      static_cast<long long>(v + base));
+        char name[256];
+        const long long row = static_cast<long long>(u) + static_cast<long long>(base);
+        const long long col = static_cast<long long>(v) + static_cast<long long>(base);
+        std::snprintf(name, sizeof name, example.c_str(), row, col);
         throw IoError("light field folder " + dir + " has a gap in its " +
                       std::to_string(layout.rows) + "x" + std::to_string(layout.cols) +
                       " grid: view file " + name + " is missing");
@@ -94,7 +95,7 @@ FolderLayout layout_from_pairs(NamingScheme scheme, const std::vector<Candidate>
 
 // Views numbered row-major over a square grid. `rows_up`: the numbering starts at the bottom
 // row (a camera whose Y axis points up), so its rows are read in reverse to put u downward.
-FolderLayout layout_from_index(NamingScheme scheme, std::vector<Candidate> found,
+FolderLayout layout_from_index(NamingScheme scheme, const std::vector<Candidate>& found,
                                const std::string& dir, int64_t base, const std::string& what,
                                bool rows_up = false) {
   int64_t max_index = 0;
@@ -148,8 +149,8 @@ CustomLayout parse_layout(const std::string& text, const std::string& what) {
           what, " ", text, ": cols= takes the grid's width, 1 to 999");
       l.cols = std::stoll(n);
     } else {
-      throw ConfigError(what + " " + text + ": unknown option '" + parts[i] +
-                        "' (known: cols=N, col-major)");
+      LFNET_CHECK_AS(ConfigError, false, what, " ", text, ": unknown option '", parts[i],
+                     "' (known: cols=N, col-major)");
     }
   }
   const bool row = l.pattern.find("{row}") != std::string::npos;
@@ -312,6 +313,8 @@ FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
   }
   auto& [scheme, files] = *found.begin();
   switch (scheme) {
+    case NamingScheme::kCustom:  // a --layout pattern returned above
+      break;
     case NamingScheme::kHciCam:
       return layout_from_index(scheme, files, dir, 0, "input_Cam");
     // The MIT archive's README places file 01 at camera Y = -2.5 cm and 21 at +2.5 cm with Y
@@ -373,6 +376,7 @@ LightField read_light_field(const std::string& dir, int threads, const std::stri
     }
   };
   std::vector<std::thread> pool;
+  pool.reserve(static_cast<size_t>(workers));
   for (int t = 0; t < workers; ++t) pool.emplace_back(work);
   for (auto& t : pool) t.join();
   if (!first_error.empty()) throw IoError(first_error);
