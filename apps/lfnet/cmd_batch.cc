@@ -36,7 +36,7 @@ namespace lfnet::app {
 namespace {
 
 struct BatchArgs {
-  std::string in, out, methods, model, dictionary, dict_method = "omp", phi, mode = "sensor";
+  std::string in, out, methods, model, dictionary, dict_method, dict_options, phi, mode = "sensor";
   int64_t stride = 5;
   int64_t batch = 1024;
   double noise = 0;
@@ -171,6 +171,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
         q.model = a.model;
         q.dictionary = a.dictionary;
         q.dict_method = a.dict_method;
+        q.dict_options = a.dict_options;
         q.options.stride = a.stride;
         q.options.batch = a.batch;
         q.options.window = a.window;
@@ -217,6 +218,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchArgs&
     context.dictionary = a.dictionary;
     context.cache = &cache;
     context.dict_method = a.dict_method;
+    context.dict_options = a.dict_options;
     pipeline::LightFieldSources sources;
     sources.light_fields = {item.path};
     truths = pipeline::load_sources(sources, phi->rows(), phi->cols());
@@ -388,9 +390,15 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--model", a->model,
                   "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for dict");
-  cmd->add_option("--dict-method", a->dict_method, "sparse coding for dict: omp or admm")
+  cmd->add_option("--dict-method", a->dict_method,
+                  "sparse coding for dict: omp or admm (default: the dictionary's)")
       ->check(CLI::IsMember({"omp", "admm"}));
-  cmd->add_option("--phi", a->phi, "Phi for evaluation without --model: NAME[:N]");
+  cmd->add_option("--dict-options", a->dict_options,
+                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
+                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
+  cmd->add_option(
+      "--phi", a->phi,
+      "Phi for evaluation without --model: NAME[:N], a spec or a calibrated-Phi folder");
   cmd->add_option("--mode", a->mode, "simulation mode of evaluations: sensor or per_patch")
       ->check(CLI::IsMember({"sensor", "per_patch"}));
   cmd->add_option("--noise", a->noise, "Gaussian noise sigma of evaluations")

@@ -29,7 +29,7 @@ namespace lfnet::app {
 namespace {
 struct EvaluateArgs {
   std::string model, lf, scene, phi, views, orient, layout, mode = "sensor", method, dictionary,
-                                                            json, out;
+                                                            dict_method, dict_options, json, out;
   double noise = 0;
   int64_t stride = 5;
   int64_t batch = 1024;
@@ -99,6 +99,8 @@ void run_evaluate(const EvaluateArgs& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
+  context.dict_method = a.dict_method;
+  context.dict_options = a.dict_options;
   const auto truths = pipeline::load_sources(sources, phi->rows(), phi->cols());
 
   const auto o = pipeline::make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window,
@@ -134,7 +136,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--lf", a->lf, "light field folder with the truth");
   cmd->add_option("--scene", a->scene, "or a procedural scene spec");
-  cmd->add_option("--phi", a->phi, "NAME[:N]: needed without --model; must match the model");
+  cmd->add_option("--phi", a->phi,
+                  "NAME[:N], a spec (.json) or a calibrated-Phi folder: needed without --model; "
+                  "must match the model");
   cmd->add_option("--views", a->views, "angular window R0:R1,C0:C1 (1-based; default central)");
   cmd->add_option(
       "--orient", a->orient,
@@ -151,6 +155,12 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "net, ae, cnn, dict, pinv, adjoint or no-parallax (default net with --model, "
                   "pinv without)");
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for --method dict");
+  cmd->add_option("--dict-method", a->dict_method,
+                  "sparse coding for dict: omp or admm (default: the dictionary's)")
+      ->check(CLI::IsMember({"omp", "admm"}));
+  cmd->add_option("--dict-options", a->dict_options,
+                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
+                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
   cmd->add_option("--out", a->out, "write the reconstruction as a light-field folder");
   cmd->add_flag("--force", a->force, "replace an existing --out folder");

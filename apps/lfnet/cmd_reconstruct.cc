@@ -53,14 +53,18 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       ->required();
   cmd->add_option("--out", a->out, "output light-field folder (views, grid.png, EPIs)")->required();
   cmd->add_option("--phi", q.phi,
-                  "Phi of a plain sensor image: NAME[:N] or a JSON spec file (default: the "
-                  "model's)");
+                  "Phi of a plain sensor image: NAME[:N], a JSON spec file or a calibrated-Phi "
+                  "folder (default: the model's)");
   cmd->add_option("--method", q.method, "net, ae, cnn, dict, pinv or adjoint (default net)");
   cmd->add_option("--model", q.model,
                   "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
-  cmd->add_option("--dict-method", q.dict_method, "sparse coding for dict: omp or admm")
+  cmd->add_option("--dict-method", q.dict_method,
+                  "sparse coding for dict: omp or admm (default: the dictionary's)")
       ->check(CLI::IsMember({"omp", "admm"}));
+  cmd->add_option("--dict-options", q.dict_options,
+                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
+                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
   cmd->add_option("--stride", q.options.stride, "patch stride (sensor images; default 5)")
       ->check(kStride);
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")

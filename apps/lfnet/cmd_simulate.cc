@@ -353,7 +353,8 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option("--scene", args->scene,
                   "procedural scene spec to render and simulate (configs/scenes)");
   cmd->add_option("--phi", args->phi,
-                  "Phi model NAME[:N] (asp, mask, aperture, random, lenslet) or a PHI.json spec")
+                  "Phi model NAME[:N] (asp, mask, aperture, random, lenslet), a PHI.json spec, a "
+                  "calibrated-Phi folder or a model file")
       ->capture_default_str();
   cmd->add_option("--mode", args->mode,
                   "sensor: one sensor image; per_patch: every patch measured alone (the paper's "

@@ -59,5 +59,6 @@ void add_report_command(CLI::App& app, const GlobalOptions& global);
 void add_export_command(CLI::App& app, const GlobalOptions& global);
 void add_launch_command(CLI::App& app, const GlobalOptions& global);
 void add_bench_command(CLI::App& app, const GlobalOptions& global);
+void add_phi_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app

@@ -53,7 +53,8 @@ int main(int argc, char** argv) {
   const std::vector<CommandFactory> commands = {
       add_info_command,       add_render_command,   add_simulate_command,    add_train_command,
       add_experiment_command, add_evaluate_command, add_reconstruct_command, add_batch_command,
-      add_report_command,     add_export_command,   add_launch_command,      add_bench_command};
+      add_report_command,     add_export_command,   add_launch_command,      add_bench_command,
+      add_phi_command};
   for (const auto& add : commands) add(app, global);
 
   try {

@@ -78,3 +78,20 @@ TEST_CASE("JSON files are written atomically and read back", "[core][json]") {
   CHECK(lfnet::read_json_file(tmp / "x.json") == j);
   CHECK_THROWS_AS(lfnet::read_json_file(tmp / "missing.json"), lfnet::IoError);
 }
+
+TEST_CASE("json_differences names only the fields that differ, briefly", "[core][json]") {
+  auto a = nlohmann::json::parse(R"({"name": "asp", "n": 2, "params": {"pair_alpha": 90}})");
+  auto b = nlohmann::json::parse(R"({"name": "asp", "n": 2, "params": {"pair_alpha": 0}})");
+  CHECK(lfnet::json_differences(a, b, "model", "data") == "params.pair_alpha (model 90, data 0)");
+  CHECK(lfnet::json_differences(a, a, "model", "data").empty());
+  // Another model: its parameters are not listed one by one.
+  auto c = nlohmann::json::parse(
+      R"({"name": "calibrated", "n": 2, "params": {"period": 1, "weights": [1, 2, 3]}})");
+  CHECK(lfnet::json_differences(a, c, "model", "data") ==
+        "name (model \"asp\", data \"calibrated\"); params (another model's)");
+  // Long lists are summarised.
+  auto d = c;
+  d["params"]["weights"] = std::vector<double>(50, 0.25);
+  CHECK(lfnet::json_differences(c, d, "A", "B") ==
+        "params.weights (A [1,2,3], B a list of 50 values)");
+}

@@ -25,6 +25,14 @@ PhiSpec spec_of(const std::string& name, int64_t n, int64_t rows = 5, int64_t co
   s.rows = rows;
   s.cols = cols;
   s.seed = 7;
+  if (name == "calibrated") {
+    // A measured response has no generator: give it one, period 2, from a seeded draw.
+    auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
+    auto w = torch::rand({n * rows * cols * 4}, gen, torch::kFloat64);
+    s.params = {
+        {"period", 2},
+        {"weights", std::vector<double>(w.data_ptr<double>(), w.data_ptr<double>() + w.numel())}};
+  }
   return s;
 }
 
@@ -49,8 +57,8 @@ double adjoint_error(const lfnet::optics::Phi& phi, torch::ScalarType dtype, int
 
 }  // namespace
 
-TEST_CASE("the registry holds the five built-in models", "[optics][phi]") {
-  for (const char* name : {"asp", "mask", "aperture", "random", "lenslet"}) {
+TEST_CASE("the registry holds the built-in models", "[optics][phi]") {
+  for (const char* name : {"asp", "mask", "aperture", "random", "lenslet", "calibrated"}) {
     CHECK(std::find(kModels.begin(), kModels.end(), name) != kModels.end());
   }
 }
@@ -336,7 +344,16 @@ TEST_CASE("Phi specs round-trip through JSON and resolve their parameters", "[op
 
 TEST_CASE("bad Phi specs are ConfigErrors that say what is wrong", "[optics][spec]") {
   CHECK_THROWS_WITH(make_phi(spec_of("ASP", 2)),
-                    Catch::Contains("known: aperture, asp, lenslet, mask, random"));
+                    Catch::Contains("known: aperture, asp, calibrated, lenslet, mask, random"));
+  auto measured = spec_of("calibrated", 2);
+  measured.params["weights"].erase(measured.params["weights"].begin());
+  CHECK_THROWS_WITH(make_phi(measured), Catch::Contains("$.params.weights: expected N x U x V x "
+                                                        "T x T = 2 x 5 x 5 x 2 x 2 = 200 values"));
+  measured = spec_of("calibrated", 2);
+  measured.params["weights"][7] = -0.5;
+  CHECK_THROWS_WITH(make_phi(measured), Catch::Contains("$.params.weights[7]"));
+  measured.params.erase("weights");
+  CHECK_THROWS_WITH(make_phi(measured), Catch::Contains("$.params.weights: required"));
   CHECK_THROWS_WITH(make_phi(spec_of("asp", 26)), Catch::Contains("1..25"));
   auto spec = spec_of("mask", 2);
   spec.params = {{"periode", 9}};

@@ -129,3 +129,28 @@ TEST_CASE("evaluate_method scores the registry's methods and the no-parallax bas
   CHECK_THROWS_WITH(pipeline::evaluate_method(truth, "net", context, o, nullptr, false),
                     Catch::Contains("--model"));
 }
+
+TEST_CASE("the dict method codes as its dictionary recommends, unless told otherwise",
+          "[pipeline][dict]") {
+  dict::Dictionary d;
+  // No recommendation: the library's default, OMP.
+  CHECK(pipeline::dict_coding(d, "", "").method == "omp");
+  d.training["coding"] = {{"method", "admm"}, {"admm", {{"lambda", 0.001}}}};
+  auto c = pipeline::dict_coding(d, "", "");
+  CHECK(c.method == "admm");
+  CHECK(c.admm.lambda == 0.001);
+  // --dict-options overrides field by field; --dict-method last.
+  c = pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "");
+  CHECK(c.method == "admm");
+  CHECK(c.admm.lambda == 0.001);
+  CHECK(c.admm.rho == 2.0);
+  CHECK(pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "omp").method == "omp");
+  // From a file, and errors that name the option and the JSON path.
+  test::TempDir tmp;
+  write_json_file(tmp / "coding.json", {{"omp", {{"max_atoms", 20}}}});
+  CHECK(pipeline::dict_coding(d, tmp / "coding.json", "").omp.max_atoms == 20);
+  CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": {"max_atom": 20}})", ""),
+                    Catch::Contains("--dict-options:$.omp.max_atom"));
+  CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": )", ""), Catch::Contains("--dict-options"));
+  CHECK_THROWS_WITH(pipeline::dict_coding(d, "", "lasso"), Catch::Contains("omp or admm"));
+}

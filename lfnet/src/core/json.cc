@@ -109,17 +109,39 @@ void collect_differences(const nlohmann::json& a, const nlohmann::json& b, const
     }
     return;
   }
-  if (a != b) {
-    out.push_back((path.empty() ? "$" : path) + " (" + a_name + " " + a.dump() + ", " + b_name +
-                  " " + b.dump() + ")");
+  if (a == b) return;
+  const std::string where = path.empty() ? "$" : path;
+  // Long values (a calibrated camera's weights) are summarised, not printed.
+  auto shown = [](const nlohmann::json& v) {
+    std::string text = v.dump();
+    if (text.size() <= 40) return text;
+    return v.is_array() ? "a list of " + std::to_string(v.size()) + " values"
+                        : text.substr(0, 37) + "...";
+  };
+  out.push_back(where + " (" + a_name + " " + shown(a) + ", " + b_name + " " + shown(b) + ")");
+}
+
+// Model names that differ make every parameter differ: say only that.
+void collect_top_differences(const nlohmann::json& a, const nlohmann::json& b,
+                             const std::string& a_name, const std::string& b_name,
+                             std::vector<std::string>& out) {
+  if (a.is_object() && b.is_object() && a.contains("name") && b.contains("name") &&
+      a["name"] != b["name"] && a.contains("params") && b.contains("params")) {
+    auto a_rest = a, b_rest = b;
+    a_rest.erase("params");
+    b_rest.erase("params");
+    collect_differences(a_rest, b_rest, "", a_name, b_name, out);
+    out.push_back("params (another model's)");
+    return;
   }
+  collect_differences(a, b, "", a_name, b_name, out);
 }
 }  // namespace
 
 std::string json_differences(const nlohmann::json& a, const nlohmann::json& b,
                              const std::string& a_name, const std::string& b_name) {
   std::vector<std::string> parts;
-  collect_differences(a, b, "", a_name, b_name, parts);
+  collect_top_differences(a, b, a_name, b_name, parts);
   std::string out;
   for (const auto& p : parts) out += (out.empty() ? "" : "; ") + p;
   return out;

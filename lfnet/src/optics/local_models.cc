@@ -1,4 +1,5 @@
 // The local models besides asp: a coded mask in the camera body, a coded aperture, lenslets.
+#include <cmath>
 #include <numeric>
 
 #include "lfnet/core/error.h"
@@ -114,6 +115,39 @@ std::unique_ptr<Phi> make_lenslet(const PhiSpec& spec) {
   PhiSpec resolved = spec;
   resolved.params = nlohmann::json::object();
   return std::make_unique<LocalPhi>(resolved, normalise_white(code));
+}
+
+std::unique_ptr<Phi> make_calibrated(const PhiSpec& spec) {
+  JsonReader r(spec.params, "$.params");
+  int64_t period = 1;           // T: the response repeats every T pixels
+  std::vector<double> weights;  // M_n(u, v, y, x), N * U * V * T * T values in that order
+  bool normalise = true;        // scale so a white light field measures 1 on average
+  std::string source;           // where the measurement came from (informational)
+  r.get("period", period);
+  r.require("weights", weights);
+  r.get("normalise", normalise);
+  r.get("source", source);
+  r.finish();
+  LFNET_CHECK_AS(ConfigError, period >= 1 && period <= 64, r.path_of("period"),
+                 ": the period T must be in 1..64, got ", period);
+  const int64_t expected = spec.n * spec.rows * spec.cols * period * period;
+  check_code_size(spec, expected, "a calibrated code");
+  LFNET_CHECK_AS(ConfigError, static_cast<int64_t>(weights.size()) == expected,
+                 r.path_of("weights"), ": expected N x U x V x T x T = ", spec.n, " x ", spec.rows,
+                 " x ", spec.cols, " x ", period, " x ", period, " = ", expected, " values, got ",
+                 weights.size());
+  for (size_t i = 0; i < weights.size(); ++i) {
+    LFNET_CHECK_AS(ConfigError, std::isfinite(weights[i]) && weights[i] >= 0, r.path_of("weights"),
+                   "[", i, "]: a measured response must be finite and non-negative, got ",
+                   weights[i]);
+  }
+  auto code = torch::from_blob(weights.data(), {spec.n, spec.rows, spec.cols, period, period},
+                               torch::kFloat64)
+                  .clone();
+  PhiSpec resolved = spec;
+  resolved.params = {{"period", period}, {"weights", weights}, {"normalise", normalise}};
+  if (!source.empty()) resolved.params["source"] = source;
+  return std::make_unique<LocalPhi>(resolved, normalise ? normalise_white(code) : code);
 }
 
 }  // namespace lfnet::optics::detail

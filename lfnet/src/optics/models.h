@@ -66,6 +66,8 @@ std::unique_ptr<Phi> make_mask(const PhiSpec& spec);
 std::unique_ptr<Phi> make_aperture(const PhiSpec& spec);
 std::unique_ptr<Phi> make_lenslet(const PhiSpec& spec);
 std::unique_ptr<Phi> make_random(const PhiSpec& spec);
+// A measured local response given value by value (docs/acquisition.md, "Calibrated Phi").
+std::unique_ptr<Phi> make_calibrated(const PhiSpec& spec);
 
 // Checks a light field (..., U, V, H, W) against the spec: U, V, float32 or float64.
 void check_light_field(const torch::Tensor& lf, const PhiSpec& spec);

@@ -109,6 +109,7 @@ void ensure_builtins() {
     add_factory("aperture", detail::make_aperture);
     add_factory("random", detail::make_random);
     add_factory("lenslet", detail::make_lenslet);
+    add_factory("calibrated", detail::make_calibrated);
   });
 }
 

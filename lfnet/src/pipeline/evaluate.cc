@@ -53,7 +53,8 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     if (needs == recon::MethodNeeds::kDictionary && !context.dictionary.empty()) {
       resources.dictionary =
           &(context.cache ? *context.cache : local).dictionary(context.dictionary);
-      resources.coding.method = context.dict_method;
+      resources.coding =
+          dict_coding(*resources.dictionary, context.dict_options, context.dict_method);
       report = std::make_shared<recon::SolverReport>();
       resources.report = report;
     }

@@ -4,6 +4,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/stages.h"
 
 namespace fs = std::filesystem;
@@ -113,7 +114,8 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
     r.get("name", c.name);
     nlohmann::json phi;
     r.require("phi", phi);
-    c.phi = phi.is_string() ? optics::PhiSpec::parse(phi.get<std::string>())
+    // A string is NAME[:N] or a file: a calibrated-Phi folder, a spec, a model.
+    c.phi = phi.is_string() ? phi_from_argument(phi.get<std::string>(), "$.phi")
                             : optics::PhiSpec::from_json(phi, "$.phi");
     {
       auto d = r.child("data");
@@ -163,10 +165,13 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
     }
     if (r.has("dictionary")) {
       auto d = r.child("dictionary");
-      nlohmann::json sampling = nlohmann::json::object(), ksvd = nlohmann::json::object();
+      nlohmann::json sampling = nlohmann::json::object(), ksvd = nlohmann::json::object(),
+                     coding = nlohmann::json::object();
       d.get("sampling", sampling);
       d.get("ksvd", ksvd);
+      d.get("coding", coding);
       d.finish();
+      c.dictionary_coding = dict::SparseCodingOptions::from_json(coding, "$.dictionary.coding");
       c.dictionary_sampling =
           dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
       c.dictionary_ksvd = dict::KsvdOptions::from_json(ksvd, "$.dictionary.ksvd");

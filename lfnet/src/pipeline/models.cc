@@ -6,6 +6,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/io/phi_io.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
 
@@ -90,16 +91,50 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   return it->second;
 }
 
+dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
+                                      const std::string& options, const std::string& method,
+                                      const std::string& option) {
+  nlohmann::json merged = dict::SparseCodingOptions{}.to_json();
+  auto merge = [&](const nlohmann::json& patch, const std::string& source) {
+    LFNET_CHECK_AS(ConfigError, patch.is_object(), source, ": expected a JSON object, got ",
+                   patch.dump());
+    merged.merge_patch(patch);
+    try {
+      return dict::SparseCodingOptions::from_json(merged, source);
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string(e.what()));
+    }
+  };
+  dict::SparseCodingOptions coding;
+  if (dictionary.training.is_object() && dictionary.training.contains("coding")) {
+    coding = merge(dictionary.training["coding"], "the dictionary's coding");
+  }
+  if (!options.empty()) {
+    const bool inline_json = options.find('{') != std::string::npos;
+    const auto patch = inline_json ? parse_json(options, option) : read_json_file(options);
+    coding = merge(patch, option + (inline_json ? "" : " " + options) + ":$");
+  }
+  if (!method.empty()) {
+    LFNET_CHECK_AS(ConfigError, method == "omp" || method == "admm",
+                   "--dict-method must be omp or admm, got ", method);
+    coding.method = method;
+  }
+  return coding;
+}
+
 bool phi_argument_is_file(const std::string& text) {
   std::error_code ec;
-  return fs::path(text).extension() == ".json" || fs::is_regular_file(text, ec);
+  return fs::path(text).extension() == ".json" || fs::exists(text, ec);
 }
 
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option) {
+  if (io::is_calibrated_phi(text)) return io::read_calibrated_phi(text);
+  std::error_code ec;
+  LFNET_CHECK_AS(ConfigError, !fs::is_directory(text, ec), option, " ", text,
+                 " is a folder without phi.json, not a calibrated Phi");
   if (fs::path(text).extension() == ".json") {
     return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
   }
-  std::error_code ec;
   if (!fs::is_regular_file(text, ec)) return optics::PhiSpec::parse(text);
   ModelFile model;
   try {

@@ -71,9 +71,15 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   if (folder) {
     acq = io::read_acquisition(a.sensor);
     spec = optics::PhiSpec::from_json(acq.meta.at("phi"), a.sensor + "/sensor.json:$.phi");
-    LFNET_CHECK_AS(ConfigError, a.phi.empty() || phi_from_argument(a.phi).label() == spec.label(),
-                   "--phi ", a.phi, " contradicts ", a.sensor, "/sensor.json, which says ",
-                   spec.label());
+    if (!a.phi.empty()) {
+      // A calibrated camera is its weights, not its name: compare them too.
+      auto given = phi_from_argument(a.phi);
+      const bool same = given.label() == spec.label() &&
+                        (given.name != "calibrated" || given.params == spec.params);
+      LFNET_CHECK_AS(ConfigError, same, "--phi ", a.phi, " contradicts ", a.sensor,
+                     "/sensor.json, which says ", spec.label(),
+                     given.label() == spec.label() ? " with other weights" : "");
+    }
   } else {
     LFNET_CHECK_AS(IoError, fs::exists(a.sensor) || a.sensor.find(',') != std::string::npos,
                    "--sensor ", a.sensor, " does not exist");
@@ -116,7 +122,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
     if (needs == recon::MethodNeeds::kDictionary) {
       resources.dictionary = &files.dictionary(a.dictionary);
-      resources.coding.method = a.dict_method;
+      resources.coding = dict_coding(*resources.dictionary, a.dict_options, a.dict_method);
     }
     solver = recon::make_solver(method, resources);
   }

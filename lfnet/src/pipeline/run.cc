@@ -83,7 +83,8 @@ TrainResult train_experiment(const TrainRequest& request,
   }
   nlohmann::json resolved = config.raw;
   resolved["scale"] = config.scale;
-  std::unique_ptr<RunFolder> folder;  // the other ranks write nothing
+  resolved["phi"] = config.phi.to_json();  // the camera itself, not a path to it
+  std::unique_ptr<RunFolder> folder;       // the other ranks write nothing
   if (lead) {
     OutputFolderPolicy policy;
     policy.force = request.force;

@@ -134,9 +134,13 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
                    config.dataset.patch_w};
   nlohmann::json sources = nlohmann::json::array();
   for (const auto& n : named) sources.push_back(n.name);
-  d.training = {{"ksvd", ksvd.to_json()},       {"sampling", sampling.to_json()},
-                {"light_fields", sources},      {"history", history},
-                {"command_line", command_line}, {"seconds", clock.seconds()}};
+  d.training = {{"ksvd", ksvd.to_json()},
+                {"coding", config.dictionary_coding.to_json()},
+                {"sampling", sampling.to_json()},
+                {"light_fields", sources},
+                {"history", history},
+                {"command_line", command_line},
+                {"seconds", clock.seconds()}};
   const std::string target = (fs::path(run_dir) / "models" / "dict.ckpt").string();
   dict::save_dictionary(d, target);
   spdlog::info("dict: {} atoms in {:.0f} s, coding RMSE {:.4f}: {}", d.size(), clock.seconds(),

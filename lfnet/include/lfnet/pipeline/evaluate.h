@@ -26,7 +26,8 @@ struct MethodContext {
   std::string dictionary;                       // for dict: a dictionary file
   ModelCache* cache =
       nullptr;  // where to read it (and keep it) for many calls; none: read it each call
-  std::string dict_method = "omp";  // for dict: omp or admm
+  std::string dict_method;   // for dict: omp or admm ("": dict_options', else the dictionary's)
+  std::string dict_options;  // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
 };
 
 // The evaluation options of the command line: simulation mode, Gaussian noise sigma (0: none),

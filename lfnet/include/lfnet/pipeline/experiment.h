@@ -11,6 +11,7 @@
 #include "lfnet/data/patch_dataset.h"
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/dict/patch_sampling.h"
+#include "lfnet/dict/sparse_coding.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/sources.h"
@@ -55,6 +56,8 @@ struct ExperimentConfig {
   // The dict stage: training patches and K-SVD ($.dictionary.sampling, $.dictionary.ksvd).
   dict::PatchSamplingOptions dictionary_sampling;
   dict::KsvdOptions dictionary_ksvd;
+  // How the dictionary codes patches by default ($.dictionary.coding), kept in its file.
+  dict::SparseCodingOptions dictionary_coding;
   EvaluationConfig evaluation;
   nlohmann::json raw;  // the config after merging the scale, as written to config.json
 

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "lfnet/dict/dictionary.h"
+#include "lfnet/dict/sparse_coding.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
@@ -56,12 +57,22 @@ class ModelCache {
   int64_t loads_ = 0;
 };
 
-// A Phi named on the command line: NAME[:N] (e.g. asp:2), a JSON file holding a spec, or a
+// A Phi named on the command line: NAME[:N] (e.g. asp:2), a JSON file holding a spec, a
+// calibrated-Phi folder (or its phi.json: a measured response, docs/acquisition.md), or a
 // model file (an lfnet checkpoint or an exported model), whose Phi it takes: `--phi
 // models/asp-n2.ckpt` simulates exactly the camera the model was trained for.
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option = "--phi");
 
-// True when `text` names a file (a spec or a model) rather than NAME[:N].
+// The sparse coding of the dict method: OMP with 10 atoms, then the dictionary's own
+// recommendation (its record's "coding", set when it was tuned), then `options` (a JSON object
+// such as {"omp": {"max_atoms": 20}}, or a .json file holding one), then `method` (omp or
+// admm) when not empty. Bad options are ConfigErrors naming `option` and the JSON path.
+dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
+                                      const std::string& options, const std::string& method,
+                                      const std::string& option = "--dict-options");
+
+// True when `text` names a file or folder (a spec, a calibrated Phi, a model) rather than
+// NAME[:N].
 bool phi_argument_is_file(const std::string& text);
 
 }  // namespace lfnet::pipeline

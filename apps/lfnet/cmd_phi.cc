@@ -1,0 +1,83 @@
+// lfnet phi: a camera's measurement model as a file. `phi export` writes any local Phi as a
+// calibrated-Phi folder (docs/acquisition.md, "Calibrated Phi"), the format in which a measured
+// camera response is given to --phi.
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+
+#include "command.h"
+#include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
+#include "lfnet/io/phi_io.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/models.h"
+
+namespace lfnet::app {
+
+namespace {
+struct PhiExportArgs {
+  std::string phi, out, grid = "5x5";
+  bool force = false;
+};
+
+// "UxV" -> (U, V).
+std::pair<int64_t, int64_t> parse_grid(const std::string& text) {
+  const auto x = text.find('x');
+  int64_t u = 0, v = 0;
+  const bool ok = x != std::string::npos && CLI::detail::lexical_cast(text.substr(0, x), u) &&
+                  CLI::detail::lexical_cast(text.substr(x + 1), v) && u >= 1 && v >= 1 &&
+                  u <= optics::kMaxViews && v <= optics::kMaxViews;
+  LFNET_CHECK_AS(ConfigError, ok, "--grid must be UxV with U and V in 1..", optics::kMaxViews,
+                 ", got ", text);
+  return {u, v};
+}
+
+void run_phi_export(const PhiExportArgs& a) {
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.phi};
+  check_output_folder(a.out, policy);
+  optics::PhiSpec spec;
+  if (pipeline::phi_argument_is_file(a.phi)) {
+    spec = pipeline::phi_from_argument(a.phi);
+  } else {
+    spec = optics::PhiSpec::parse(a.phi);
+    std::tie(spec.rows, spec.cols) = parse_grid(a.grid);
+  }
+  const auto phi = optics::make_phi(spec);
+  write_folder(a.out, policy, [&](const std::string& dir) {
+    io::write_calibrated_phi(*phi, dir);
+    // Read it back: the folder must give the same camera, weight for weight.
+    const auto back = optics::make_phi(io::read_calibrated_phi(dir));
+    const int64_t t = phi->period();
+    const double diff = (back->pixel_weights(0, 0, t, t, torch::kFloat64) -
+                         phi->pixel_weights(0, 0, t, t, torch::kFloat64))
+                            .abs()
+                            .max()
+                            .item<double>();
+    LFNET_CHECK_AS(NumericalError, diff == 0, "the written Phi differs from ", spec.label(), " by ",
+                   diff, " when read back: please report this");
+  });
+  std::printf("wrote %s (%lld measurements, %lldx%lld views, period %lld) to %s\n",
+              spec.label().c_str(), static_cast<long long>(phi->measurements()),
+              static_cast<long long>(phi->rows()), static_cast<long long>(phi->cols()),
+              static_cast<long long>(phi->period()), a.out.c_str());
+}
+}  // namespace
+
+void add_phi_command(CLI::App& app, const GlobalOptions&) {
+  auto* cmd = app.add_subcommand("phi", "Measurement models as files (calibrated Phi)");
+  cmd->require_subcommand(1);
+  auto* ex = cmd->add_subcommand(
+      "export", "Write a Phi as a calibrated-Phi folder (phi.json and one image per measurement)");
+  auto a = std::make_shared<PhiExportArgs>();
+  ex->add_option("--phi", a->phi,
+                 "NAME[:N], a Phi spec (.json), a calibrated-Phi folder or a model file")
+      ->required();
+  ex->add_option("--out", a->out, "folder to write")->required();
+  ex->add_option("--grid", a->grid, "views U x V coded by a NAME[:N] Phi")->capture_default_str();
+  ex->add_flag("--force", a->force, "replace an existing folder");
+  ex->callback([a] { run_phi_export(*a); });
+}
+
+}  // namespace lfnet::app

@@ -1,0 +1,34 @@
+// The calibrated-Phi folder: a measured per-pixel angular response as images plus a JSON
+// sidecar, accepted wherever --phi is. The format is described in docs/acquisition.md
+// ("Calibrated Phi").
+#pragma once
+
+#include <string>
+
+#include "lfnet/optics/phi.h"
+
+namespace lfnet::io {
+
+constexpr int kCalibratedPhiFormatVersion = 1;
+constexpr const char* kCalibratedPhiFormat = "lfnet-calibrated-phi";
+constexpr const char* kCalibratedPhiSidecar = "phi.json";
+
+// Whether `path` is a calibrated-Phi folder (one holding phi.json) or its phi.json.
+bool is_calibrated_phi(const std::string& path);
+
+// Writes a local Phi into the folder `dir` (created if missing; files of the same names are
+// replaced, so callers choose the output policy):
+// phi.json and one float64 TIFF per measurement, response_<n>.tif (n from 1), of
+// (T U) x (T V) pixels, in which the U x V block at block row y, block column x holds the
+// weights M_n(u, v) of sensor pixel (y, x) of the period T. The weights are written as the
+// model computes them (already normalised), so loading the folder gives the same Phi.
+// Random projections are not local and cannot be written (ConfigError).
+void write_calibrated_phi(const optics::Phi& phi, const std::string& dir);
+
+// Reads a calibrated-Phi folder (or its phi.json) into the spec of a "calibrated" Phi, whose
+// params carry every weight: models and acquisitions made with it record the camera itself.
+// Throws IoError naming the file for anything malformed, before any image is decoded where
+// the sidecar alone shows it.
+optics::PhiSpec read_calibrated_phi(const std::string& path);
+
+}  // namespace lfnet::io
