@@ -14,6 +14,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/scene/scene.h"
+#include "report_figures.h"
 
 namespace lfnet::app {
 namespace {
@@ -68,23 +69,11 @@ std::pair<double, double> parse_range(const std::string& text) {
   }
 }
 
-// Viridis-like ramp for disparity maps: far (small) is dark blue, near (large) is yellow.
+// Disparity maps in viridis: far (small) is dark blue, near (large) is yellow.
 torch::Tensor colour_map(const torch::Tensor& disparity) {
-  static const float anchors[5][3] = {{0.267f, 0.005f, 0.329f},
-                                      {0.230f, 0.322f, 0.546f},
-                                      {0.128f, 0.567f, 0.551f},
-                                      {0.369f, 0.789f, 0.383f},
-                                      {0.993f, 0.906f, 0.144f}};
   const float lo = disparity.min().item<float>();
   const float hi = disparity.max().item<float>();
-  auto t = hi > lo ? (disparity - lo) / (hi - lo) : torch::full_like(disparity, 0.5f);
-  auto pos = t.clamp(0.0, 1.0) * 4.0f;
-  auto k = pos.floor().clamp(0, 3).to(torch::kLong);
-  auto f = pos - k.to(torch::kFloat32);
-  auto table = torch::from_blob(const_cast<float*>(&anchors[0][0]), {5, 3}).clone();
-  auto c0 = table.index({k}).permute({2, 0, 1});
-  auto c1 = table.index({k + 1}).permute({2, 0, 1});
-  return c0 * (1 - f).unsqueeze(0) + c1 * f.unsqueeze(0);
+  return viridis(hi > lo ? (disparity - lo) / (hi - lo) : torch::full_like(disparity, 0.5f));
 }
 
 // A small image to look at: the centre view and the disparity map side by side, area-downscaled

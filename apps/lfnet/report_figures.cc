@@ -59,6 +59,31 @@ std::string format(const char* fmt, double v) {
 
 }  // namespace
 
+namespace {
+// OpenCV's viridis as a (256, 3) RGB table in [0, 1].
+const torch::Tensor& viridis_table() {
+  static const torch::Tensor table = [] {
+    cv::Mat levels(1, 256, CV_8UC1);
+    for (int i = 0; i < 256; ++i) levels.at<uint8_t>(0, i) = static_cast<uint8_t>(i);
+    cv::Mat bgr;
+    cv::applyColorMap(levels, bgr, cv::COLORMAP_VIRIDIS);
+    auto t = torch::empty({256, 3});
+    for (int i = 0; i < 256; ++i) {
+      const auto c = bgr.at<cv::Vec3b>(0, i);
+      for (int k = 0; k < 3; ++k) t[i][k] = static_cast<float>(c[2 - k]) / 255.0f;
+    }
+    return t;
+  }();
+  return table;
+}
+}  // namespace
+
+torch::Tensor viridis(const torch::Tensor& t) {
+  auto index = (t.to(torch::kFloat32).clamp(0, 1) * 255).round().to(torch::kLong);
+  auto rgb = viridis_table().index({index});  // (S..., 3)
+  return rgb.movedim(-1, 0).contiguous();
+}
+
 void mark_pareto_front(std::vector<ParetoPoint>& points) {
   std::vector<size_t> order(points.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
@@ -183,16 +208,16 @@ void plot_view_heatmap(const std::vector<std::vector<double>>& psnr, const std::
       hi = std::max(hi, v);
     }
   }
-  cv::Mat levels(1, 256, CV_8UC1);
-  for (int i = 0; i < 256; ++i) levels.at<uint8_t>(0, i) = static_cast<uint8_t>(i);
-  cv::Mat colours;
-  cv::applyColorMap(levels, colours, cv::COLORMAP_VIRIDIS);
+  const auto& colours = viridis_table();
   for (int u = 0; u < rows; ++u) {
     for (int v = 0; v < cols; ++v) {
       const double t = hi > lo ? (psnr[u][v] - lo) / (hi - lo) : 0.5;
-      const auto c = colours.at<cv::Vec3b>(0, static_cast<int>(std::round(t * 255)));
+      const auto c = colours[static_cast<int64_t>(std::round(t * 255))];
       const cv::Rect r(left + v * cell, top + u * cell, cell - 2, cell - 2);
-      cv::rectangle(img, r, cv::Scalar(c[0], c[1], c[2]), cv::FILLED);
+      cv::rectangle(img, r,
+                    cv::Scalar(255 * c[2].item<double>(), 255 * c[1].item<double>(),
+                               255 * c[0].item<double>()),
+                    cv::FILLED);
       put_text(img, format("%.1f", psnr[u][v]), {r.x + 12, r.y + 36}, 0.5,
                t > 0.6 ? kBlack : cv::Scalar(255, 255, 255));
     }

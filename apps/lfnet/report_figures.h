@@ -19,6 +19,10 @@ struct ParetoPoint {
   bool front = false;  // on the Pareto front (no other point is both faster and better)
 };
 
+// The colour map of every lfnet figure (OpenCV's viridis): values in [0, 1] of any shape S
+// to RGB (3, S...) float32 in [0, 1]; values outside are clamped.
+torch::Tensor viridis(const torch::Tensor& t);
+
 // Marks the Pareto front: a point is on it when every faster point has a lower PSNR.
 void mark_pareto_front(std::vector<ParetoPoint>& points);
 
