@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Fuzzes the config parser and the light-field folder loader with libFuzzer (docs/robustness.md).
+# Fuzzes the config parser, the light-field folder loader, the sensor-image loaders and model
+# file reading with libFuzzer (docs/robustness.md).
 #
-#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]     (default: 300 s; both targets)
+#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]     (default: 300 s; every target)
 #
 # Builds into build-fuzz/ (never into build/): the fuzz targets, and the lfnet sources they
 # exercise most (JSON reading, Phi specs, the experiment config, image and folder reading),
@@ -15,7 +16,7 @@ cd "$(dirname "$0")/.."
 seconds="${1:-300}"
 shift || true
 targets=("$@")
-[ ${#targets[@]} -eq 0 ] && targets=(config light_field_folder)
+[ ${#targets[@]} -eq 0 ] && targets=(config light_field_folder acquisition checkpoint)
 
 if ! command -v clang++ >/dev/null || ! ls /usr/lib/llvm-*/lib/clang/*/lib/linux/libclang_rt.fuzzer-x86_64.a >/dev/null 2>&1; then
   echo "installing clang (libFuzzer)" >&2
@@ -52,6 +53,8 @@ libs=(-Wl,--start-group build/lfnet/src/*/liblfnet_*.a -Wl,--end-group
 declare -A instrumented=(
   [config]="lfnet/src/pipeline/experiment.cc lfnet/src/pipeline/sources.cc lfnet/src/core/json.cc lfnet/src/optics/phi.cc lfnet/src/optics/asp.cc lfnet/src/optics/local_models.cc"
   [light_field_folder]="lfnet/src/io/light_field_io.cc lfnet/src/io/sensor_io.cc lfnet/src/core/json.cc"
+  [acquisition]="lfnet/src/io/sensor_io.cc lfnet/src/io/phi_io.cc lfnet/src/core/json.cc lfnet/src/optics/local_models.cc"
+  [checkpoint]="lfnet/src/pipeline/models.cc lfnet/src/train/checkpoint.cc lfnet/src/dict/dictionary.cc lfnet/src/nn/script.cc"
 )
 
 for t in "${targets[@]}"; do
