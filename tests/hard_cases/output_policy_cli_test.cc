@@ -212,3 +212,49 @@ TEST_CASE("batch records unreadable entries as failed items and goes on", "[app]
             out) != 0);
   expect_one_error(out, "lies inside the input");
 }
+
+TEST_CASE("batch records a folder it may not read as a failed item and goes on",
+          "[app][bad_input]") {
+  // Permissions do not stop root: run lfnet as `nobody` (setpriv, util-linux) when the tests
+  // run as root, else as the user running them.
+  std::string out;
+  std::string as_user;
+  if (::geteuid() == 0) {
+    if (run_command("command -v setpriv", out) != 0) {
+      WARN("skipped: running as root without setpriv");
+      return;
+    }
+    as_user = "setpriv --reuid=65534 --regid=65534 --clear-groups ";
+  }
+  lfnet::test::TempDir tmp;
+  const fs::path in = tmp.path() / "in";
+  fs::create_directories(in);
+  REQUIRE(
+      run_command(program("render --random 2 --size 24x24 --grey --out " + (in / "good").string()),
+                  out) == 0);
+  REQUIRE(run_command(
+              program("render --random 3 --size 24x24 --grey --out " + (in / "secret").string()),
+              out) == 0);
+  fs::permissions(in / "secret", fs::perms::none);
+  // nobody must reach the input and write the output.
+  fs::permissions(tmp.path(), fs::perms::all);
+  fs::permissions(in, fs::perms::all);
+  for (const auto& e : fs::directory_iterator(in / "good")) {
+    fs::permissions(e.path(),
+                    fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
+  }
+  fs::permissions(in / "good", fs::perms::all);
+  CHECK(run_command(as_user + program("batch --input " + in.string() +
+                                      " --phi asp:2 --methods pinv --out " + (tmp / "b")),
+                    out) != 0);
+  INFO(out);
+  CHECK(out.find("1 of 2 item-method pair(s) failed") != std::string::npos);
+  const auto summary = lfnet::read_json_file(tmp / "b/summary.json");
+  REQUIRE(summary.size() == 2);
+  std::map<std::string, std::string> status;
+  for (const auto& r : summary)
+    status[r["item"].get<std::string>()] = r["status"].get<std::string>();
+  CHECK(status["good"] == "ok");
+  CHECK(status["secret"] == "error");
+  fs::permissions(in / "secret", fs::perms::owner_all);  // so the folder can be removed
+}
