@@ -151,7 +151,7 @@ TEST_CASE("simulate describes a Phi and plots its weights", "[app][simulate]") {
   CHECK(image[0][0][0].item<float>() == 1.0f);
   CHECK(image[0][0][16].item<float>() == 0.0f);
   CHECK(run_command(simulate("--phi prism:2 --describe"), out) != 0);
-  CHECK(out.find("known: aperture, asp, lenslet, mask, random") != std::string::npos);
+  CHECK(out.find("known: aperture, asp, calibrated, lenslet, mask, random") != std::string::npos);
   CHECK(run_command(simulate("--phi asp:2"), out) != 0);
   CHECK(out.find("nothing to do") != std::string::npos);
 }

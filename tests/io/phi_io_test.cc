@@ -127,6 +127,15 @@ TEST_CASE("a malformed calibrated folder is refused naming the file and field", 
   m["normalise"] = true;
   expect_error(m, "measures nothing");
   REQUIRE_THROWS_WITH(io::read_calibrated_phi(dir + "/nothing"), Catch::Contains("no phi.json"));
+  // A sidecar is known by its format, not its name: a Phi spec file called phi.json is not one,
+  // and a sidecar under another name is.
+  lfnet::test::TempDir other;
+  lfnet::write_json_file(other / "phi.json", {{"name", "asp"}, {"n", 2}});
+  CHECK_FALSE(io::is_calibrated_phi(other / "phi.json"));
+  CHECK_FALSE(io::is_calibrated_phi(other.path().string()));
+  lfnet::write_json_file(dir + "/camera.json", good);
+  CHECK(io::is_calibrated_phi(dir + "/camera.json"));
+  CHECK(io::read_calibrated_phi(dir + "/camera.json").n == 2);
   // Random projections have no per-pixel response.
   REQUIRE_THROWS_AS(
       io::write_calibrated_phi(*optics::make_phi(optics::PhiSpec::parse("random:2")), dir),

@@ -51,16 +51,28 @@ torch::Tensor read_response(const std::string& path, int64_t h, int64_t w) {
   return pixels;
 }
 
+// The folder of a calibrated Phi named by the folder or by its sidecar file.
 fs::path folder_of(const std::string& path) {
-  return fs::path(path).filename() == kCalibratedPhiSidecar ? fs::path(path).parent_path()
-                                                            : fs::path(path);
+  std::error_code ec;
+  return fs::is_directory(path, ec) ? fs::path(path) : fs::path(path).parent_path();
 }
 
 }  // namespace
 
 bool is_calibrated_phi(const std::string& path) {
   std::error_code ec;
-  return fs::is_regular_file(folder_of(path) / kCalibratedPhiSidecar, ec);
+  // A JSON file is a calibrated Phi's sidecar when it says so (a Phi spec file may be called
+  // phi.json too); a folder is one when its phi.json is.
+  const fs::path sidecar =
+      fs::is_directory(path, ec) ? fs::path(path) / kCalibratedPhiSidecar : fs::path(path);
+  if (!fs::is_regular_file(sidecar, ec) || sidecar.extension() != ".json") return false;
+  try {
+    const auto j = read_json_file(sidecar.string());
+    return j.is_object() && j.contains("format") && j["format"].is_string() &&
+           j["format"].get<std::string>() == kCalibratedPhiFormat;
+  } catch (const Error&) {
+    return false;
+  }
 }
 
 void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
@@ -93,8 +105,9 @@ void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
 
 optics::PhiSpec read_calibrated_phi(const std::string& path) {
   const fs::path dir = folder_of(path);
-  const std::string sidecar = (dir / kCalibratedPhiSidecar).string();
   std::error_code ec;
+  const std::string sidecar =
+      fs::is_directory(path, ec) ? (dir / kCalibratedPhiSidecar).string() : path;
   LFNET_CHECK_AS(IoError, fs::is_regular_file(sidecar, ec), path,
                  " is not a calibrated Phi (no phi.json)");
   const auto meta = read_json_file(sidecar);

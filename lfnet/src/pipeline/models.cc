@@ -128,10 +128,11 @@ bool phi_argument_is_file(const std::string& text) {
 }
 
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option) {
-  if (io::is_calibrated_phi(text)) return io::read_calibrated_phi(text);
+  // A folder can only be a calibrated Phi: reading it says what is wrong with it.
   std::error_code ec;
-  LFNET_CHECK_AS(ConfigError, !fs::is_directory(text, ec), option, " ", text,
-                 " is a folder without phi.json, not a calibrated Phi");
+  if (fs::is_directory(text, ec) || io::is_calibrated_phi(text)) {
+    return io::read_calibrated_phi(text);
+  }
   if (fs::path(text).extension() == ".json") {
     return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
   }

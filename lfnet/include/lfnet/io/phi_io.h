@@ -13,7 +13,8 @@ constexpr int kCalibratedPhiFormatVersion = 1;
 constexpr const char* kCalibratedPhiFormat = "lfnet-calibrated-phi";
 constexpr const char* kCalibratedPhiSidecar = "phi.json";
 
-// Whether `path` is a calibrated-Phi folder (one holding phi.json) or its phi.json.
+// Whether `path` is a calibrated-Phi folder (one holding phi.json) or a sidecar file (JSON
+// whose "format" is lfnet-calibrated-phi, whatever its name).
 bool is_calibrated_phi(const std::string& path);
 
 // Writes a local Phi into the folder `dir` (created if missing; files of the same names are
@@ -25,7 +26,7 @@ bool is_calibrated_phi(const std::string& path);
 // Random projections are not local and cannot be written (ConfigError).
 void write_calibrated_phi(const optics::Phi& phi, const std::string& dir);
 
-// Reads a calibrated-Phi folder (or its phi.json) into the spec of a "calibrated" Phi, whose
+// Reads a calibrated-Phi folder (or its sidecar file, whose images lie beside it) into the spec of a "calibrated" Phi, whose
 // params carry every weight: models and acquisitions made with it record the camera itself.
 // Throws IoError naming the file for anything malformed, before any image is decoded where
 // the sidecar alone shows it.
