@@ -14,20 +14,16 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/io/light_field_io.h"
-#include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/asp.h"
-#include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
 #include "lfnet/optics/weights_image.h"
-#include "lfnet/pipeline/evaluate.h"
-#include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/models.h"
-#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/simulate.h"
 #include "lfnet/pipeline/sources.h"
-#include "lfnet/pipeline/stages.h"
 #include "lfnet/scene/render.h"
 #include "lfnet/scene/scene_spec.h"
 
@@ -276,70 +272,18 @@ void run_simulate(const SimulateArgs& args) {
   }
   if (!simulate) return;
 
-  const auto effects = resolve_effects(args, input);
-  const auto& lf = input.lf;
-  nlohmann::json meta = {
-      {"format", io::kAcquisitionFormat},
-      {"format_version", io::kAcquisitionFormatVersion},
-      {"lfnet_version", kVersion},
-      {"mode", optics::to_string(mode)},
-      {"phi", phi->spec().to_json()},
-      {"effects", effects.to_json()},
-      {"noise_sigma", effects.gaussian ? effects.gaussian->sigma : 0.0},
-      {"seed", args.seed},
-      {"light_field",
-       {{"channels", lf.channels()},
-        {"rows", lf.rows()},
-        {"cols", lf.cols()},
-        {"height", lf.height()},
-        {"width", lf.width()}}},
-      {"views", input.views},
-      {"color", lf.channels() == 3},
-      {"source", input.source},
-  };
-  const int64_t n = phi->measurements();
-  write_folder(args.out, policy, [&](const std::string& dir) {
-    Stopwatch clock;
-    if (mode == optics::SimulationMode::kSensor) {
-      auto sensor = optics::simulate_sensor(*phi, lf.data(), effects, args.seed);  // (C, N, H, W)
-      meta["seconds"] = clock.seconds();
-      io::write_sensor_images(dir, sensor);
-      meta["sensor"] = {{"files", io::sensor_file_names(lf.channels())},
-                        {"channels_per_file", n},
-                        {"dtype", "float32"},
-                        {"shape", {lf.channels(), n, lf.height(), lf.width()}}};
-      spdlog::info("simulated a {}x{}x{} sensor image with {} in {:.3f} s", n, lf.height(),
-                   lf.width(), phi->spec().label(), clock.seconds());
-    } else {
-      const PatchGrid grid(lf.height(), lf.width(), args.patch, args.patch, args.stride);
-      const int64_t m = n * args.patch * args.patch, c = lf.channels();
-      io::MeasurementWriter writer((fs::path(dir) / io::kMeasurementsName).string(), c, grid.size(),
-                                   m);
-      const int64_t band = std::max<int64_t>(1, 4096 / std::max<int64_t>(1, grid.cols()));
-      ProgressBar bar("simulate", grid.rows(), "rows");
-      for (int64_t r = 0; r < grid.rows(); r += band) {
-        const int64_t r_end = std::min(grid.rows(), r + band);
-        auto values =
-            optics::measure_patches(*phi, lf.data(), grid, mode, effects, args.seed, r, r_end)
-                .values;
-        writer.write(values.view({c, -1, m}), r * grid.cols());
-        bar.advance(r_end - r);
-      }
-      bar.finish();
-      writer.close();
-      meta["seconds"] = clock.seconds();
-      meta["measurements"] = {{"file", io::kMeasurementsName},
-                              {"dtype", "float32"},
-                              {"byte_order", "little"},
-                              {"shape", {c, grid.size(), m}}};
-      meta["grid"] = {{"patch", args.patch},   {"stride", args.stride}, {"height", grid.height()},
-                      {"width", grid.width()}, {"rows", grid.rows()},   {"cols", grid.cols()}};
-      spdlog::info("simulated {} patches of {} measurements with {} ({}) in {:.3f} s",
-                   c * grid.size(), m, phi->spec().label(), optics::to_string(mode),
-                   clock.seconds());
-    }
-    write_json_file((fs::path(dir) / io::kSidecarName).string(), meta);
-  });
+  pipeline::SimulateRequest request;
+  request.lf = input.lf;
+  request.phi = phi.get();
+  request.effects = resolve_effects(args, input);
+  request.mode = mode;
+  request.seed = args.seed;
+  request.patch = args.patch;
+  request.stride = args.stride;
+  request.views = input.views;
+  request.source = input.source;
+  write_folder(args.out, policy,
+               [&](const std::string& dir) { pipeline::write_acquisition(request, dir); });
   spdlog::info("wrote {}", args.out);
 }
 

@@ -12,6 +12,7 @@
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/methods.h"
 #include "support/test_support.h"
 
@@ -153,4 +154,34 @@ TEST_CASE("the dict method codes as its dictionary recommends, unless told other
                     Catch::Contains("--dict-options:$.omp.max_atom"));
   CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": )", ""), Catch::Contains("--dict-options"));
   CHECK_THROWS_WITH(pipeline::dict_coding(d, "", "lasso"), Catch::Contains("omp or admm"));
+}
+
+TEST_CASE("write_acquisition writes what the optics simulate, and read_acquisition reads it",
+          "[pipeline][simulate]") {
+  test::TempDir tmp;
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  pipeline::SimulateRequest r;
+  r.lf = LightField(torch::rand({1, 5, 5, 20, 23}));
+  r.phi = phi.get();
+  r.effects.gaussian = optics::SensorOptions::Gaussian{0.05};
+  r.seed = 9;
+  r.source = {{"kind", "test"}};
+  fs::create_directories(tmp / "sensor");
+  const auto meta = pipeline::write_acquisition(r, tmp / "sensor");
+  CHECK(meta["noise_sigma"] == 0.05);
+  const auto acq = io::read_acquisition(tmp / "sensor");
+  CHECK(acq.meta == meta);
+  const auto want = optics::simulate_sensor(*phi, r.lf.data(), r.effects, r.seed);
+  CHECK(torch::equal(acq.sensor, want));
+  // per_patch: every patch measured alone, in the order of the grid.
+  r.mode = optics::SimulationMode::kPerPatch;
+  r.stride = 7;
+  fs::create_directories(tmp / "patches");
+  pipeline::write_acquisition(r, tmp / "patches");
+  const auto per_patch = io::read_acquisition(tmp / "patches");
+  const PatchGrid grid(20, 23, 9, 9, 7);
+  const auto direct =
+      optics::measure_patches(*phi, r.lf.data(), grid, r.mode, r.effects, r.seed, 0, grid.rows());
+  CHECK(per_patch.measurements.sizes() == torch::IntArrayRef({1, grid.size(), 2 * 81}));
+  CHECK(torch::equal(per_patch.measurements, direct.values.view({1, grid.size(), -1})));
 }
