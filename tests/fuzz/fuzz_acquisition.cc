@@ -9,6 +9,8 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
 #include <string>
 
 #include <unistd.h>
@@ -43,15 +45,24 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   lfnet::io::set_image_value_limit(int64_t{1} << 22);
   static const fs::path dir =
       fs::temp_directory_path() / ("lfnet-fuzz-acquisition-" + std::to_string(::getpid()));
-  // The valid files, written once; each run replaces only the fuzzed one.
-  static const fs::path good = [] {
+  // The valid files, made once and kept in memory: each run writes them with plain writes
+  // (a file copy may be interrupted by libFuzzer's timer signal).
+  static const std::map<std::string, std::string> good = [] {
     const fs::path g = dir / "good";
     fs::create_directories(g / "phi");
     lfnet::io::write_sensor_images(g.string(), torch::rand({1, 2, 4, 5}));
     lfnet::io::write_calibrated_phi(
         *lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2")), (g / "phi").string());
-    return g;
+    std::map<std::string, std::string> files;
+    for (const char* f : {"sensor.tif", "phi/response_1.tif", "phi/response_2.tif"}) {
+      std::ifstream in(g / f, std::ios::binary);
+      files[f] = std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    return files;
   }();
+  auto put = [](const fs::path& path, const std::string& bytes) {
+    std::ofstream(path, std::ios::binary) << bytes;
+  };
   const fs::path work = dir / "work";
   std::error_code ec;
   fs::remove_all(work, ec);
@@ -62,7 +73,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {
     switch (mode) {
       case 0: {
-        fs::copy_file(good / "sensor.tif", work / "sensor.tif");
+        put(work / "sensor.tif", good.at("sensor.tif"));
         write(work / "sensor.json", rest, n);
         (void)lfnet::io::read_acquisition(work.string());
         break;
@@ -80,7 +91,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       }
       default: {
         for (const char* f : {"response_1.tif", "response_2.tif"}) {
-          fs::copy_file(good / "phi" / f, work / f);
+          put(work / f, good.at(std::string("phi/") + f));
         }
         write(work / "phi.json", rest, n);
         const auto spec = lfnet::io::read_calibrated_phi(work.string());

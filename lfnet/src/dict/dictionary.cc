@@ -63,6 +63,10 @@ Dictionary load_dictionary(const std::string& path) {
   } catch (const c10::Error& e) {
     throw CheckpointError("dictionary " + path +
                           " is truncated or not a LibTorch archive: " + e.what_without_backtrace());
+  } catch (const std::exception& e) {
+    // Damaged archive code fails in the TorchScript compiler, over several lines.
+    const std::string what = e.what();
+    throw CheckpointError("dictionary " + path + " is damaged: " + what.substr(0, what.find('\n')));
   }
   c10::IValue meta_value;
   bool has_meta = false;

@@ -566,6 +566,12 @@ ScriptedNetwork load_script(const std::string& path) {
     net.module = jit::load(path, torch::Device(torch::kCPU), extra);
   } catch (const c10::Error& e) {
     throw CheckpointError(where + " cannot be loaded: " + e.what_without_backtrace());
+  } catch (const std::exception& e) {
+    // A damaged code section fails in the TorchScript compiler, which reports the source
+    // around the fault over several lines: keep the first.
+    const std::string what = e.what();
+    throw CheckpointError(where + " cannot be loaded: its TorchScript code is damaged (" +
+                          what.substr(0, what.find('\n')) + ")");
   }
   std::string text = extra[kScriptMetadataFile];
   // A module saved again from Python without extra files still has the attribute.
