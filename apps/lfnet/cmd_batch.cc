@@ -288,6 +288,11 @@ void run_batch(const BatchArgs& a) {
     }
   }
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
+  LFNET_CHECK_AS(ConfigError,
+                 std::find(methods.begin(), methods.end(), "dict") != methods.end() ||
+                     (a.dict_method.empty() && a.dict_options.empty()),
+                 "--dict-method and --dict-options apply to the dict method, which --methods does "
+                 "not name");
   std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
   if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy);
   // The other ranks write only once rank 0 has checked and made the folder (when it is shared).

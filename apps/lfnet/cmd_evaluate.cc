@@ -45,6 +45,8 @@ void run_evaluate(const EvaluateArgs& a) {
                  "give exactly one of --lf DIR and --scene SCENE.json");
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
   const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
+  LFNET_CHECK_AS(ConfigError, method == "dict" || (a.dict_method.empty() && a.dict_options.empty()),
+                 "--dict-method and --dict-options apply to --method dict, not '", method, "'");
   OutputFolderPolicy policy;
   policy.force = a.force;
   policy.inputs = {a.lf, a.scene, a.model, a.dictionary};

@@ -160,6 +160,20 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
   expect_error(sim + "--noise nan", "--noise", tmp.path());
   expect_error(sim + "--views 1:99999999999999999999,1:5", "99999999999999999999", tmp.path());
   CHECK_FALSE(fs::exists(tmp / "acq"));
+  // Options that belong to another method are refused, not ignored.
+  expect_error(eval + "--dict-options '{\"omp\": {\"max_atoms\": 5}}'", "--method dict",
+               tmp.path());
+  expect_error(eval + "--dict-method admm", "--method dict", tmp.path());
+  const std::string dict = "evaluate --phi asp:2 --lf " + lf + " --method dict --dictionary " +
+                           std::string(LFNET_SOURCE_DIR) + "/models/dictionary.ckpt ";
+  expect_error(dict + "--dict-options '{\"admm\": {\"lambda\": -1}}'", "$.admm", tmp.path());
+  expect_error(dict + "--dict-options " + (tmp / "none.json"), "--dict-options", tmp.path());
+  // A calibrated Phi that is not one, and phi export's own checks.
+  expect_error("simulate --lf " + lf + " --phi " + tmp.path().string() + " --out " + (tmp / "acq"),
+               "not a calibrated Phi", tmp.path());
+  expect_error("phi export --phi asp:2 --grid 0x5 --out " + (tmp / "cam"), "--grid", tmp.path());
+  expect_error("phi export --phi random:2 --out " + (tmp / "cam"), "not local", tmp.path());
+  CHECK_FALSE(fs::exists(tmp / "cam"));
 }
 
 TEST_CASE("missing, mismatched, truncated and foreign image files are one-line errors",

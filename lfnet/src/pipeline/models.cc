@@ -111,7 +111,12 @@ dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
   }
   if (!options.empty()) {
     const bool inline_json = options.find('{') != std::string::npos;
-    const auto patch = inline_json ? parse_json(options, option) : read_json_file(options);
+    nlohmann::json patch;
+    try {
+      patch = inline_json ? parse_json(options, option) : read_json_file(options);
+    } catch (const IoError& e) {
+      throw ConfigError(option + " " + options + ": " + e.what());
+    }
     coding = merge(patch, option + (inline_json ? "" : " " + options) + ":$");
   }
   if (!method.empty()) {

@@ -57,6 +57,10 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
                  " needs the true light field: it is a method of lfnet evaluate");
   LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kDictionary || !a.dictionary.empty(),
                  "method '", method, "' needs --dictionary FILE (e.g. models/dictionary.ckpt)");
+  LFNET_CHECK_AS(
+      ConfigError,
+      needs == recon::MethodNeeds::kDictionary || (a.dict_method.empty() && a.dict_options.empty()),
+      "--dict-method and --dict-options apply to the dict method, not '", method, "'");
   ModelCache local;
   ModelCache& files = cache ? *cache : local;
   // The model first: its Phi is the default for plain sensor images.
