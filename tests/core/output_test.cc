@@ -1,6 +1,7 @@
 // The output policy (core/output.h): atomic files and folders, inputs never overwritten,
 // exclusive writers, stale temporaries removed, failed starts undone.
 #include "lfnet/core/output.h"
+#include "lfnet/core/zip_check.h"
 
 #include <sys/wait.h>
 #include <unistd.h>
@@ -181,4 +182,19 @@ TEST_CASE("a run folder that fails before committing leaves nothing; force resto
     CHECK(fs::exists(fs::path(run) / "new.ckpt"));
   }
   CHECK(fs::exists(fs::path(run) / "new.ckpt"));  // resuming never removes the run
+}
+
+TEST_CASE("crc32 is the zip checksum", "[core][zip]") {
+  const std::string check = "123456789";
+  CHECK(lfnet::crc32(check.data(), check.size()) == 0xCBF43926u);  // the standard check value
+  CHECK(lfnet::crc32(nullptr, 0) == 0u);
+  // Continuing a running checksum gives the checksum of the whole.
+  CHECK(lfnet::crc32(check.data() + 4, 5, lfnet::crc32(check.data(), 4)) == 0xCBF43926u);
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "short.zip") << "PK";
+  CHECK_THROWS_WITH(lfnet::check_zip_integrity(tmp / "short.zip", "file X"),
+                    Catch::Contains("file X is damaged or truncated"));
+  std::ofstream(tmp / "text.zip") << std::string(100, 'x');
+  CHECK_THROWS_WITH(lfnet::check_zip_integrity(tmp / "text.zip", "file X"),
+                    Catch::Contains("no zip directory"));
 }

@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/zip_check.h"
 #include "support/test_support.h"
 
 using lfnet::dict::Dictionary;
@@ -95,6 +96,31 @@ TEST_CASE("Broken dictionary files are clear errors", "[dict][dictionary]") {
     archive.save_to(tmp / "future.ckpt");
   }
   CHECK_THROWS_WITH(load_dictionary(tmp / "future.ckpt"), Catch::Contains("version 99"));
+
+  // One byte changed anywhere in an entry's data (LibTorch's loader can crash on damaged code
+  // or pickles): the zip checksums catch it first, naming the entry.
+  std::string good;
+  {
+    std::ifstream in(tmp / "good.ckpt", std::ios::binary);
+    good.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  CHECK_NOTHROW(lfnet::check_zip_integrity(tmp / "good.ckpt", "dictionary"));
+  for (const char* entry : {"data.pkl", "constants.pkl", "data/0"}) {
+    const auto at = good.find(std::string("/") + entry);
+    REQUIRE(at != std::string::npos);
+    // The entry's data follows its local header (30 bytes before the name, extra field after).
+    auto bytes = good;
+    const size_t header = bytes.rfind("PK\x03\x04", at);
+    const size_t name_len =
+        static_cast<uint8_t>(bytes[header + 26]) | static_cast<uint8_t>(bytes[header + 27]) << 8;
+    const size_t extra_len =
+        static_cast<uint8_t>(bytes[header + 28]) | static_cast<uint8_t>(bytes[header + 29]) << 8;
+    bytes[header + 30 + name_len + extra_len] ^= 0x20;
+    std::ofstream(tmp / "flipped.ckpt", std::ios::binary) << bytes;
+    INFO(entry);
+    CHECK_THROWS_WITH(load_dictionary(tmp / "flipped.ckpt"),
+                      Catch::Contains("checksum mismatch in entry") && Catch::Contains(entry));
+  }
 }
 
 TEST_CASE("Dictionaries are checked before they are written", "[dict][dictionary]") {

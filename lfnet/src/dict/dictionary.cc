@@ -8,6 +8,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/zip_check.h"
 
 namespace lfnet::dict {
 
@@ -57,6 +58,7 @@ Dictionary load_dictionary(const std::string& path) {
   if (!std::filesystem::is_regular_file(path)) {
     throw IoError("cannot read dictionary " + path + ": no such file");
   }
+  check_zip_integrity(path, "dictionary " + path);
   torch::serialize::InputArchive archive;
   try {
     archive.load_from(path);

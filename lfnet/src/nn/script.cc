@@ -17,6 +17,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/zip_check.h"
 
 namespace lfnet::nn {
 
@@ -559,6 +560,7 @@ ScriptedNetwork load_script(const std::string& path) {
   if (!is_script_file(path)) {
     throw CheckpointError(where + " is not a TorchScript file (it is not a zip archive)");
   }
+  check_zip_integrity(path, where);
   ScriptedNetwork net;
   net.path = path;
   jit::ExtraFilesMap extra{{kScriptMetadataFile, ""}};

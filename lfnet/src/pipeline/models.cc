@@ -6,6 +6,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/zip_check.h"
 #include "lfnet/io/phi_io.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
@@ -21,7 +22,9 @@ ModelFileKind model_file_kind(const std::string& path) {
   in.read(head, 8);
   if (in.gcount() == 8 && std::memcmp(head, "LFNETCKP", 8) == 0) return ModelFileKind::kCheckpoint;
   if (in.gcount() < 4 || std::memcmp(head, "PK\x03\x04", 4) != 0) return ModelFileKind::kOther;
-  // Dictionaries and exported models are both zip archives: a dictionary loads as one.
+  // Dictionaries and exported models are both zip archives: a damaged one is neither, and a
+  // dictionary loads as one.
+  check_zip_integrity(path, path);
   try {
     (void)dict::load_dictionary(path);
     return ModelFileKind::kDictionary;
@@ -80,11 +83,11 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   auto it = dictionaries_.find(path);
   if (it == dictionaries_.end()) {
     const auto kind = model_file_kind(path);
-    LFNET_CHECK_AS(ConfigError,
-                   kind != ModelFileKind::kCheckpoint && kind != ModelFileKind::kExported,
-                   "--dictionary ", path, " is a ",
-                   kind == ModelFileKind::kCheckpoint ? "network checkpoint" : "exported network",
-                   ": give it as --model (with --method net, ae or cnn)");
+    LFNET_CHECK_AS(
+        ConfigError, kind != ModelFileKind::kCheckpoint && kind != ModelFileKind::kExported,
+        "--dictionary ", path, " is ",
+        kind == ModelFileKind::kCheckpoint ? "a network checkpoint" : "an exported network",
+        ": give it as --model (with --method net, ae or cnn)");
     it = dictionaries_.emplace(path, dict::load_dictionary(path)).first;
     ++loads_;
   }
