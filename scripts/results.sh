@@ -197,7 +197,7 @@ paper-scale-asp-n2() {
 # chart of margins over pinv (scripts/plot_cross_scene.py).
 cross-scene() {
   local tmp models
-  read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
+  read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
   tmp=$(mktemp)
   local sources=(--lf ../shared/data/hci_antinous --lf ../shared/data/lytro_Begonia
                  --scene configs/scenes/heldout_window.json --scene configs/scenes/heldout_wide.json)
