@@ -395,12 +395,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--model", a->model,
                   "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for dict");
-  cmd->add_option("--dict-method", a->dict_method,
-                  "sparse coding for dict: omp or admm (default: the dictionary's)")
-      ->check(CLI::IsMember({"omp", "admm"}));
-  cmd->add_option("--dict-options", a->dict_options,
-                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
-                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
+  add_dict_coding_options(cmd, a->dict_method, a->dict_options);
   cmd->add_option(
       "--phi", a->phi,
       "Phi for evaluation without --model: NAME[:N], a spec or a calibrated-Phi folder");

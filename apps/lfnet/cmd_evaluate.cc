@@ -157,12 +157,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "net, ae, cnn, dict, pinv, adjoint or no-parallax (default net with --model, "
                   "pinv without)");
   cmd->add_option("--dictionary", a->dictionary, "dictionary file for --method dict");
-  cmd->add_option("--dict-method", a->dict_method,
-                  "sparse coding for dict: omp or admm (default: the dictionary's)")
-      ->check(CLI::IsMember({"omp", "admm"}));
-  cmd->add_option("--dict-options", a->dict_options,
-                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
-                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
+  add_dict_coding_options(cmd, a->dict_method, a->dict_options);
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
   cmd->add_option("--out", a->out, "write the reconstruction as a light-field folder");
   cmd->add_flag("--force", a->force, "replace an existing --out folder");

@@ -59,12 +59,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--model", q.model,
                   "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
-  cmd->add_option("--dict-method", q.dict_method,
-                  "sparse coding for dict: omp or admm (default: the dictionary's)")
-      ->check(CLI::IsMember({"omp", "admm"}));
-  cmd->add_option("--dict-options", q.dict_options,
-                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
-                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
+  add_dict_coding_options(cmd, q.dict_method, q.dict_options);
   cmd->add_option("--stride", q.options.stride, "patch stride (sensor images; default 5)")
       ->check(kStride);
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")

@@ -44,6 +44,16 @@ inline const CLI::Validator kStride(
     },
     "1..PATCH");
 
+// --dict-method and --dict-options: how the dict method codes (pipeline::dict_coding).
+inline void add_dict_coding_options(CLI::App* cmd, std::string& method, std::string& options) {
+  cmd->add_option("--dict-method", method,
+                  "sparse coding for dict: omp or admm (default: the dictionary's)")
+      ->check(CLI::IsMember({"omp", "admm"}));
+  cmd->add_option("--dict-options", options,
+                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
+                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
+}
+
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.
 using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& global)>;
 
