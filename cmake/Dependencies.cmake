@@ -14,6 +14,10 @@ if(NOT nlohmann_json_FOUND)
   target_include_directories(nlohmann_json::nlohmann_json INTERFACE ${LFNET_NLOHMANN_INCLUDE})
 endif()
 
+# zlib, optional: with it, core/zip_check.h also verifies the compressed entries of LibTorch
+# archives (TorchScript code) before LibTorch reads them. Debian: zlib1g-dev.
+find_package(ZLIB QUIET)
+
 # LibTorch's imported target carries its flags in TORCH_CXX_FLAGS; wrap it once.
 if(NOT TARGET lfnet_torch)
   add_library(lfnet_torch INTERFACE)

@@ -38,9 +38,9 @@ cxx=(clang++ -std=c++17 -g -O1 -fno-omit-frame-pointer -fsanitize=fuzzer-no-link
      -DSPDLOG_SHARED_LIB -Ilfnet/include -isystem /usr/include/torch/csrc/api/include
      -Wno-unused-command-line-argument)
 
-compile() {  # source -> object, rebuilt when the source is newer
+compile() {  # source -> object, rebuilt when the source or any lfnet header is newer
   local src="$1" obj="$out/obj/$(echo "$1" | tr / _).o"
-  if [ ! -f "$obj" ] || [ "$src" -nt "$obj" ]; then
+  if [ ! -f "$obj" ] || [ "$src" -nt "$obj" ] || [ -n "$(find lfnet/include -newer "$obj" -print -quit)" ]; then
     echo "compiling $src" >&2
     "${cxx[@]}" -c "$src" -o "$obj"
   fi
@@ -48,7 +48,7 @@ compile() {  # source -> object, rebuilt when the source is newer
 }
 
 libs=(-Wl,--start-group build/lfnet/src/*/liblfnet_*.a -Wl,--end-group
-      -ltorch -ltorch_cpu -lc10 -lOpenImageIO -lOpenImageIO_Util -lspdlog -lfmt -lpthread)
+      -ltorch -ltorch_cpu -lc10 -lOpenImageIO -lOpenImageIO_Util -lspdlog -lfmt -lz -lpthread)
 
 declare -A instrumented=(
   [config]="lfnet/src/pipeline/experiment.cc lfnet/src/pipeline/sources.cc lfnet/src/core/json.cc lfnet/src/optics/phi.cc lfnet/src/optics/asp.cc lfnet/src/optics/local_models.cc"

@@ -198,3 +198,33 @@ TEST_CASE("crc32 is the zip checksum", "[core][zip]") {
   CHECK_THROWS_WITH(lfnet::check_zip_integrity(tmp / "text.zip", "file X"),
                     Catch::Contains("no zip directory"));
 }
+
+TEST_CASE("a damaged deflated entry (TorchScript code) is caught before LibTorch reads it",
+          "[core][zip]") {
+  const std::string seed =
+      std::string(LFNET_SOURCE_DIR) + "/tests/fuzz/corpus/checkpoint/tiny_net.pt";
+  std::ifstream in(seed, std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  REQUIRE(bytes.size() > 1000);
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "good.pt", std::ios::binary) << bytes;
+  CHECK_NOTHROW(lfnet::check_zip_integrity(tmp / "good.pt", "model"));
+  // The code file is deflated: flip one byte in the middle of its compressed data.
+  const auto name = bytes.find("code/__torch__/lfnet.py");
+  REQUIRE(name != std::string::npos);
+  const size_t header = bytes.rfind("PK\x03\x04", name);
+  const auto u16 = [&](size_t at) {
+    return static_cast<size_t>(static_cast<uint8_t>(bytes[at]) | static_cast<uint8_t>(bytes[at + 1])
+                                                                     << 8);
+  };
+  REQUIRE(u16(header + 8) == 8);  // deflate
+  const size_t data = header + 30 + u16(header + 26) + u16(header + 28);
+  bytes[data + 100] = static_cast<char>(bytes[data + 100] ^ 0x10);
+  std::ofstream(tmp / "bad.pt", std::ios::binary) << bytes;
+  if (lfnet::zip_checks_deflated()) {
+    CHECK_THROWS_WITH(lfnet::check_zip_integrity(tmp / "bad.pt", "model"),
+                      Catch::Contains("lfnet.py"));
+  } else {
+    WARN("built without zlib: deflated entries are not checked");
+  }
+}

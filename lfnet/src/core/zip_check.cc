@@ -7,6 +7,10 @@
 
 #include "lfnet/core/error.h"
 
+#ifdef LFNET_HAVE_ZLIB
+#include <zlib.h>
+#endif
+
 namespace lfnet {
 
 namespace {
@@ -38,6 +42,28 @@ uint16_t u16(const std::string& b, size_t at) {
 constexpr uint32_t kLocalHeader = 0x04034b50, kCentralHeader = 0x02014b50,
                    kEndOfCentral = 0x06054b50;
 constexpr uint32_t kZip64 = 0xFFFFFFFFu;
+constexpr uint16_t kStored = 0, kDeflated = 8;
+
+#ifdef LFNET_HAVE_ZLIB
+// The CRC-32 of a deflated entry's data once inflated; false when it does not inflate to
+// exactly `size` bytes, or claims more than deflate can expand `packed` bytes to (1032:1).
+bool inflated_crc(const char* data, size_t packed, size_t size, uint32_t& crc) {
+  if (size > 1032 * packed + 64) return false;
+  std::vector<unsigned char> out(size + 1);
+  z_stream s{};
+  if (inflateInit2(&s, -MAX_WBITS) != Z_OK) return false;  // raw deflate, as zip stores it
+  s.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data));
+  s.avail_in = static_cast<uInt>(packed);
+  s.next_out = out.data();
+  s.avail_out = static_cast<uInt>(out.size());
+  const int rc = inflate(&s, Z_FINISH);
+  const size_t produced = s.total_out;
+  inflateEnd(&s);
+  if (rc != Z_STREAM_END || produced != size) return false;
+  crc = lfnet::crc32(out.data(), size);
+  return true;
+}
+#endif
 
 }  // namespace
 
@@ -47,6 +73,14 @@ uint32_t crc32(const void* data, size_t size, uint32_t crc) {
   crc = ~crc;
   for (size_t i = 0; i < size; ++i) crc = t[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
   return ~crc;
+}
+
+bool zip_checks_deflated() {
+#ifdef LFNET_HAVE_ZLIB
+  return true;
+#else
+  return false;
+#endif
 }
 
 void check_zip_integrity(const std::string& path, const std::string& what) {
@@ -88,9 +122,20 @@ void check_zip_integrity(const std::string& path, const std::string& what) {
     }
     const size_t data = local + 30 + static_cast<size_t>(u16(b, local + 26)) + u16(b, local + 28);
     if (static_cast<uint64_t>(data) + packed > b.size()) throw damaged("entry " + name + " is cut");
-    if (method != 0) continue;  // compressed entries are checked by the inflater
-    if (packed != size) throw damaged("entry " + name + " has inconsistent sizes");
-    if (crc32(b.data() + data, size) != crc) throw damaged("checksum mismatch in entry " + name);
+    if (method == kStored) {
+      if (packed != size) throw damaged("entry " + name + " has inconsistent sizes");
+      if (crc32(b.data() + data, size) != crc) throw damaged("checksum mismatch in entry " + name);
+    } else if (method == kDeflated) {
+#ifdef LFNET_HAVE_ZLIB
+      uint32_t got = 0;
+      if (!inflated_crc(b.data() + data, packed, size, got)) {
+        throw damaged("entry " + name + " does not inflate");
+      }
+      if (got != crc) throw damaged("checksum mismatch in entry " + name);
+#endif
+    } else {
+      throw damaged("entry " + name + " uses compression method " + std::to_string(method));
+    }
   }
 }
 
