@@ -26,10 +26,10 @@ bool is_calibrated_phi(const std::string& path);
 // Random projections are not local and cannot be written (ConfigError).
 void write_calibrated_phi(const optics::Phi& phi, const std::string& dir);
 
-// Reads a calibrated-Phi folder (or its sidecar file, whose images lie beside it) into the spec of a "calibrated" Phi, whose
-// params carry every weight: models and acquisitions made with it record the camera itself.
-// Throws IoError naming the file for anything malformed, before any image is decoded where
-// the sidecar alone shows it.
+// Reads a calibrated-Phi folder (or its sidecar file, whose images lie beside it) into the spec of
+// a "calibrated" Phi, whose params carry every weight: models and acquisitions made with it record
+// the camera itself. Throws IoError naming the file for anything malformed, before any image is
+// decoded where the sidecar alone shows it.
 optics::PhiSpec read_calibrated_phi(const std::string& path);
 
 }  // namespace lfnet::io
