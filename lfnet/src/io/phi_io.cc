@@ -51,10 +51,11 @@ torch::Tensor read_response(const std::string& path, int64_t h, int64_t w) {
   return pixels;
 }
 
-// The folder of a calibrated Phi named by the folder or by its sidecar file.
-fs::path folder_of(const std::string& path) {
+// The sidecar of a calibrated Phi named by its folder or by the sidecar file itself; the
+// response images lie beside it.
+fs::path sidecar_of(const std::string& path) {
   std::error_code ec;
-  return fs::is_directory(path, ec) ? fs::path(path) : fs::path(path).parent_path();
+  return fs::is_directory(path, ec) ? fs::path(path) / kCalibratedPhiSidecar : fs::path(path);
 }
 
 }  // namespace
@@ -63,8 +64,7 @@ bool is_calibrated_phi(const std::string& path) {
   std::error_code ec;
   // A JSON file is a calibrated Phi's sidecar when it says so (a Phi spec file may be called
   // phi.json too); a folder is one when its phi.json is.
-  const fs::path sidecar =
-      fs::is_directory(path, ec) ? fs::path(path) / kCalibratedPhiSidecar : fs::path(path);
+  const fs::path sidecar = sidecar_of(path);
   if (!fs::is_regular_file(sidecar, ec) || sidecar.extension() != ".json") return false;
   try {
     const auto j = read_json_file(sidecar.string());
@@ -104,10 +104,9 @@ void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
 }
 
 optics::PhiSpec read_calibrated_phi(const std::string& path) {
-  const fs::path dir = folder_of(path);
+  const std::string sidecar = sidecar_of(path).string();
+  const fs::path dir = fs::path(sidecar).parent_path();
   std::error_code ec;
-  const std::string sidecar =
-      fs::is_directory(path, ec) ? (dir / kCalibratedPhiSidecar).string() : path;
   LFNET_CHECK_AS(IoError, fs::is_regular_file(sidecar, ec), path,
                  " is not a calibrated Phi (no phi.json)");
   const auto meta = read_json_file(sidecar);

@@ -102,11 +102,7 @@ dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
     LFNET_CHECK_AS(ConfigError, patch.is_object(), source, ": expected a JSON object, got ",
                    patch.dump());
     merged.merge_patch(patch);
-    try {
-      return dict::SparseCodingOptions::from_json(merged, source);
-    } catch (const ConfigError& e) {
-      throw ConfigError(std::string(e.what()));
-    }
+    return dict::SparseCodingOptions::from_json(merged, source);
   };
   dict::SparseCodingOptions coding;
   if (dictionary.training.is_object() && dictionary.training.contains("coding")) {
