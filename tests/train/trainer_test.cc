@@ -5,6 +5,9 @@
 
 #include <cmath>
 #include <filesystem>
+#include <tuple>
+#include <utility>
+#include <vector>
 
 #include "lfnet/core/error.h"
 #include "support/test_support.h"
@@ -142,7 +145,9 @@ TEST_CASE("training on synthetic patches reduces the validation loss", "[train][
   Trainer trainer(net, options, run_info(lfnet::test::synthetic_phi_spec("random", 2, 5)));
   const auto before = trainer.evaluate(*source);
   std::vector<lfnet::train::EpochRecord> seen;
-  auto records = trainer.fit(*source, {[&](const auto& r) { seen.push_back(r); }, {}, {}});
+  lfnet::train::TrainerHooks hooks;
+  hooks.on_epoch = [&](const auto& r) { seen.push_back(r); };
+  auto records = trainer.fit(*source, hooks);
   REQUIRE(records.size() == 8);
   REQUIRE(seen.size() == 8);
   const auto& last = records.back();
@@ -177,7 +182,9 @@ TEST_CASE("two epochs equal one epoch, resume, one epoch, bit for bit", "[train]
   auto source_b = lfnet::test::make_source(patches, phi, 13);
   {
     Trainer first(make_net(o, phi, 42), options, run_info(spec));
-    first.fit(*source_b, {{}, {}, [] { return true; }});  // interrupted after epoch 1
+    lfnet::train::TrainerHooks interrupt;
+    interrupt.stop_requested = [] { return true; };
+    first.fit(*source_b, interrupt);  // interrupted after epoch 1
     REQUIRE(first.state().epoch == 1);
   }
   torch::manual_seed(999);  // the resumed run must not depend on the generator's state
@@ -239,8 +246,8 @@ TEST_CASE("a poisoned batch stops training with a clear message and the last che
   auto options = quick_options("joint", dir.path().string(), 3);
   Trainer trainer(make_net(o, phi, 5), options, run_info(spec));
   lfnet::train::TensorMap after_epoch1;
-  auto hooks = lfnet::train::TrainerHooks{
-      [&](const auto&) { after_epoch1 = lfnet::train::module_state(*trainer.net()); }, {}, {}};
+  lfnet::train::TrainerHooks hooks;
+  hooks.on_epoch = [&](const auto&) { after_epoch1 = lfnet::train::module_state(*trainer.net()); };
   try {
     trainer.fit(source, hooks);
     FAIL("a NaN batch was not detected");
@@ -258,6 +265,62 @@ TEST_CASE("a poisoned batch stops training with a clear message and the last che
   Trainer again(make_net(o, phi, 6), options, run_info(spec));
   again.resume(last);
   CHECK(again.fit(*inner).size() == 2);
+}
+
+TEST_CASE("schedule, validation and saving are hooks that replace the defaults",
+          "[train][trainer]") {
+  lfnet::test::TempDir dir;
+  auto o = lfnet::test::small_net_options("ae");
+  auto phi = lfnet::test::gaussian_phi(1, o.measurement_size(), o.patch.size(), 3);
+  auto source = lfnet::test::make_source(lfnet::test::smooth_patches(200, o.patch, 4), phi);
+  const auto spec = lfnet::test::synthetic_phi_spec("random", 2, 3);
+  auto options = quick_options("ae", dir.path().string(), 3);
+  Trainer trainer(make_net(o, phi, 5), options, run_info(spec));
+  std::vector<std::tuple<int64_t, int64_t, int64_t>> asked;
+  std::vector<double> used;
+  lfnet::train::TrainerHooks hooks;
+  hooks.schedule = [&](int64_t epoch, int64_t batch, int64_t batches) {
+    asked.emplace_back(epoch, batch, batches);
+    return 1e-4 * static_cast<double>(epoch + 1);
+  };
+  hooks.on_step = [&](const lfnet::train::StepRecord& s) { used.push_back(s.lr); };
+  // Validation PSNR that falls every epoch: only the first epoch is a new best.
+  int validations = 0;
+  hooks.validate = [&](Trainer& t, lfnet::train::BatchSource& s) {
+    auto e = t.evaluate(s);
+    e.psnr_db = 50.0 - ++validations;
+    return e;
+  };
+  std::vector<std::pair<int64_t, bool>> saved;
+  hooks.save = [&](Trainer& t, const lfnet::train::EpochRecord& r) {
+    saved.emplace_back(r.epoch, r.best);
+    CHECK(t.state().epoch == r.epoch);  // the state already holds the epoch
+  };
+  const auto records = trainer.fit(*source, hooks);
+  REQUIRE(records.size() == 3);
+  REQUIRE(!asked.empty());
+  CHECK(std::get<0>(asked.front()) == 0);
+  CHECK(std::get<0>(asked.back()) == 2);
+  CHECK(std::get<1>(asked.back()) == std::get<2>(asked.back()) - 1);
+  REQUIRE(used.size() == asked.size());
+  CHECK(used.front() == Approx(1e-4));
+  CHECK(used.back() == Approx(3e-4));
+  CHECK(records[2].lr == Approx(3e-4));
+  CHECK(validations == 3);
+  CHECK(records[0].val_psnr_db == Approx(49.0));
+  CHECK(records[0].best);
+  CHECK_FALSE(records[1].best);
+  CHECK(trainer.state().best_epoch == 1);
+  CHECK(saved == std::vector<std::pair<int64_t, bool>>{{1, true}, {2, false}, {3, false}});
+  // The save hook replaced the default: nothing was written to out_dir.
+  CHECK_FALSE(std::filesystem::exists(lfnet::train::last_checkpoint_path(dir.path().string())));
+  CHECK(trainer.last_written().empty());
+  // Without hooks the defaults write last.ckpt and best.ckpt.
+  Trainer plain(make_net(o, phi, 5), quick_options("ae", dir.path().string(), 1), run_info(spec));
+  plain.fit(*source);
+  CHECK(std::filesystem::exists(lfnet::train::last_checkpoint_path(dir.path().string())));
+  CHECK(std::filesystem::exists(lfnet::train::best_checkpoint_path(dir.path().string())));
+  CHECK(plain.last_written() == lfnet::train::last_checkpoint_path(dir.path().string()));
 }
 
 TEST_CASE("with on_nonfinite = skip a poisoned batch is dropped", "[train][trainer]") {

@@ -11,25 +11,13 @@ namespace lfnet::data {
 
 DatasetOptions DatasetOptions::from_json(JsonReader& r) {
   DatasetOptions o;
-  r.get("patch_h", o.patch_h);
-  r.get("patch_w", o.patch_w);
-  r.get("train_patches", o.train_patches);
-  r.get("validation_patches", o.validation_patches);
-  r.get("validation_fraction", o.validation_fraction);
-  r.get("augment", o.augment);
-  r.get("min_std", o.min_std);
-  r.get("angular_windows", o.angular_windows);
-  r.get("angular_steps", o.angular_steps);
-  r.get("jitter_gamma", o.jitter_gamma);
-  r.get("jitter_contrast", o.jitter_contrast);
-  r.get("jitter_brightness", o.jitter_brightness);
-  r.get("seed", o.seed);
-  if (r.has("effects")) {
-    nlohmann::json effects;
-    r.get("effects", effects);
-    o.effects = optics::SensorOptions::from_json(effects, r.path_of("effects"));
-  }
+  read_fields(r, o);
   r.finish();
+  try {
+    o.effects.validate();
+  } catch (const ConfigError& e) {
+    throw ConfigError(r.path_of("effects") + ": " + e.what());
+  }
   try {
     o.validate();
   } catch (const ConfigError& e) {
@@ -38,22 +26,7 @@ DatasetOptions DatasetOptions::from_json(JsonReader& r) {
   return o;
 }
 
-nlohmann::json DatasetOptions::to_json() const {
-  return {{"patch_h", patch_h},
-          {"patch_w", patch_w},
-          {"train_patches", train_patches},
-          {"validation_patches", validation_patches},
-          {"validation_fraction", validation_fraction},
-          {"augment", augment},
-          {"min_std", min_std},
-          {"angular_windows", angular_windows},
-          {"angular_steps", angular_steps},
-          {"jitter_gamma", jitter_gamma},
-          {"jitter_contrast", jitter_contrast},
-          {"jitter_brightness", jitter_brightness},
-          {"seed", seed},
-          {"effects", effects.to_json()}};
-}
+nlohmann::json DatasetOptions::to_json() const { return fields_to_json(*this); }
 
 void DatasetOptions::validate() const {
   if (patch_h < 1 || patch_w < 1) throw ConfigError("patch size must be positive");

@@ -38,41 +38,12 @@ void KsvdOptions::validate() const {
                  "ksvd.max_coherence must be in (0, 1], got ", max_coherence);
 }
 
-nlohmann::json KsvdOptions::to_json() const {
-  return {{"atoms", atoms},
-          {"sparsity", sparsity},
-          {"target_error", target_error},
-          {"iterations", iterations},
-          {"tolerance", tolerance},
-          {"atom_update", to_string(atom_update)},
-          {"seed", seed},
-          {"keep_better_codes", keep_better_codes},
-          {"replace_atoms", replace_atoms},
-          {"min_uses", min_uses},
-          {"max_coherence", max_coherence}};
-}
+nlohmann::json KsvdOptions::to_json() const { return fields_to_json(*this); }
 
 KsvdOptions KsvdOptions::from_json(const nlohmann::json& j, const std::string& path) {
   KsvdOptions o;
   JsonReader r(j, path);
-  r.get("atoms", o.atoms);
-  r.get("sparsity", o.sparsity);
-  r.get("target_error", o.target_error);
-  r.get("iterations", o.iterations);
-  r.get("tolerance", o.tolerance);
-  std::string update = to_string(o.atom_update);
-  if (r.get("atom_update", update)) {
-    try {
-      o.atom_update = parse_atom_update(update);
-    } catch (const ConfigError& e) {
-      throw ConfigError(r.path_of("atom_update") + ": " + e.what());
-    }
-  }
-  r.get("seed", o.seed);
-  r.get("keep_better_codes", o.keep_better_codes);
-  r.get("replace_atoms", o.replace_atoms);
-  r.get("min_uses", o.min_uses);
-  r.get("max_coherence", o.max_coherence);
+  read_fields(r, o);
   r.finish();
   try {
     o.validate();

@@ -20,17 +20,12 @@ void OmpOptions::validate() const {
   LFNET_CHECK_AS(ConfigError, std::isfinite(tolerance), "omp.tolerance must be finite");
 }
 
-nlohmann::json OmpOptions::to_json() const {
-  return {
-      {"max_atoms", max_atoms}, {"tolerance", tolerance}, {"double_precision", double_precision}};
-}
+nlohmann::json OmpOptions::to_json() const { return fields_to_json(*this); }
 
 OmpOptions OmpOptions::from_json(const nlohmann::json& j, const std::string& path) {
   OmpOptions o;
   JsonReader r(j, path);
-  r.get("max_atoms", o.max_atoms);
-  r.get("tolerance", o.tolerance);
-  r.get("double_precision", o.double_precision);
+  read_fields(r, o);
   r.finish();
   o.validate();
   return o;

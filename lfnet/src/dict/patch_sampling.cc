@@ -20,24 +20,13 @@ void PatchSamplingOptions::validate() const {
   LFNET_CHECK_AS(ConfigError, max_draws >= 1, "sampling.max_draws must be >= 1, got ", max_draws);
 }
 
-nlohmann::json PatchSamplingOptions::to_json() const {
-  return {{"count", count},           {"views", views},
-          {"patch_size", patch_size}, {"min_variance", min_variance},
-          {"color", color},           {"seed", seed},
-          {"max_draws", max_draws}};
-}
+nlohmann::json PatchSamplingOptions::to_json() const { return fields_to_json(*this); }
 
 PatchSamplingOptions PatchSamplingOptions::from_json(const nlohmann::json& j,
                                                      const std::string& path) {
   PatchSamplingOptions o;
   JsonReader r(j, path);
-  r.get("count", o.count);
-  r.get("views", o.views);
-  r.get("patch_size", o.patch_size);
-  r.get("min_variance", o.min_variance);
-  r.get("color", o.color);
-  r.get("seed", o.seed);
-  r.get("max_draws", o.max_draws);
+  read_fields(r, o);
   r.finish();
   try {
     o.validate();

@@ -34,15 +34,12 @@ void OmpCodingOptions::validate() const {
                  "omp.residual_tolerance must be finite");
 }
 
-nlohmann::json OmpCodingOptions::to_json() const {
-  return {{"max_atoms", max_atoms}, {"residual_tolerance", residual_tolerance}};
-}
+nlohmann::json OmpCodingOptions::to_json() const { return fields_to_json(*this); }
 
 OmpCodingOptions OmpCodingOptions::from_json(const nlohmann::json& j, const std::string& path) {
   OmpCodingOptions o;
   JsonReader r(j, path);
-  r.get("max_atoms", o.max_atoms);
-  r.get("residual_tolerance", o.residual_tolerance);
+  read_fields(r, o);
   r.finish();
   validate_at(o, path);
   return o;
@@ -66,28 +63,12 @@ void AdmmOptions::validate() const {
                  max_iterations);
 }
 
-nlohmann::json AdmmOptions::to_json() const {
-  return {{"lambda", lambda},
-          {"relative_lambda", relative_lambda},
-          {"rho", rho},
-          {"relaxation", relaxation},
-          {"abs_tolerance", abs_tolerance},
-          {"rel_tolerance", rel_tolerance},
-          {"max_iterations", max_iterations},
-          {"double_precision", double_precision}};
-}
+nlohmann::json AdmmOptions::to_json() const { return fields_to_json(*this); }
 
 AdmmOptions AdmmOptions::from_json(const nlohmann::json& j, const std::string& path) {
   AdmmOptions o;
   JsonReader r(j, path);
-  r.get("lambda", o.lambda);
-  r.get("relative_lambda", o.relative_lambda);
-  r.get("rho", o.rho);
-  r.get("relaxation", o.relaxation);
-  r.get("abs_tolerance", o.abs_tolerance);
-  r.get("rel_tolerance", o.rel_tolerance);
-  r.get("max_iterations", o.max_iterations);
-  r.get("double_precision", o.double_precision);
+  read_fields(r, o);
   r.finish();
   validate_at(o, path);
   return o;
@@ -101,30 +82,16 @@ void SparseCodingOptions::validate() const {
   admm.validate();
 }
 
-nlohmann::json SparseCodingOptions::to_json() const {
-  return {{"method", method},
-          {"normalize_columns", normalize_columns},
-          {"cache_size", cache_size},
-          {"omp", omp.to_json()},
-          {"admm", admm.to_json()}};
-}
+nlohmann::json SparseCodingOptions::to_json() const { return fields_to_json(*this); }
 
 SparseCodingOptions SparseCodingOptions::from_json(const nlohmann::json& j,
                                                    const std::string& path) {
   SparseCodingOptions o;
   JsonReader r(j, path);
-  r.get("method", o.method);
-  r.get("normalize_columns", o.normalize_columns);
-  r.get("cache_size", o.cache_size);
-  if (r.has("omp")) {
-    auto c = r.child("omp");
-    o.omp = OmpCodingOptions::from_json(c.object(), c.path());
-  }
-  if (r.has("admm")) {
-    auto c = r.child("admm");
-    o.admm = AdmmOptions::from_json(c.object(), c.path());
-  }
+  read_fields(r, o);
   r.finish();
+  validate_at(o.omp, path + ".omp");  // the nested object's path first
+  validate_at(o.admm, path + ".admm");
   validate_at(o, path);
   return o;
 }

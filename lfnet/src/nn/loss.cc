@@ -39,8 +39,7 @@ LossOptions LossOptions::from_json(const nlohmann::json& j, const std::string& p
 }
 
 void LossOptions::read(JsonReader& reader) {
-  reader.get("name", name);
-  reader.get("reduction", reduction);
+  read_fields(reader, *this);
   try {
     kind();
   } catch (const ConfigError& e) {
@@ -53,7 +52,7 @@ void LossOptions::read(JsonReader& reader) {
   }
 }
 
-nlohmann::json LossOptions::to_json() const { return {{"name", name}, {"reduction", reduction}}; }
+nlohmann::json LossOptions::to_json() const { return fields_to_json(*this); }
 
 void LossOptions::validate() const {
   kind();

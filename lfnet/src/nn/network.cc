@@ -10,48 +10,14 @@
 
 namespace lfnet::nn {
 
-namespace {
-
-// Runs `fn`; a ConfigError it throws gets the reader's path in front ("$.network.ae: ...").
-template <typename Fn>
-void with_path(const JsonReader& reader, Fn&& fn) {
-  try {
-    fn();
-  } catch (const ConfigError& e) {
-    throw ConfigError(reader.path() + "." + e.what());
-  }
-}
-
-}  // namespace
-
 // ---- options -------------------------------------------------------------------------------
 
-void PatchShape::read(JsonReader& reader) {
-  reader.get("rows", rows);
-  reader.get("cols", cols);
-  reader.get("height", height);
-  reader.get("width", width);
-}
-
-nlohmann::json PatchShape::to_json() const {
-  return {{"rows", rows}, {"cols", cols}, {"height", height}, {"width", width}};
-}
-
-void AutoencoderOptions::read(JsonReader& reader) {
-  reader.get("hidden", hidden);
-  reader.get("input", input);
-}
-
-nlohmann::json AutoencoderOptions::to_json() const {
-  return {{"hidden", hidden}, {"input", input}};
-}
-
-void CnnOptions::read(JsonReader& reader) {
-  reader.get("channels", channels);
-  reader.get("depth", depth);
-}
-
-nlohmann::json CnnOptions::to_json() const { return {{"channels", channels}, {"depth", depth}}; }
+void PatchShape::read(JsonReader& reader) { read_fields(reader, *this); }
+nlohmann::json PatchShape::to_json() const { return fields_to_json(*this); }
+void AutoencoderOptions::read(JsonReader& reader) { read_fields(reader, *this); }
+nlohmann::json AutoencoderOptions::to_json() const { return fields_to_json(*this); }
+void CnnOptions::read(JsonReader& reader) { read_fields(reader, *this); }
+nlohmann::json CnnOptions::to_json() const { return fields_to_json(*this); }
 
 NetworkOptions NetworkOptions::from_json(const nlohmann::json& j, const std::string& path) {
   NetworkOptions options;
@@ -62,37 +28,11 @@ NetworkOptions NetworkOptions::from_json(const nlohmann::json& j, const std::str
 }
 
 void NetworkOptions::read(JsonReader& reader) {
-  if (reader.has("patch")) {
-    auto child = reader.child("patch");
-    patch.read(child);
-    child.finish();
-  }
-  reader.get("measurements", measurements);
-  reader.get("branches", branches);
-  reader.get("kernel", kernel);
-  reader.get("conv_algorithm", conv_algorithm);
-  if (reader.has("ae")) {
-    auto child = reader.child("ae");
-    ae.read(child);
-    child.finish();
-  }
-  if (reader.has("cnn")) {
-    auto child = reader.child("cnn");
-    cnn.read(child);
-    child.finish();
-  }
-  reader.get("head_weights", head_weights);
-  reader.get("residual", residual);
-  reader.get("pinv_lambda", pinv_lambda);
+  read_fields(reader, *this);
   with_path(reader, [&] { validate(); });
 }
 
-nlohmann::json NetworkOptions::to_json() const {
-  return {{"patch", patch.to_json()},  {"measurements", measurements},     {"branches", branches},
-          {"kernel", kernel},          {"conv_algorithm", conv_algorithm}, {"ae", ae.to_json()},
-          {"cnn", cnn.to_json()},      {"head_weights", head_weights},     {"residual", residual},
-          {"pinv_lambda", pinv_lambda}};
-}
+nlohmann::json NetworkOptions::to_json() const { return fields_to_json(*this); }
 
 void NetworkOptions::validate() const {
   auto fail = [](const std::string& field, const std::string& what) {

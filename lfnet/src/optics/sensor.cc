@@ -37,65 +37,13 @@ void SensorOptions::validate() const {
 SensorOptions SensorOptions::from_json(const nlohmann::json& j, const std::string& path) {
   JsonReader r(j, path);
   SensorOptions o;
-  r.get("photons_at_white", o.photons_at_white);
-  if (r.has("gaussian")) {
-    auto c = r.child("gaussian");
-    o.gaussian.emplace();
-    c.get("sigma", o.gaussian->sigma);
-    c.finish();
-  }
-  if (r.has("shot")) {
-    auto c = r.child("shot");
-    o.shot.emplace();
-    c.get("model", o.shot->model);
-    c.finish();
-  }
-  if (r.has("read")) {
-    auto c = r.child("read");
-    o.read.emplace();
-    c.get("electrons", o.read->electrons);
-    c.finish();
-  }
-  if (r.has("saturation")) {
-    auto c = r.child("saturation");
-    o.saturation.emplace();
-    c.get("full_well", o.saturation->full_well);
-    c.finish();
-  }
-  if (r.has("adc")) {
-    auto c = r.child("adc");
-    o.adc.emplace();
-    c.get("bits", o.adc->bits);
-    c.get("full_scale", o.adc->full_scale);
-    c.finish();
-  }
-  if (r.has("gain")) {
-    auto c = r.child("gain");
-    o.gain.emplace();
-    c.get("spread", o.gain->spread);
-    const auto& seed = c.object().value("seed", nlohmann::json(0));
-    if (seed.is_number_integer() && !seed.is_number_unsigned() && seed.get<int64_t>() < 0) {
-      throw ConfigError(c.path_of("seed") + ": the seed must be a non-negative integer, got " +
-                        seed.dump());
-    }
-    c.get("seed", o.gain->seed);
-    c.finish();
-  }
+  read_fields(r, o);
   r.finish();
   o.validate();
   return o;
 }
 
-nlohmann::json SensorOptions::to_json() const {
-  nlohmann::json j = {{"photons_at_white", photons_at_white}};
-  if (gaussian) j["gaussian"] = {{"sigma", gaussian->sigma}};
-  if (shot) j["shot"] = {{"model", shot->model}};
-  if (read) j["read"] = {{"electrons", read->electrons}};
-  if (saturation) j["saturation"] = {{"full_well", saturation->full_well}};
-  if (adc) j["adc"] = {{"bits", adc->bits}, {"full_scale", adc->full_scale}};
-  if (gain) j["gain"] = {{"spread", gain->spread}, {"seed", gain->seed}};
-  return j;
-}
+nlohmann::json SensorOptions::to_json() const { return fields_to_json(*this); }
 
 namespace {
 

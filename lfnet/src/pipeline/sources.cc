@@ -19,30 +19,14 @@ namespace fs = std::filesystem;
 namespace lfnet::pipeline {
 
 void LightFieldSources::read(JsonReader& r) {
-  r.get("light_fields", light_fields);
-  r.get("scenes", scenes);
-  r.get("random_scenes", random_scenes);
-  r.get("random_seed", random_seed);
-  r.get("random_options", random_options);
-  r.get("views", views);
-  r.get("orient", orient);
-  r.get("layout", layout);
+  read_fields(r, *this);
   r.finish();
   if (random_scenes < 0) throw ConfigError(r.path_of("random_scenes") + ": must be >= 0");
   AngularOrientation::parse(orient, r.path_of("orient"));
   if (!layout.empty()) io::parse_layout(layout, r.path_of("layout"));
 }
 
-nlohmann::json LightFieldSources::to_json() const {
-  return {{"light_fields", light_fields},
-          {"scenes", scenes},
-          {"random_scenes", random_scenes},
-          {"random_seed", random_seed},
-          {"random_options", random_options},
-          {"views", views},
-          {"orient", orient},
-          {"layout", layout}};
-}
+nlohmann::json LightFieldSources::to_json() const { return fields_to_json(*this); }
 
 LightField read_oriented(const std::string& dir, const std::string& orient, const std::string& what,
                          const std::string& layout) {

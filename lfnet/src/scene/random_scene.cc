@@ -260,57 +260,14 @@ double max_gradient(const RandomSceneOptions& o) {
 }  // namespace
 
 RandomSceneOptions RandomSceneOptions::from_json(JsonReader& r) {
-  using namespace detail;  // NOLINT: the typed JSON readers
   RandomSceneOptions o;
-  read_int(r, "height", o.height);
-  read_int(r, "width", o.width);
-  read_int(r, "rows", o.rows);
-  read_int(r, "cols", o.cols);
-  read_bool(r, "color", o.color);
-  read_double(r, "min_disparity", o.min_disparity);
-  read_double(r, "max_disparity", o.max_disparity);
-  read_int(r, "min_layers", o.min_layers);
-  read_int(r, "max_layers", o.max_layers);
-  read_double(r, "thin_occluder_probability", o.thin_occluder_probability);
-  read_double(r, "slanted_probability", o.slanted_probability);
-  read_double(r, "specular_probability", o.specular_probability);
-  read_double(r, "vignetting_probability", o.vignetting_probability);
-  read_double(r, "defocus_probability", o.defocus_probability);
-  if (r.has("texture_images")) {
-    json list;
-    read_raw(r, "texture_images", list);
-    if (!list.is_array()) fail(r.path_of("texture_images"), "must be a list of paths");
-    for (size_t i = 0; i < list.size(); ++i) {
-      if (!list[i].is_string()) {
-        fail(r.path_of("texture_images") + "[" + std::to_string(i) + "]", "must be a path");
-      }
-      o.texture_images.push_back(list[i].get<std::string>());
-    }
-  }
-  read_double(r, "image_probability", o.image_probability);
+  read_fields(r, o);
   r.finish();
   o.validate(r.path());
   return o;
 }
 
-nlohmann::json RandomSceneOptions::to_json() const {
-  return {{"height", height},
-          {"width", width},
-          {"rows", rows},
-          {"cols", cols},
-          {"color", color},
-          {"min_disparity", min_disparity},
-          {"max_disparity", max_disparity},
-          {"min_layers", min_layers},
-          {"max_layers", max_layers},
-          {"thin_occluder_probability", thin_occluder_probability},
-          {"slanted_probability", slanted_probability},
-          {"specular_probability", specular_probability},
-          {"vignetting_probability", vignetting_probability},
-          {"defocus_probability", defocus_probability},
-          {"texture_images", texture_images},
-          {"image_probability", image_probability}};
-}
+nlohmann::json RandomSceneOptions::to_json() const { return fields_to_json(*this); }
 
 void RandomSceneOptions::validate(const std::string& p) const {
   using detail::fail;

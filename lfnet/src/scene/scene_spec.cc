@@ -9,8 +9,8 @@
 namespace lfnet::scene {
 namespace {
 
+using detail::fail;
 using nlohmann::json;
-using namespace detail;  // NOLINT: the typed JSON readers
 
 Point parse_point(const json& v, const std::string& path) {
   if (!v.is_array() || v.size() != 2 || !v[0].is_number() || !v[1].is_number()) {
@@ -21,7 +21,7 @@ Point parse_point(const json& v, const std::string& path) {
 
 bool read_point(JsonReader& r, const std::string& key, Point& out) {
   json v;
-  if (!read_raw(r, key, v)) return false;
+  if (!r.get(key, v)) return false;
   out = parse_point(v, r.path_of(key));
   return true;
 }
@@ -134,12 +134,12 @@ TextureSpec TextureSpec::defaults(TextureKind kind) {
 
 TextureSpec TextureSpec::from_json(JsonReader& r) {
   std::string kind_name;
-  if (!read_string(r, "kind", kind_name)) fail(r.path_of("kind"), "required key is missing");
+  if (!r.get("kind", kind_name)) fail(r.path_of("kind"), "required key is missing");
   TextureSpec t =
       defaults(kind_from_string(kind_name, kTextureKinds, "texture", r.path_of("kind")));
   if (t.kind != TextureKind::kImage) {
     json colors;
-    if (read_raw(r, "colors", colors)) {
+    if (r.get("colors", colors)) {
       if (!colors.is_array() || colors.empty()) {
         fail(r.path_of("colors"), "expected a non-empty list of colours, got " + colors.dump());
       }
@@ -156,35 +156,35 @@ TextureSpec TextureSpec::from_json(JsonReader& r) {
       break;
     case TextureKind::kNoise:
     case TextureKind::kFractal:
-      read_double(r, "scale", t.scale);
-      read_double(r, "contrast", t.contrast);
-      if (t.kind == TextureKind::kFractal) read_double(r, "beta", t.beta);
-      if (read_seed(r, "seed", seed)) t.seed = seed;
+      r.get("scale", t.scale);
+      r.get("contrast", t.contrast);
+      if (t.kind == TextureKind::kFractal) r.get("beta", t.beta);
+      if (r.get("seed", seed)) t.seed = seed;
       break;
     case TextureKind::kStripes:
-      read_double(r, "period", t.period);
-      read_double(r, "duty", t.duty);
-      read_string(r, "profile", t.profile);
-      read_double(r, "phase", t.phase);
-      read_double(r, "angle", t.angle);
+      r.get("period", t.period);
+      r.get("duty", t.duty);
+      r.get("profile", t.profile);
+      r.get("phase", t.phase);
+      r.get("angle", t.angle);
       break;
     case TextureKind::kChecker:
-      read_double(r, "size", t.size);
-      read_double(r, "angle", t.angle);
+      r.get("size", t.size);
+      r.get("angle", t.angle);
       break;
     case TextureKind::kGradient: {
-      read_string(r, "profile", t.profile);
-      read_double(r, "angle", t.angle);
+      r.get("profile", t.profile);
+      r.get("angle", t.angle);
       Point c;
       if (read_point(r, "center", c)) t.center = c;
       double length = 0;
-      if (read_double(r, "length", length)) t.length = length;
+      if (r.get("length", length)) t.length = length;
       break;
     }
     case TextureKind::kImage:
-      if (!read_string(r, "path", t.path)) fail(r.path_of("path"), "required key is missing");
-      read_string(r, "fit", t.fit);
-      read_double(r, "zoom", t.zoom);
+      if (!r.get("path", t.path)) fail(r.path_of("path"), "required key is missing");
+      r.get("fit", t.fit);
+      r.get("zoom", t.zoom);
       read_point(r, "offset", t.offset);
       break;
   }
@@ -296,7 +296,7 @@ ShapeSpec ShapeSpec::defaults(ShapeKind kind) {
 
 ShapeSpec ShapeSpec::from_json(JsonReader& r) {
   std::string kind_name = "full";
-  read_string(r, "kind", kind_name);
+  r.get("kind", kind_name);
   ShapeSpec s = defaults(kind_from_string(kind_name, kShapeKinds, "shape", r.path_of("kind")));
   auto require = [&](bool found, const std::string& key) {
     if (!found) fail(r.path_of(key), "required key for a " + kind_name + " shape is missing");
@@ -308,20 +308,20 @@ ShapeSpec ShapeSpec::from_json(JsonReader& r) {
     case ShapeKind::kRectangle: {
       if (read_point(r, "center", c)) s.center = c;
       json size;
-      require(read_raw(r, "size", size), "size");
+      require(r.get("size", size), "size");
       const Point wh = parse_point(size, r.path_of("size"));
       s.width = wh.x;
       s.height = wh.y;
-      read_double(r, "angle", s.angle);
+      r.get("angle", s.angle);
       break;
     }
     case ShapeKind::kDisk:
       if (read_point(r, "center", c)) s.center = c;
-      require(read_double(r, "radius", s.radius), "radius");
+      require(r.get("radius", s.radius), "radius");
       break;
     case ShapeKind::kPolygon: {
       json points;
-      require(read_raw(r, "points", points), "points");
+      require(r.get("points", points), "points");
       if (!points.is_array()) fail(r.path_of("points"), "expected a list of [x, y] points");
       for (size_t i = 0; i < points.size(); ++i) {
         s.points.push_back(
@@ -331,15 +331,15 @@ ShapeSpec ShapeSpec::from_json(JsonReader& r) {
     }
     case ShapeKind::kBars:
       if (read_point(r, "center", c)) s.center = c;
-      require(read_double(r, "width", s.width), "width");
-      require(read_double(r, "period", s.period), "period");
-      read_double(r, "angle", s.angle);
-      read_int(r, "count", s.count);
+      require(r.get("width", s.width), "width");
+      require(r.get("period", s.period), "period");
+      r.get("angle", s.angle);
+      r.get("count", s.count);
       break;
   }
   if (s.kind != ShapeKind::kFull) {
-    read_double(r, "softness", s.softness);
-    read_bool(r, "invert", s.invert);
+    r.get("softness", s.softness);
+    r.get("invert", s.invert);
   }
   r.finish();
   s.validate(r.path());
@@ -406,23 +406,23 @@ void ShapeSpec::validate(const std::string& path) const {
 
 LayerSpec LayerSpec::from_json(JsonReader& r) {
   LayerSpec layer;
-  read_string(r, "name", layer.name);
+  r.get("name", layer.name);
   {
     JsonReader tex = r.child("texture");
     layer.texture = TextureSpec::from_json(tex);
   }
   json shape;
-  if (read_raw(r, "shape", shape)) {
+  if (r.get("shape", shape)) {
     JsonReader sr(shape, r.path_of("shape"));
     layer.shape = ShapeSpec::from_json(sr);
   }
-  read_double(r, "disparity", layer.disparity);
+  r.get("disparity", layer.disparity);
   json gradient;
-  if (read_raw(r, "disparity_gradient", gradient)) {
+  if (r.get("disparity_gradient", gradient)) {
     layer.disparity_gradient = parse_point(gradient, r.path_of("disparity_gradient"));
   }
-  read_double(r, "opacity", layer.opacity);
-  read_double(r, "gloss", layer.gloss);
+  r.get("opacity", layer.opacity);
+  r.get("gloss", layer.gloss);
   r.finish();
   layer.validate(r.path());
   return layer;
@@ -452,15 +452,15 @@ void LayerSpec::validate(const std::string& path) const {
 
 SpecularSpec SpecularSpec::from_json(JsonReader& r) {
   SpecularSpec s;
-  read_int(r, "count", s.count);
-  read_double(r, "strength", s.strength);
-  read_double(r, "sigma", s.sigma);
-  read_double(r, "lobe", s.lobe);
-  read_double(r, "disparity_offset", s.disparity_offset);
+  r.get("count", s.count);
+  r.get("strength", s.strength);
+  r.get("sigma", s.sigma);
+  r.get("lobe", s.lobe);
+  r.get("disparity_offset", s.disparity_offset);
   json color;
-  if (read_raw(r, "color", color)) s.color = parse_color(color, r.path_of("color"));
+  if (r.get("color", color)) s.color = parse_color(color, r.path_of("color"));
   uint64_t seed = 0;
-  if (read_seed(r, "seed", seed)) s.seed = seed;
+  if (r.get("seed", seed)) s.seed = seed;
   r.finish();
   s.validate(r.path());
   return s;
@@ -488,10 +488,10 @@ void SpecularSpec::validate(const std::string& path) const {
 
 VignettingSpec VignettingSpec::from_json(JsonReader& r) {
   VignettingSpec v;
-  read_double(r, "strength", v.strength);
-  read_double(r, "power", v.power);
-  read_double(r, "angular", v.angular);
-  read_double(r, "shift", v.shift);
+  r.get("strength", v.strength);
+  r.get("power", v.power);
+  r.get("angular", v.angular);
+  r.get("shift", v.shift);
   r.finish();
   v.validate(r.path());
   return v;
@@ -510,9 +510,9 @@ void VignettingSpec::validate(const std::string& path) const {
 
 DefocusSpec DefocusSpec::from_json(JsonReader& r) {
   DefocusSpec d;
-  read_double(r, "focus_disparity", d.focus_disparity);
-  read_double(r, "blur", d.blur);
-  read_double(r, "max_sigma", d.max_sigma);
+  r.get("focus_disparity", d.focus_disparity);
+  r.get("blur", d.blur);
+  r.get("max_sigma", d.max_sigma);
   r.finish();
   d.validate(r.path());
   return d;
@@ -533,16 +533,16 @@ void DefocusSpec::validate(const std::string& path) const {
 SceneSpec SceneSpec::from_json(const json& doc) {
   JsonReader r(doc, "$");
   SceneSpec s;
-  read_string(r, "name", s.name);
-  read_string(r, "description", s.description);
-  if (!read_int(r, "height", s.height)) fail("$.height", "required key is missing");
-  if (!read_int(r, "width", s.width)) fail("$.width", "required key is missing");
-  read_int(r, "rows", s.rows);
-  read_int(r, "cols", s.cols);
-  read_bool(r, "color", s.color);
-  read_seed(r, "seed", s.seed);
+  r.get("name", s.name);
+  r.get("description", s.description);
+  if (!r.get("height", s.height)) fail("$.height", "required key is missing");
+  if (!r.get("width", s.width)) fail("$.width", "required key is missing");
+  r.get("rows", s.rows);
+  r.get("cols", s.cols);
+  r.get("color", s.color);
+  r.get("seed", s.seed);
   json layers;
-  if (!read_raw(r, "layers", layers)) fail("$.layers", "required key is missing");
+  if (!r.get("layers", layers)) fail("$.layers", "required key is missing");
   if (!layers.is_array() || layers.empty()) fail("$.layers", "expected a non-empty list of layers");
   for (size_t i = 0; i < layers.size(); ++i) {
     JsonReader lr(layers[i], "$.layers[" + std::to_string(i) + "]");
@@ -565,12 +565,12 @@ SceneSpec SceneSpec::from_json(const json& doc) {
     er.finish();
   }
   json sensor;
-  if (read_raw(r, "sensor", sensor)) {
+  if (r.get("sensor", sensor)) {
     if (!sensor.is_object()) fail("$.sensor", "expected a JSON object, got " + sensor.dump());
     s.sensor = sensor;
   }
   json rendered;
-  read_raw(r, "rendered", rendered);  // a record written by `lfnet render`, not an input
+  r.get("rendered", rendered);  // a record written by `lfnet render`, not an input
   r.finish();
   s.validate();
   return s;

@@ -21,15 +21,6 @@ double number_or(const nlohmann::json& j, double fallback) {
   return j.is_number() ? j.get<double>() : fallback;
 }
 
-template <typename Fn>
-void with_path(const JsonReader& reader, Fn&& fn) {
-  try {
-    fn();
-  } catch (const ConfigError& e) {
-    throw ConfigError(reader.path() + "." + e.what());
-  }
-}
-
 std::string param_key(const torch::Tensor& p) {
   return c10::guts::to_string(p.unsafeGetTensorImpl());
 }
@@ -60,21 +51,9 @@ std::string format_double(double v) {
 
 // ---- options -------------------------------------------------------------------------------
 
-void LrScheduleOptions::read(JsonReader& reader) {
-  reader.get("name", name);
-  reader.get("step_epochs", step_epochs);
-  reader.get("gamma", gamma);
-  reader.get("min_factor", min_factor);
-  reader.get("warmup_epochs", warmup_epochs);
-}
+void LrScheduleOptions::read(JsonReader& reader) { read_fields(reader, *this); }
 
-nlohmann::json LrScheduleOptions::to_json() const {
-  return {{"name", name},
-          {"step_epochs", step_epochs},
-          {"gamma", gamma},
-          {"min_factor", min_factor},
-          {"warmup_epochs", warmup_epochs}};
-}
+nlohmann::json LrScheduleOptions::to_json() const { return fields_to_json(*this); }
 
 void LrScheduleOptions::validate() const {
   if (name != "constant" && name != "step" && name != "cosine") {
@@ -95,51 +74,11 @@ TrainerOptions TrainerOptions::from_json(const nlohmann::json& j, const std::str
 }
 
 void TrainerOptions::read(JsonReader& reader) {
-  reader.get("stage", stage);
-  reader.get("epochs", epochs);
-  reader.get("batch_size", batch_size);
-  reader.get("lr", lr);
-  reader.get("beta1", beta1);
-  reader.get("beta2", beta2);
-  reader.get("eps", eps);
-  reader.get("weight_decay", weight_decay);
-  if (reader.has("schedule")) {
-    auto child = reader.child("schedule");
-    schedule.read(child);
-    child.finish();
-  }
-  if (reader.has("loss")) {
-    auto child = reader.child("loss");
-    loss.read(child);
-    child.finish();
-  }
-  reader.get("clip_grad_norm", clip_grad_norm);
-  reader.get("on_nonfinite", on_nonfinite);
-  reader.get("max_skipped_batches", max_skipped_batches);
-  reader.get("out_dir", out_dir);
-  reader.get("progress", progress);
-  reader.get("device", device);
+  read_fields(reader, *this);
   with_path(reader, [&] { validate(); });
 }
 
-nlohmann::json TrainerOptions::to_json() const {
-  return {{"stage", stage},
-          {"epochs", epochs},
-          {"batch_size", batch_size},
-          {"lr", lr},
-          {"beta1", beta1},
-          {"beta2", beta2},
-          {"eps", eps},
-          {"weight_decay", weight_decay},
-          {"schedule", schedule.to_json()},
-          {"loss", loss.to_json()},
-          {"clip_grad_norm", clip_grad_norm},
-          {"on_nonfinite", on_nonfinite},
-          {"max_skipped_batches", max_skipped_batches},
-          {"out_dir", out_dir},
-          {"progress", progress},
-          {"device", device}};
-}
+nlohmann::json TrainerOptions::to_json() const { return fields_to_json(*this); }
 
 void TrainerOptions::validate() const {
   auto fail = [](const std::string& field, const std::string& what) {
@@ -614,6 +553,61 @@ Evaluation Trainer::evaluate(BatchSource& source) {
   return e;
 }
 
+Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distributed) {
+  StepOutcome out;
+  out.patches = static_cast<double>(batch.size());
+  if (!distributed) {
+    auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target);
+    out.loss = loss.item<double>();
+    if (std::isfinite(out.loss)) loss.backward();
+  } else {
+    // The loss is a mean over the batch: each rank backpropagates its patches' sum, the sums
+    // are added over the ranks and divided by the global batch.
+    double local_sum = 0;
+    if (batch.size() > 0) {
+      auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target) * out.patches;
+      local_sum = loss.item<double>();
+      if (std::isfinite(local_sum)) loss.backward();
+    }
+    auto totals = torch::tensor({local_sum, out.patches}, torch::kFloat64);
+    comm_->all_reduce_sum(totals);
+    out.patches = totals[1].item<double>();
+    out.loss = totals[0].item<double>() / out.patches;
+    average_gradients(out.patches);
+  }
+  if (!std::isfinite(out.loss)) {
+    out.problem = "the loss is " + format_double(out.loss);
+    return out;
+  }
+  const double norm = options_.clip_grad_norm > 0 ? torch::nn::utils::clip_grad_norm_(
+                                                        net_->parameters(), options_.clip_grad_norm)
+                                                  : gradient_norm(*net_);
+  if (!std::isfinite(norm)) out.problem = "the gradient norm is " + format_double(norm);
+  return out;
+}
+
+bool Trainer::agree_to_stop(bool stop) {
+  if (comm_->world_size() == 1) return stop;
+  auto votes = torch::tensor({stop ? int64_t{1} : int64_t{0}}, torch::kInt64);
+  comm_->all_reduce_sum(votes);
+  return votes.item<int64_t>() > 0;
+}
+
+void Trainer::save_checkpoints(const EpochRecord& record) {
+  if (options_.out_dir.empty()) return;
+  std::filesystem::create_directories(options_.out_dir);
+  const auto ck = checkpoint();
+  save_checkpoint(ck, last_checkpoint_path(options_.out_dir));
+  last_written_ = last_checkpoint_path(options_.out_dir);
+  if (record.best) {
+    // best.ckpt is the model to use or finetune, which starts a fresh optimizer: without the
+    // Adam moments it is a third of the size. Resuming reads last.ckpt.
+    auto model_only = ck;
+    model_only.optimizer.clear();
+    save_checkpoint(model_only, best_checkpoint_path(options_.out_dir));
+  }
+}
+
 std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& hooks) {
   std::vector<EpochRecord> records;
   const bool skip = options_.on_nonfinite == "skip";
@@ -643,40 +637,12 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
         check_batch(batch, "training batch " + std::to_string(i + 1) + " of epoch " +
                                std::to_string(epoch + 1));
       }
-      lr = learning_rate(options_, epoch, i, batches);
+      lr = hooks.schedule ? hooks.schedule(epoch, i, batches)
+                          : learning_rate(options_, epoch, i, batches);
       apply_lr(lr);
       optimizer_->zero_grad();
-      double value = 0, patches = static_cast<double>(batch.size());
-      std::string problem;
-      if (!distributed) {
-        auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target);
-        value = loss.item<double>();
-        if (std::isfinite(value)) loss.backward();
-      } else {
-        // The loss is a mean over the batch: each rank backpropagates its patches' sum, the
-        // sums are added over the ranks and divided by the global batch.
-        double local_sum = 0;
-        if (batch.size() > 0) {
-          auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target) * patches;
-          local_sum = loss.item<double>();
-          if (std::isfinite(local_sum)) loss.backward();
-        }
-        auto totals = torch::tensor({local_sum, patches}, torch::kFloat64);
-        comm_->all_reduce_sum(totals);
-        patches = totals[1].item<double>();
-        value = totals[0].item<double>() / patches;
-        average_gradients(patches);
-      }
-      if (!std::isfinite(value)) {
-        problem = "the loss is " + format_double(value);
-      } else {
-        const double norm =
-            options_.clip_grad_norm > 0
-                ? torch::nn::utils::clip_grad_norm_(net_->parameters(), options_.clip_grad_norm)
-                : gradient_norm(*net_);
-        if (!std::isfinite(norm)) problem = "the gradient norm is " + format_double(norm);
-      }
-      if (!problem.empty()) {
+      auto step = compute_gradients(batch, distributed);
+      if (!step.problem.empty()) {
         // A bad batch can be dropped; weights that are no longer finite cannot be saved.
         if (skip && skipped < options_.max_skipped_batches && weights_finite()) {
           ++skipped;
@@ -685,26 +651,26 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
           continue;
         }
         if (skip && skipped >= options_.max_skipped_batches) {
-          problem += " (and " + std::to_string(skipped) + " batches were skipped already)";
+          step.problem += " (and " + std::to_string(skipped) + " batches were skipped already)";
         }
-        fail_nonfinite(problem, batch, epoch, i, lr);
+        fail_nonfinite(step.problem, batch, epoch, i, lr);
       }
       optimizer_->step();
       ++state_.step;
-      loss_sum += value * patches;
-      seen += static_cast<int64_t>(patches);
+      loss_sum += step.loss * step.patches;
+      seen += static_cast<int64_t>(step.patches);
       if (bar) {
         bar->set_note("loss " + format_double(loss_sum / static_cast<double>(seen)));
         bar->advance();
       }
-      if (hooks.on_step) hooks.on_step({epoch + 1, i, state_.step, value, lr});
+      if (hooks.on_step) hooks.on_step({epoch + 1, i, state_.step, step.loss, lr});
     }
     const double train_seconds = clock.seconds();
     if (bar) bar->finish();
     if (!weights_finite()) {
       fail_nonfinite("the weights are no longer finite", Batch{}, epoch, batches - 1, lr);
     }
-    const auto eval = evaluate(source);
+    const auto eval = hooks.validate ? hooks.validate(*this, source) : evaluate(source);
     if (!std::isfinite(eval.loss)) {
       fail_nonfinite("the validation loss is " + format_double(eval.loss), Batch{}, epoch,
                      batches - 1, lr);
@@ -726,29 +692,16 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     state_.epoch = epoch + 1;
     r.seconds = clock.seconds();
     state_.history.push_back(r.to_json());
-    if (!options_.out_dir.empty() && lead) {
-      std::filesystem::create_directories(options_.out_dir);
-      const auto ck = checkpoint();
-      save_checkpoint(ck, last_checkpoint_path(options_.out_dir));
-      last_written_ = last_checkpoint_path(options_.out_dir);
-      if (r.best) {
-        // best.ckpt is the model to use or finetune, which starts a fresh optimizer: without
-        // the Adam moments it is a third of the size. Resuming reads last.ckpt.
-        auto model_only = ck;
-        model_only.optimizer.clear();
-        save_checkpoint(model_only, best_checkpoint_path(options_.out_dir));
+    if (lead) {
+      if (hooks.save) {
+        hooks.save(*this, r);
+      } else {
+        save_checkpoints(r);
       }
     }
     records.push_back(r);
     if (hooks.on_epoch) hooks.on_epoch(r);
-    bool stop = hooks.stop_requested && hooks.stop_requested();
-    if (distributed) {
-      // Any rank may ask to stop; all stop together.
-      auto votes = torch::tensor({stop ? int64_t{1} : int64_t{0}}, torch::kInt64);
-      comm_->all_reduce_sum(votes);
-      stop = votes.item<int64_t>() > 0;
-    }
-    if (stop) break;
+    if (agree_to_stop(hooks.stop_requested && hooks.stop_requested())) break;
   }
   return records;
 }

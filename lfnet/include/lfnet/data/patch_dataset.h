@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/optics/phi.h"
@@ -50,6 +51,23 @@ struct DatasetOptions {
     return angular_windows != "central" || angular_steps != std::vector<int64_t>{1};
   }
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("patch_h", patch_h);
+    f("patch_w", patch_w);
+    f("train_patches", train_patches);
+    f("validation_patches", validation_patches);
+    f("validation_fraction", validation_fraction);
+    f("augment", augment);
+    f("min_std", min_std);
+    f("angular_windows", angular_windows);
+    f("angular_steps", angular_steps);
+    f("jitter_gamma", jitter_gamma);
+    f("jitter_contrast", jitter_contrast);
+    f("jitter_brightness", jitter_brightness);
+    f("seed", seed);
+    f("effects", effects);
+  }
   static DatasetOptions from_json(JsonReader& r);
   nlohmann::json to_json() const;
   void validate() const;

@@ -5,6 +5,8 @@
 #include <torch/types.h>
 #include <nlohmann/json.hpp>
 
+#include "lfnet/core/fields.h"
+
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -39,6 +41,20 @@ struct KsvdOptions {
   int64_t min_uses = 4;            // atoms used by fewer signals are replaced (Rubinstein's 4)
   double max_coherence = 0.99;     // an atom with |<d_i, d_j>| above this for some j is replaced
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("atoms", atoms);
+    f("sparsity", sparsity);
+    f("target_error", target_error);
+    f("iterations", iterations);
+    f("tolerance", tolerance);
+    f("atom_update", atom_update);
+    f("seed", seed);
+    f("keep_better_codes", keep_better_codes);
+    f("replace_atoms", replace_atoms);
+    f("min_uses", min_uses);
+    f("max_coherence", max_coherence);
+  }
   void validate() const;
   nlohmann::json to_json() const;
   static KsvdOptions from_json(const nlohmann::json& j, const std::string& path = "$");
@@ -47,6 +63,9 @@ struct KsvdOptions {
 // "approximate" / "exact"; parsing an unknown name throws ConfigError.
 std::string to_string(AtomUpdate update);
 AtomUpdate parse_atom_update(const std::string& name);
+inline AtomUpdate from_string(const std::string& name, AtomUpdate) {
+  return parse_atom_update(name);
+}
 
 // What one K-SVD iteration did. Errors are root-mean-square per signal entry.
 struct KsvdIteration {

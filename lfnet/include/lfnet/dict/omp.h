@@ -5,6 +5,8 @@
 #include <torch/types.h>
 #include <nlohmann/json.hpp>
 
+#include "lfnet/core/fields.h"
+
 #include <cstdint>
 #include <string>
 
@@ -16,6 +18,12 @@ struct OmpOptions {
   double tolerance = -1.0;       // stop when the squared residual norm <= tolerance; < 0: off
   bool double_precision = true;  // float64 arithmetic inside (float32 when false)
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("max_atoms", max_atoms);
+    f("tolerance", tolerance);
+    f("double_precision", double_precision);
+  }
   void validate() const;
   nlohmann::json to_json() const;
   static OmpOptions from_json(const nlohmann::json& j, const std::string& path = "$");

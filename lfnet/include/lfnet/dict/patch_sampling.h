@@ -5,6 +5,8 @@
 #include <torch/types.h>
 #include <nlohmann/json.hpp>
 
+#include "lfnet/core/fields.h"
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -24,6 +26,16 @@ struct PatchSamplingOptions {
   uint64_t seed = 0;           // positions and light fields drawn
   int64_t max_draws = 50;      // give up after count * max_draws draws
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("count", count);
+    f("views", views);
+    f("patch_size", patch_size);
+    f("min_variance", min_variance);
+    f("color", color);
+    f("seed", seed);
+    f("max_draws", max_draws);
+  }
   void validate() const;
   nlohmann::json to_json() const;
   static PatchSamplingOptions from_json(const nlohmann::json& j, const std::string& path = "$");

@@ -5,6 +5,8 @@
 #include <torch/types.h>
 #include <nlohmann/json.hpp>
 
+#include "lfnet/core/fields.h"
+
 #include <cstdint>
 #include <list>
 #include <memory>
@@ -19,6 +21,11 @@ struct OmpCodingOptions {
   double residual_tolerance = -1.0;  // also stop when ||A D alpha - y||^2 / m <= this (a noise
                                      // variance per measurement); < 0: off
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("max_atoms", max_atoms);
+    f("residual_tolerance", residual_tolerance);
+  }
   void validate() const;
   nlohmann::json to_json() const;
   static OmpCodingOptions from_json(const nlohmann::json& j, const std::string& path);
@@ -48,6 +55,17 @@ struct AdmmOptions {
   bool double_precision = false;  // float64 iterations; float32 halves the time of the two
                                   // matrix products per iteration (factorisation: float64)
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("lambda", lambda);
+    f("relative_lambda", relative_lambda);
+    f("rho", rho);
+    f("relaxation", relaxation);
+    f("abs_tolerance", abs_tolerance);
+    f("rel_tolerance", rel_tolerance);
+    f("max_iterations", max_iterations);
+    f("double_precision", double_precision);
+  }
   void validate() const;
   nlohmann::json to_json() const;
   static AdmmOptions from_json(const nlohmann::json& j, const std::string& path);
@@ -63,6 +81,14 @@ struct SparseCodingOptions {
   OmpCodingOptions omp;
   AdmmOptions admm;
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("method", method);
+    f("normalize_columns", normalize_columns);
+    f("cache_size", cache_size);
+    f("omp", omp);
+    f("admm", admm);
+  }
   void validate() const;
   nlohmann::json to_json() const;
   static SparseCodingOptions from_json(const nlohmann::json& j, const std::string& path = "$");

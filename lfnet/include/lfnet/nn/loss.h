@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <string>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 
 namespace lfnet::nn {
@@ -38,6 +39,11 @@ struct LossOptions {
   std::string name = "weighted_l2";  // weighted_l2, l2 or l1
   std::string reduction = "mean";    // mean or sum (see LossReduction)
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("name", name);
+    f("reduction", reduction);
+  }
   static LossOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
   nlohmann::json to_json() const;

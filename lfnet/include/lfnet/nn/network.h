@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/nn/conv4d.h"
 
@@ -33,6 +34,13 @@ struct PatchShape {
   int64_t height = 9;  // h: pixels
   int64_t width = 9;   // w: pixels
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("rows", rows);
+    f("cols", cols);
+    f("height", height);
+    f("width", width);
+  }
   int64_t pixels() const { return height * width; }
   int64_t size() const { return rows * cols * height * width; }  // 2025 by default
   void read(JsonReader& reader);
@@ -53,6 +61,11 @@ struct AutoencoderOptions {
   // masks) and does not change width when N does.
   std::string input = "measurements";
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("hidden", hidden);
+    f("input", input);
+  }
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
 };
@@ -62,6 +75,11 @@ struct CnnOptions {
   int64_t channels = 16;  // hidden channels of the 4D CNN (1 in, 1 out)
   int64_t depth = 5;      // Conv4d layers, ReLU between (the paper's five)
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("channels", channels);
+    f("depth", depth);
+  }
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
 };
@@ -84,6 +102,19 @@ struct NetworkOptions {
   std::string residual = "none";
   double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("patch", patch);
+    f("measurements", measurements);
+    f("branches", branches);
+    f("kernel", kernel);
+    f("conv_algorithm", conv_algorithm);
+    f("ae", ae);
+    f("cnn", cnn);
+    f("head_weights", head_weights);
+    f("residual", residual);
+    f("pinv_lambda", pinv_lambda);
+  }
   // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);

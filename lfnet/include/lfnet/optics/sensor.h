@@ -6,6 +6,8 @@
 #include <torch/types.h>
 #include <nlohmann/json.hpp>
 
+#include "lfnet/core/fields.h"
+
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -18,28 +20,60 @@ struct SensorOptions {
   // Additive Gaussian noise in relative units: the paper's "std 0.1 / 0.2".
   struct Gaussian {
     double sigma = 0.01;  // standard deviation, relative to a white scene's mean signal
+
+    template <typename Fields>
+    void fields(Fields& f) {
+      f("sigma", sigma);
+    }
   };
   // Photon shot noise: electrons ~ Poisson(photons_at_white * y).
   struct Shot {
     std::string model = "poisson";  // "poisson" or "gaussian" (its approximation)
+
+    template <typename Fields>
+    void fields(Fields& f) {
+      f("model", model);
+    }
   };
   // Read noise of the pixel's electronics, in electrons.
   struct Read {
     double electrons = 3.0;  // standard deviation in electrons
+
+    template <typename Fields>
+    void fields(Fields& f) {
+      f("electrons", electrons);
+    }
   };
   // Full-well saturation: electrons are clipped at the well's capacity.
   struct Saturation {
     double full_well = 2000.0;  // electrons (twice a white scene's mean at the default scale)
+
+    template <typename Fields>
+    void fields(Fields& f) {
+      f("full_well", full_well);
+    }
   };
   // Analogue-to-digital conversion: clip to [0, full_scale] and quantise to 2^bits levels.
   struct Adc {
     int bits = 12;            // 1 .. 24
     double full_scale = 2.0;  // relative signal at the top code (white's mean is 1)
+
+    template <typename Fields>
+    void fields(Fields& f) {
+      f("bits", bits);
+      f("full_scale", full_scale);
+    }
   };
   // Fixed-pattern photo-response non-uniformity: each sensor pixel's gain ~ N(1, spread).
   struct Gain {
     double spread = 0.01;  // standard deviation of the per-pixel gain
     uint64_t seed = 0;     // the sensor's pattern: fixed across captures, unlike the noise seed
+
+    template <typename Fields>
+    void fields(Fields& f) {
+      f("spread", spread);
+      f("seed", seed);
+    }
   };
 
   // Electrons a pixel collects when its noiseless measurement is 1 (a white scene's mean):
@@ -52,6 +86,16 @@ struct SensorOptions {
   std::optional<Adc> adc;
   std::optional<Gain> gain;
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("photons_at_white", photons_at_white);
+    f("gaussian", gaussian);
+    f("shot", shot);
+    f("read", read);
+    f("saturation", saturation);
+    f("adc", adc);
+    f("gain", gain);
+  }
   // True when no effect is named: the measurement is the noiseless forward model.
   bool empty() const;
   // Throws ConfigError naming the bad field.

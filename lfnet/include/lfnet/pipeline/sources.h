@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/scene/render.h"
@@ -27,6 +28,17 @@ struct LightFieldSources {
   std::string orient;  // angular reorientation of the folders on loading:
                        // flip-u, flip-v, transpose (docs/conventions.md)
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("light_fields", light_fields);
+    f("scenes", scenes);
+    f("random_scenes", random_scenes);
+    f("random_seed", random_seed);
+    f("random_options", random_options);
+    f("views", views);
+    f("orient", orient);
+    f("layout", layout);
+  }
   void read(JsonReader& r);
   nlohmann::json to_json() const;
   bool empty() const { return light_fields.empty() && scenes.empty() && random_scenes == 0; }

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/scene/scene_spec.h"
 
@@ -34,6 +35,25 @@ struct RandomSceneOptions {
   std::vector<std::string> texture_images;
   double image_probability = 0.0;
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("height", height);
+    f("width", width);
+    f("rows", rows);
+    f("cols", cols);
+    f("color", color);
+    f("min_disparity", min_disparity);
+    f("max_disparity", max_disparity);
+    f("min_layers", min_layers);
+    f("max_layers", max_layers);
+    f("thin_occluder_probability", thin_occluder_probability);
+    f("slanted_probability", slanted_probability);
+    f("specular_probability", specular_probability);
+    f("vignetting_probability", vignetting_probability);
+    f("defocus_probability", defocus_probability);
+    f("texture_images", texture_images);
+    f("image_probability", image_probability);
+  }
   static RandomSceneOptions from_json(JsonReader& reader);
   nlohmann::json to_json() const;
   // Throws ConfigError naming the bad key under `json_path`.

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/dist/communicator.h"
 #include "lfnet/nn/loss.h"
@@ -29,6 +30,14 @@ struct LrScheduleOptions {
   double min_factor = 0.01;     // cosine: the last learning rate as a fraction of lr
   int64_t warmup_epochs = 0;    // linear warm-up from lr / steps over this many epochs
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("name", name);
+    f("step_epochs", step_epochs);
+    f("gamma", gamma);
+    f("min_factor", min_factor);
+    f("warmup_epochs", warmup_epochs);
+  }
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
   void validate() const;  // ConfigError naming the field
@@ -61,6 +70,25 @@ struct TrainerOptions {
   // checkpoints always hold CPU tensors, so a run resumes on either.
   std::string device = "cpu";
 
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("stage", stage);
+    f("epochs", epochs);
+    f("batch_size", batch_size);
+    f("lr", lr);
+    f("beta1", beta1);
+    f("beta2", beta2);
+    f("eps", eps);
+    f("weight_decay", weight_decay);
+    f("schedule", schedule);
+    f("loss", loss);
+    f("clip_grad_norm", clip_grad_norm);
+    f("on_nonfinite", on_nonfinite);
+    f("max_skipped_batches", max_skipped_batches);
+    f("out_dir", out_dir);
+    f("progress", progress);
+    f("device", device);
+  }
   static TrainerOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
@@ -97,18 +125,33 @@ struct StepRecord {
   double lr = 0;
 };
 
-// Optional callbacks: logging, metrics, time budgets.
-struct TrainerHooks {
-  std::function<void(const EpochRecord&)> on_epoch;  // after each epoch's checkpoints
-  std::function<void(const StepRecord&)> on_step;    // after each optimizer step
-  std::function<bool()> stop_requested;              // checked after each epoch
-};
-
 // Validation loss and PSNR.
 struct Evaluation {
   double loss = 0;
   double psnr_db = 0;
   int64_t patches = 0;
+};
+
+class Trainer;
+
+// What fit() does around the optimizer steps, each part replaceable. An empty function keeps
+// the default, named beside it; the defaults are what TrainerOptions describes.
+struct TrainerHooks {
+  // The learning rate of batch `batch` (0-based) of epoch `epoch` (0-based) of `batches`.
+  // Default: learning_rate(options, ...). It must be a pure function of its arguments so that a
+  // resumed run follows the same schedule.
+  std::function<double(int64_t epoch, int64_t batch, int64_t batches)> schedule;
+  // The validation of each epoch, whose PSNR picks the best epoch. Default:
+  // Trainer::evaluate(source), the source's validation batches. It runs on every rank and must
+  // return the same numbers on each.
+  std::function<Evaluation(Trainer&, BatchSource&)> validate;
+  // Saving after each epoch (only rank 0 calls it), after the record is complete and the
+  // training state holds the epoch. Default: Trainer::save_checkpoints, last.ckpt always and
+  // best.ckpt when the record is a new best, in options.out_dir ("" writes nothing).
+  std::function<void(Trainer&, const EpochRecord&)> save;
+  std::function<void(const EpochRecord&)> on_epoch;  // after each epoch's checkpoints
+  std::function<void(const StepRecord&)> on_step;    // after each optimizer step
+  std::function<bool()> stop_requested;              // checked after each epoch
 };
 
 // What the run is, stored in every checkpoint it writes.
@@ -168,11 +211,32 @@ class Trainer {
   // The complete current state as a checkpoint.
   Checkpoint checkpoint() const;
 
+  // The default save hook: last.ckpt in options.out_dir, and best.ckpt (the model without
+  // Adam moments) when `record` is a new best. Does nothing when out_dir is "".
+  void save_checkpoints(const EpochRecord& record);
+
+  // The last checkpoint this run wrote ("" when none), named by non-finite-number errors.
+  // A save hook that writes checkpoints elsewhere reports them here.
+  const std::string& last_written() const { return last_written_; }
+  void set_last_written(std::string path) { last_written_ = std::move(path); }
+
   const TrainingState& state() const { return state_; }
   nn::LightFieldNet net() const { return net_; }
   const TrainerOptions& options() const { return options_; }
 
  private:
+  // What one optimizer step did: the batch's mean loss over every rank, the patches it held
+  // over every rank, and what was not finite ("" when all was).
+  struct StepOutcome {
+    double loss = 0;
+    double patches = 0;
+    std::string problem;
+  };
+  // Forward, backward (with the all-reduce of the gradients when distributed) and the
+  // gradient norm or clipping; the optimizer step is left to the caller.
+  StepOutcome compute_gradients(const Batch& batch, bool distributed);
+  // True when any rank asks to stop (all ranks stop together).
+  bool agree_to_stop(bool stop);
   void check_batch(const Batch& batch, const std::string& where) const;
   void apply_lr(double lr);
   [[noreturn]] void fail_nonfinite(const std::string& what, const Batch& batch, int64_t epoch,

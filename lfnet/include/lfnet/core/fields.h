@@ -1,0 +1,134 @@
+// One field list per Options struct (docs/architecture.md, "Options"). A struct names its JSON
+// fields once, in a member template
+//
+//   template <typename Fields>
+//   void fields(Fields& f) {
+//     f("name", name);
+//     f("reduction", reduction);
+//   }
+//
+// and read_fields / fields_to_json drive that list both ways: reading is strict (JsonReader:
+// kinds checked, unknown keys refused with their JSON path), nested Options structs (those
+// with a fields() of their own) are read and written as nested objects, and a missing key
+// keeps the field's default. An optional Options struct (std::optional<T>) is set when its key
+// is present, however empty its object, and written only when set. An enum field (a closed set) is
+// written by its name: its namespace provides `std::string to_string(E)` and `E from_string(const
+// std::string&, E)` (found by argument-dependent lookup; the second argument only picks the
+// overload), which throws ConfigError naming the known values.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <optional>
+#include <string>
+#include <type_traits>
+#include <utility>
+
+#include "lfnet/core/json.h"
+
+namespace lfnet {
+
+namespace detail {
+
+struct FieldProbe {
+  template <typename T>
+  void operator()(const char*, T&) {}
+};
+
+// True for types with a fields() member template: nested Options structs.
+template <typename T, typename = void>
+struct HasFields : std::false_type {};
+template <typename T>
+struct HasFields<T, std::void_t<decltype(std::declval<T&>().fields(std::declval<FieldProbe&>()))>>
+    : std::true_type {};
+
+template <typename T>
+struct IsOptional : std::false_type {};
+template <typename T>
+struct IsOptional<std::optional<T>> : std::true_type {};
+
+}  // namespace detail
+
+template <typename T>
+void read_fields(JsonReader& reader, T& options);
+
+// Reads one field: a nested Options struct from its object, anything else with JsonReader::get.
+struct FieldReader {
+  JsonReader& reader;
+  template <typename T>
+  void operator()(const char* key, T& value) {
+    if constexpr (detail::HasFields<T>::value) {
+      if (!reader.has(key)) return;
+      auto child = reader.child(key);
+      read_fields(child, value);
+      child.finish();
+    } else if constexpr (detail::IsOptional<T>::value) {
+      if (!reader.has(key)) return;
+      auto child = reader.child(key);
+      value.emplace();
+      read_fields(child, *value);
+      child.finish();
+    } else if constexpr (std::is_enum_v<T>) {
+      std::string name;
+      if (!reader.get(key, name)) return;
+      try {
+        value = from_string(name, value);
+      } catch (const ConfigError& e) {
+        throw ConfigError(reader.path_of(key) + ": " + e.what());
+      }
+    } else {
+      reader.get(key, value);
+    }
+  }
+};
+
+// Every field of `options` present in the reader's object. Unknown keys are left to the
+// caller's reader.finish(), so a struct can read more keys than its list.
+template <typename T>
+void read_fields(JsonReader& reader, T& options) {
+  FieldReader f{reader};
+  options.fields(f);
+}
+
+template <typename T>
+nlohmann::json fields_to_json(const T& options);
+
+// Writes one field: a nested Options struct as its object, anything else as nlohmann writes it.
+struct FieldWriter {
+  nlohmann::json& out;
+  template <typename T>
+  void operator()(const char* key, const T& value) {
+    if constexpr (detail::HasFields<T>::value) {
+      out[key] = fields_to_json(value);
+    } else if constexpr (detail::IsOptional<T>::value) {
+      if (value) out[key] = fields_to_json(*value);
+    } else if constexpr (std::is_enum_v<T>) {
+      out[key] = to_string(value);
+    } else {
+      out[key] = value;
+    }
+  }
+};
+
+// The field list written as a JSON object. fields() does not change the struct when the
+// visitor only reads, so a const struct is visited through a copy-free const_cast.
+template <typename T>
+nlohmann::json fields_to_json(const T& options) {
+  nlohmann::json out = nlohmann::json::object();
+  FieldWriter f{out};
+  const_cast<T&>(options).fields(f);  // NOLINT(cppcoreguidelines-pro-type-const-cast)
+  return out;
+}
+
+// Runs `fn` (a validate()); a ConfigError it throws gets the reader's path in front, so
+// "epochs: must be >= 1" reads "$.training.epochs: must be >= 1".
+template <typename Fn>
+void with_path(const JsonReader& reader, Fn&& fn) {
+  try {
+    fn();
+  } catch (const ConfigError& e) {
+    throw ConfigError(reader.path() + "." + e.what());
+  }
+}
+
+}  // namespace lfnet
