@@ -7,6 +7,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/pipeline/evaluate.h"
@@ -184,4 +185,47 @@ TEST_CASE("write_acquisition writes what the optics simulate, and read_acquisiti
       optics::measure_patches(*phi, r.lf.data(), grid, r.mode, r.effects, r.seed, 0, grid.rows());
   CHECK(per_patch.measurements.sizes() == torch::IntArrayRef({1, grid.size(), 2 * 81}));
   CHECK(torch::equal(per_patch.measurements, direct.values.view({1, grid.size(), -1})));
+}
+
+TEST_CASE("simulate's inputs: the window, the Phi on it, the effects, and the Phi described",
+          "[pipeline][simulate]") {
+  test::TempDir tmp;
+  io::write_light_field(test::parallax_light_field(7, 7, 12, 14, 1, -1), tmp / "lf");
+  pipeline::SimulateSource source;
+  source.lf = tmp / "lf";
+  auto input = pipeline::load_simulate_input(source);
+  CHECK(input.lf.shape_string() == LightField(torch::zeros({1, 5, 5, 12, 14})).shape_string());
+  CHECK(input.views["rows"] == nlohmann::json{2, 6});  // the central 5 x 5 of 7 x 7
+  CHECK(input.source["kind"] == "light_field");
+  source.views = "1:3,1:4";
+  input = pipeline::load_simulate_input(source);
+  CHECK(input.lf.rows() == 3);
+  CHECK(input.lf.cols() == 4);
+  CHECK(pipeline::window_size("1:3,1:4") == std::pair<int64_t, int64_t>{3, 4});
+  CHECK(pipeline::window_size("") == std::pair<int64_t, int64_t>{5, 5});
+  const auto spec = pipeline::phi_for_window("mask:2", 3, 4);
+  CHECK(spec.rows == 3);
+  CHECK(spec.cols == 4);
+  // A spec file codes its own window: another one is refused.
+  write_json_file(tmp / "phi.json", {{"name", "asp"}, {"n", 2}});
+  CHECK_THROWS_WITH(pipeline::phi_for_window(tmp / "phi.json", 3, 4), Catch::Contains("--views"));
+  // The effects file, then --noise over it.
+  write_json_file(tmp / "effects.json",
+                  {{"gaussian", {{"sigma", 0.05}}}, {"read", nlohmann::json::object()}});
+  auto effects = pipeline::simulation_effects(tmp / "effects.json", -1, input, "");
+  REQUIRE(effects.gaussian.has_value());
+  CHECK(effects.gaussian->sigma == 0.05);
+  CHECK(effects.read.has_value());
+  effects = pipeline::simulation_effects(tmp / "effects.json", 0.2, input, "");
+  CHECK(effects.gaussian->sigma == 0.2);
+  CHECK(pipeline::simulation_effects("", -1, input, "").empty());
+  // The description names the spec and, for a single matrix, its condition number.
+  const auto text = pipeline::describe_phi(*optics::make_phi(optics::PhiSpec::parse("random:2")));
+  CHECK(text.find("random:2") != std::string::npos);
+  CHECK(text.find("condition:") != std::string::npos);
+  const auto asp = pipeline::describe_phi(*optics::make_phi(optics::PhiSpec::parse("asp:2")));
+  CHECK(asp.find("asp table:") != std::string::npos);
+  // A periodic mask has one matrix per pixel phase: a table of their condition numbers.
+  const auto mask = pipeline::describe_phi(*optics::make_phi(optics::PhiSpec::parse("mask:2")));
+  CHECK(mask.find("condition by pixel phase") != std::string::npos);
 }

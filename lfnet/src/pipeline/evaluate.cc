@@ -5,8 +5,11 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/parallax.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/core/runtime.h"
+#include "lfnet/io/light_field_io.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
@@ -84,6 +87,80 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   }
   if (estimate) *estimate = result.estimate;
   return result.record;
+}
+
+EvaluateResult evaluate_request(const EvaluateRequest& a) {
+  LFNET_CHECK_AS(ConfigError, a.lf.empty() != a.scene.empty(),
+                 "give exactly one of --lf DIR and --scene SCENE.json");
+  LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
+  const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
+  LFNET_CHECK_AS(ConfigError, method == "dict" || (a.dict_method.empty() && a.dict_options.empty()),
+                 "--dict-method and --dict-options apply to --method dict, not '", method, "'");
+  parse_device(a.device);  // a clear error before any work
+  MethodContext context;
+  optics::PhiSpec spec;
+  std::optional<nn::PatchShape> network_patch;  // the patch size of net, ae and cnn
+  if (!a.model.empty()) {
+    const auto model = load_model(a.model, recon::needs_network(method));
+    spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
+    if (!a.phi.empty()) {
+      auto given = phi_from_argument(a.phi);
+      LFNET_CHECK_AS(ConfigError, given.name == spec.name && given.n == spec.n, "--phi ", a.phi,
+                     " does not match the model ", a.model, ", which was trained for ",
+                     spec.label());
+    }
+    if (recon::needs_network(method)) {
+      context.net = model.net;
+      context.script = model.script;
+      network_patch = model.network.patch;
+      if (context.net) {
+        context.net->to(parse_device(a.device));
+        nn::set_cnn_precision(context.net, nn::parse_precision(a.precision));
+      } else {
+        LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == "float32",
+                       "--device and --precision apply to checkpoints; ", a.model,
+                       " is an exported TorchScript file");
+      }
+    }
+  } else {
+    LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
+                   "' needs --model");
+    LFNET_CHECK_AS(ConfigError, !a.phi.empty(), "--phi NAME[:N] is needed without --model");
+    spec = phi_from_argument(a.phi);
+  }
+  LightFieldSources sources;
+  if (!a.lf.empty()) sources.light_fields = {a.lf};
+  if (!a.scene.empty()) sources.scenes = {a.scene};
+  sources.views = a.views;
+  sources.orient = a.orient;
+  sources.layout = a.layout;
+  if (!a.layout.empty()) io::parse_layout(a.layout);  // before any work
+  AngularOrientation::parse(a.orient, "--orient");    // before any work
+  if (!a.views.empty()) {
+    auto [ru, rv] = parse_views(a.views);
+    if (a.model.empty()) {
+      spec.rows = ru.size();
+      spec.cols = rv.size();
+    }
+  }
+  const auto phi = optics::make_phi(spec);
+  context.phi = phi.get();
+  context.dictionary = a.dictionary;
+  context.dict_method = a.dict_method;
+  context.dict_options = a.dict_options;
+  const auto truths = load_sources(sources, phi->rows(), phi->cols());
+
+  const auto o =
+      make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
+  EvaluateResult result;
+  result.record =
+      evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);
+  if (!a.model.empty()) result.record["model"] = a.model;
+  result.record["device"] = a.device;
+  if (recon::needs_network(method)) result.record["precision"] = a.precision;
+  result.light_field = truths[0].name;
+  result.phi = spec.label();
+  return result;
 }
 
 }  // namespace lfnet::pipeline

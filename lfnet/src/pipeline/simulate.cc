@@ -3,15 +3,24 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/light_field.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/text.h"
 #include "lfnet/core/version.h"
 #include "lfnet/io/sensor_io.h"
+#include "lfnet/optics/asp.h"
+#include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/scene/render.h"
+#include "lfnet/scene/scene_spec.h"
 
 namespace fs = std::filesystem;
 
@@ -83,6 +92,180 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
   }
   write_json_file((fs::path(dir) / io::kSidecarName).string(), meta);
   return meta;
+}
+
+SimulateInput load_simulate_input(const SimulateSource& args) {
+  SimulateInput in;
+  LightField lf;
+  if (!args.scene.empty()) {
+    scene::SceneSpec spec;
+    try {
+      spec = scene::load_scene(args.scene);
+    } catch (const ConfigError& e) {
+      throw ConfigError(args.scene + ": " + e.what());
+    }
+    lf = scene::render_scene(spec, scene_render_options(args.scene)).light_field;
+    in.scene_effects = spec.sensor;
+    in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}};
+  } else {
+    lf = read_oriented(args.lf, args.orient, "--orient", args.layout);
+    in.source = {{"kind", "light_field"}, {"path", fs::absolute(args.lf).string()}};
+    if (!args.orient.empty()) in.source["orient"] = args.orient;
+    if (!args.layout.empty()) in.source["layout"] = args.layout;
+  }
+  AngularRange ru, rv;
+  if (args.views.empty()) {
+    const int64_t n = 5;
+    LFNET_CHECK_AS(ConfigError, lf.rows() >= n && lf.cols() >= n, "the light field in ", args.lf,
+                   " has ", lf.rows(), "x", lf.cols(), " views, fewer than the default central ", n,
+                   "x", n, ": choose views with --views R0:R1,C0:C1");
+    ru = {central_start(lf.rows(), n), central_start(lf.rows(), n) + n};
+    rv = {central_start(lf.cols(), n), central_start(lf.cols(), n) + n};
+  } else {
+    std::tie(ru, rv) = parse_views(args.views);
+  }
+  in.views = {{"rows", {ru.begin + 1, ru.end}},
+              {"cols", {rv.begin + 1, rv.end}},
+              {"source_grid", {lf.rows(), lf.cols()}}};
+  lf = lf.window(ru, rv);
+  if (!args.color) {
+    lf = lf.grey();
+  } else if (lf.channels() == 1) {
+    spdlog::warn("--color given but {} is grey: simulating one channel", args.lf);
+  }
+  in.lf = lf;
+  return in;
+}
+
+std::pair<int64_t, int64_t> window_size(const std::string& views) {
+  if (views.empty()) return {5, 5};
+  auto [ru, rv] = parse_views(views);
+  return {ru.size(), rv.size()};
+}
+
+optics::PhiSpec phi_for_window(const std::string& arg, int64_t rows, int64_t cols) {
+  optics::PhiSpec spec;
+  if (phi_argument_is_file(arg)) {
+    spec = phi_from_argument(arg);
+    LFNET_CHECK_AS(ConfigError, spec.rows == rows && spec.cols == cols, arg, " codes ", spec.rows,
+                   "x", spec.cols, " views, but the light field window has ", rows, "x", cols,
+                   ": set rows and cols in the file or choose --views to match");
+  } else {
+    spec = optics::PhiSpec::parse(arg);
+    spec.rows = rows;
+    spec.cols = cols;
+  }
+  return spec;
+}
+
+optics::SensorOptions simulation_effects(const std::string& effects_file, double noise,
+                                         const SimulateInput& input,
+                                         const std::string& scene_path) {
+  optics::SensorOptions effects;
+  if (effects_file.empty() && input.scene_effects) {
+    effects = optics::SensorOptions::from_json(*input.scene_effects, scene_path + ":$.sensor");
+  }
+  if (!effects_file.empty()) {
+    effects = optics::SensorOptions::from_json(read_json_file(effects_file), effects_file + ":$");
+  }
+  if (noise >= 0) {
+    if (effects.gaussian && effects.gaussian->sigma != noise) {
+      spdlog::warn("--noise {} replaces gaussian.sigma {} of {}", noise, effects.gaussian->sigma,
+                   effects_file);
+    }
+    effects.gaussian = optics::SensorOptions::Gaussian{noise};
+  }
+  effects.validate();
+  return effects;
+}
+
+namespace {
+
+std::string format_values(const torch::Tensor& values, int64_t max_count) {
+  std::string text;
+  const int64_t n = values.numel();
+  char buffer[32];
+  for (int64_t i = 0; i < n; ++i) {
+    if (n > max_count && i == max_count / 2) {
+      text += " ...";
+      i = n - max_count / 2;
+    }
+    std::snprintf(buffer, sizeof buffer, "%s%.4g", text.empty() ? "" : " ",
+                  values[i].item<double>());
+    text += buffer;
+  }
+  return text;
+}
+
+}  // namespace
+
+std::string describe_phi(const optics::Phi& phi) {
+  std::string text;
+  auto print = [&text](const char* format, auto... args) { text += format_text(format, args...); };
+  const auto c = optics::conditioning(phi);
+  const auto& spec = phi.spec();
+  print("phi:        %s on %lldx%lld views, compression %.1f%% (N / (U V))\n", spec.label().c_str(),
+        static_cast<long long>(spec.rows), static_cast<long long>(spec.cols),
+        100.0 * spec.n / (spec.rows * spec.cols));
+  print("spec:       %s\n", spec.to_json().dump().c_str());
+  if (spec.name == "asp") {
+    const auto table = optics::asp_table(
+        spec.rows, spec.cols, spec.n, spec.params.value("layout", "") == "pairs",
+        spec.params.value("pair_gamma", 0.0), spec.params.value("pair_alpha", 0.0));
+    print("asp table:\n   n   beta (rad)  gamma (deg)  alpha (deg)  k (theta, phi)  role\n");
+    for (size_t i = 0; i < table.size(); ++i) {
+      const auto& r = table[i];
+      print("  %2zu  %10.4f  %11.2f  %11.1f  (%2lld, %2lld)        %s\n", i, r.beta,
+            r.gamma * 180 / M_PI, r.alpha * 180 / M_PI, static_cast<long long>(r.k_theta),
+            static_cast<long long>(r.k_phi), r.role.c_str());
+    }
+  }
+  const int64_t pieces = c.singular_values.size(0);
+  print("pieces:     %lld %s matri%s of %lld x %lld\n", static_cast<long long>(pieces),
+        c.piece.c_str(), pieces == 1 ? "x" : "ces", static_cast<long long>(c.piece_rows),
+        static_cast<long long>(c.piece_cols));
+  auto cond_text = [](double k) {
+    char b[32];
+    if (std::isinf(k)) return std::string("inf (rank-deficient)");
+    std::snprintf(b, sizeof b, "%.4g", k);
+    return std::string(b);
+  };
+  if (pieces == 1) {
+    print("singular values: %s\n", format_values(c.singular_values[0], 30).c_str());
+    print("condition:  %s, rank %lld of %lld\n", cond_text(c.condition[0].item<double>()).c_str(),
+          static_cast<long long>(c.rank[0].item<int64_t>()),
+          static_cast<long long>(c.singular_values.size(1)));
+    return text;
+  }
+  // Periodic models: one matrix per pixel phase; summarise, then list by phase.
+  auto sorted = std::get<0>(c.condition.sort());
+  print("condition:  min %s, median %s, max %s; rank min %lld, max %lld of %lld\n",
+        cond_text(sorted[0].item<double>()).c_str(),
+        cond_text(sorted[pieces / 2].item<double>()).c_str(),
+        cond_text(sorted[pieces - 1].item<double>()).c_str(),
+        static_cast<long long>(c.rank.min().item<int64_t>()),
+        static_cast<long long>(c.rank.max().item<int64_t>()),
+        static_cast<long long>(c.singular_values.size(1)));
+  print("mean singular values over phases: %s\n",
+        format_values(c.singular_values.mean(0), 30).c_str());
+  const int64_t t = phi.period();
+  print("condition by pixel phase (y mod %lld down, x mod %lld across):\n",
+        static_cast<long long>(t), static_cast<long long>(t));
+  for (int64_t y = 0; y < t; ++y) {
+    std::string line = " ";
+    for (int64_t x = 0; x < t; ++x) {
+      char b[16];
+      const double k = c.condition[y * t + x].item<double>();
+      if (std::isinf(k)) {
+        std::snprintf(b, sizeof b, " %8s", "inf");
+      } else {
+        std::snprintf(b, sizeof b, " %8.3g", k);
+      }
+      line += b;
+    }
+    print("%s\n", line.c_str());
+  }
+  return text;
 }
 
 }  // namespace lfnet::pipeline

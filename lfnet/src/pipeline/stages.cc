@@ -7,6 +7,7 @@
 #include <fstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/dict/dictionary.h"
@@ -90,10 +91,11 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   const std::string best = train::best_checkpoint_path(stage_dir);
   const std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
   if (!lead) return target;
-  std::error_code ec;
-  fs::copy_file(best, target + ".tmp", fs::copy_options::overwrite_existing, ec);
-  if (!ec) fs::rename(target + ".tmp", target, ec);
-  LFNET_CHECK_AS(IoError, !ec, "cannot copy ", best, " to ", target, ": ", ec.message());
+  write_file_atomically(target, [&](const std::string& tmp) {
+    std::error_code ec;
+    fs::copy_file(best, tmp, fs::copy_options::overwrite_existing, ec);
+    LFNET_CHECK_AS(IoError, !ec, "cannot copy ", best, " to ", target, ": ", ec.message());
+  });
   return target;
 }
 

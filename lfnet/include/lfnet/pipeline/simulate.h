@@ -5,7 +5,9 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include "lfnet/core/light_field.h"
 #include "lfnet/optics/measure.h"
@@ -31,5 +33,42 @@ struct SimulateRequest {
 // caller's): the sensor image files (sensor mode) or measurements.f32 (per_patch, written in
 // bands of patch rows with a progress bar), then sensor.json, which it returns.
 nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& dir);
+
+// Where `lfnet simulate` takes its light field from.
+struct SimulateSource {
+  std::string lf;      // a light-field folder
+  std::string scene;   // or a procedural scene spec to render
+  std::string views;   // angular window R0:R1,C0:C1, 1-based ("" = the central 5 x 5)
+  std::string orient;  // reorientation of the folder's angular axes (docs/conventions.md)
+  std::string layout;  // file-naming pattern of the folder (io::parse_layout)
+  bool color = false;  // every colour channel (else the grey luma)
+};
+
+// The light field to code and a record of where it came from.
+struct SimulateInput {
+  LightField lf;                                // windowed, grey unless color
+  nlohmann::json source;                        // kind and absolute path (and orient, layout)
+  nlohmann::json views;                         // the window in the source grid, 1-based inclusive
+  std::optional<nlohmann::json> scene_effects;  // a scene's own sensor block, if it names one
+};
+
+// Reads (or renders) and windows the light field of `source`.
+SimulateInput load_simulate_input(const SimulateSource& source);
+
+// The window size `views` selects ("" = 5 x 5), for a Phi without a light field to look at.
+std::pair<int64_t, int64_t> window_size(const std::string& views);
+
+// The Phi of `arg` (NAME[:N], a spec file, a calibrated-Phi folder, a model file) on a window of
+// rows x cols views; a file that codes another window is a ConfigError.
+optics::PhiSpec phi_for_window(const std::string& arg, int64_t rows, int64_t cols);
+
+// The sensor effects of a simulation: the effects file (or else the scene's own sensor block),
+// then `noise` (>= 0: the Gaussian sigma, replacing the file's); validated.
+optics::SensorOptions simulation_effects(const std::string& effects_file, double noise,
+                                         const SimulateInput& input, const std::string& scene_path);
+
+// How much each piece of the camera can recover, as text: the spec, the ASP table, singular
+// values and condition numbers (by pixel phase for periodic models).
+std::string describe_phi(const optics::Phi& phi);
 
 }  // namespace lfnet::pipeline

@@ -1,0 +1,20 @@
+// printf-style formatting into a std::string, for tables and reports printed line by line.
+#pragma once
+
+#include <cstdio>
+#include <string>
+
+namespace lfnet {
+
+// The text std::printf(format, args...) would print, whatever its length.
+template <typename... Args>
+std::string format_text(const char* format, Args... args) {
+  const int size = std::snprintf(nullptr, 0, format, args...);  // NOLINT(*-vararg)
+  if (size <= 0) return {};
+  std::string text(static_cast<size_t>(size) + 1, '\0');
+  std::snprintf(text.data(), text.size(), format, args...);  // NOLINT(*-vararg)
+  text.pop_back();
+  return text;
+}
+
+}  // namespace lfnet

@@ -1,0 +1,72 @@
+// What `lfnet bench` measures (docs/performance.md): LibTorch's GEMM FLOP/s, Conv4d FLOP/s at
+// the default channel counts, and whole-light-field reconstruction of a procedural light field
+// (593 x 840 x 5 x 5, the paper's test size, by default) per method and stride.
+#pragma once
+
+#include <torch/types.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "lfnet/core/light_field.h"
+#include "lfnet/dict/dictionary.h"
+#include "lfnet/recon/fully_convolutional.h"
+
+namespace lfnet::pipeline {
+
+// The paper's times on a Titan X (Table 3, ASP, dragons scene, 593 x 840 x 5 x 5).
+inline constexpr double kPaperNetSeconds = 242.0;
+inline constexpr double kPaperDictSeconds = 3786.0;
+
+struct BenchOptions {
+  std::vector<std::string> methods = {"net", "ae", "cnn", "dict", "pinv"};
+  std::vector<int64_t> strides = {9, 5, 2};
+  int64_t height = 593, width = 840;  // the random scene's size
+  std::string phi = "asp:2";
+  int64_t batch = 1024;         // patches per solver call
+  std::string model;            // trained checkpoint; default an untrained net of the default shape
+  std::string dictionary;       // dictionary file; default a small K-SVD dictionary
+  std::string save_dictionary;  // write the bench's K-SVD dictionary here
+  std::string scene;            // scene spec file; default random_scene(seed) at height x width
+  int64_t dict_atoms = 1000;
+  uint64_t seed = 7;
+  int64_t conv_batch = 256;  // patches per Conv4d timing
+  int reps = 3;              // repetitions of the kernel timings (the best is kept)
+  bool skip_kernels = false;
+  std::string device = "cpu";
+  std::string cnn_mode = "patches";       // patches or full (recon::CnnMode)
+  int64_t tile = recon::kDefaultCnnTile;  // tile of cnn_mode full
+  std::string precision = "float32";      // float32 or bfloat16 (the CNN branch's convolutions)
+};
+
+// FLOP/s of a 2048^3 single-precision matrix product, the best of `reps` after a warm-up.
+double bench_gemm_flops(int reps, const torch::Device& device);
+
+// Conv4d layers of the default CNN branch and the whole branch, forward, in inference mode:
+// one record per layer (seconds, GFLOP/s, share of `gemm`).
+nlohmann::json bench_conv_kernels(const BenchOptions& options, double gemm);
+
+// The light field the cases reconstruct (grey).
+LightField bench_light_field(const BenchOptions& options);
+
+// The dictionary of the dict cases: options.dictionary, or a small K-SVD dictionary trained on
+// another random scene (OMP's cost depends on its size, not on its training).
+dict::Dictionary bench_dictionary(const BenchOptions& options, int64_t patch);
+
+// One case in this process: reconstructs the bench light field with `method` at `stride`; the
+// record has seconds, patches/s, peak memory, CPU use, GFLOP/s and its share of `gemm`, PSNR.
+nlohmann::json bench_case(const BenchOptions& options, const std::string& method, int64_t stride,
+                          double gemm);
+
+// The whole run: machine, GEMM, Conv4d kernels, then every stride and method through
+// `run_case` (in this process, or a child process of the caller's for peak memory of its own).
+// `on_case` sees each case's record as it comes.
+using BenchCaseRunner =
+    std::function<nlohmann::json(const std::string& method, int64_t stride, double gemm)>;
+nlohmann::json bench_report(const BenchOptions& options, const BenchCaseRunner& run_case,
+                            const std::function<void(const std::string&)>& print);
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,343 @@
+#include "lfnet/pipeline/batch.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <filesystem>
+#include <optional>
+#include <set>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
+#include "lfnet/core/progress.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/reconstruct.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/recon/method_registry.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+namespace {
+
+bool looks_like_light_field(const fs::path& dir) {
+  try {
+    io::scan_folder(dir.string());
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+std::string csv_field(const nlohmann::json& v) {
+  std::string s = v.is_null() ? "" : v.is_string() ? v.get<std::string>() : v.dump();
+  if (s.find_first_of(",\"\n") != std::string::npos) {
+    std::string q = "\"";
+    for (char c : s)
+      q += c == '"' ? std::string("\"\"") : c == '\n' ? std::string(" ") : std::string(1, c);
+    return q + "\"";
+  }
+  return s;
+}
+
+std::string safe_file_name(std::string name) {
+  for (auto& c : name) {
+    if (c == '/' || c == '\\' || c == ' ') c = '_';
+  }
+  return name;
+}
+
+}  // namespace
+
+std::vector<BatchItem> discover_items(const std::string& root) {
+  LFNET_CHECK_AS(IoError, fs::is_directory(root), root, " is not a folder");
+  std::vector<BatchItem> items;
+  std::vector<fs::path> pending = {fs::path(root)};
+  std::set<std::string> visited;  // canonical folders: a link back up is not followed again
+  while (!pending.empty()) {
+    const fs::path dir = pending.back();
+    pending.pop_back();
+    std::string name = fs::relative(dir, root).generic_string();
+    if (name.empty() || name == ".")
+      name = fs::absolute(dir).lexically_normal().filename().string();
+    std::error_code canonical_error;
+    const auto canonical = fs::canonical(dir, canonical_error);
+    if (canonical_error) {
+      items.push_back({dir.string(), name, "unreadable", canonical_error.message()});
+      continue;
+    }
+    if (!visited.insert(canonical.string()).second) {
+      items.push_back({dir.string(), name, "unreadable",
+                       "a link to " + canonical.string() + ", which the batch already visits"});
+      continue;
+    }
+    if (::access(dir.c_str(), R_OK | X_OK) != 0) {
+      items.push_back({dir.string(), name, "unreadable", "permission denied"});
+      continue;
+    }
+    if (fs::exists(dir / io::kSidecarName)) {
+      items.push_back({dir.string(), name, "reconstruct", ""});
+      continue;
+    }
+    if (looks_like_light_field(dir)) {
+      items.push_back({dir.string(), name, "evaluate", ""});
+      continue;
+    }
+    std::error_code ec;
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+      const fs::path path = it->path();
+      if (path.filename().string().rfind('.', 0) == 0) continue;
+      std::error_code kind_error;
+      const bool is_link = fs::is_symlink(fs::symlink_status(path, kind_error));
+      const auto status = fs::status(path, kind_error);
+      if (is_link && kind_error) {
+        const std::string rel = fs::relative(path, root).generic_string();
+        items.push_back({path.string(), rel, "unreadable",
+                         kind_error.value() == ELOOP
+                             ? "a link that loops"
+                             : "a broken link (" + kind_error.message() + ")"});
+      } else if (fs::is_directory(status)) {
+        pending.push_back(path);
+      }
+    }
+    if (ec) items.push_back({dir.string(), name, "unreadable", ec.message()});
+  }
+  std::sort(items.begin(), items.end(),
+            [](const BatchItem& a, const BatchItem& b) { return a.name < b.name; });
+  return items;
+}
+
+std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptions& a,
+                                         const std::vector<std::string>& methods,
+                                         const std::string& out_dir, ModelCache& cache) {
+  std::vector<nlohmann::json> records;
+  auto failed = [&](const std::string& method, const std::string& error) {
+    return nlohmann::json{{"item", item.name}, {"path", item.path}, {"kind", item.kind},
+                          {"method", method},  {"status", "error"}, {"error", error}};
+  };
+  if (item.kind == "unreadable") {
+    for (const auto& method : methods) records.push_back(failed(method, item.error));
+    return records;
+  }
+  if (item.kind == "reconstruct") {
+    for (const auto& method : methods) {
+      try {
+        ReconstructRequest q;
+        q.sensor = item.path;
+        q.method = method;
+        q.model = a.model;
+        q.dictionary = a.dictionary;
+        q.dict_method = a.dict_method;
+        q.dict_options = a.dict_options;
+        q.options.stride = a.stride;
+        q.options.batch = a.batch;
+        q.options.window = a.window;
+        q.post_filter = a.post_filter;
+        q.match_mean = a.match_mean;
+        auto r = reconstruct_acquisition(q, {}, &cache);
+        const std::string target = (fs::path(out_dir) / item.name / method).string();
+        OutputFolderPolicy policy;
+        policy.inputs = {item.path, a.model, a.dictionary};
+        write_reconstruction(r, target, policy);
+        auto record = r.record;
+        record["item"] = item.name;
+        record["path"] = item.path;
+        record["kind"] = item.kind;
+        record["status"] = "ok";
+        record["output"] = target;
+        records.push_back(record);
+      } catch (const std::exception& e) {
+        records.push_back(failed(method, e.what()));
+      }
+    }
+    return records;
+  }
+  // evaluate: simulate with the model's Phi (or --phi), reconstruct, score.
+  std::vector<NamedLightField> truths;
+  MethodContext context;
+  std::unique_ptr<optics::Phi> phi;
+  std::optional<nn::PatchShape> patch;  // the model's, when there is one
+  try {
+    optics::PhiSpec spec;
+    if (!a.model.empty()) {
+      const auto& model = cache.model(a.model);
+      spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
+      context.net = model.net;
+      context.script = model.script;
+      patch = model.network.patch;
+    } else {
+      LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
+                     "evaluating light-field folders needs --model or --phi");
+      spec = phi_from_argument(a.phi);
+    }
+    phi = optics::make_phi(spec);
+    context.phi = phi.get();
+    context.dictionary = a.dictionary;
+    context.cache = &cache;
+    context.dict_method = a.dict_method;
+    context.dict_options = a.dict_options;
+    LightFieldSources sources;
+    sources.light_fields = {item.path};
+    truths = load_sources(sources, phi->rows(), phi->cols());
+  } catch (const std::exception& e) {
+    for (const auto& method : methods) records.push_back(failed(method, e.what()));
+    return records;
+  }
+  for (const auto& method : methods) {
+    try {
+      const auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
+      auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
+      record["item"] = item.name;
+      record["path"] = item.path;
+      record["kind"] = item.kind;
+      record["status"] = "ok";
+      const auto needs = recon::find_method(method).needs();
+      if (needs == recon::MethodNeeds::kNetwork) record["model"] = a.model;
+      if (needs == recon::MethodNeeds::kDictionary) record["model"] = a.dictionary;
+      records.push_back(record);
+    } catch (const std::exception& e) {
+      records.push_back(failed(method, e.what()));
+    }
+  }
+  return records;
+}
+
+void write_batch_summary(const std::string& out_dir, const std::vector<nlohmann::json>& records) {
+  const std::vector<std::string> columns = {"item",    "kind",   "method",  "status",
+                                            "psnr_db", "ssim",   "seconds", "stride",
+                                            "mode",    "output", "error"};
+  const fs::path csv = fs::path(out_dir) / "summary.csv";
+  std::ostringstream f;
+  {
+    for (size_t i = 0; i < columns.size(); ++i) f << (i ? "," : "") << columns[i];
+    f << "\n";
+    for (const auto& r : records) {
+      for (size_t i = 0; i < columns.size(); ++i) {
+        f << (i ? "," : "") << (r.contains(columns[i]) ? csv_field(r[columns[i]]) : "");
+      }
+      f << "\n";
+    }
+  }
+  write_text_file(csv.string(), f.str());
+  nlohmann::json all = nlohmann::json::array();
+  for (const auto& r : records) all.push_back(r);
+  write_json_file((fs::path(out_dir) / "summary.json").string(), all);
+}
+
+BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator> comm) {
+  if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
+  const int64_t rank = comm->rank(), world = comm->world_size();
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.in, a.model, a.dictionary};
+  check_output_folder(a.out, policy);
+  const auto items = discover_items(a.in);
+  LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
+                 ") and no light-field folder under ", a.in);
+  std::vector<std::string> methods = a.methods;
+  if (methods.empty()) methods = {a.model.empty() ? "pinv" : "net"};
+  for (const auto& m : methods) {
+    try {
+      (void)recon::find_method(m);
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("--methods: ") + e.what());
+    }
+  }
+  LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
+  LFNET_CHECK_AS(ConfigError,
+                 std::find(methods.begin(), methods.end(), "dict") != methods.end() ||
+                     (a.dict_method.empty() && a.dict_options.empty()),
+                 "--dict-method and --dict-options apply to the dict method, which --methods does "
+                 "not name");
+  std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
+  if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy);
+  // The other ranks write only once rank 0 has checked and made the folder (when it is shared).
+  comm->barrier();
+  const fs::path records_dir = fs::path(a.out) / "records";
+  fs::create_directories(records_dir);
+  int64_t reconstruct = 0;
+  for (const auto& it : items) reconstruct += it.kind == "reconstruct";
+  std::string method_list;
+  for (const auto& m : methods) method_list += (method_list.empty() ? "" : ",") + m;
+  spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
+               items.size(), a.in, reconstruct, items.size() - reconstruct, method_list);
+
+  // Rank r takes items r, r + W, r + 2W, ... of the sorted list: neighbours in the list (often
+  // alike in size) go to different ranks.
+  std::vector<size_t> mine;
+  for (size_t i = static_cast<size_t>(rank); i < items.size(); i += static_cast<size_t>(world)) {
+    mine.push_back(i);
+  }
+  if (world > 1) {
+    spdlog::info("batch: {} rank(s), rank 0 takes {} item(s)", world, mine.size());
+  }
+  BatchSummary summary;
+  std::vector<size_t> record_item;  // the item index of every record, for the gather
+  ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
+  ModelCache cache;  // every item shares one read of the model and the dictionary
+  for (size_t index : mine) {
+    const auto& item = items[index];
+    bar.set_note(item.name);
+    for (auto& r : process_item(item, a, methods, a.out, cache)) {
+      const bool ok = r["status"] == "ok";
+      summary.failures += !ok;
+      const std::string file =
+          safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
+      write_json_file((records_dir / file).string(), r);
+      if (folder) folder->commit();  // a record lasts: the batch keeps its folder from now on
+      if (ok && r.contains("psnr_db")) {
+        spdlog::info("{} {}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s", item.name,
+                     r["method"].get<std::string>(),
+                     r["psnr_db"].is_null() ? INFINITY : r["psnr_db"].get<double>(),
+                     r["ssim"].get<double>(), r["seconds"].get<double>());
+      } else if (ok) {
+        spdlog::info("{} {}: {:.2f} s -> {}", item.name, r["method"].get<std::string>(),
+                     r["seconds"].get<double>(), r["output"].get<std::string>());
+      } else {
+        spdlog::warn("{} {}: {}", item.name, r["method"].get<std::string>(),
+                     r["error"].get<std::string>());
+      }
+      summary.records.push_back(std::move(r));
+      record_item.push_back(index);
+    }
+    bar.advance(1);
+  }
+  bar.finish();
+  summary.loads = cache.loads();
+  if (world > 1) {
+    // One summary on rank 0: every rank's records, back in the order of one process.
+    nlohmann::json shipped = nlohmann::json::array();
+    for (size_t i = 0; i < summary.records.size(); ++i) {
+      shipped.push_back({record_item[i], summary.records[i]});
+    }
+    const auto gathered = comm->all_gather(shipped.dump());
+    if (rank != 0) return summary;  // rank 0 writes the summary
+    std::vector<std::pair<size_t, nlohmann::json>> all;
+    for (const auto& part : gathered) {
+      for (auto& entry : nlohmann::json::parse(part)) {
+        all.emplace_back(entry[0].get<size_t>(), std::move(entry[1]));
+      }
+    }
+    std::stable_sort(all.begin(), all.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+    summary.records.clear();
+    summary.failures = 0;
+    for (auto& entry : all) {
+      summary.failures += entry.second["status"] != "ok";
+      summary.records.push_back(std::move(entry.second));
+    }
+  }
+  write_batch_summary(a.out, summary.records);
+  if (folder) folder->commit();
+  return summary;
+}
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,351 @@
+#include "lfnet/pipeline/bench.h"
+
+#include <sys/resource.h>
+#include <torch/torch.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/metrics.h"
+#include "lfnet/core/patches.h"
+#include "lfnet/core/progress.h"
+#include "lfnet/core/runtime.h"
+#include "lfnet/core/text.h"
+#include "lfnet/dict/ksvd.h"
+#include "lfnet/dict/patch_sampling.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/sources.h"
+#include "lfnet/recon/fully_convolutional.h"
+#include "lfnet/recon/method_registry.h"
+#include "lfnet/recon/reconstruct.h"
+#include "lfnet/scene/random_scene.h"
+#include "lfnet/scene/render.h"
+#include "lfnet/scene/scene_spec.h"
+#include "lfnet/train/checkpoint.h"
+
+namespace lfnet::pipeline {
+
+namespace {
+
+// CPU seconds of this process so far: (user, system).
+std::pair<double, double> cpu_seconds() {
+  rusage r{};
+  getrusage(RUSAGE_SELF, &r);
+  return {r.ru_utime.tv_sec + 1e-6 * r.ru_utime.tv_usec,
+          r.ru_stime.tv_sec + 1e-6 * r.ru_stime.tv_usec};
+}
+
+// A field of /proc/self/status in MB (VmRSS, VmHWM); -1 where it cannot be read.
+double status_mb(const std::string& field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(field + ":", 0) == 0) {
+      std::istringstream s(line.substr(field.size() + 1));
+      double kb = -1;
+      s >> kb;
+      return kb / 1024.0;
+    }
+  }
+  return -1;
+}
+
+// Resets the peak resident size (VmHWM) to the current one; false where the kernel refuses.
+bool reset_peak_rss() {
+  std::ofstream out("/proc/self/clear_refs");
+  if (!out) return false;
+  out << "5";
+  out.flush();
+  return static_cast<bool>(out);
+}
+
+// Best wall time of `reps` runs after one warm-up run.
+template <typename Fn>
+double best_seconds(int reps, Fn&& fn) {
+  fn();
+  double best = 1e30;
+  for (int i = 0; i < reps; ++i) {
+    Stopwatch clock;
+    fn();
+    best = std::min(best, clock.seconds());
+  }
+  return best;
+}
+
+}  // namespace
+
+double bench_gemm_flops(int reps, const torch::Device& device) {
+  const int64_t n = 2048;
+  auto a = torch::randn({n, n}, torch::TensorOptions().device(device));
+  auto b = torch::randn({n, n}, torch::TensorOptions().device(device));
+  const double t = best_seconds(reps, [&] {
+    auto c = a.matmul(b);
+    if (device.is_cuda()) c.cpu();
+  });
+  return 2.0 * n * n * n / t;
+}
+
+LightField bench_light_field(const BenchOptions& a) {
+  if (!a.scene.empty()) {
+    return scene::render_scene(scene::load_scene(a.scene), scene_render_options(a.scene))
+        .light_field.grey()
+        .central(5);
+  }
+  scene::RandomSceneOptions so;
+  so.height = a.height;
+  so.width = a.width;
+  so.color = false;
+  return scene::render_scene(scene::random_scene(a.seed, so)).light_field.grey();
+}
+
+dict::Dictionary bench_dictionary(const BenchOptions& a, int64_t patch) {
+  if (!a.dictionary.empty()) return dict::load_dictionary(a.dictionary);
+  // Trained on another scene than the one reconstructed; few signals and iterations, since
+  // OMP's cost depends on the dictionary's size and the atoms per patch, not on its training.
+  scene::RandomSceneOptions so;
+  so.height = 256;
+  so.width = 256;
+  so.color = false;
+  std::vector<LightField> lfs{
+      scene::render_scene(scene::random_scene(a.seed + 1000, so)).light_field.grey()};
+  dict::PatchSamplingOptions sampling;
+  sampling.count = 3 * a.dict_atoms;
+  sampling.patch_size = patch;
+  auto signals = dict::sample_patches(lfs, sampling);
+  dict::KsvdOptions ko;
+  ko.atoms = a.dict_atoms;
+  ko.iterations = 3;
+  dict::Dictionary d;
+  d.atoms = dict::ksvd(signals, ko).dictionary.to(torch::kFloat32);
+  d.patch_shape = {5, 5, patch, patch};
+  d.training = {{"bench", true}, {"ksvd", ko.to_json()}, {"signals", signals.size(0)}};
+  if (!a.save_dictionary.empty()) dict::save_dictionary(d, a.save_dictionary);
+  return d;
+}
+
+nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int64_t stride,
+                          double gemm) {
+  const torch::Device device = parse_device(a.device);
+  Stopwatch setup_clock;
+  nn::LightFieldNet net{nullptr};
+  optics::PhiSpec spec = optics::PhiSpec::parse(a.phi);
+  nlohmann::json model_info = "untrained default network";
+  if (recon::needs_network(method)) {
+    if (!a.model.empty()) {
+      const auto ckpt = train::load_checkpoint(a.model);
+      spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":phi");
+      net = train::build_net(ckpt, a.model);
+      model_info = a.model;
+    } else {
+      nn::NetworkOptions no;
+      no.measurements = spec.n;
+      torch::manual_seed(0);
+      net = nn::LightFieldNet(no);
+    }
+  }
+  const auto phi = optics::make_phi(spec);
+  if (net && a.model.empty()) {
+    net->set_phi(
+        optics::patch_matrix_stack(*phi, net->options().patch.height, net->options().patch.width));
+  }
+  const int64_t patch = net ? net->options().patch.height : 9;
+  recon::ReconstructOptions o;
+  o.patch_h = o.patch_w = patch;
+  o.stride = stride;
+  o.batch = a.batch;
+  o.validate();
+  const LightField truth = bench_light_field(a);
+  const auto sensor = optics::simulate_sensor(*phi, truth.data()[0]);
+
+  const auto cnn_mode = recon::parse_cnn_mode(a.cnn_mode);
+  const bool full = cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn");
+  nlohmann::json extra = nlohmann::json::object();
+  recon::MethodResources resources;
+  resources.phi = phi.get();
+  resources.patch_h = resources.patch_w = patch;
+  dict::Dictionary dictionary;
+  if (net) {
+    net->to(device);
+    nn::set_cnn_precision(net, nn::parse_precision(a.precision));
+    resources.net = net;
+    extra["model"] = model_info;
+    extra["cnn_mode"] = full ? "full" : "patches";
+    extra["precision"] = a.precision;
+    if (full) extra["tile"] = a.tile;
+  } else if (recon::find_method(method).needs() == recon::MethodNeeds::kDictionary) {
+    dictionary = bench_dictionary(a, patch);
+    resources.dictionary = &dictionary;
+    extra["dictionary_atoms"] = dictionary.size();
+    extra["dictionary"] = a.dictionary.empty() ? "bench K-SVD (3 iterations)" : a.dictionary;
+    extra["omp_atoms"] = resources.coding.omp.max_atoms;
+  }
+  const recon::PatchSolver solver = recon::make_solver(method, resources);
+  const double flops_per_patch = recon::find_method(method).patch_flops(resources);
+  const double setup_seconds = setup_clock.seconds();
+  const double setup_peak = status_mb("VmHWM");
+  const bool isolated_peak = reset_peak_rss();
+  const double rss_before = status_mb("VmRSS");
+  const auto cpu0 = cpu_seconds();
+  Stopwatch clock;
+  auto est =
+      full ? recon::reconstruct_sensor_fully_convolutional(net, method, *phi, sensor, o, a.tile)
+           : recon::reconstruct_sensor(*phi, sensor, solver, o);
+  const double seconds = clock.seconds();
+  const auto cpu1 = cpu_seconds();
+  const double user = cpu1.first - cpu0.first, system = cpu1.second - cpu0.second;
+  const double cpu = user + system;
+  const double peak = status_mb("VmHWM");
+  const PatchGrid grid(truth.height(), truth.width(), patch, patch, stride);
+  // Patch stitching computes flops_per_patch for every patch; the fully convolutional pass
+  // computes the CNN once per tile position instead.
+  double flops = flops_per_patch * static_cast<double>(grid.size());
+  if (full) {
+    flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), a.tile) -
+             nn::cnn_patch_flops(net->options()) * static_cast<double>(grid.size());
+  }
+  nlohmann::json r = {{"method", method},
+                      {"stride", stride},
+                      {"patches", grid.size()},
+                      {"seconds", seconds},
+                      {"patches_per_second", grid.size() / seconds},
+                      {"cpu_utilisation", cpu / seconds / thread_count()},
+                      {"cpu_user_seconds", user},
+                      {"cpu_system_seconds", system},
+                      {"batch", a.batch},
+                      {"peak_rss_mb", peak},
+                      {"rss_before_mb", rss_before},
+                      {"peak_is_reconstruction_only", isolated_peak},
+                      {"setup_peak_rss_mb", setup_peak},
+                      {"setup_seconds", setup_seconds},
+                      {"flops_per_patch", flops_per_patch},
+                      {"gflops", flops / seconds / 1e9},
+                      {"gemm_fraction", gemm > 0 ? flops / seconds / gemm : 0.0},
+                      {"psnr_db", psnr(LightField(est), truth)},
+                      {"phi", spec.label()},
+                      {"device", a.device}};
+  if (method == "net") r["paper_ratio"] = kPaperNetSeconds / seconds;
+  if (method == "dict") r["paper_ratio"] = kPaperDictSeconds / seconds;
+  r.update(extra);
+  return r;
+}
+
+nlohmann::json bench_conv_kernels(const BenchOptions& a, double gemm) {
+  const torch::Device device = parse_device(a.device);
+  torch::InferenceMode guard;
+  nn::NetworkOptions o;
+  const auto& p = o.patch;
+  const int64_t c = o.cnn.channels, b = a.conv_batch;
+  nlohmann::json out = nlohmann::json::array();
+  auto run = [&](const std::string& name, int64_t cin, int64_t cout) {
+    auto w = torch::randn({cout, cin, 3, 3, 3, 3}, torch::TensorOptions().device(device)) * 0.1;
+    auto bias = torch::zeros({cout}, torch::TensorOptions().device(device));
+    auto x = torch::rand({b, p.rows, cin, p.cols, p.height, p.width},
+                         torch::TensorOptions().device(device));
+    const double t = best_seconds(a.reps, [&] {
+      auto y = nn::conv4d_u_major(x, w, bias);
+      if (device.is_cuda()) y.cpu();
+    });
+    const double f = nn::conv4d_flops(b, cin, cout, p.rows, p.cols, p.height, p.width, 3);
+    out.push_back({{"layer", name},
+                   {"batch", b},
+                   {"seconds", t},
+                   {"gflops", f / t / 1e9},
+                   {"gemm_fraction", f / t / gemm}});
+  };
+  run("1->" + std::to_string(c), 1, c);
+  run(std::to_string(c) + "->" + std::to_string(c), c, c);
+  run(std::to_string(c) + "->1", c, 1);
+  nn::CnnBranch cnn(o);
+  cnn->eval();
+  cnn->to(device);
+  auto x =
+      torch::rand({b, 1, p.rows, p.cols, p.height, p.width}, torch::TensorOptions().device(device));
+  const double t = best_seconds(a.reps, [&] {
+    auto y = cnn->forward(x);
+    if (device.is_cuda()) y.cpu();
+  });
+  const double f = b * nn::cnn_patch_flops(o);
+  out.push_back({{"layer", "cnn branch (" + std::to_string(o.cnn.depth) + " layers)"},
+                 {"batch", b},
+                 {"seconds", t},
+                 {"gflops", f / t / 1e9},
+                 {"gemm_fraction", f / t / gemm},
+                 {"patches_per_second", b / t}});
+  return out;
+}
+
+namespace {
+
+std::string machine_name() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
+  }
+  return "unknown";
+}
+
+double load_average() {
+  double load[1] = {-1};
+  if (getloadavg(load, 1) < 1) return -1;
+  return load[0];
+}
+
+}  // namespace
+
+nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_case,
+                            const std::function<void(const std::string&)>& print) {
+  auto say = [&](const char* format, auto... args) { print(format_text(format, args...)); };
+  const torch::Device device = parse_device(a.device);
+  nlohmann::json report;
+  report["machine"] = {{"cpu", machine_name()},
+                       {"hardware_threads", static_cast<int64_t>(sysconf(_SC_NPROCESSORS_ONLN))},
+                       {"threads", thread_count()},
+                       {"device", a.device},
+                       {"load_average_1min_start", load_average()}};
+  report["light_field"] = {{"height", a.height}, {"width", a.width}, {"views", "5x5"},
+                           {"seed", a.seed},     {"channels", 1},    {"phi", a.phi}};
+  if (!a.scene.empty())
+    report["light_field"] = {{"scene", a.scene}, {"channels", 1}, {"phi", a.phi}};
+  say("lfnet bench: %s, %d threads, device %s, load %.2f\n", machine_name().c_str(), thread_count(),
+      a.device.c_str(), load_average());
+  const double gemm = bench_gemm_flops(a.reps, device);
+  report["gemm_gflops"] = gemm / 1e9;
+  say("GEMM (2048^3 sgemm): %.1f GFLOP/s\n", gemm / 1e9);
+  if (!a.skip_kernels) {
+    report["conv4d"] = bench_conv_kernels(a, gemm);
+    for (const auto& k : report["conv4d"]) {
+      say("Conv4d %-22s batch %lld: %.4f s, %.1f GFLOP/s (%.0f%% of GEMM)\n",
+          k["layer"].get<std::string>().c_str(), static_cast<long long>(k["batch"].get<int64_t>()),
+          k["seconds"].get<double>(), k["gflops"].get<double>(),
+          100 * k["gemm_fraction"].get<double>());
+    }
+  }
+  report["cases"] = nlohmann::json::array();
+  for (int64_t stride : a.strides) {
+    for (const auto& method : a.methods) {
+      auto r = run_case(method, stride, gemm);
+      if (!r.contains("error")) {
+        say("%-4s stride %lld: %.2f s, %.0f patches/s, peak %.0f MB, PSNR %.2f dB\n",
+            method.c_str(), static_cast<long long>(stride), r["seconds"].get<double>(),
+            r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
+            r["psnr_db"].get<double>());
+      } else {
+        say("%-4s stride %lld: %s\n", method.c_str(), static_cast<long long>(stride),
+            r["error"].get<std::string>().c_str());
+      }
+      report["cases"].push_back(r);
+    }
+  }
+  report["machine"]["load_average_1min_end"] = load_average();
+  report["paper_seconds"] = {{"net", kPaperNetSeconds}, {"dict", kPaperDictSeconds}};
+  return report;
+}
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,59 @@
+// pipeline/bench.h: the measurements of `lfnet bench`, without the program.
+#include "lfnet/pipeline/bench.h"
+
+#include <catch2/catch.hpp>
+
+#include <string>
+#include <vector>
+
+using namespace lfnet;
+
+TEST_CASE("bench_case reconstructs the bench light field and reports what it measured",
+          "[pipeline][bench]") {
+  pipeline::BenchOptions o;
+  o.height = 40;
+  o.width = 48;
+  const auto r = pipeline::bench_case(o, "pinv", 5, 1e9);
+  CHECK(r["method"] == "pinv");
+  CHECK(r["stride"] == 5);
+  // Origins every 5 px and one flush with the far edge: 8 rows (0..30, 31), 9 columns.
+  CHECK(r["patches"].get<int64_t>() == 8 * 9);
+  CHECK(r["seconds"].get<double>() > 0);
+  CHECK(r["flops_per_patch"].get<double>() == 2.0 * 2025 * 2 * 81);
+  CHECK(r["gemm_fraction"].get<double>() > 0);
+  CHECK(r["psnr_db"].get<double>() > 15);
+  CHECK(r["phi"] == "asp:2");
+  CHECK(pipeline::bench_light_field(o).data().sizes() == torch::IntArrayRef({1, 5, 5, 40, 48}));
+}
+
+TEST_CASE("bench_report runs every stride and method through the given runner",
+          "[pipeline][bench]") {
+  pipeline::BenchOptions o;
+  o.skip_kernels = true;
+  o.reps = 1;
+  o.methods = {"pinv", "adjoint"};
+  o.strides = {9, 5};
+  std::vector<std::string> asked;
+  std::vector<std::string> lines;
+  const auto report = pipeline::bench_report(
+      o,
+      [&](const std::string& method, int64_t stride, double gemm) {
+        CHECK(gemm > 0);
+        asked.push_back(method + ":" + std::to_string(stride));
+        if (method == "adjoint")
+          return nlohmann::json{
+              {"method", method}, {"stride", stride}, {"error", "failed on purpose"}};
+        return nlohmann::json{{"method", method},          {"stride", stride},   {"seconds", 1.0},
+                              {"patches_per_second", 2.0}, {"peak_rss_mb", 3.0}, {"psnr_db", 4.0}};
+      },
+      [&](const std::string& line) { lines.push_back(line); });
+  CHECK(asked == std::vector<std::string>{"pinv:9", "adjoint:9", "pinv:5", "adjoint:5"});
+  REQUIRE(report["cases"].size() == 4);
+  CHECK(report["cases"][1]["error"] == "failed on purpose");
+  CHECK(report["gemm_gflops"].get<double>() > 0);
+  CHECK_FALSE(report.contains("conv4d"));
+  CHECK(report["paper_seconds"]["net"] == pipeline::kPaperNetSeconds);
+  REQUIRE(lines.size() == 6);  // the machine, GEMM, and one line per case
+  CHECK(lines[0].rfind("lfnet bench:", 0) == 0);
+  CHECK(lines[3].find("failed on purpose") != std::string::npos);
+}
