@@ -8,6 +8,9 @@
 # Usage: scripts/paper-scale.sh [extra lfnet train arguments, e.g. --device cuda]
 # Pass lfnet's global options in LFNET_OPTS, e.g. LFNET_OPTS="--threads 1" beside other work;
 # CONFIG, SCALE, OUT and MODEL change what is trained, at which scale, where, and the copy.
+# SNAPSHOT names a folder of the repository that carries the run between machines
+# (scripts/run-snapshot.sh): when OUT does not exist but SNAPSHOT does, the run continues from
+# it; `scripts/run-snapshot.sh save OUT SNAPSHOT` refreshes it before a session ends.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 lfnet=${LFNET:-build/apps/lfnet}
@@ -15,6 +18,10 @@ config=${CONFIG:-configs/paper/phi-comparison/asp.json}
 scale=${SCALE:-paper}
 out=${OUT:-out/paper-scale/asp-n2}
 model=${MODEL:-models/asp-n2-paper.ckpt}
+snapshot=${SNAPSHOT:-}
+if [[ -n $snapshot && ! -e $out && -f $snapshot/config.json ]]; then
+  scripts/run-snapshot.sh restore "$snapshot" "$out"
+fi
 if [[ -f $out/config.json ]]; then
   echo "== resuming $out"
   # shellcheck disable=SC2086

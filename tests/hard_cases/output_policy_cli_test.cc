@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "lfnet/core/json.h"
 #include "support/test_support.h"
@@ -182,6 +183,49 @@ TEST_CASE(
   std::ifstream fresh(tmp / "run/training.jsonl");
   for (std::string line; std::getline(fresh, line);) ++lines;
   CHECK(lines == 1);  // one ae epoch, not appended to the old log
+}
+
+TEST_CASE("a run snapshot carries an interrupted run to another folder, which resumes it alike",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  lfnet::write_json_file(tmp / "two.json", two_stage_config());
+  REQUIRE(run_command(
+              program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae"),
+              out) == 0);
+  // An unfinished stage's state, as an interrupted run leaves it.
+  fs::create_directories(tmp.path() / "run/models/cnn");
+  lfnet::test::write_bytes(tmp / "run/models/cnn/last.ckpt", "state");
+  const std::string script = std::string(LFNET_SOURCE_DIR) + "/scripts/run-snapshot.sh";
+  REQUIRE(run_command(script + " save " + (tmp / "run") + " " + (tmp / "snap"), out) == 0);
+  CHECK(fs::exists(tmp.path() / "snap/config.json"));
+  CHECK(fs::exists(tmp.path() / "snap/training.jsonl"));
+  CHECK(read_bytes(tmp / "snap/models/ae.ckpt") == read_bytes(tmp / "run/models/ae.ckpt"));
+  CHECK_FALSE(fs::exists(tmp.path() / "snap/models/ae"));  // a finished stage needs its model only
+  CHECK(read_bytes(tmp / "snap/models/cnn/last.ckpt") == "state");
+  // Restoring never replaces a folder, and a folder that is no run folder is refused.
+  CHECK(run_command(script + " restore " + (tmp / "snap") + " " + (tmp / "run"), out) != 0);
+  CHECK(out.find("exists") != std::string::npos);
+  CHECK(run_command(script + " save " + (tmp / "nothing") + " " + (tmp / "x"), out) != 0);
+  CHECK_FALSE(fs::exists(tmp.path() / "x"));
+  // The restored run continues exactly as the original one does.
+  fs::remove_all(tmp.path() / "run/models/cnn");
+  fs::remove_all(tmp.path() / "snap/models/cnn");
+  REQUIRE(run_command(script + " restore " + (tmp / "snap") + " " + (tmp / "moved"), out) == 0);
+  REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(program("train --resume " + (tmp / "moved")), out) == 0);
+  auto cnn_losses = [](const std::string& log_path) {
+    std::vector<double> losses;
+    std::ifstream log(log_path);
+    for (std::string line; std::getline(log, line);) {
+      const auto j = nlohmann::json::parse(line);
+      if (j["stage"] == "cnn") losses.push_back(j["record"]["val_loss"].get<double>());
+    }
+    return losses;
+  };
+  const auto original = cnn_losses(tmp / "run/training.jsonl");
+  REQUIRE_FALSE(original.empty());
+  CHECK(cnn_losses(tmp / "moved/training.jsonl") == original);
 }
 
 TEST_CASE("batch records unreadable entries as failed items and goes on", "[app][bad_input]") {
