@@ -71,6 +71,7 @@ Child start_rank(const std::string& program, const std::vector<std::string>& arg
   LFNET_CHECK_AS(IoError, ::pipe(out) == 0 && ::pipe(err) == 0,
                  "cannot create a pipe: ", std::strerror(errno));
   std::vector<char*> c_argv;
+  c_argv.reserve(argv.size() + 1);
   for (const auto& a : argv) c_argv.push_back(const_cast<char*>(a.c_str()));
   c_argv.push_back(nullptr);
   const pid_t pid = ::fork();

@@ -34,7 +34,7 @@ eval::EvalOptions make_eval_options(const std::string& mode, double noise, uint6
 }
 
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
-                               const MethodContext& context, eval::EvalOptions options,
+                               const MethodContext& context, const eval::EvalOptions& options,
                                torch::Tensor* estimate, bool show_progress) {
   LFNET_CHECK(context.phi != nullptr, "evaluation without a Phi");
   const auto& phi = *context.phi;

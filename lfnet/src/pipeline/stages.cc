@@ -26,6 +26,7 @@ std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
       load_sources(config.train_data, phi.rows(), phi.cols(), config.dataset.needs_whole_grids());
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
+  lfs.reserve(named.size());
   for (auto& n : named) lfs.push_back(n.lf);
   return std::make_unique<data::PatchDataset>(std::move(lfs), phi, config.dataset);
 }
@@ -89,7 +90,7 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   };
   trainer.fit(dataset, hooks);
   const std::string best = train::best_checkpoint_path(stage_dir);
-  const std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
+  std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
   if (!lead) return target;
   write_file_atomically(target, [&](const std::string& tmp) {
     std::error_code ec;
@@ -111,6 +112,7 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
   const auto named = load_sources(config.train_data, config.phi.rows, config.phi.cols);
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
+  lfs.reserve(named.size());
   for (const auto& n : named) lfs.push_back(n.lf);
   dict::PatchSamplingStats stats;
   Stopwatch clock;
@@ -143,7 +145,7 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
                 {"history", history},
                 {"command_line", command_line},
                 {"seconds", clock.seconds()}};
-  const std::string target = (fs::path(run_dir) / "models" / "dict.ckpt").string();
+  std::string target = (fs::path(run_dir) / "models" / "dict.ckpt").string();
   dict::save_dictionary(d, target);
   spdlog::info("dict: {} atoms in {:.0f} s, coding RMSE {:.4f}: {}", d.size(), clock.seconds(),
                history.empty() ? 0.0 : history.back()["coding_rmse"].get<double>(), target);

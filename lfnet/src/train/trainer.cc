@@ -126,7 +126,8 @@ double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch
       static_cast<double>(options.epochs);
   double factor = 1.0;
   if (s.name == "step") {
-    factor = std::pow(s.gamma, static_cast<double>(epoch / s.step_epochs));
+    const int64_t steps_taken = epoch / s.step_epochs;  // whole steps only
+    factor = std::pow(s.gamma, static_cast<double>(steps_taken));
   } else if (s.name == "cosine") {
     factor = s.min_factor + (1 - s.min_factor) * 0.5 * (1 + std::cos(M_PI * progress));
   }

@@ -9,10 +9,11 @@ namespace lfnet {
 // The text std::printf(format, args...) would print, whatever its length.
 template <typename... Args>
 std::string format_text(const char* format, Args... args) {
-  const int size = std::snprintf(nullptr, 0, format, args...);  // NOLINT(*-vararg)
+  // The format is the caller's literal, passed through.
+  const int size = std::snprintf(nullptr, 0, format, args...);  // NOLINT
   if (size <= 0) return {};
   std::string text(static_cast<size_t>(size) + 1, '\0');
-  std::snprintf(text.data(), text.size(), format, args...);  // NOLINT(*-vararg)
+  std::snprintf(text.data(), text.size(), format, args...);  // NOLINT
   text.pop_back();
   return text;
 }

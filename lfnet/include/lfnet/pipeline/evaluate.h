@@ -40,7 +40,7 @@ eval::EvalOptions make_eval_options(const std::string& mode, double noise, uint6
 // Evaluates `method` on one grey light field; the record names the light field and method.
 // `show_progress` draws a progress bar over the patches.
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
-                               const MethodContext& context, eval::EvalOptions options,
+                               const MethodContext& context, const eval::EvalOptions& options,
                                torch::Tensor* estimate = nullptr, bool show_progress = true);
 
 // What `lfnet evaluate` does with one light field (a folder or a procedural scene).
