@@ -8,7 +8,8 @@ packages=(
   libopencv-dev libopenimageio-dev openimageio-tools
   nlohmann-json3-dev libspdlog-dev libfmt-dev catch2 libcli11-dev zlib1g-dev
   python3 python3-numpy python3-skimage python3-sklearn python3-torch python3-imageio
-  python3-matplotlib
+  python3-matplotlib python3-pil
+  chromium
 )
 
 missing=()

@@ -8,6 +8,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/evaluate.h"
 
 namespace lfnet::app {
@@ -40,6 +41,11 @@ void run_evaluate(EvaluateArgs& a) {
     write_folder(a.out, policy, [&](const std::string& dir) {
       io::write_light_field(est, dir);
       io::write_previews(est, dir);
+      io::ViewerPage page;
+      page.title = record["method"].get<std::string>() + " on " + r.light_field;
+      page.truth = LightField(r.truth);
+      page.record = record;
+      io::write_viewer(est, (std::filesystem::path(dir) / "index.html").string(), page);
       write_json_file((std::filesystem::path(dir) / "evaluation.json").string(), record);
     });
   }
@@ -76,7 +82,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   add_dict_coding_options(cmd, q.dict_method, q.dict_options);
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
-  cmd->add_option("--out", a->out, "write the reconstruction as a light-field folder");
+  cmd->add_option("--out", a->out, "write the reconstruction as a light-field folder with a viewer (index.html)");
   cmd->add_flag("--force", a->force, "replace an existing --out folder");
   cmd->add_option("--seed", q.seed, "noise seed");
   cmd->add_option("--batch", q.batch, "patches per forward pass")->check(CLI::PositiveNumber);

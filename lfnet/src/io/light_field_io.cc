@@ -1,5 +1,6 @@
 #include "lfnet/io/light_field_io.h"
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
@@ -415,6 +416,70 @@ void write_image(const std::string& path, const torch::Tensor& image, int bits) 
     const bool ok = out->open(tmp, spec) &&
                     out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
     if (!ok) throw IoError("cannot write " + path + ": " + out->geterror());
+  });
+}
+
+std::string encode_png(const torch::Tensor& image) {
+  LFNET_CHECK(image.dim() == 2 || image.dim() == 3, "encode_png takes (H, W) or (C, H, W)");
+  auto chw = image.dim() == 2 ? image.unsqueeze(0) : image;
+  const int64_t c = chw.size(0), h = chw.size(1), w = chw.size(2);
+  auto hwc = chw.to(torch::kFloat32).clamp(0, 1).permute({1, 2, 0}).contiguous();
+  std::vector<unsigned char> bytes;
+  OIIO::Filesystem::IOVecOutput proxy(bytes);
+  auto out = OIIO::ImageOutput::create("image.png");
+  LFNET_CHECK_AS(IoError, out, "cannot encode PNG: ", OIIO::geterror());
+  out->set_ioproxy(&proxy);
+  OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), static_cast<int>(c),
+                       OIIO::TypeDesc::UINT8);
+  const bool ok = out->open("image.png", spec) &&
+                  out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
+  LFNET_CHECK_AS(IoError, ok, "cannot encode PNG: ", out->geterror());
+  return {bytes.begin(), bytes.end()};
+}
+
+void write_parallax_gif(const LightField& lf, const std::string& path, int64_t crop) {
+  const int64_t h = std::min(crop, lf.height()), w = std::min(crop, lf.width());
+  const int64_t y0 = (lf.height() - h) / 2, x0 = (lf.width() - w) / 2;
+  // The angular border, clockwise from the top-left view.
+  std::vector<std::pair<int64_t, int64_t>> loop;
+  const int64_t U = lf.rows(), V = lf.cols();
+  for (int64_t v = 0; v < V; ++v) loop.push_back({0, v});
+  for (int64_t u = 1; u < U; ++u) loop.push_back({u, V - 1});
+  for (int64_t v = V - 2; v >= 0; --v) loop.push_back({U - 1, v});
+  for (int64_t u = U - 2; u >= 1; --u) loop.push_back({u, 0});
+  fs::create_directories(fs::path(path).parent_path());
+  write_file_atomically(path, [&](const std::string& tmp) {
+    auto out = OIIO::ImageOutput::create(tmp);
+    LFNET_CHECK_AS(IoError, out != nullptr, "cannot write GIF files: ", OIIO::geterror());
+    // GIF frames are RGB: the grey view in all three channels.
+    OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), 3, OIIO::TypeDesc::UINT8);
+    const int fps[2] = {8, 1};
+    spec.attribute("FramesPerSecond", OIIO::TypeRational, fps);
+    spec.attribute("oiio:Movie", 1);
+    spec.attribute("gif:LoopCount", 0);
+    std::vector<OIIO::ImageSpec> specs(loop.size(), spec);
+    LFNET_CHECK_AS(IoError, out->open(tmp, static_cast<int>(specs.size()), specs.data()),
+                   "cannot write ", tmp, ": ", out->geterror());
+    const auto data = lf.data()[0];
+    for (size_t i = 0; i < loop.size(); ++i) {
+      if (i > 0) {
+        LFNET_CHECK_AS(IoError, out->open(tmp, spec, OIIO::ImageOutput::AppendSubimage),
+                       "cannot write ", tmp, ": ", out->geterror());
+      }
+      auto frame = (data[loop[i].first][loop[i].second]
+                        .slice(0, y0, y0 + h)
+                        .slice(1, x0, x0 + w)
+                        .clamp(0, 1) *
+                    255.0)
+                       .round()
+                       .to(torch::kUInt8)
+                       .unsqueeze(-1)
+                       .expand({h, w, 3})
+                       .contiguous();
+      LFNET_CHECK_AS(IoError, out->write_image(OIIO::TypeDesc::UINT8, frame.data_ptr()),
+                     "cannot write ", tmp, ": ", out->geterror());
+    }
+    LFNET_CHECK_AS(IoError, out->close(), "cannot write ", tmp, ": ", out->geterror());
   });
 }
 

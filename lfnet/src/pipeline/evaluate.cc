@@ -159,6 +159,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   result.record["device"] = a.device;
   if (recon::needs_network(method)) result.record["precision"] = a.precision;
   result.light_field = truths[0].name;
+  if (a.keep_estimate) result.truth = truths[0].lf.data();
   result.phi = spec.label();
   return result;
 }

@@ -10,6 +10,7 @@
 #include "lfnet/core/runtime.h"
 #include "lfnet/core/version.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/io/viewer.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
@@ -212,6 +213,11 @@ void write_reconstruction(const Reconstruction& r, const std::string& out,
     io::write_light_field(r.lf, dir);
     io::write_previews(r.lf, dir);
     write_json_file((fs::path(dir) / "reconstruction.json").string(), r.record);
+    io::ViewerPage page;
+    page.title = r.record.value("method", "") + " reconstruction of " +
+                 fs::path(r.record.value("sensor", "")).filename().string();
+    page.record = r.record;
+    io::write_viewer(r.lf, (fs::path(dir) / "index.html").string(), page);
   });
 }
 

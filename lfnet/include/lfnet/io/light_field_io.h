@@ -79,6 +79,13 @@ int64_t image_value_limit();
 // written to a temporary name and renamed, so a failure leaves no partial file.
 void write_image(const std::string& path, const torch::Tensor& image, int bits = 8);
 
+// A (C, H, W) or (H, W) image in [0, 1] as the bytes of an 8-bit PNG file.
+std::string encode_png(const torch::Tensor& image);
+
+// An animated GIF of the central `crop` x `crop` pixels that walks the views of a grey light field
+// along a loop of the angular border (8 frames per second, looping).
+void write_parallax_gif(const LightField& lf, const std::string& path, int64_t crop = 160);
+
 // Options of write_light_field.
 struct WriteOptions {
   std::string extension = "png";  // png, tif, exr

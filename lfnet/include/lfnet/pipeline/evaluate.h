@@ -71,6 +71,7 @@ struct EvaluateRequest {
 struct EvaluateResult {
   nlohmann::json record;    // evaluate_method's record with model, device and precision
   torch::Tensor estimate;   // the reconstruction (with keep_estimate)
+  torch::Tensor truth;      // the light field it was scored against (with keep_estimate)
   std::string light_field;  // the truth's name
   std::string phi;          // the Phi's label, e.g. asp:2
 };

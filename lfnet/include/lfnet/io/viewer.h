@@ -1,0 +1,33 @@
+// The offline light-field viewer: one self-contained HTML page (docs/viewer.md).
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <optional>
+#include <string>
+
+#include "lfnet/core/light_field.h"
+
+namespace lfnet::io {
+
+// What the page shows beside the light field.
+struct ViewerPage {
+  std::string title;                // the heading, e.g. "net on hci_antinous"
+  std::optional<LightField> truth;  // of the same shape: error map and "show truth"
+  // An evaluate or reconstruct record: method, Phi, PSNR, SSIM and seconds are listed, and
+  // per_view_psnr_db fills the per-view table.
+  nlohmann::json record = nlohmann::json::object();
+  double max_disparity = 4;  // the refocus slider spans +-max(4, this) px per view step
+};
+
+// The page as text: viewer.html with viewer.js and the views (8-bit PNG data URIs, row-major)
+// embedded, so it opens from a file in any browser without a network.
+std::string viewer_html(const LightField& lf, const ViewerPage& page = {});
+
+// Writes viewer_html to `path` (usually DIR/index.html) through a temporary file.
+void write_viewer(const LightField& lf, const std::string& path, const ViewerPage& page = {});
+
+// Base64 (RFC 4648, with padding) of bytes.
+std::string base64(const std::string& bytes);
+
+}  // namespace lfnet::io

@@ -1,0 +1,100 @@
+#include "lfnet/io/viewer.h"
+
+#include <string_view>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
+#include "lfnet/io/light_field_io.h"
+#include "viewer_assets.h"
+
+namespace lfnet::io {
+
+namespace {
+
+std::string data_uri(const torch::Tensor& view) {
+  return "data:image/png;base64," + base64(encode_png(view));
+}
+
+nlohmann::json view_uris(const LightField& lf) {
+  auto uris = nlohmann::json::array();
+  for (int64_t u = 0; u < lf.rows(); ++u) {
+    for (int64_t v = 0; v < lf.cols(); ++v) uris.push_back(data_uri(lf.view(u, v)));
+  }
+  return uris;
+}
+
+// Replaces the one `marker` of `text` with `value`.
+void fill(std::string& text, std::string_view marker, const std::string& value) {
+  const auto at = text.find(marker);
+  LFNET_CHECK(at != std::string::npos, "viewer template lacks ", marker);
+  text.replace(at, marker.size(), value);
+}
+
+// JSON inside <script>: "</" would end the element early.
+std::string script_safe(std::string json) {
+  for (size_t at = json.find("</"); at != std::string::npos; at = json.find("</", at + 3)) {
+    json.replace(at, 2, "<\\/");
+  }
+  return json;
+}
+
+}  // namespace
+
+std::string base64(const std::string& bytes) {
+  static constexpr char kAlphabet[] =
+      "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  out.reserve((bytes.size() + 2) / 3 * 4);
+  size_t i = 0;
+  for (; i + 2 < bytes.size(); i += 3) {
+    const uint32_t n = static_cast<uint8_t>(bytes[i]) << 16 |
+                       static_cast<uint8_t>(bytes[i + 1]) << 8 | static_cast<uint8_t>(bytes[i + 2]);
+    for (int shift : {18, 12, 6, 0}) out += kAlphabet[(n >> shift) & 63];
+  }
+  if (i < bytes.size()) {
+    const bool two = i + 1 < bytes.size();
+    const uint32_t n = static_cast<uint8_t>(bytes[i]) << 16 |
+                       (two ? static_cast<uint8_t>(bytes[i + 1]) << 8 : 0);
+    out += kAlphabet[(n >> 18) & 63];
+    out += kAlphabet[(n >> 12) & 63];
+    out += two ? kAlphabet[(n >> 6) & 63] : '=';
+    out += '=';
+  }
+  return out;
+}
+
+std::string viewer_html(const LightField& lf, const ViewerPage& page) {
+  LFNET_CHECK(lf.defined(), "the viewer needs a light field");
+  nlohmann::json data = {{"title", page.title.empty() ? "light field" : page.title},
+                         {"rows", lf.rows()},
+                         {"cols", lf.cols()},
+                         {"height", lf.height()},
+                         {"width", lf.width()},
+                         {"channels", lf.channels()},
+                         {"max_disparity", page.max_disparity},
+                         {"record", page.record},
+                         {"views", view_uris(lf)},
+                         {"truth", nullptr},
+                         {"per_view_psnr_db", nullptr}};
+  if (page.truth) {
+    const auto& t = *page.truth;
+    LFNET_CHECK(t.rows() == lf.rows() && t.cols() == lf.cols() && t.height() == lf.height() &&
+                    t.width() == lf.width(),
+                "the viewer's truth (", t.shape_string(), ") and light field (", lf.shape_string(),
+                ") differ in shape");
+    data["truth"] = view_uris(t);
+    if (page.record.contains("per_view_psnr_db"))
+      data["per_view_psnr_db"] = page.record["per_view_psnr_db"];
+  }
+  data["record"].erase("per_view_psnr_db");
+  std::string html(kViewerHtml);
+  fill(html, "<!--lfnet:script-->", kViewerJs);  // first: the data may hold any text
+  fill(html, "<!--lfnet:data-->", script_safe(data.dump()));
+  return html;
+}
+
+void write_viewer(const LightField& lf, const std::string& path, const ViewerPage& page) {
+  write_text_file(path, viewer_html(lf, page));
+}
+
+}  // namespace lfnet::io

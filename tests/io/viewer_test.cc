@@ -1,0 +1,106 @@
+#include "lfnet/io/viewer.h"
+
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <string>
+
+#include "lfnet/core/error.h"
+#include "lfnet/io/light_field_io.h"
+#include "support/test_support.h"
+
+using namespace lfnet;
+
+namespace {
+
+// The inverse of io::base64, written here independently (RFC 4648 alphabet).
+std::string from_base64(const std::string& text) {
+  const std::string alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  uint32_t bits = 0;
+  int count = 0;
+  for (char c : text) {
+    if (c == '=') break;
+    bits = bits << 6 | static_cast<uint32_t>(alphabet.find(c));
+    count += 6;
+    if (count >= 8) {
+      count -= 8;
+      out += static_cast<char>((bits >> count) & 0xff);
+    }
+  }
+  return out;
+}
+
+// The JSON the page embeds.
+nlohmann::json page_data(const std::string& html) {
+  const std::string open = R"(<script id="lfnet-data" type="application/json">)";
+  const auto begin = html.find(open) + open.size();
+  return nlohmann::json::parse(html.substr(begin, html.find("</script>", begin) - begin));
+}
+
+}  // namespace
+
+TEST_CASE("base64 follows RFC 4648", "[io][viewer]") {
+  CHECK(io::base64("") == "");
+  CHECK(io::base64("f") == "Zg==");
+  CHECK(io::base64("fo") == "Zm8=");
+  CHECK(io::base64("foo") == "Zm9v");
+  CHECK(io::base64("foob") == "Zm9vYg==");
+  CHECK(io::base64("foobar") == "Zm9vYmFy");
+  std::string bytes;
+  for (int i = 0; i < 256; ++i) bytes += static_cast<char>(i);
+  CHECK(from_base64(io::base64(bytes)) == bytes);
+}
+
+TEST_CASE("the viewer page embeds every view, the truth and the per-view PSNR",
+          "[io][viewer]") {
+  const auto lf = test::parallax_light_field(3, 4, 24, 32, 1, -2);
+  const auto truth = test::parallax_light_field(3, 4, 24, 32, 1, -1);
+  io::ViewerPage page;
+  page.title = "net on </script><b>scene";
+  page.truth = truth;
+  page.record = {{"method", "net"},
+                 {"psnr_db", 31.5},
+                 {"per_view_psnr_db", std::vector<std::vector<double>>(3, {30, 31, 32, 33})}};
+  const std::string html = io::viewer_html(lf, page);
+  // One page: the script is inlined and nothing is fetched from elsewhere.
+  CHECK(html.find("<!--lfnet:") == std::string::npos);
+  CHECK(html.find("window.lfnetViewer") != std::string::npos);
+  CHECK(html.find("http://") == std::string::npos);
+  CHECK(html.find("https://") == std::string::npos);
+  CHECK(html.find("</script><b>") == std::string::npos);  // the title cannot end the script
+  const auto data = page_data(html);
+  CHECK(data["title"] == page.title);
+  CHECK(data["rows"] == 3);
+  CHECK(data["cols"] == 4);
+  CHECK(data["per_view_psnr_db"][2][3] == 33);
+  CHECK_FALSE(data["record"].contains("per_view_psnr_db"));
+  REQUIRE(data["views"].size() == 12);
+  REQUIRE(data["truth"].size() == 12);
+  // View (u, v) = (1, 2), row-major, decodes back to the light field's view (8-bit).
+  test::TempDir dir;
+  for (const auto* which : {"views", "truth"}) {
+    const std::string uri = data[which][1 * 4 + 2];
+    const std::string prefix = "data:image/png;base64,";
+    REQUIRE(uri.rfind(prefix, 0) == 0);
+    test::write_bytes(dir / "view.png", from_base64(uri.substr(prefix.size())));
+    const auto decoded = io::read_image(dir / "view.png");
+    const auto& source = std::string(which) == "views" ? lf : truth;
+    CHECK(decoded.sizes() == source.view(1, 2).sizes());
+    CHECK((decoded - source.view(1, 2)).abs().max().item<float>() <= 0.5f / 255 + 1e-6f);
+  }
+}
+
+TEST_CASE("the viewer refuses a truth of another shape", "[io][viewer]") {
+  io::ViewerPage page;
+  page.truth = test::parallax_light_field(3, 3, 24, 32, 1, 1);
+  CHECK_THROWS_WITH(io::viewer_html(test::parallax_light_field(3, 4, 24, 32, 1, 1), page),
+                    Catch::Contains("differ in shape"));
+}
+
+TEST_CASE("without the truth the page has no error map data", "[io][viewer]") {
+  const auto data = page_data(io::viewer_html(test::parallax_light_field(2, 2, 16, 16, 1, 1)));
+  CHECK(data["truth"].is_null());
+  CHECK(data["per_view_psnr_db"].is_null());
+  CHECK(data["views"].size() == 4);
+}
