@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Makes the records of results/<section>/records.jsonl, then regenerates docs/RESULTS.md with
-# `lfnet report`. Usage: scripts/results.sh [SECTION...]   (default: every section below)
+# `lfnet report`. Usage: scripts/results.sh [SECTION...]   (default: every section below;
+# `pictures` remakes only the reconstructions the report shows, and `report` nothing).
 # Needs the trained models (models/, scripts/train-models.sh) and ../shared/data.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -194,7 +195,7 @@ paper-scale-asp-n2() {
 # hci_antinous, Lytro Illum lytro_Begonia, the rendered heldout_window (disparities up to
 # 2.9 px) and heldout_wide (up to 4 px). Every network of $CROSS_SCENE_MODELS (default: the
 # ASP N = 2 models in models/) against no-parallax, pinv and the dictionary; then the bar
-# chart of margins over pinv (scripts/plot_cross_scene.py).
+# chart of margins over pinv (scripts/figures.py margins).
 cross-scene() {
   local tmp models
   read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
@@ -218,7 +219,25 @@ cross-scene() {
     done
   done
   mv "$tmp" results/cross-scene/records.jsonl
-  "$py" scripts/plot_cross_scene.py results/cross-scene/records.jsonl docs/images/results/cross-scene-margins
+  "$py" scripts/figures.py margins results/cross-scene/records.jsonl docs/images/results/cross-scene-margins
+}
+
+# Only the reconstructions behind the pictures of heldout-asp-n2 and lytro (and their viewers,
+# index.html), leaving every record as it is: `scripts/results.sh pictures` on a fresh checkout.
+pictures() {
+  local pics=out/results/heldout-asp-n2 tmp
+  tmp=$(mktemp)
+  rm -rf "$pics" out/results/lytro && mkdir -p "$pics" out/results/lytro
+  for method in net dict pinv no-parallax; do
+    "$lfnet" evaluate --model models/asp-n2.ckpt --dictionary models/dictionary.ckpt \
+      --lf ../shared/data/hci_antinous --method "$method" --mode sensor --stride 5 \
+      --json "$tmp" --out "$pics/$method"
+  done
+  for method in net pinv no-parallax; do
+    "$lfnet" evaluate --model $pq/lytro.ckpt --lf ../shared/data/lytro_Begonia --mode sensor \
+      --stride 5 --method "$method" --json "$tmp" --out "out/results/lytro/$method"
+  done
+  rm -f "$tmp"
 }
 
 sections=("$@")
@@ -228,6 +247,6 @@ if [[ ${#sections[@]} -eq 0 ]]; then
 fi
 for s in "${sections[@]}"; do
   echo "== $s"
-  "$s"
+  [[ $s == report ]] || "$s"
 done
 "$lfnet" report results --out docs/RESULTS.md

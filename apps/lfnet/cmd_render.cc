@@ -3,6 +3,8 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -14,7 +16,6 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/scene/scene.h"
-#include "report_figures.h"
 
 namespace lfnet::app {
 namespace {
@@ -67,6 +68,31 @@ std::pair<double, double> parse_range(const std::string& text) {
   } catch (const std::exception&) {
     throw ConfigError("--disparity-range '" + text + "': expected MIN:MAX, e.g. -3:3");
   }
+}
+
+// OpenCV's viridis as a (256, 3) RGB table in [0, 1].
+const torch::Tensor& viridis_table() {
+  static const torch::Tensor table = [] {
+    cv::Mat levels(1, 256, CV_8UC1);
+    for (int i = 0; i < 256; ++i) levels.at<uint8_t>(0, i) = static_cast<uint8_t>(i);
+    cv::Mat bgr;
+    cv::applyColorMap(levels, bgr, cv::COLORMAP_VIRIDIS);
+    auto t = torch::empty({256, 3});
+    for (int i = 0; i < 256; ++i) {
+      const auto c = bgr.at<cv::Vec3b>(0, i);
+      for (int k = 0; k < 3; ++k) t[i][k] = static_cast<float>(c[2 - k]) / 255.0f;
+    }
+    return t;
+  }();
+  return table;
+}
+
+// The colour map of disparity maps (OpenCV's viridis): values in [0, 1] of any shape S to RGB
+// (3, S...) float32 in [0, 1]; values outside are clamped.
+torch::Tensor viridis(const torch::Tensor& t) {
+  auto index = (t.to(torch::kFloat32).clamp(0, 1) * 255).round().to(torch::kLong);
+  auto rgb = viridis_table().index({index});  // (S..., 3)
+  return rgb.movedim(-1, 0).contiguous();
 }
 
 // Disparity maps in viridis: far (small) is dark blue, near (large) is yellow.

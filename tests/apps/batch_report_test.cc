@@ -4,12 +4,14 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
 
 using lfnet::test::lfnet_binary;
+using lfnet::test::read_bytes;
 using lfnet::test::run_command;
 namespace fs = std::filesystem;
 
@@ -185,6 +187,22 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   trained["variant"] = "finetuned";
   std::ofstream(tmp / "results/b/records.jsonl") << trained.dump() << "\n"
                                                  << record("no-parallax", 26.0, 0.1) << "\n";
+  // A sweep over N with the paper's numbers.
+  fs::create_directories(tmp / "results/c");
+  std::ofstream(tmp / "results/c/section.json")
+      << R"({"title": "Compression", "order": 3, "pareto": false,
+    "sweep": {"x": "n", "label": "measurements per pixel N"},
+    "paper": [{"method": "net", "n": 2, "psnr_db": 26.77}, {"method": "net", "n": 15, "psnr_db": 27.5}]})";
+  {
+    std::ofstream c(tmp / "results/c/records.jsonl");
+    for (int n : {2, 15}) {
+      for (const auto& [method, psnr] : {std::pair{"net", 29.0}, std::pair{"pinv", 28.0}}) {
+        auto r = nlohmann::json::parse(record(method, psnr + (n == 15 ? 1 : 0), 1.0));
+        r["measurements"] = n;
+        c << r.dump() << "\n";
+      }
+    }
+  }
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
                           (tmp / "docs/RESULTS.md"),
@@ -217,13 +235,39 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   // dict is slower and worse than net: off the front; the others are on it.
   CHECK(text.find("| dict | 5 | 2 |") == std::string::npos);
   CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
-  CHECK(fs::file_size(tmp / "docs/images/results/pareto.png") > 1000);
-  CHECK(fs::file_size(tmp / "docs/images/results/a_views_net.png") > 500);
-  // A heatmap chosen by a selector; one that matches no record draws nothing.
-  CHECK(fs::file_size(tmp / "docs/images/results/b_views_fine_tuned.png") > 500);
-  CHECK(text.find("![fine tuned per-view PSNR](images/results/b_views_fine_tuned.png)") !=
+  // Figures: a PNG and its SVG twin each, drawn from one spec file by scripts/figures.py.
+  const fs::path figures = tmp.path() / "docs/images/results";
+  for (const char* stem : {"pareto", "a_views", "b_views", "c_sweep"}) {
+    CHECK(fs::file_size(figures / (std::string(stem) + ".png")) > 1000);
+    CHECK(fs::file_size(figures / (std::string(stem) + ".svg")) > 1000);
+  }
+  CHECK(text.find("![per-view PSNR](images/results/b_views.png) ([SVG](images/results/b_views.svg))") !=
         std::string::npos);
-  CHECK(!fs::exists(tmp / "docs/images/results/b_views_net__none_.png"));
+  const auto spec = nlohmann::json::parse(read_bytes((figures / "figures.json").string()));
+  std::map<std::string, nlohmann::json> by_stem;
+  for (const auto& f : spec["figures"])
+    by_stem[fs::path(f["stem"].get<std::string>()).filename().string()] = f;
+  // A heatmap chosen by a selector; one that matches no record adds no panel.
+  REQUIRE(by_stem.count("b_views"));
+  REQUIRE(by_stem["b_views"]["panels"].size() == 1);
+  CHECK(by_stem["b_views"]["panels"][0]["label"] == "fine tuned");
+  // The Pareto points carry method, camera and stride apart; dict is off the front.
+  REQUIRE(by_stem.count("pareto"));
+  for (const auto& p : by_stem["pareto"]["points"]) {
+    CHECK(p["n"] == 2);
+    CHECK(p["stride"] == 5);
+    CHECK(p["front"] == (p["method"] != "dict"));
+  }
+  // The sweep: net and the pinv baseline against N, and the paper's numbers as their own series.
+  REQUIRE(by_stem.count("c_sweep"));
+  std::map<std::string, nlohmann::json> series;
+  for (const auto& s : by_stem["c_sweep"]["series"]) series[s["label"]] = s;
+  REQUIRE(series.count("net"));
+  CHECK(series["net"]["x"] == nlohmann::json({2, 15}));
+  CHECK(series["net"]["y"] == nlohmann::json({29.0, 30.0}));
+  CHECK(series["pinv"]["kind"] == "baseline");
+  CHECK(series["paper: net"]["kind"] == "paper");
+  CHECK(series["paper: net"]["y"] == nlohmann::json({26.77, 27.5}));
   // A missing results folder is one clear error.
   CHECK(run_command(lfnet_binary() + " report " + (tmp / "nothing"), out) != 0);
   CHECK(out.find("lfnet: error:") != std::string::npos);

@@ -1,4 +1,5 @@
-#include "report_run.h"
+// The report of one run folder (pipeline/report.h).
+#include "lfnet/pipeline/report.h"
 
 #include <spdlog/spdlog.h>
 
@@ -15,29 +16,13 @@
 #include "lfnet/core/output.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/recon/method_registry.h"
-#include "report_figures.h"
+#include "lfnet/pipeline/figures.h"
 
 namespace fs = std::filesystem;
 
-namespace lfnet::app {
+namespace lfnet::pipeline {
 
 namespace {
-
-std::vector<nlohmann::json> read_records(const fs::path& path) {
-  std::vector<nlohmann::json> out;
-  std::ifstream in(path);
-  int line_number = 0;
-  for (std::string line; std::getline(in, line);) {
-    ++line_number;
-    if (line.empty()) continue;
-    try {
-      out.push_back(nlohmann::json::parse(line));
-    } catch (const nlohmann::json::exception&) {
-      throw IoError(path.string() + ":" + std::to_string(line_number) + ": not a JSON record");
-    }
-  }
-  return out;
-}
 
 std::string number(const nlohmann::json& v, const char* format) {
   if (!v.is_number()) return v.is_null() ? "inf" : "";
@@ -46,47 +31,11 @@ std::string number(const nlohmann::json& v, const char* format) {
   return buf;
 }
 
-// Where scripts/plot_training.py is: $LFNET_SCRIPTS, the source tree the program was built
-// from, or scripts/ under the current folder.
-std::string plot_script() {
-  std::vector<std::string> candidates;
-  if (const char* env = std::getenv("LFNET_SCRIPTS")) candidates.emplace_back(env);
-#ifdef LFNET_SCRIPTS_DIR
-  candidates.emplace_back(LFNET_SCRIPTS_DIR);
-#endif
-  candidates.emplace_back("scripts");
-  for (const auto& dir : candidates) {
-    const fs::path p = fs::path(dir) / "plot_training.py";
-    if (fs::exists(p)) return p.string();
-  }
-  return "";
-}
-
-// Draws the training curves; returns a note when it cannot.
-std::string plot_training(const fs::path& log, const fs::path& stem) {
-  const std::string script = plot_script();
-  if (script.empty()) return "scripts/plot_training.py not found (set LFNET_SCRIPTS)";
-  const std::string command =
-      "/usr/bin/python3 '" + script + "' '" + log.string() + "' '" + stem.string() + "' 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return "cannot run /usr/bin/python3";
-  std::string output;
-  char buffer[256];
-  while (std::fgets(buffer, sizeof(buffer), pipe)) output += buffer;
-  const int status = ::pclose(pipe);
-  if (status != 0) return "the plot failed (python3-matplotlib installed?): " + output;
-  return "";
-}
-
 }  // namespace
 
-bool is_run_folder(const std::string& dir) {
-  return fs::is_regular_file(fs::path(dir) / "config.json");
-}
-
-void report_run(const std::string& run_dir, std::string out, std::string figures) {
+void write_run_report(const std::string& run_dir, std::string out, std::string figures) {
   const fs::path run(run_dir);
-  const auto config = pipeline::ExperimentConfig::load_run(run_dir);
+  const auto config = ExperimentConfig::load_run(run_dir);
   if (out.empty()) out = (run / "report.md").string();
   if (figures.empty()) figures = (fs::path(out).parent_path() / "figures").string();
   OutputFolderPolicy policy;
@@ -96,6 +45,7 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
                    (run / "results.jsonl").string()};
   check_output_file(out, policy);
   fs::create_directories(figures);
+  FigureSet figure_set(figures);
   const std::string figures_link =
       fs::relative(fs::absolute(figures), fs::absolute(fs::path(out).parent_path()))
           .generic_string();
@@ -121,7 +71,7 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
   } else {
     std::map<std::string, std::vector<nlohmann::json>> by_stage;
     std::vector<std::string> order;
-    for (const auto& r : read_records(log)) {
+    for (const auto& r : read_jsonl(log.string())) {
       const std::string stage = r.value("stage", "?");
       if (!by_stage.count(stage)) order.push_back(stage);
       by_stage[stage].push_back(r.value("record", nlohmann::json::object()));
@@ -144,8 +94,7 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
          << " | " << (std::isfinite(best) ? number(best, "%.2f") : std::string("")) << " | "
          << number(seconds, "%.0f") << " |\n";
     }
-    const fs::path stem = fs::path(figures) / "training";
-    const std::string note = plot_training(log, stem);
+    const std::string note = figure_set.training(log.string(), "training");
     if (note.empty()) {
       md << "\n![Training curves](" << figures_link << "/training.png) "
          << "([SVG](" << figures_link << "/training.svg))\n\n";
@@ -162,7 +111,7 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
   if (!fs::exists(results)) {
     md << "No `results.jsonl` (`lfnet experiment` writes it after training).\n";
   } else {
-    auto rows = read_records(results);
+    auto rows = read_jsonl(results.string());
     const auto order = recon::registered_methods();
     auto rank = [&](const std::string& m) {
       return std::find(order.begin(), order.end(), m) - order.begin();
@@ -201,8 +150,9 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
       if (r["psnr_db"].is_number() && r.value("method", "") != "no-parallax") {
         ParetoPoint p;
         p.method = r.value("method", "");
-        p.label = p.method + " s" + std::to_string(r.value("stride", 0)) + " " +
-                  r.value("light_field", "");
+        p.variant = r.value("variant", "");
+        p.n = r.value("measurements", int64_t{0});
+        p.stride = r.value("stride", int64_t{0});
         p.seconds = r.value("seconds", 0.0);
         p.psnr_db = r["psnr_db"].get<double>();
         points.push_back(p);
@@ -213,13 +163,19 @@ void report_run(const std::string& run_dir, std::string out, std::string figures
           "same light field, mode and noise.\n";
     if (points.size() >= 2) {
       mark_pareto_front(points);
-      plot_pareto(points, config.name + ": PSNR against seconds",
-                  (fs::path(figures) / "pareto.png").string());
-      md << "\n![Accuracy against time](" << figures_link << "/pareto.png)\n";
+      figure_set.add(pareto_spec(points, config.name + ": PSNR against seconds"));
+      const std::string note = figure_set.draw();
+      if (note.empty()) {
+        md << "\n![Accuracy against time](" << figures_link << "/pareto.png) ([SVG]("
+           << figures_link << "/pareto.svg))\n";
+      } else {
+        md << "\n(No accuracy-against-time plot: " << note << ")\n";
+        spdlog::warn("no accuracy-against-time plot: {}", note);
+      }
     }
   }
   write_text_file(out, md.str());
   spdlog::info("wrote {} (figures in {})", out, figures);
 }
 
-}  // namespace lfnet::app
+}  // namespace lfnet::pipeline

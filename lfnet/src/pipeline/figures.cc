@@ -1,0 +1,128 @@
+#include "lfnet/pipeline/figures.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+namespace {
+
+std::string quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// Runs figures.py with `args`; "" or why it failed.
+std::string run_script(const std::string& args) {
+  const std::string script = figures_script();
+  if (script.empty()) return "scripts/figures.py not found (set LFNET_SCRIPTS)";
+  const std::string command = "/usr/bin/python3 " + quote(script) + " " + args + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return "cannot run /usr/bin/python3";
+  std::string output;
+  char buffer[256];
+  while (std::fgets(buffer, sizeof(buffer), pipe)) output += buffer;
+  const int status = ::pclose(pipe);
+  if (status != 0) return "the plot failed (python3-matplotlib installed?): " + output;
+  return "";
+}
+
+}  // namespace
+
+void mark_pareto_front(std::vector<ParetoPoint>& points) {
+  std::vector<size_t> order(points.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return points[a].seconds != points[b].seconds ? points[a].seconds < points[b].seconds
+                                                  : points[a].psnr_db > points[b].psnr_db;
+  });
+  double best = -INFINITY;
+  for (size_t i : order) {
+    points[i].front = points[i].psnr_db > best;
+    best = std::max(best, points[i].psnr_db);
+  }
+}
+
+nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::string& title) {
+  auto list = nlohmann::json::array();
+  for (const auto& p : points) {
+    list.push_back({{"method", p.method},
+                    {"variant", p.variant},
+                    {"n", p.n},
+                    {"stride", p.stride},
+                    {"seconds", p.seconds},
+                    {"psnr_db", p.psnr_db},
+                    {"front", p.front}});
+  }
+  return {{"kind", "pareto"}, {"stem", "pareto"}, {"title", title}, {"points", list}};
+}
+
+std::string figures_script() {
+  std::vector<std::string> candidates;
+  if (const char* env = std::getenv("LFNET_SCRIPTS")) candidates.emplace_back(env);
+#ifdef LFNET_SCRIPTS_DIR
+  candidates.emplace_back(LFNET_SCRIPTS_DIR);
+#endif
+  candidates.emplace_back("scripts");
+  for (const auto& dir : candidates) {
+    const fs::path p = fs::path(dir) / "figures.py";
+    if (fs::exists(p)) return p.string();
+  }
+  return "";
+}
+
+std::vector<nlohmann::json> read_jsonl(const std::string& path) {
+  std::ifstream in(path);
+  LFNET_CHECK_AS(IoError, in, "cannot read ", path);
+  std::vector<nlohmann::json> out;
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    try {
+      out.push_back(nlohmann::json::parse(line));
+    } catch (const nlohmann::json::exception&) {
+      throw IoError(path + ":" + std::to_string(n) + ": not a JSON record");
+    }
+  }
+  return out;
+}
+
+FigureSet::FigureSet(std::string folder) : folder_(std::move(folder)) {}
+
+void FigureSet::add(nlohmann::json spec) {
+  spec["stem"] = (fs::path(folder_) / spec.at("stem").get<std::string>()).string();
+  specs_.push_back(std::move(spec));
+}
+
+std::string FigureSet::image(const std::string& name, const torch::Tensor& image) const {
+  const fs::path path = fs::path(folder_) / "data" / (name + ".png");
+  fs::create_directories(path.parent_path());
+  io::write_image(path.string(), image, 16);
+  return path.string();
+}
+
+std::string FigureSet::draw() const {
+  if (specs_.empty()) return "";
+  fs::create_directories(folder_);
+  const std::string spec = (fs::path(folder_) / "figures.json").string();
+  write_json_file(spec, {{"figures", specs_}});
+  return run_script(quote(spec));
+}
+
+std::string FigureSet::training(const std::string& log, const std::string& stem) const {
+  fs::create_directories(folder_);
+  return run_script("training " + quote(log) + " " + quote((fs::path(folder_) / stem).string()));
+}
+
+}  // namespace lfnet::pipeline

@@ -1,0 +1,561 @@
+// The results report (pipeline/report.h): every table lists the simulation mode and warns when
+// the no-parallax baseline is missing; figures are drawn by scripts/figures.py.
+#include "lfnet/pipeline/report.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/core/metrics.h"
+#include "lfnet/pipeline/figures.h"
+#include "lfnet/recon/method_registry.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+namespace {
+
+struct Section {
+  std::string name;  // folder name
+  nlohmann::json meta;
+  std::vector<nlohmann::json> records;
+};
+
+const std::vector<std::string> kMethodOrder = recon::registered_methods();
+
+int method_rank(const std::string& m) {
+  auto it = std::find(kMethodOrder.begin(), kMethodOrder.end(), m);
+  return static_cast<int>(it - kMethodOrder.begin());
+}
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), f, v);
+  return buf;
+}
+
+double number(const nlohmann::json& r, const char* key, double fallback = NAN) {
+  return r.contains(key) && r[key].is_number() ? r[key].get<double>() : fallback;
+}
+
+std::string phi_name(const nlohmann::json& r) {
+  return r.contains("phi") && r["phi"].is_object() ? r["phi"].value("name", "?") : "?";
+}
+
+// The value of a setting of a record, as text: method, phi, n, stride, mode, noise,
+// light_field, scale.
+std::string setting(const nlohmann::json& r, const std::string& key) {
+  if (key == "method") return r.value("method", "");
+  if (key == "phi") return phi_name(r);
+  if (key == "n") return std::to_string(r.value("measurements", 0));
+  if (key == "stride") return std::to_string(r.value("stride", 0));
+  if (key == "mode") return r.value("mode", "");
+  if (key == "noise") return fmt("%g", number(r, "noise_sigma", 0.0));
+  if (key == "light_field") return r.value("light_field", "");
+  if (key == "scale") return r.value("scale", "");
+  if (key == "variant") return r.value("variant", "");
+  return "";
+}
+
+const std::vector<std::string> kSettings = {"light_field", "variant", "phi",  "n",
+                                            "noise",       "stride",  "mode", "method"};
+
+std::vector<Section> read_sections(const std::string& dir) {
+  LFNET_CHECK_AS(IoError, fs::is_directory(dir), dir, " is not a folder of result sections");
+  std::vector<Section> sections;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (!entry.is_directory() || !fs::exists(entry.path() / "section.json")) continue;
+    Section s;
+    s.name = entry.path().filename().string();
+    s.meta = read_json_file((entry.path() / "section.json").string());
+    const fs::path records = entry.path() / "records.jsonl";
+    if (fs::exists(records)) s.records = read_jsonl(records.string());
+    sections.push_back(std::move(s));
+  }
+  std::sort(sections.begin(), sections.end(), [](const Section& a, const Section& b) {
+    const int oa = a.meta.value("order", 1000), ob = b.meta.value("order", 1000);
+    return oa != ob ? oa < ob : a.name < b.name;
+  });
+  LFNET_CHECK_AS(IoError, !sections.empty(), "no section (a folder with section.json) in ", dir);
+  return sections;
+}
+
+// Whether a record has every setting a selector names (keys other than settings are ignored).
+bool matches(const nlohmann::json& r, const nlohmann::json& selector) {
+  for (auto it = selector.begin(); it != selector.end(); ++it) {
+    if (std::find(kSettings.begin(), kSettings.end(), it.key()) == kSettings.end()) continue;
+    const std::string want = it->is_string()       ? it->get<std::string>()
+                             : it.key() == "noise" ? fmt("%g", it->get<double>())
+                                                   : it->dump();
+    if (setting(r, it.key()) != want) return false;
+  }
+  return true;
+}
+
+// The paper entry of a section that matches a record: every setting it names must agree.
+const nlohmann::json* paper_entry(const Section& s, const nlohmann::json& r) {
+  if (!s.meta.contains("paper")) return nullptr;
+  for (const auto& p : s.meta["paper"]) {
+    if (matches(r, p)) return &p;
+  }
+  return nullptr;
+}
+
+// The first record of a section that a selector matches.
+const nlohmann::json* find_record(const Section& s, const nlohmann::json& selector) {
+  for (const auto& r : s.records) {
+    if (matches(r, selector)) return &r;
+  }
+  return nullptr;
+}
+
+// A claim of the paper about a difference: "a" is better than "b" by paper_db (a number, or
+// [low, high]). Ours is psnr(a) - psnr(b) from the section's records.
+struct GapClaim {
+  std::string section, claim, source;
+  double low = NAN, high = NAN, ours = NAN;
+};
+
+std::vector<GapClaim> gap_claims(const Section& s) {
+  std::vector<GapClaim> out;
+  if (!s.meta.contains("gaps")) return out;
+  for (const auto& g : s.meta["gaps"]) {
+    GapClaim c{s.meta.value("title", s.name), g.value("claim", ""), g.value("source", "")};
+    const auto& p = g.at("paper_db");
+    c.low = p.is_array() ? p.at(0).get<double>() : p.get<double>();
+    c.high = p.is_array() ? p.at(1).get<double>() : c.low;
+    const auto* a = find_record(s, g.at("a"));
+    const auto* b = find_record(s, g.at("b"));
+    if (a && b) c.ours = number(*a, "psnr_db") - number(*b, "psnr_db");
+    out.push_back(c);
+  }
+  return out;
+}
+
+// Reproduced: ours is at least the paper's (lower) gap, less 0.1 dB. A claimed gain that we
+// measure as a smaller gain is "direction only"; anything else (a loss, a larger drop) is "no".
+constexpr double kGapTolerance = 0.1;
+// A figure of the paper is reproduced when ours is at most this far below it.
+constexpr double kPsnrTolerance = 0.5;
+
+std::string gap_verdict(const GapClaim& c) {
+  if (std::isnan(c.ours)) return "not measured (records missing)";
+  if (c.ours >= c.low - kGapTolerance) return "yes";
+  const std::string by = " (" + fmt("%+.2f dB", c.ours - c.low) + ")";
+  if (c.low > 0 && c.ours > 0) return "direction only" + by;
+  return "no" + by;
+}
+
+// One paper claim against ours, for the summary at the end.
+struct Claim {
+  std::string section, setting;
+  double paper_psnr = NAN, ours_psnr = NAN, paper_s = NAN, ours_s = NAN;
+  std::string source;
+};
+
+std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
+  auto rows = s.records;
+  std::sort(rows.begin(), rows.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+    for (const auto& k : kSettings) {
+      if (k == "method") continue;
+      const auto va = setting(a, k), vb = setting(b, k);
+      if (va != vb) {
+        if (k == "n" || k == "stride" || k == "noise") return std::stod(va) < std::stod(vb);
+        return va < vb;
+      }
+    }
+    return method_rank(a.value("method", "")) < method_rank(b.value("method", ""));
+  });
+  // Columns: settings that vary, and always the method and the mode.
+  std::vector<std::string> columns = {"method"};
+  for (const auto& k : kSettings) {
+    std::set<std::string> values;
+    for (const auto& r : rows) values.insert(setting(r, k));
+    if (k != "method" && k != "mode" && values.size() > 1) columns.push_back(k);
+  }
+  columns.push_back("mode");
+  bool has_paper = false, has_training = false;
+  for (const auto& r : rows) has_paper |= paper_entry(s, r) != nullptr;
+  for (const auto& r : rows) has_training |= r.contains("training_seconds");
+  std::ostringstream md;
+  md << "|";
+  for (const auto& c : columns)
+    md << " " << (c == "n" ? "N" : c == "light_field" ? "light field" : c) << " |";
+  md << " PSNR dB | SSIM | seconds |";
+  if (has_training) md << " training s |";
+  if (has_paper) md << " paper PSNR dB | paper seconds |";
+  md << "\n|";
+  const size_t n_columns = columns.size() + 3 + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
+  for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
+  md << "\n";
+  for (const auto& r : rows) {
+    md << "|";
+    for (const auto& c : columns) md << " " << setting(r, c) << " |";
+    const double psnr = number(r, "psnr_db", INFINITY), ssim = number(r, "ssim"),
+                 sec = number(r, "seconds");
+    md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
+       << " | " << fmt("%.2f", sec) << " |";
+    if (has_training)
+      md << " "
+         << (r.contains("training_seconds") ? fmt("%.0f", number(r, "training_seconds")) : "")
+         << " |";
+    if (has_paper) {
+      const auto* p = paper_entry(s, r);
+      if (p) {
+        const double pp = p->contains("psnr_db") ? (*p)["psnr_db"].get<double>() : NAN;
+        const double ps = p->contains("seconds") ? (*p)["seconds"].get<double>() : NAN;
+        md << " " << (std::isnan(pp) ? "" : fmt("%.2f", pp)) << " | "
+           << (std::isnan(ps) ? "" : fmt("%g", ps)) << " |";
+        std::string what;
+        for (const auto& c : columns) what += (what.empty() ? "" : ", ") + c + " " + setting(r, c);
+        claims.push_back(
+            {s.meta.value("title", s.name), what, pp, psnr, ps, sec, p->value("source", "")});
+      } else {
+        md << " | |";
+      }
+    }
+    md << "\n";
+  }
+  bool baseline = false;
+  for (const auto& r : rows) baseline |= r.value("method", "") == "no-parallax";
+  if (!baseline) md << "\n*These records have no `no-parallax` baseline.*\n";
+  return md.str();
+}
+
+// net minus no-parallax, dict and pinv for every group of records that differ only in method.
+std::string margins(const Section& s) {
+  std::map<std::string, std::map<std::string, double>> groups;
+  for (const auto& r : s.records) {
+    std::string key;
+    for (const auto& k : kSettings) {
+      if (k != "method" && !setting(r, k).empty()) {
+        key += (key.empty() ? "" : ", ") + (k == "n" ? std::string("N") : k) + " " + setting(r, k);
+      }
+    }
+    groups[key][r.value("method", "")] = number(r, "psnr_db");
+  }
+  std::ostringstream md;
+  for (const auto& [key, by_method] : groups) {
+    if (!by_method.count("net")) continue;
+    std::string line;
+    for (const char* other : {"no-parallax", "dict", "pinv"}) {
+      if (!by_method.count(other)) continue;
+      line += (line.empty() ? "" : ", ") + std::string("net - ") + other + " = " +
+              fmt("%+.2f dB", by_method.at("net") - by_method.at(other));
+    }
+    if (!line.empty()) md << "- " << key << ": " << line << "\n";
+  }
+  return md.str();
+}
+
+// The value of a sweep's setting in a record, as a number.
+double sweep_value(const nlohmann::json& r, const std::string& key) {
+  if (key == "noise") return number(r, "noise_sigma", 0.0);
+  if (key == "n") return number(r, "measurements", 0.0);
+  return number(r, key.c_str(), 0.0);
+}
+
+// A "sweep" figure of a section: PSNR against one setting ("n", "stride" or "noise"), a series
+// per method (and per other setting that varies), the paper's numbers as series of their own.
+nlohmann::json sweep_spec(const Section& s, const nlohmann::json& sweep) {
+  const std::string key = sweep.at("x").get<std::string>();
+  std::map<std::string, nlohmann::json> series;
+  std::vector<std::string> order;
+  auto add_point = [&](const std::string& label, const std::string& method, const char* kind,
+                       double x, double y) {
+    if (!series.count(label)) {
+      order.push_back(label);
+      series[label] = {{"label", label}, {"method", method}, {"kind", kind}, {"x", {}}, {"y", {}}};
+    }
+    series[label]["x"].push_back(x);
+    series[label]["y"].push_back(y);
+  };
+  // Other settings that vary name the series (e.g. "net, mode per_patch").
+  std::vector<std::string> varying;
+  for (const auto& k : kSettings) {
+    if (k == key || k == "method" || k == "variant") continue;
+    std::set<std::string> values;
+    for (const auto& r : s.records) values.insert(setting(r, k));
+    if (values.size() > 1) varying.push_back(k);
+  }
+  auto rows = s.records;
+  std::stable_sort(rows.begin(), rows.end(), [&](const auto& x, const auto& y) {
+    return sweep_value(x, key) < sweep_value(y, key);
+  });
+  for (const auto& r : rows) {
+    const double y = number(r, "psnr_db");
+    if (!std::isfinite(y)) continue;
+    const std::string method = r.value("method", "");
+    std::string label = method;
+    if (!r.value("variant", "").empty()) label += " (" + r.value("variant", "") + ")";
+    for (const auto& k : varying) label += ", " + k + " " + setting(r, k);
+    const bool baseline = method == "no-parallax" || method == "pinv" || method == "adjoint";
+    add_point(label, method, baseline ? "baseline" : "ours", sweep_value(r, key), y);
+  }
+  if (s.meta.contains("paper")) {
+    for (const auto& p : s.meta["paper"]) {
+      if (!p.contains(key) || !p.contains("psnr_db")) continue;
+      const double x = p[key].get<double>();
+      add_point("paper: " + p.value("method", "net"), p.value("method", "net"), "paper", x,
+                p["psnr_db"].get<double>());
+    }
+  }
+  auto list = nlohmann::json::array();
+  for (const auto& label : order) {
+    if (series[label]["x"].size() >= 2) list.push_back(series[label]);
+  }
+  return {{"kind", "sweep"},
+          {"stem", s.name + "_sweep"},
+          {"title", s.meta.value("title", s.name) + ": PSNR against " +
+                        sweep.value("label", key)},
+          {"xlabel", sweep.value("label", key)},
+          {"xlog", sweep.value("log", false)},
+          {"series", list}};
+}
+
+// Markdown that shows a figure and links its vector twin.
+std::string figure_markdown(const std::string& alt, const std::string& link,
+                            const std::string& stem) {
+  return "![" + alt + "](" + link + "/" + stem + ".png) ([SVG](" + link + "/" + stem + ".svg))";
+}
+
+// The "views" figure of a section's pictures: centre-view crops and horizontal EPIs of the truth
+// (first) and each reconstruction, with PSNR over all views in the titles.
+nlohmann::json pictures_spec(const std::vector<LightField>& lfs,
+                             const std::vector<std::string>& titles, const std::string& stem,
+                             const FigureSet& figure_set) {
+  constexpr int64_t kCrop = 160, kEpiScale = 8;
+  auto panels = nlohmann::json::array();
+  for (size_t i = 0; i < lfs.size(); ++i) {
+    const auto& lf = lfs[i];
+    const int64_t h = std::min(kCrop, lf.height()), w = std::min(kCrop, lf.width());
+    const int64_t y0 = (lf.height() - h) / 2, x0 = (lf.width() - w) / 2;
+    const auto view =
+        lf.view(lf.rows() / 2, lf.cols() / 2)[0].slice(0, y0, y0 + h).slice(1, x0, x0 + w);
+    const auto epi = io::horizontal_epi(lf, -1, kEpiScale)[0].slice(1, x0, x0 + w);
+    const std::string name = stem + "_" + std::to_string(i);
+    nlohmann::json panel = {{"label", titles[i]},
+                            {"view", figure_set.image(name + "_view", view)},
+                            {"epi", figure_set.image(name + "_epi", epi)}};
+    if (i > 0 && lf.data().sizes() == lfs[0].data().sizes()) panel["psnr_db"] = psnr(lf, lfs[0]);
+    panels.push_back(panel);
+  }
+  return {{"kind", "views"},
+          {"stem", stem},
+          {"title", "Centre views (160 px crops), horizontal EPIs and |error| of the centre view"},
+          {"panels", panels}};
+}
+
+}  // namespace
+
+bool is_run_folder(const std::string& dir) {
+  return fs::is_regular_file(fs::path(dir) / "config.json");
+}
+
+void write_results_report(const std::string& results_dir, const std::string& out,
+                          const std::string& figures_dir) {
+  const auto sections = read_sections(results_dir);
+  const fs::path out_dir =
+      fs::path(out).parent_path().empty() ? fs::path(".") : fs::path(out).parent_path();
+  const fs::path figures =
+      figures_dir.empty() ? out_dir / "images" / "results" : fs::path(figures_dir);
+  const std::string figures_link =
+      fs::relative(fs::absolute(figures), fs::absolute(out_dir)).generic_string();
+  FigureSet figure_set(figures.string());
+  std::ostringstream md;
+  md << "# Results\n\n"
+     << "Generated by `lfnet report " << results_dir << "` from the records under `" << results_dir
+     << "/`; do not edit by hand. Each section names the command that produced its records. "
+     << "PSNR and SSIM are over all views of the grey light field (docs/conventions.md, Metrics); "
+        "seconds "
+     << "are reconstruction wall time on the machine that ran the command. `no-parallax` (every "
+     << "view set to the angular mean of the truth) is what a conventional camera records.\n\n";
+  std::vector<Claim> claims;
+  std::vector<GapClaim> gaps;
+  std::vector<ParetoPoint> points;
+  for (const auto& s : sections) {
+    for (auto& g : gap_claims(s)) gaps.push_back(std::move(g));
+    md << "## " << s.meta.value("title", s.name) << "\n\n";
+    if (s.meta.contains("text")) md << s.meta["text"].get<std::string>() << "\n\n";
+    if (s.meta.contains("command"))
+      md << "Records made by:\n\n    " << s.meta["command"].get<std::string>() << "\n\n";
+    if (s.records.empty()) {
+      md << "*No records yet.*\n\n";
+      continue;
+    }
+    md << markdown_table(s, claims) << "\n";
+    const auto m = margins(s);
+    if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
+    if (s.meta.contains("sweep")) {
+      auto spec = sweep_spec(s, s.meta["sweep"]);
+      if (!spec["series"].empty()) {
+        const std::string stem = spec["stem"];
+        figure_set.add(std::move(spec));
+        md << figure_markdown("PSNR sweep", figures_link, stem) << "\n\n";
+      }
+    }
+    if (s.meta.value("pareto", true)) {
+      for (const auto& r : s.records) {
+        if (number(r, "noise_sigma", 0) != 0 || !std::isfinite(number(r, "psnr_db", NAN))) continue;
+        if (r.value("mode", "") != "sensor") continue;
+        points.push_back({r.value("method", ""), r.value("variant", ""),
+                          r.value("measurements", int64_t{0}), r.value("stride", int64_t{0}),
+                          number(r, "seconds"), number(r, "psnr_db")});
+      }
+    }
+    // Per-view PSNR of the records named in "heatmaps" (first sensor-mode record of each): a
+    // method name, or a selector of settings with an optional "label".
+    if (s.meta.contains("heatmaps")) {
+      auto panels = nlohmann::json::array();
+      for (const auto& entry : s.meta["heatmaps"]) {
+        const nlohmann::json selector =
+            entry.is_string() ? nlohmann::json{{"method", entry}} : entry;
+        std::string label = selector.value("label", selector.value("method", "?"));
+        if (!selector.contains("label") && selector.contains("variant"))
+          label += " (" + selector["variant"].get<std::string>() + ")";
+        for (const auto& r : s.records) {
+          if (!matches(r, selector) || r.value("mode", "") != "sensor" ||
+              !r.contains("per_view_psnr_db"))
+            continue;
+          panels.push_back({{"label", label}, {"psnr", r["per_view_psnr_db"]}});
+          break;
+        }
+      }
+      if (!panels.empty()) {
+        const std::string stem = s.name + "_views";
+        figure_set.add({{"kind", "heatmaps"},
+                        {"stem", stem},
+                        {"title", s.meta.value("title", s.name) +
+                                      ": PSNR per view (sensor mode; one colour range)"},
+                        {"panels", panels}});
+        md << "Per-view PSNR (the paper's angular-error figure):\n\n"
+           << figure_markdown("per-view PSNR", figures_link, stem) << "\n\n";
+      }
+    }
+    // Pictures of reconstructions when the section names a folder that holds them.
+    if (s.meta.contains("pictures")) {
+      const auto& p = s.meta["pictures"];
+      const fs::path dir = p.value("reconstructions", "");
+      const std::string truth_dir = p.value("truth", "");
+      if (fs::is_directory(dir) && fs::is_directory(truth_dir)) {
+        std::vector<LightField> lfs = {io::read_light_field(truth_dir).central(5).grey()};
+        std::vector<std::string> titles = {"truth"};
+        for (const auto& method : p["methods"]) {
+          const fs::path m = dir / method.get<std::string>();
+          if (!fs::is_directory(m)) continue;
+          lfs.push_back(io::read_light_field(m.string()).grey());
+          titles.push_back(method.get<std::string>());
+        }
+        const std::string stem = s.name + "_pictures", gif = s.name + "_parallax.gif";
+        figure_set.add(pictures_spec(lfs, titles, stem, figure_set));
+        io::write_parallax_gif(lfs.size() > 1 ? lfs[1] : lfs[0], (figures / gif).string());
+        md << "Centre views, EPIs and error maps (crops):\n\n"
+           << figure_markdown("reconstructions", figures_link, stem) << "\n\nParallax of the `"
+           << titles[lfs.size() > 1 ? 1 : 0]
+           << "` reconstruction, walking the border views: ![parallax](" << figures_link << "/"
+           << gif << ")\n\n";
+      } else {
+        md << "*(pictures: run the section's command to make " << dir.string() << ")*\n\n";
+      }
+    }
+  }
+  if (!points.empty()) {
+    mark_pareto_front(points);
+    figure_set.add(pareto_spec(points, "What accuracy costs in time (sensor mode, no noise)"));
+    md << "## What accuracy costs in time\n\n"
+       << figure_markdown("PSNR against seconds", figures_link, "pareto")
+       << "\n\nThe Pareto front (no other result is both faster and better), sensor "
+          "mode:\n\n"
+       << "| method | stride | N | PSNR dB | seconds |\n|---|---:|---:|---:|---:|\n";
+    std::vector<ParetoPoint> front;
+    for (const auto& p : points) {
+      if (p.front) front.push_back(p);
+    }
+    std::sort(front.begin(), front.end(),
+              [](const auto& x, const auto& y) { return x.seconds < y.seconds; });
+    for (const auto& p : front) {
+      md << "| " << p.method << " | " << p.stride << " | " << p.n << " | "
+         << fmt("%.2f", p.psnr_db) << " | " << fmt("%.2f", p.seconds) << " |\n";
+    }
+    md << "\n";
+  }
+  if (!claims.empty()) {
+    md << "## The paper's numbers beside ours\n\n"
+       << "A PSNR claim counts as reproduced when ours is at most " << fmt("%.1f", kPsnrTolerance)
+       << " dB below the paper's; a time claim when ours is no slower. The paper's scenes (the "
+       << "synthetic dragons, its Lytro set) are not ours, so only the size of the gaps "
+          "compares.\n\n"
+       << "| section | setting | paper PSNR dB | ours | paper s | ours s | reproduced | source |\n"
+       << "|---|---|---:|---:|---:|---:|---|---|\n";
+    int psnr_claims = 0, psnr_yes = 0, time_claims = 0, time_yes = 0;
+    for (const auto& c : claims) {
+      std::string verdict;
+      if (!std::isnan(c.paper_psnr)) {
+        const bool yes = c.ours_psnr >= c.paper_psnr - kPsnrTolerance;
+        ++psnr_claims, psnr_yes += yes;
+        verdict +=
+            yes ? "PSNR yes" : "PSNR no (" + fmt("%+.2f dB", c.ours_psnr - c.paper_psnr) + ")";
+      }
+      if (!std::isnan(c.paper_s)) {
+        const bool yes = c.ours_s <= c.paper_s;
+        ++time_claims, time_yes += yes;
+        verdict +=
+            std::string(verdict.empty() ? "" : "; ") +
+            (yes ? "time yes (" + fmt("%.0fx faster", c.paper_s / c.ours_s) + ")" : "time no");
+      }
+      md << "| " << c.section << " | " << c.setting << " | "
+         << (std::isnan(c.paper_psnr) ? "" : fmt("%.2f", c.paper_psnr)) << " | "
+         << fmt("%.2f", c.ours_psnr) << " | " << (std::isnan(c.paper_s) ? "" : fmt("%g", c.paper_s))
+         << " | " << fmt("%.2f", c.ours_s) << " | " << verdict << " | " << c.source << " |\n";
+    }
+    md << "\nReproduced: " << psnr_yes << " of " << psnr_claims << " PSNR figures, " << time_yes
+       << " of " << time_claims << " times.\n\n";
+  }
+  if (!gaps.empty()) {
+    md << "## The paper's claims about differences\n\n"
+       << "Each claim compares two of our records of the same section (ours = the first minus "
+       << "the second). Reproduced when our difference is at least the paper's (lower) figure, "
+       << "less " << fmt("%.1f", kGapTolerance) << " dB; \"direction only\" when the paper claims "
+       << "a gain and ours is a smaller gain; \"no\" otherwise (a loss, or a larger drop than "
+       << "the paper's).\n\n"
+       << "| section | claim | paper dB | ours dB | reproduced | source "
+          "|\n|---|---|---:|---:|---|---|\n";
+    int reproduced = 0, direction = 0;
+    for (const auto& g : gaps) {
+      const std::string verdict = gap_verdict(g);
+      reproduced += verdict == "yes";
+      direction += verdict.rfind("direction only", 0) == 0;
+      const std::string paper = g.low == g.high
+                                    ? fmt("%+.1f", g.low)
+                                    : fmt("%+.1f", g.low) + " to " + fmt("%+.1f", g.high);
+      md << "| " << g.section << " | " << g.claim << " | " << paper << " | "
+         << (std::isnan(g.ours) ? "" : fmt("%+.2f", g.ours)) << " | " << verdict << " | "
+         << g.source << " |\n";
+    }
+    md << "\nReproduced: " << reproduced << " of " << gaps.size() << " claims; " << direction
+       << " more in direction only.\n\n";
+  }
+  const std::string note = figure_set.draw();
+  if (!note.empty()) {
+    md << "*(Figures not drawn: " << note << ")*\n";
+    spdlog::warn("figures not drawn: {}", note);
+  }
+  fs::create_directories(out_dir);
+  write_text_file(out, md.str());
+  spdlog::info("wrote {} ({} sections; figures in {})", out, sections.size(), figures.string());
+}
+
+}  // namespace lfnet::pipeline
