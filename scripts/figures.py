@@ -13,6 +13,7 @@ Kinds of a spec (each has "stem": the output path without extension, and "title"
   heatmaps  panels [{label, psnr}] of U x V per-view PSNR, one shared colour range
   views     panels [{label, psnr_db, view, epi}] (16-bit PNG crops); the first is the truth
   sweep     series [{label, method, x, y, kind: ours|paper|baseline}], xlabel, xlog
+  weights   tiles [rows][columns][h][w] in [0, 1] of a camera's code, signed, wrapped, wrap
 """
 import json
 import math
@@ -21,6 +22,7 @@ import sys
 import matplotlib
 
 matplotlib.use("Agg")
+matplotlib.rcParams["svg.hashsalt"] = "lfnet"  # the same data gives the same SVG
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
@@ -48,7 +50,7 @@ class Colours:
 
 def save(fig, stem):
     fig.savefig(stem + ".png", bbox_inches="tight")
-    fig.savefig(stem + ".svg", bbox_inches="tight")
+    fig.savefig(stem + ".svg", bbox_inches="tight", metadata={"Date": None})
     plt.close(fig)
 
 
@@ -219,6 +221,45 @@ def sweep(spec):
     save(fig, spec["stem"])
 
 
+def weights(spec):
+    """A camera's code: one tile per (pixel, measurement) showing measurement n's weight on each
+    view (u down, v across); rows are the first pixels of the sensor's top row, unless one
+    pixel's measurements are wrapped into rows."""
+    tiles = np.array(spec["tiles"], dtype=float)  # (rows, columns, h, w)
+    rows, cols = tiles.shape[:2]
+    size = 1.15 if tiles.shape[2] <= 9 else 1.6
+    fig, axes = plt.subplots(rows, cols, figsize=(size * cols + 1.6, size * rows + 0.9),
+                             dpi=120, squeeze=False)
+    signed = spec.get("signed", False)
+    cmap = "gray"  # signed weights: 0.5 (mid grey) is zero
+    for i in range(rows):
+        for j in range(cols):
+            ax = axes[i][j]
+            n = i * spec["wrap"] + j if spec.get("wrapped") else j
+            if spec.get("wrapped") and n >= spec["measurements"]:
+                ax.set_axis_off()
+                continue
+            image = ax.imshow(tiles[i, j], cmap=cmap, vmin=0, vmax=1, interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if spec.get("wrapped"):
+                ax.set_title(f"n = {n + 1}", fontsize=8)
+            elif i == 0:
+                ax.set_title(f"n = {j + 1}", fontsize=8)
+            if not spec.get("wrapped") and j == 0:
+                ax.set_ylabel(f"pixel x = {i}", fontsize=8)
+    bar = fig.colorbar(image, ax=axes.ravel().tolist(), shrink=0.8)
+    if signed:
+        bar.set_ticks([0, 0.5, 1], labels=["-max |w|", "0", "+max |w|"])
+    else:
+        bar.set_ticks([0, 0.5, 1], labels=["0", "0.5", "max"])
+    bar.set_label("weight", fontsize=8)
+    what = (f"each tile: {spec['views']} views, u down, v across" if not spec.get("block") else
+            f"each tile: {spec['views']} views of the {spec['block']} x {spec['block']} block")
+    fig.suptitle(f"{spec['title']}\n({what})", fontsize=9)
+    save(fig, spec["stem"])
+
+
 def training(log_path, stem):
     """Training loss and validation PSNR per epoch, the stages one after another (and K-SVD
     coding error for a dict stage)."""
@@ -282,7 +323,8 @@ def margins(records_path, stem):
     save(fig, stem)
 
 
-KINDS = {"pareto": pareto, "heatmaps": heatmaps, "views": views, "sweep": sweep}
+KINDS = {"pareto": pareto, "heatmaps": heatmaps, "views": views, "sweep": sweep,
+         "weights": weights}
 
 
 def main(argv):

@@ -82,7 +82,8 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   add_dict_coding_options(cmd, q.dict_method, q.dict_options);
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
-  cmd->add_option("--out", a->out, "write the reconstruction as a light-field folder with a viewer (index.html)");
+  cmd->add_option("--out", a->out,
+                  "write the reconstruction as a light-field folder with a viewer (index.html)");
   cmd->add_flag("--force", a->force, "replace an existing --out folder");
   cmd->add_option("--seed", q.seed, "noise seed");
   cmd->add_option("--batch", q.batch, "patches per forward pass")->check(CLI::PositiveNumber);

@@ -51,7 +51,9 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "acquisition folder (sensor.json with sensor.tif or measurements.f32), or a "
                   "sensor image of N channels (one file per colour channel, comma-separated)")
       ->required();
-  cmd->add_option("--out", a->out, "output light-field folder (views, grid.png, EPIs, viewer index.html)")->required();
+  cmd->add_option("--out", a->out,
+                  "output light-field folder (views, grid.png, EPIs, viewer index.html)")
+      ->required();
   cmd->add_option("--phi", q.phi,
                   "Phi of a plain sensor image: NAME[:N], a JSON spec file or a calibrated-Phi "
                   "folder (default: the model's)");

@@ -3,19 +3,15 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
-#include <filesystem>
 #include <memory>
 
 #include "command.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
-#include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
-#include "lfnet/optics/weights_image.h"
+#include "lfnet/pipeline/figures.h"
 #include "lfnet/pipeline/simulate.h"
-
-namespace fs = std::filesystem;
 
 namespace lfnet::app {
 
@@ -69,12 +65,7 @@ void run_simulate(const SimulateArgs& args) {
   const auto phi = optics::make_phi(pipeline::phi_for_window(args.phi, rows, cols));
   if (args.describe) std::fputs(pipeline::describe_phi(*phi).c_str(), stdout);
   if (!args.plot_weights.empty()) {
-    fs::create_directories(args.plot_weights);
-    const auto& s = phi->spec();
-    const std::string path =
-        (fs::path(args.plot_weights) / (s.name + "-n" + std::to_string(s.n) + ".png")).string();
-    io::write_image(path, optics::weights_image(*phi), 8);
-    spdlog::info("wrote {}", path);
+    spdlog::info("wrote {}", pipeline::plot_weights(*phi, args.plot_weights));
   }
   if (!simulate) return;
 
@@ -136,7 +127,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                 "print the singular values and condition numbers of the Phi's per-pixel (or "
                 "per-block) matrices");
   cmd->add_option("--plot-weights", args->plot_weights,
-                  "write a PNG of every measurement's angular response M_n(u, v) into DIR");
+                  "draw every measurement's angular response M_n(u, v) into DIR (PNG and SVG)");
   cmd->callback([args] { run_simulate(*args); });
 }
 

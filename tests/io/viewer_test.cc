@@ -52,8 +52,7 @@ TEST_CASE("base64 follows RFC 4648", "[io][viewer]") {
   CHECK(from_base64(io::base64(bytes)) == bytes);
 }
 
-TEST_CASE("the viewer page embeds every view, the truth and the per-view PSNR",
-          "[io][viewer]") {
+TEST_CASE("the viewer page embeds every view, the truth and the per-view PSNR", "[io][viewer]") {
   const auto lf = test::parallax_light_field(3, 4, 24, 32, 1, -2);
   const auto truth = test::parallax_light_field(3, 4, 24, 32, 1, -1);
   io::ViewerPage page;
@@ -75,6 +74,7 @@ TEST_CASE("the viewer page embeds every view, the truth and the per-view PSNR",
   CHECK(data["cols"] == 4);
   CHECK(data["per_view_psnr_db"][2][3] == 33);
   CHECK_FALSE(data["record"].contains("per_view_psnr_db"));
+  CHECK(data["viridis"].size() == 256);  // the page colours with lfnet's one map
   REQUIRE(data["views"].size() == 12);
   REQUIRE(data["truth"].size() == 12);
   // View (u, v) = (1, 2), row-major, decodes back to the light field's view (8-bit).

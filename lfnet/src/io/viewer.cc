@@ -2,6 +2,7 @@
 
 #include <string_view>
 
+#include "lfnet/core/colour_map.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
@@ -53,8 +54,8 @@ std::string base64(const std::string& bytes) {
   }
   if (i < bytes.size()) {
     const bool two = i + 1 < bytes.size();
-    const uint32_t n = static_cast<uint8_t>(bytes[i]) << 16 |
-                       (two ? static_cast<uint8_t>(bytes[i + 1]) << 8 : 0);
+    const uint32_t n =
+        static_cast<uint8_t>(bytes[i]) << 16 | (two ? static_cast<uint8_t>(bytes[i + 1]) << 8 : 0);
     out += kAlphabet[(n >> 18) & 63];
     out += kAlphabet[(n >> 12) & 63];
     out += two ? kAlphabet[(n >> 6) & 63] : '=';
@@ -73,6 +74,7 @@ std::string viewer_html(const LightField& lf, const ViewerPage& page) {
                          {"channels", lf.channels()},
                          {"max_disparity", page.max_disparity},
                          {"record", page.record},
+                         {"viridis", viridis_table()},
                          {"views", view_uris(lf)},
                          {"truth", nullptr},
                          {"per_view_psnr_db", nullptr}};

@@ -10,6 +10,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/optics/weights_image.h"
 
 namespace fs = std::filesystem;
 
@@ -112,10 +113,10 @@ std::string FigureSet::image(const std::string& name, const torch::Tensor& image
   return path.string();
 }
 
-std::string FigureSet::draw() const {
+std::string FigureSet::draw(const std::string& spec_name) const {
   if (specs_.empty()) return "";
   fs::create_directories(folder_);
-  const std::string spec = (fs::path(folder_) / "figures.json").string();
+  const std::string spec = (fs::path(folder_) / spec_name).string();
   write_json_file(spec, {{"figures", specs_}});
   return run_script(quote(spec));
 }
@@ -123,6 +124,49 @@ std::string FigureSet::draw() const {
 std::string FigureSet::training(const std::string& log, const std::string& stem) const {
   fs::create_directories(folder_);
   return run_script("training " + quote(log) + " " + quote((fs::path(folder_) / stem).string()));
+}
+
+std::string plot_weights(const optics::Phi& phi, const std::string& dir) {
+  const auto& s = phi.spec();
+  const std::string stem = s.name + "-n" + std::to_string(s.n);
+  const auto t = optics::weight_tiles(phi);
+  nlohmann::json tiles = nlohmann::json::array();
+  for (int64_t i = 0; i < t.tiles.size(0); ++i) {
+    auto row = nlohmann::json::array();
+    for (int64_t j = 0; j < t.tiles.size(1); ++j) {
+      const auto tile = t.tiles[i][j].contiguous();
+      std::vector<std::vector<double>> rows(tile.size(0));
+      for (int64_t y = 0; y < tile.size(0); ++y) {
+        const auto line = tile[y];
+        for (int64_t x = 0; x < line.numel(); ++x) {  // 4 decimals: a spec of readable size
+          rows[y].push_back(std::round(line[x].item<double>() * 1e4) / 1e4);
+        }
+      }
+      row.push_back(rows);
+    }
+    tiles.push_back(row);
+  }
+  std::string title = s.name + ", N = " + std::to_string(s.n) +
+                      ": the angular response of each "
+                      "measurement, M_n(u, v)";
+  if (!phi.local())
+    title = s.name + ", N = " + std::to_string(s.n) +
+            ": the matrix row of "
+            "each measurement over the 9 x 9 block of every view";
+  FigureSet figures(dir);
+  figures.add({{"kind", "weights"},
+               {"stem", stem},
+               {"title", title},
+               {"tiles", tiles},
+               {"signed", t.signed_weights},
+               {"wrapped", t.wrapped},
+               {"wrap", t.wrap},
+               {"measurements", phi.measurements()},
+               {"views", std::to_string(phi.rows()) + " x " + std::to_string(phi.cols())},
+               {"block", phi.local() ? 0 : phi.block()}});
+  const std::string note = figures.draw(stem + ".json");
+  LFNET_CHECK_AS(IoError, note.empty(), "cannot draw the weights of ", stem, ": ", note);
+  return (fs::path(dir) / (stem + ".png")).string();
 }
 
 }  // namespace lfnet::pipeline

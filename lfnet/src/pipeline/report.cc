@@ -9,16 +9,16 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/metrics.h"
 #include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
-#include "lfnet/core/metrics.h"
+#include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/figures.h"
 #include "lfnet/recon/method_registry.h"
 
@@ -319,8 +319,7 @@ nlohmann::json sweep_spec(const Section& s, const nlohmann::json& sweep) {
   }
   return {{"kind", "sweep"},
           {"stem", s.name + "_sweep"},
-          {"title", s.meta.value("title", s.name) + ": PSNR against " +
-                        sweep.value("label", key)},
+          {"title", s.meta.value("title", s.name) + ": PSNR against " + sweep.value("label", key)},
           {"xlabel", sweep.value("label", key)},
           {"xlog", sweep.value("log", false)},
           {"series", list}};
@@ -357,6 +356,32 @@ nlohmann::json pictures_spec(const std::vector<LightField>& lfs,
           {"stem", stem},
           {"title", "Centre views (160 px crops), horizontal EPIs and |error| of the centre view"},
           {"panels", panels}};
+}
+
+// A viewer page (io/viewer.h) of the first reconstruction against the truth (lfs[0]), on the
+// central `crop` x `crop` pixels so the page stays small enough to keep beside the report.
+void write_section_viewer(const std::vector<LightField>& lfs,
+                          const std::vector<std::string>& titles, const std::string& path,
+                          int64_t crop = 256) {
+  const size_t k = lfs.size() > 1 ? 1 : 0;
+  auto central = [&](const LightField& lf) {
+    const int64_t h = std::min(crop, lf.height()), w = std::min(crop, lf.width());
+    const int64_t y0 = (lf.height() - h) / 2, x0 = (lf.width() - w) / 2;
+    return LightField(lf.data().slice(axis::kH, y0, y0 + h).slice(axis::kW, x0, x0 + w));
+  };
+  const auto truth = central(lfs[0]), estimate = central(lfs[k]);
+  io::ViewerPage page;
+  page.title = titles[k] + " against the truth (central " + std::to_string(estimate.height()) +
+               " x " + std::to_string(estimate.width()) + " pixels)";
+  page.truth = truth;
+  const auto pv = per_view_psnr(estimate, truth).to(torch::kFloat64).contiguous();
+  std::vector<std::vector<double>> table(pv.size(0));
+  for (int64_t u = 0; u < pv.size(0); ++u) {
+    for (int64_t v = 0; v < pv.size(1); ++v) table[u].push_back(pv[u][v].item<double>());
+  }
+  page.record = {
+      {"method", titles[k]}, {"psnr_db", psnr(estimate, truth)}, {"per_view_psnr_db", table}};
+  io::write_viewer(estimate, path, page);
 }
 
 }  // namespace
@@ -462,11 +487,16 @@ void write_results_report(const std::string& results_dir, const std::string& out
         const std::string stem = s.name + "_pictures", gif = s.name + "_parallax.gif";
         figure_set.add(pictures_spec(lfs, titles, stem, figure_set));
         io::write_parallax_gif(lfs.size() > 1 ? lfs[1] : lfs[0], (figures / gif).string());
+        const std::string viewer = s.name + "_viewer.html";
+        write_section_viewer(lfs, titles, (figures / viewer).string());
         md << "Centre views, EPIs and error maps (crops):\n\n"
            << figure_markdown("reconstructions", figures_link, stem) << "\n\nParallax of the `"
            << titles[lfs.size() > 1 ? 1 : 0]
            << "` reconstruction, walking the border views: ![parallax](" << figures_link << "/"
-           << gif << ")\n\n";
+           << gif << ")\n\n[Open it in the light-field viewer](" << figures_link << "/" << viewer
+           << ") (parallax, refocus, EPIs, error map and per-view PSNR against the truth, on the "
+              "central 256 x 256 pixels; docs/viewer.md). The whole light field: `"
+           << (dir / titles[lfs.size() > 1 ? 1 : 0] / "index.html").generic_string() << "`.\n\n";
       } else {
         md << "*(pictures: run the section's command to make " << dir.string() << ")*\n\n";
       }
@@ -487,8 +517,8 @@ void write_results_report(const std::string& results_dir, const std::string& out
     std::sort(front.begin(), front.end(),
               [](const auto& x, const auto& y) { return x.seconds < y.seconds; });
     for (const auto& p : front) {
-      md << "| " << p.method << " | " << p.stride << " | " << p.n << " | "
-         << fmt("%.2f", p.psnr_db) << " | " << fmt("%.2f", p.seconds) << " |\n";
+      md << "| " << p.method << " | " << p.stride << " | " << p.n << " | " << fmt("%.2f", p.psnr_db)
+         << " | " << fmt("%.2f", p.seconds) << " |\n";
     }
     md << "\n";
   }

@@ -15,8 +15,8 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/pipeline/experiment.h"
-#include "lfnet/recon/method_registry.h"
 #include "lfnet/pipeline/figures.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
 

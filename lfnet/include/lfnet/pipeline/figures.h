@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/optics/phi.h"
+
 namespace lfnet::pipeline {
 
 // One result on the accuracy-against-time plot.
@@ -48,9 +50,9 @@ class FigureSet {
   std::string image(const std::string& name, const torch::Tensor& image) const;
   bool empty() const { return specs_.empty(); }
 
-  // Draws every figure added; returns "" or why the figures are missing (no python3 or
-  // matplotlib, no script), for the report to say.
-  std::string draw() const;
+  // Draws every figure added, from the specs written to folder/`spec_name`; returns "" or why
+  // the figures are missing (no python3 or matplotlib, no script), for the report to say.
+  std::string draw(const std::string& spec_name = "figures.json") const;
   // Training curves of a run's training.jsonl into folder/STEM.{png,svg}; "" or why not.
   std::string training(const std::string& log, const std::string& stem) const;
 
@@ -58,5 +60,10 @@ class FigureSet {
   std::string folder_;
   std::vector<nlohmann::json> specs_;
 };
+
+// The angular responses of a Phi (optics::weight_tiles) as DIR/NAME-nN.png and .svg, with their
+// spec beside them (NAME-nN.json); returns the PNG's path. A figure that cannot be drawn is an
+// IoError that says why.
+std::string plot_weights(const optics::Phi& phi, const std::string& dir);
 
 }  // namespace lfnet::pipeline

@@ -55,13 +55,10 @@
     return pixels[which][index];
   }
 
-  // Viridis, a few stops interpolated linearly: t in [0, 1] -> [r, g, b] in 0..255.
-  const kViridis = [[68, 1, 84], [72, 40, 120], [62, 74, 137], [49, 104, 142], [38, 130, 142],
-    [31, 158, 137], [53, 183, 121], [109, 205, 89], [180, 222, 44], [253, 231, 37]];
+  // The viridis table lfnet colours every picture with (core/colour_map.h), 256 RGB entries.
+  const kViridis = data.viridis;
   function viridis(t) {
-    const s = Math.min(Math.max(t, 0), 1) * (kViridis.length - 1);
-    const i = Math.min(Math.floor(s), kViridis.length - 2), f = s - i;
-    return kViridis[i].map((a, k) => Math.round(a + f * (kViridis[i + 1][k] - a)));
+    return kViridis[Math.round(Math.min(Math.max(t, 0), 1) * (kViridis.length - 1))];
   }
 
   function drawView() {
