@@ -5,8 +5,6 @@ SVG beside it (the vector twin), from the JSON that `lfnet report` writes.
 Usage:
   figures.py SPEC.json               every figure of a spec: {"figures": [{"kind": ..., ...}]}
   figures.py training LOG.jsonl STEM training curves of a run (RUN/training.jsonl)
-  figures.py margins RECORDS.jsonl STEM
-                                     cross-scene bar chart: each method's margin over pinv
 
 Kinds of a spec (each has "stem": the output path without extension, and "title"):
   pareto    points [{method, variant, n, stride, seconds, psnr_db, front}]
@@ -14,6 +12,7 @@ Kinds of a spec (each has "stem": the output path without extension, and "title"
   views     panels [{label, psnr_db, view, epi}] (16-bit PNG crops); the first is the truth
   sweep     series [{label, method, x, y, kind: ours|paper|baseline}], xlabel, xlog
   weights   tiles [rows][columns][h][w] in [0, 1] of a camera's code, signed, wrapped, wrap
+  margins   records (lfnet evaluate records), over (the baseline method), target (dB)
 """
 import json
 import math
@@ -294,37 +293,42 @@ def training(log_path, stem):
     save(fig, stem)
 
 
-def margins(records_path, stem):
-    """Each method's PSNR margin over pinv per held-out light field (the cross-scene benchmark)."""
-    rows = [json.loads(line) for line in open(records_path) if line.strip()]
+def margins(spec):
+    """Each method's PSNR margin over a baseline (pinv) per light field: the cross-scene
+    benchmark, with its target as a dashed line."""
+    rows = spec["records"]
+    over = spec.get("over", "pinv")
     scenes = list(dict.fromkeys(r["light_field"] for r in rows))
-    pinv = {r["light_field"]: r["psnr_db"] for r in rows
-            if r["method"] == "pinv" and "variant" not in r}
-    series = [s for s in dict.fromkeys(series_name(r) for r in rows) if s != "pinv"]
+    base = {r["light_field"]: r["psnr_db"] for r in rows
+            if r["method"] == over and not r.get("variant")}
+    series = [s for s in dict.fromkeys(series_name(r) for r in rows) if s != over]
     colour = Colours()
     fig, ax = plt.subplots(figsize=(8.5, 4.6), dpi=120)
     width = 0.8 / max(len(series), 1)
     for i, s in enumerate(series):
         by = [{series_name(r): r["psnr_db"] for r in rows if r["light_field"] == sc}.get(s, math.nan)
-              - pinv[sc] for sc in scenes]
+              - base.get(sc, math.nan) for sc in scenes]
         xs = [k + (i - (len(series) - 1) / 2) * width for k in range(len(scenes))]
         ax.bar(xs, by, width, label=s, color=colour(s))
         for x, m in zip(xs, by):
-            ax.annotate(f"{m:+.2f}", (x, m), ha="center", va="bottom" if m >= 0 else "top",
-                        fontsize=7, xytext=(0, 2 if m >= 0 else -2), textcoords="offset points")
+            if not math.isnan(m):
+                ax.annotate(f"{m:+.2f}", (x, m), ha="center", va="bottom" if m >= 0 else "top",
+                            fontsize=7, xytext=(0, 2 if m >= 0 else -2),
+                            textcoords="offset points")
     ax.axhline(0, color="black", linewidth=0.8)
-    ax.axhline(1.5, color="grey", linewidth=0.8, linestyle="--", label="target: +1.5 dB")
+    if spec.get("target") is not None:
+        ax.axhline(spec["target"], color="grey", linewidth=0.8, linestyle="--",
+                   label=f"target: {spec['target']:+g} dB")
     ax.set_xticks(range(len(scenes)), scenes)
     ax.set_xlabel("held-out light field")
-    ax.set_ylabel("PSNR margin over pinv (dB)")
-    ax.set_title("Cross-scene benchmark: ASP N = 2, stride 5, sensor mode, held-out light fields")
-    ax.legend(fontsize=8, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.14), frameon=False)
-    fig.tight_layout()
-    save(fig, stem)
+    ax.set_ylabel(f"PSNR margin over {over} (dB)")
+    ax.set_title(spec["title"], fontsize=10)
+    ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.14), frameon=False)
+    save(fig, spec["stem"])
 
 
 KINDS = {"pareto": pareto, "heatmaps": heatmaps, "views": views, "sweep": sweep,
-         "weights": weights}
+         "weights": weights, "margins": margins}
 
 
 def main(argv):
@@ -336,8 +340,8 @@ def main(argv):
                 sys.exit(f"figures.py: unknown figure kind '{figure['kind']}'")
             KINDS[figure["kind"]](figure)
         return
-    if len(argv) == 4 and argv[1] in ("training", "margins"):
-        {"training": training, "margins": margins}[argv[1]](argv[2], argv[3])
+    if len(argv) == 4 and argv[1] == "training":
+        training(argv[2], argv[3])
         return
     sys.exit(__doc__)
 

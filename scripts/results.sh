@@ -195,7 +195,7 @@ paper-scale-asp-n2() {
 # hci_antinous, Lytro Illum lytro_Begonia, the rendered heldout_window (disparities up to
 # 2.9 px) and heldout_wide (up to 4 px). Every network of $CROSS_SCENE_MODELS (default: the
 # ASP N = 2 models in models/) against no-parallax, pinv and the dictionary; then the bar
-# chart of margins over pinv (scripts/figures.py margins).
+# chart of margins over pinv (the section's "margins" figure, drawn by lfnet report).
 cross-scene() {
   local tmp models
   read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
@@ -219,7 +219,6 @@ cross-scene() {
     done
   done
   mv "$tmp" results/cross-scene/records.jsonl
-  "$py" scripts/figures.py margins results/cross-scene/records.jsonl docs/images/results/cross-scene-margins
 }
 
 # Only the reconstructions behind the pictures of heldout-asp-n2 and lytro (and their viewers,

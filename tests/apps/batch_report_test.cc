@@ -154,7 +154,7 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   lfnet::test::TempDir tmp;
   fs::create_directories(tmp / "results/a");
   std::ofstream(tmp / "results/a/section.json") << R"({"title": "Held out", "order": 1,
-    "command": "scripts/x.sh", "heatmaps": ["net"],
+    "command": "scripts/x.sh", "heatmaps": ["net"], "margins": {"over": "pinv", "target": 1.5},
     "paper": [{"method": "net", "n": 2, "psnr_db": 26.77, "seconds": 242, "source": "Fig. 5"}],
     "gaps": [{"claim": "net beats pinv", "a": {"method": "net"}, "b": {"method": "pinv"}, "paper_db": [2, 3], "source": "s. 3"},
              {"claim": "net beats dict", "a": {"method": "net"}, "b": {"method": "dict"}, "paper_db": 0.55, "source": "s. 4"},
@@ -238,7 +238,7 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
   // Figures: a PNG and its SVG twin each, drawn from one spec file by scripts/figures.py.
   const fs::path figures = tmp.path() / "docs/images/results";
-  for (const char* stem : {"pareto", "a_views", "b_views", "c_sweep"}) {
+  for (const char* stem : {"pareto", "a_views", "a_margins", "b_views", "c_sweep"}) {
     CHECK(fs::file_size(figures / (std::string(stem) + ".png")) > 1000);
     CHECK(fs::file_size(figures / (std::string(stem) + ".svg")) > 1000);
   }
@@ -249,6 +249,11 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   std::map<std::string, nlohmann::json> by_stem;
   for (const auto& f : spec["figures"])
     by_stem[fs::path(f["stem"].get<std::string>()).filename().string()] = f;
+  // The margins chart gets the section's records and its baseline.
+  REQUIRE(by_stem.count("a_margins"));
+  CHECK(by_stem["a_margins"]["records"].size() == 4);
+  CHECK(by_stem["a_margins"]["over"] == "pinv");
+  CHECK(by_stem["a_margins"]["target"] == 1.5);
   // A heatmap chosen by a selector; one that matches no record adds no panel.
   REQUIRE(by_stem.count("b_views"));
   REQUIRE(by_stem["b_views"]["panels"].size() == 1);

@@ -424,6 +424,20 @@ void write_results_report(const std::string& results_dir, const std::string& out
     md << markdown_table(s, claims) << "\n";
     const auto m = margins(s);
     if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
+    // A bar chart of each model's margin over a baseline per light field ("margins":
+    // {"over": "pinv", "target": 1.5, "stem": ...}): the cross-scene benchmark.
+    if (s.meta.contains("margins")) {
+      const auto& m = s.meta["margins"];
+      const std::string stem = m.value("stem", s.name + "_margins");
+      figure_set.add({{"kind", "margins"},
+                      {"stem", stem},
+                      {"title", m.value("title", s.meta.value("title", s.name))},
+                      {"over", m.value("over", "pinv")},
+                      {"target", m.contains("target") ? m["target"] : nlohmann::json()},
+                      {"records", s.records}});
+      md << figure_markdown("margins over " + m.value("over", "pinv"), figures_link, stem)
+         << "\n\n";
+    }
     if (s.meta.contains("sweep")) {
       auto spec = sweep_spec(s, s.meta["sweep"]);
       if (!spec["series"].empty()) {
