@@ -181,7 +181,14 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   fs::create_directories(tmp / "results/b");
   std::ofstream(tmp / "results/b/section.json")
       << R"({"title": "Switching", "order": 2, "pareto": false,
-    "heatmaps": [{"method": "net", "variant": "finetuned", "label": "fine tuned"}, {"method": "net", "variant": "none"}]})";
+    "heatmaps": [{"method": "net", "variant": "finetuned", "label": "fine tuned"}, {"method": "net", "variant": "none"}],
+    "training": [{"log": ")" +
+             (tmp / "b.training.jsonl") + R"(", "label": "the finetuned net"}]})";
+  std::ofstream(tmp / "b.training.jsonl")
+      << R"({"stage": "ae", "record": {"epoch": 1, "train_loss": 0.02, "val_psnr_db": 25.0}})"
+      << "\n"
+      << R"({"stage": "ae", "record": {"epoch": 2, "train_loss": 0.01, "val_psnr_db": 26.0}})"
+      << "\n";
   auto trained = nlohmann::json::parse(record("net", 27.0, 5.0));
   trained["training_seconds"] = 321.4;
   trained["variant"] = "finetuned";
@@ -238,12 +245,15 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
   // Figures: a PNG and its SVG twin each, drawn from one spec file by scripts/figures.py.
   const fs::path figures = tmp.path() / "docs/images/results";
-  for (const char* stem : {"pareto", "a_views", "a_margins", "b_views", "c_sweep"}) {
+  for (const char* stem :
+       {"pareto", "a_views", "a_margins", "b_views", "b_training_0", "c_sweep"}) {
     CHECK(fs::file_size(figures / (std::string(stem) + ".png")) > 1000);
     CHECK(fs::file_size(figures / (std::string(stem) + ".svg")) > 1000);
   }
   CHECK(text.find(
             "![per-view PSNR](images/results/b_views.png) ([SVG](images/results/b_views.svg))") !=
+        std::string::npos);
+  CHECK(text.find("the finetuned net:\n\n![training curves](images/results/b_training_0.png)") !=
         std::string::npos);
   const auto spec = nlohmann::json::parse(read_bytes((figures / "figures.json").string()));
   std::map<std::string, nlohmann::json> by_stem;

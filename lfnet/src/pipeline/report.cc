@@ -438,6 +438,23 @@ void write_results_report(const std::string& results_dir, const std::string& out
       md << figure_markdown("margins over " + m.value("over", "pinv"), figures_link, stem)
          << "\n\n";
     }
+    // Training curves of the models a section names ("training": [{"log": ..., "label": ...}]).
+    if (s.meta.contains("training")) {
+      std::string row;
+      int k = 0;
+      for (const auto& t : s.meta["training"]) {
+        const std::string stem = s.name + "_training_" + std::to_string(k++);
+        const std::string note = figure_set.training(t.at("log").get<std::string>(), stem);
+        if (!note.empty()) {
+          spdlog::warn("no training curves for {}: {}", t.at("log").get<std::string>(), note);
+          continue;
+        }
+        row += "\n\n" + t.value("label", t.at("log").get<std::string>()) + ":\n\n" +
+               figure_markdown("training curves", figures_link, stem);
+      }
+      if (!row.empty())
+        md << "Training curves (loss and validation PSNR per epoch):" << row << "\n\n";
+    }
     if (s.meta.contains("sweep")) {
       auto spec = sweep_spec(s, s.meta["sweep"]);
       if (!spec["series"].empty()) {
