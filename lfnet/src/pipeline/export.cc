@@ -1,0 +1,91 @@
+#include "lfnet/pipeline/export.h"
+
+#include <torch/torch.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/output.h"
+#include "lfnet/core/version.h"
+#include "lfnet/nn/script.h"
+#include "lfnet/optics/phi.h"
+#include "lfnet/train/checkpoint.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::pipeline {
+
+namespace {
+
+// Measurements of random light-field patches in [0, 1] through the net's own patch matrices,
+// one phase after another: inputs like those reconstruction gives the net.
+std::pair<torch::Tensor, torch::Tensor> check_inputs(const nn::LightFieldNet& net, int64_t count) {
+  auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
+  const int64_t phases = net->phases();
+  auto phase = torch::arange(count, torch::kInt64).remainder(phases);
+  auto patches = torch::rand({count, net->options().patch.size()}, gen);
+  auto y = torch::empty({count, net->options().measurement_size()});
+  for (int64_t i = 0; i < count; ++i) y[i] = net->phi[i % phases].matmul(patches[i]);
+  return {y, phase};
+}
+
+}  // namespace
+
+ExportResult export_model(const ExportRequest& a) {
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.model};
+  check_output_file(a.out, policy);
+  OutputLock lock(a.out);
+  LFNET_CHECK_AS(ConfigError, !nn::is_script_file(a.model), "--model ", a.model,
+                 " is already an exported file; export takes a checkpoint");
+  const auto ckpt = train::load_checkpoint(a.model);
+  auto net = train::build_net(ckpt, a.model);
+  net->eval();
+  const auto spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
+  const auto phi = optics::make_phi(spec);
+  const auto& o = net->options();
+  LFNET_CHECK_AS(CheckpointError,
+                 phi->measurements() == o.measurements && phi->rows() == o.patch.rows &&
+                     phi->cols() == o.patch.cols,
+                 a.model, ": its Phi ", spec.label(), " (", phi->rows(), "x", phi->cols(),
+                 " views) does not fit its network (N = ", o.measurements, ", ", o.patch.rows, "x",
+                 o.patch.cols, " views)");
+  nn::ScriptMetadata meta;
+  meta.phi = ckpt.phi;
+  meta.config = ckpt.config;
+  meta.period = phi->period();
+  meta.block = phi->block();
+  meta.local = phi->local();
+  meta.source = {{"checkpoint", fs::path(a.model).filename().string()},
+                 {"stage", ckpt.training.stage},
+                 {"epoch", ckpt.training.epoch},
+                 {"step", ckpt.training.step},
+                 {"lfnet_version", kVersion}};
+  if (std::isfinite(ckpt.training.best_metric))
+    meta.source["best_psnr_db"] = ckpt.training.best_metric;
+  nn::export_network(net, meta, a.out);
+
+  // Read the file back and compare it with the checkpoint's net on realistic inputs.
+  const auto loaded = nn::load_script(a.out);
+  double diff = 0;
+  if (a.check > 0) {
+    auto [y, phase] = check_inputs(net, a.check);
+    torch::NoGradGuard no_grad;
+    auto want = net->forward(y, phase).reshape({a.check, -1});
+    auto got = loaded.forward(y, phase).reshape({a.check, -1});
+    diff = (got - want).abs().max().item<double>();
+    LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
+                   diff, " on ", a.check, " patches (more than 1e-5): please report this");
+  }
+  ExportResult r;
+  r.phi = spec.label();
+  r.branches = o.branches;
+  r.phases = net->phases();
+  r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
+  r.max_difference = diff;
+  return r;
+}
+
+}  // namespace lfnet::pipeline
