@@ -1,7 +1,7 @@
 #include "lfnet/pipeline/export.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <filesystem>
 #include <string>
