@@ -130,29 +130,27 @@ std::string plot_weights(const optics::Phi& phi, const std::string& dir) {
   const auto& s = phi.spec();
   const std::string stem = s.name + "-n" + std::to_string(s.n);
   const auto t = optics::weight_tiles(phi);
+  // 4 decimals: a spec of readable size.
+  const auto rounded = ((t.tiles * 1e4).round() / 1e4).contiguous();
+  const auto a = rounded.accessor<double, 4>();
   nlohmann::json tiles = nlohmann::json::array();
-  for (int64_t i = 0; i < t.tiles.size(0); ++i) {
+  for (int64_t i = 0; i < a.size(0); ++i) {
     auto row = nlohmann::json::array();
-    for (int64_t j = 0; j < t.tiles.size(1); ++j) {
-      const auto tile = t.tiles[i][j].contiguous();
-      std::vector<std::vector<double>> rows(tile.size(0));
-      for (int64_t y = 0; y < tile.size(0); ++y) {
-        const auto line = tile[y];
-        for (int64_t x = 0; x < line.numel(); ++x) {  // 4 decimals: a spec of readable size
-          rows[y].push_back(std::round(line[x].item<double>() * 1e4) / 1e4);
-        }
+    for (int64_t j = 0; j < a.size(1); ++j) {
+      std::vector<std::vector<double>> tile(a.size(2));
+      for (int64_t y = 0; y < a.size(2); ++y) {
+        for (int64_t x = 0; x < a.size(3); ++x) tile[y].push_back(a[i][j][y][x]);
       }
-      row.push_back(rows);
+      row.push_back(tile);
     }
     tiles.push_back(row);
   }
-  std::string title = s.name + ", N = " + std::to_string(s.n) +
-                      ": the angular response of each "
-                      "measurement, M_n(u, v)";
-  if (!phi.local())
-    title = s.name + ", N = " + std::to_string(s.n) +
-            ": the matrix row of "
-            "each measurement over the 9 x 9 block of every view";
+  const std::string camera = s.name + ", N = " + std::to_string(s.n);
+  const std::string block = std::to_string(phi.block());
+  const std::string title = phi.local()
+                                ? camera + ": the angular response of each measurement, M_n(u, v)"
+                                : camera + ": the matrix row of each measurement over the " +
+                                      block + " x " + block + " block of every view";
   FigureSet figures(dir);
   figures.add({{"kind", "weights"},
                {"stem", stem},

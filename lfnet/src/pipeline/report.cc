@@ -17,6 +17,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/metrics.h"
 #include "lfnet/core/output.h"
+#include "lfnet/eval/evaluate.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/figures.h"
@@ -374,13 +375,8 @@ void write_section_viewer(const std::vector<LightField>& lfs,
   page.title = titles[k] + " against the truth (central " + std::to_string(estimate.height()) +
                " x " + std::to_string(estimate.width()) + " pixels)";
   page.truth = truth;
-  const auto pv = per_view_psnr(estimate, truth).to(torch::kFloat64).contiguous();
-  std::vector<std::vector<double>> table(pv.size(0));
-  for (int64_t u = 0; u < pv.size(0); ++u) {
-    for (int64_t v = 0; v < pv.size(1); ++v) table[u].push_back(pv[u][v].item<double>());
-  }
-  page.record = {
-      {"method", titles[k]}, {"psnr_db", psnr(estimate, truth)}, {"per_view_psnr_db", table}};
+  page.record = eval::score(estimate, truth);  // PSNR, SSIM and per-view PSNR, as evaluate's
+  page.record["method"] = titles[k];
   io::write_viewer(estimate, path, page);
 }
 
