@@ -79,11 +79,13 @@ nlohmann::json run_child(const pipeline::BenchOptions& a, const std::string& met
                                    shell_quote(a.device),
                                    "--cnn-mode",
                                    shell_quote(a.cnn_mode),
-                                   "--tile",
-                                   std::to_string(a.tile),
                                    "--precision",
                                    shell_quote(a.precision)};
-  if (!a.model.empty()) args.insert(args.end(), {"--model", shell_quote(a.model)});
+  if (a.tile > 0) args.insert(args.end(), {"--tile", std::to_string(a.tile)});
+  for (const auto& arch : a.architectures) {
+    args.insert(args.end(), {"--architecture", shell_quote(arch)});
+  }
+  for (const auto& model : a.models) args.insert(args.end(), {"--model", shell_quote(model)});
   if (!a.dictionary.empty()) args.insert(args.end(), {"--dictionary", shell_quote(a.dictionary)});
   if (!a.save_dictionary.empty()) {
     args.insert(args.end(), {"--save-dictionary", shell_quote(a.save_dictionary)});
@@ -108,18 +110,20 @@ nlohmann::json run_child(const pipeline::BenchOptions& a, const std::string& met
 }
 
 void print_table(const nlohmann::json& report) {
-  std::printf("\n%-6s %-6s %8s %10s %12s %9s %8s %9s %6s %8s\n", "method", "stride", "patches",
+  std::printf("\n%-14s %-6s %8s %10s %12s %9s %8s %9s %6s %8s\n", "method", "stride", "patches",
               "seconds", "patches/s", "peak MB", "GFLOP/s", "% GEMM", "util", "PSNR dB");
   for (const auto& r : report["cases"]) {
+    // Network cases name their architecture: both may share a run.
+    std::string method = r["method"].get<std::string>();
+    if (r.contains("architecture")) method += "/" + r["architecture"].get<std::string>();
     if (r.contains("error")) {
-      std::printf("%-6s %-6lld  %s\n", r["method"].get<std::string>().c_str(),
+      std::printf("%-14s %-6lld  %s\n", method.c_str(),
                   static_cast<long long>(r["stride"].get<int64_t>()),
                   r["error"].get<std::string>().c_str());
       continue;
     }
-    std::printf("%-6s %-6lld %8lld %10.2f %12.1f %9.0f %8.1f %8.1f%% %6.2f %8.2f\n",
-                r["method"].get<std::string>().c_str(),
-                static_cast<long long>(r["stride"].get<int64_t>()),
+    std::printf("%-14s %-6lld %8lld %10.2f %12.1f %9.0f %8.1f %8.1f%% %6.2f %8.2f\n",
+                method.c_str(), static_cast<long long>(r["stride"].get<int64_t>()),
                 static_cast<long long>(r["patches"].get<int64_t>()), r["seconds"].get<double>(),
                 r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
                 r["gflops"].get<double>(), 100 * r["gemm_fraction"].get<double>(),
@@ -134,7 +138,8 @@ void run_bench(const BenchArgs& args) {
     OutputFolderPolicy policy;
     policy.option = "--json";
     policy.force = true;
-    policy.inputs = {a.model, a.dictionary, a.scene};
+    policy.inputs = {a.dictionary, a.scene};
+    policy.inputs.insert(policy.inputs.end(), a.models.begin(), a.models.end());
     check_output_file(args.json, policy);
   }
   if (!args.one_case.empty()) {
@@ -149,9 +154,10 @@ void run_bench(const BenchArgs& args) {
   parse_device(a.device);  // a clear error before any work
   const auto report = pipeline::bench_report(
       a,
-      [&](const std::string& method, int64_t stride, double gemm) {
-        return args.in_process ? pipeline::bench_case(a, method, stride, gemm)
-                               : run_child(a, method, stride, gemm);
+      [&](const pipeline::BenchOptions& narrowed, const std::string& method, int64_t stride,
+          double gemm) {
+        return args.in_process ? pipeline::bench_case(narrowed, method, stride, gemm)
+                               : run_child(narrowed, method, stride, gemm);
       },
       [](const std::string& line) {
         std::fputs(line.c_str(), stdout);
@@ -188,8 +194,9 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--phi", a->phi, "measurement model name[:N] (default asp:2)");
   cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--model", a->model,
-                  "trained checkpoint (default: an untrained default network)");
+  cmd->add_option("--model", a->models,
+                  "trained checkpoint, repeatable: the network methods run with each (default: "
+                  "an untrained network of --architecture)");
   cmd->add_option("--dictionary", a->dictionary,
                   "dictionary file (default: a small K-SVD dictionary)");
   cmd->add_option("--save-dictionary", a->save_dictionary,
@@ -208,8 +215,12 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
          "--cnn-mode", a->cnn_mode,
          "CNN branch per patch ('patches', the default) or once over the light field ('full')")
       ->check(CLI::IsMember({"patches", "full"}));
-  cmd->add_option("--tile", a->tile, "tile size of --cnn-mode full (default 128)")
+  cmd->add_option("--tile", a->tile,
+                  "tile size of --cnn-mode full (default 128) and of lfnet models (default 256)")
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--architecture", a->architectures,
+                  "untrained networks timed without --model, repeatable: paper (default), lfnet")
+      ->check(CLI::IsMember({"paper", "lfnet"}));
   cmd->add_option("--precision", a->precision,
                   "float32 or bfloat16 for the CNN branch's convolutions")
       ->check(CLI::IsMember({"float32", "bfloat16"}));

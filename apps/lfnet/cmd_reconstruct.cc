@@ -78,8 +78,13 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "CNN branch per patch ('patches', default) or once over the light field in "
                   "tiles ('full'; docs/performance.md)")
       ->check(CLI::IsMember({"patches", "full"}));
-  cmd->add_option("--tile", q.tile, "tile size of --cnn-mode full (default 128)")
+  cmd->add_option("--tile", q.tile,
+                  "tile size of --cnn-mode full (default 128) and of lfnet models (default 256)")
       ->check(CLI::PositiveNumber);
+  cmd->add_option("--noise-sigma", q.noise_sigma,
+                  "the sensor's noise sigma (relative to white) for noise-aware models (default: "
+                  "what the acquisition's sensor.json records, else 0)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--precision", q.precision, "float32 (default) or bfloat16 for the CNN branch")
       ->check(CLI::IsMember({"float32", "bfloat16"}));
   cmd->callback([a] { run_reconstruct(*a); });

@@ -222,3 +222,30 @@ TEST_CASE("photometric jitter varies patches and their measurements stay consist
   o.jitter_gamma = 2;
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("jitter"));
 }
+
+TEST_CASE("noise-aware patches carry their sigma and measurements noisy by it", "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.augment = false;
+  o.noise_range = {0.05, 0.2};
+  data::PatchDataset noisy(fields(), *phi, o, 64);
+  o.noise_range.clear();
+  data::PatchDataset clean(fields(), *phi, o, 64);
+  // The same draws (sigma draws come after all others), so the difference is the noise alone.
+  noisy.start_epoch(0, 200);
+  clean.start_epoch(0, 200);
+  auto a = noisy.next_train(), b = clean.next_train();
+  REQUIRE(a.noise.defined());
+  CHECK_FALSE(b.noise.defined());
+  REQUIRE(a.noise.sizes() == torch::IntArrayRef({200}));
+  CHECK(a.noise.min().item<double>() >= 0.05);
+  CHECK(a.noise.max().item<double>() <= 0.2);
+  CHECK(a.noise.std().item<double>() > 0.02);  // drawn per patch, not one value
+  CHECK(torch::equal(a.target, b.target));
+  // Per patch, the measurement error's standard deviation is the patch's sigma.
+  auto err = (a.y - b.y).std(1);
+  CHECK(torch::allclose(err, a.noise, 0.0, 0.03));
+  REQUIRE(noisy.validation().front().noise.defined());
+  o.noise_range = {0.2, 0.1};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("noise_range"));
+}

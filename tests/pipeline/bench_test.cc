@@ -37,7 +37,7 @@ TEST_CASE("bench_report runs every stride and method through the given runner",
   std::vector<std::string> lines;
   const auto report = pipeline::bench_report(
       o,
-      [&](const std::string& method, int64_t stride, double gemm) {
+      [&](const pipeline::BenchOptions&, const std::string& method, int64_t stride, double gemm) {
         CHECK(gemm > 0);
         asked.push_back(method + ":" + std::to_string(stride));
         if (method == "adjoint")
@@ -56,4 +56,39 @@ TEST_CASE("bench_report runs every stride and method through the given runner",
   REQUIRE(lines.size() == 6);  // the machine, GEMM, and one line per case
   CHECK(lines[0].rfind("lfnet bench:", 0) == 0);
   CHECK(lines[3].find("failed on purpose") != std::string::npos);
+}
+
+TEST_CASE("bench_report times the network methods once per architecture, lfnet at one stride",
+          "[pipeline][bench]") {
+  pipeline::BenchOptions o;
+  o.skip_kernels = true;
+  o.reps = 1;
+  o.methods = {"net", "pinv"};
+  o.strides = {9, 5};
+  o.architectures = {"paper", "lfnet"};
+  std::vector<std::string> asked;
+  pipeline::bench_report(
+      o,
+      [&](const pipeline::BenchOptions& n, const std::string& method, int64_t stride, double) {
+        CHECK(n.architectures.size() == 1);
+        asked.push_back(method + "/" + n.architectures.front() + ":" + std::to_string(stride));
+        return nlohmann::json{{"method", method}, {"stride", stride}, {"error", "not run"}};
+      },
+      [](const std::string&) {});
+  CHECK(asked == std::vector<std::string>{"net/paper:9", "net/lfnet:9", "pinv/paper:9",
+                                          "net/paper:5", "pinv/paper:5"});
+}
+
+TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pipeline][bench]") {
+  pipeline::BenchOptions o;
+  o.height = 40;
+  o.width = 52;
+  o.architectures = {"lfnet"};
+  const auto r = pipeline::bench_case(o, "net", 5, 1e9);
+  CHECK(r["architecture"] == "lfnet");
+  CHECK(r["tile"] == 256);
+  CHECK(r["gflops"].get<double>() > 0);
+  // Untrained, the U-Net adds nothing: the result is the pseudo-inverse's.
+  const auto pinv = pipeline::bench_case(o, "pinv", 5, 1e9);
+  CHECK(r["psnr_db"].get<double>() == Approx(pinv["psnr_db"].get<double>()).margin(0.01));
 }

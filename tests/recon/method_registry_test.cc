@@ -30,15 +30,16 @@ class HalfGreyMethod : public recon::Method {
 
 TEST_CASE("the built-in methods are registered in table order with what they need", "[recon]") {
   const auto names = recon::registered_methods();
-  const std::vector<std::string> builtins = {"net",  "ae",      "cnn",        "dict",
-                                             "pinv", "adjoint", "no-parallax"};
+  const std::vector<std::string> builtins = {"net",  "ae",       "cnn",     "dict",
+                                             "pinv", "pinv-nlm", "adjoint", "no-parallax"};
   REQUIRE(names.size() >= builtins.size());
-  CHECK(std::vector<std::string>(names.begin(), names.begin() + 7) == builtins);
+  CHECK(std::vector<std::string>(names.begin(), names.begin() + 8) == builtins);
   CHECK(recon::find_method("net").needs() == recon::MethodNeeds::kNetwork);
   CHECK(recon::find_method("cnn").needs() == recon::MethodNeeds::kNetwork);
   CHECK(recon::find_method("dict").needs() == recon::MethodNeeds::kDictionary);
   CHECK(recon::find_method("pinv").needs() == recon::MethodNeeds::kNothing);
   CHECK(recon::find_method("adjoint").needs() == recon::MethodNeeds::kNothing);
+  CHECK(recon::find_method("pinv-nlm").needs() == recon::MethodNeeds::kNothing);
   CHECK(recon::find_method("no-parallax").needs() == recon::MethodNeeds::kTruth);
   CHECK(recon::needs_network("ae"));
   CHECK_FALSE(recon::needs_network("pinv"));

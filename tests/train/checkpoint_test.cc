@@ -223,3 +223,33 @@ TEST_CASE("a default-sized checkpoint with Adam state stays under 10 MB", "[trai
   CHECK(lfnet::train::load_checkpoint(best).optimizer.empty());
   CHECK_THROWS_WITH(trainer.resume(best), Catch::Contains("no optimizer state"));
 }
+
+TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[train][checkpoint]") {
+  lfnet::test::TempDir dir;
+  for (int64_t period : {1, 3}) {
+    INFO("period " << period);
+    NetworkOptions o;
+    o.architecture = "lfnet";
+    o.measurements = 2;
+    o.patch = {3, 3, 8, 8};
+    o.image.channels = 4;
+    o.image.levels = 2;
+    o.image.blocks = 1;
+    o.image.noise_input = period > 1;
+    torch::manual_seed(period);
+    LightFieldNet net(o);
+    net->set_phi(torch::rand({2, 3, 3, period, period}));
+    {
+      torch::NoGradGuard no_grad;
+      for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.1);
+    }
+    const auto path = dir / ("lfnet" + std::to_string(period) + ".ckpt");
+    lfnet::train::save_checkpoint(checkpoint_of(net, {{"name", "mask"}}), path);
+    auto loaded = lfnet::train::build_net(lfnet::train::load_checkpoint(path));
+    auto y = torch::rand({4, 2 * 64});
+    auto phase = torch::arange(4, torch::kInt64).remainder(period * period);
+    auto noise = torch::full({4}, 0.1);
+    CHECK(torch::equal(loaded->forward(y, phase, noise), net->forward(y, phase, noise)));
+    CHECK(loaded->options().to_json() == o.to_json());
+  }
+}

@@ -45,6 +45,11 @@ void DatasetOptions::validate() const {
     throw ConfigError("validation_fraction must lie in (0, 1)");
   }
   if (min_std < 0) throw ConfigError("min_std must be non-negative");
+  if (!noise_range.empty() &&
+      (noise_range.size() != 2 || !(noise_range[0] >= 0 && noise_range[1] >= noise_range[0] &&
+                                    std::isfinite(noise_range[1])))) {
+    throw ConfigError("noise_range must be [lo, hi] with 0 <= lo <= hi, or empty");
+  }
   if (angular_windows != "central" && angular_windows != "any") {
     throw ConfigError("angular_windows must be \"central\" or \"any\", got \"" + angular_windows +
                       "\"");
@@ -133,10 +138,10 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
 PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
   auto part = [&](const auto& v) {
     using V = std::decay_t<decltype(v)>;
-    return V(v.begin() + begin, v.begin() + end);
+    return v.empty() ? V() : V(v.begin() + begin, v.begin() + end);  // sigma may be empty
   };
-  return {part(lf),     part(y0),    part(x0),       part(aug),
-          part(window), part(gamma), part(contrast), part(brightness)};
+  return {part(lf),    part(y0),       part(x0),         part(aug),  part(window),
+          part(gamma), part(contrast), part(brightness), part(sigma)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
@@ -186,6 +191,13 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
     d.contrast.push_back(static_cast<float>(c));
     d.brightness.push_back(static_cast<float>(b));
   }
+  // After the patches' own draws, so that a noise range leaves which patches are drawn alone.
+  if (!options_.noise_range.empty()) {
+    const double lo = options_.noise_range[0], hi = options_.noise_range[1];
+    for (int64_t i = 0; i < count; ++i) {
+      d.sigma.push_back(static_cast<float>(lo + (hi - lo) * 0.5 * (unit(rng) + 1.0)));
+    }
+  }
   return d;
 }
 
@@ -224,7 +236,13 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
     y = torch::matmul(target.reshape({b, -1}), matrix_.t());
   }
   if (!options_.effects.empty()) y = optics::apply_sensor_effects(y, options_.effects, noise_seed);
-  return {y.contiguous(), phase, target.unsqueeze(1)};
+  torch::Tensor noise;
+  if (!d.sigma.empty()) {
+    noise = torch::tensor(d.sigma, torch::kFloat32);
+    auto gen = torch::make_generator<at::CPUGeneratorImpl>(noise_seed ^ 0x6e6f697365ULL);
+    y = y + torch::randn(y.sizes(), gen, y.options()) * noise.unsqueeze(1);
+  }
+  return {y.contiguous(), phase, target.unsqueeze(1), noise};
 }
 
 PatchDataset::~PatchDataset() {
@@ -262,16 +280,18 @@ train::Batch PatchDataset::prepare_next() {
   Draw d = draw(false, n, rng_);
   if (shard_world_ == 1) return make_batch(d, noise_seed);
   const auto [begin, end] = dist::shard_range(n, shard_rank_, shard_world_);
-  if (!options_.effects.empty()) {
+  auto part = [](const train::Batch& b, int64_t from, int64_t to) {
+    return train::Batch{b.y.slice(0, from, to).contiguous(), b.phase.slice(0, from, to),
+                        b.target.slice(0, from, to).contiguous(),
+                        b.noise.defined() ? b.noise.slice(0, from, to) : b.noise};
+  };
+  if (!options_.effects.empty() || !options_.noise_range.empty()) {
     // The noise of one patch depends on the whole batch's draw: simulate it all, keep a part.
-    auto full = make_batch(d, noise_seed);
-    return {full.y.slice(0, begin, end).contiguous(), full.phase.slice(0, begin, end),
-            full.target.slice(0, begin, end).contiguous()};
+    return part(make_batch(d, noise_seed), begin, end);
   }
   if (begin == end) {
     // A last batch smaller than the world leaves this rank nothing: an empty batch.
-    auto b = make_batch(d.slice(0, 1), noise_seed);
-    return {b.y.slice(0, 0, 0), b.phase.slice(0, 0, 0), b.target.slice(0, 0, 0)};
+    return part(make_batch(d.slice(0, 1), noise_seed), 0, 0);
   }
   return make_batch(d.slice(begin, end), noise_seed);
 }

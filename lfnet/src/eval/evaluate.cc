@@ -47,7 +47,7 @@ nlohmann::json score(const LightField& estimate, const LightField& truth) {
 
 EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::string& method,
                     const recon::PatchSolver& solver, const EvalOptions& options,
-                    const recon::ProgressCallback& progress) {
+                    const recon::ProgressCallback& progress, const recon::ImageSolver& image) {
   LFNET_CHECK_AS(ConfigError, truth.channels() == 1, "evaluation takes a grey light field");
   const auto& ro = options.reconstruct;
   ro.validate();
@@ -57,7 +57,12 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   if (options.mode == optics::SimulationMode::kSensor) {
     auto sensor = optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed);
     clock.reset();  // time the reconstruction, not the simulation
-    estimate = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
+    if (image) {
+      estimate = image(sensor, options.effects.gaussian ? options.effects.gaussian->sigma : 0.0);
+      if (progress) progress(grid.size(), grid.size());
+    } else {
+      estimate = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
+    }
   } else {
     // Simulate every band up front so only the reconstruction is timed; memory is N h w
     // floats per patch.

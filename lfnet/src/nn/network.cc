@@ -41,6 +41,17 @@ void NetworkOptions::validate() const {
   if (patch.rows < 1 || patch.cols < 1 || patch.height < 1 || patch.width < 1) {
     fail("patch", "every size must be positive, got " + patch.to_json().dump());
   }
+  if (architecture != "paper" && architecture != "lfnet") {
+    fail("architecture", "'" + architecture + "' is unknown (known: paper, lfnet)");
+  }
+  if (is_image()) {
+    image.validate();
+    const int64_t m = image.multiple();
+    if (patch.height % m != 0 || patch.width % m != 0) {
+      fail("patch", "the lfnet architecture's training crops need sides that are multiples of " +
+                        std::to_string(m) + ", got " + patch.to_json().dump());
+    }
+  }
   if (measurements < 1) fail("measurements", "must be >= 1, got " + std::to_string(measurements));
   if (branches != "net" && branches != "ae" && branches != "cnn") {
     fail("branches", "'" + branches + "' is unknown (known: net, ae, cnn)");
@@ -201,6 +212,15 @@ int64_t parameter_count(const torch::nn::Module& module) {
 
 LightFieldNetImpl::LightFieldNetImpl(NetworkOptions options) : options_(std::move(options)) {
   options_.validate();
+  const auto& p = options_.patch;
+  if (options_.is_image()) {
+    const int64_t views = p.rows * p.cols;
+    phi = register_buffer("phi", torch::zeros({options_.measurements, p.rows, p.cols, 1, 1}));
+    pixel_pinv = register_buffer("pixel_pinv", torch::zeros({1, 1, options_.measurements, views}));
+    const int64_t in = views + (options_.image.noise_input ? 1 : 0);
+    image = register_module("image", ImageNet(options_.image, in, views));
+    return;
+  }
   const int64_t m = options_.measurement_size(), d = options_.patch.size();
   phi = register_buffer("phi", torch::zeros({1, m, d}));
   adjoint_scale = register_buffer("adjoint_scale", torch::ones({1}));
@@ -210,6 +230,26 @@ LightFieldNetImpl::LightFieldNetImpl(NetworkOptions options) : options_(std::mov
 }
 
 void LightFieldNetImpl::set_phi(const torch::Tensor& stack) {
+  if (options_.is_image()) {
+    const auto& p = options_.patch;
+    LFNET_CHECK(stack.dim() == 5 && stack.size(0) == options_.measurements &&
+                    stack.size(1) == p.rows && stack.size(2) == p.cols && stack.size(3) >= 1 &&
+                    stack.size(3) == stack.size(4),
+                "set_phi: the lfnet architecture expects the pixel weights of one period (",
+                options_.measurements, ", ", p.rows, ", ", p.cols, ", T, T), got ", stack.sizes());
+    LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
+                   "set_phi: the pixel weights contain NaN or inf");
+    torch::NoGradGuard no_grad;
+    // Per pixel, A (N, U V) -> A^T (A A^T + lambda I)^-1, stored transposed as (N, U V).
+    const int64_t n = options_.measurements, t = stack.size(3);
+    auto a = stack.to(torch::kFloat64).reshape({n, p.rows * p.cols, t, t}).permute({2, 3, 0, 1});
+    auto gram =
+        torch::matmul(a, a.transpose(2, 3)) + options_.pinv_lambda * torch::eye(n, a.options());
+    auto inverse = at::linalg_solve(gram, a);  // (T, T, N, U V)
+    phi.set_(stack.to(phi.options()).contiguous().clone());
+    pixel_pinv.set_(inverse.to(phi.options()).contiguous());
+    return;
+  }
   const int64_t m = options_.measurement_size(), d = options_.patch.size();
   LFNET_CHECK(stack.dim() == 3 && stack.size(0) >= 1 && stack.size(1) == m && stack.size(2) == d,
               "set_phi: expected patch matrices (P, ", m, ", ", d,
@@ -259,6 +299,7 @@ torch::Tensor LightFieldNetImpl::adjoint(const torch::Tensor& y, const torch::Te
 
 torch::Tensor LightFieldNetImpl::scaled_adjoint(const torch::Tensor& y,
                                                 const torch::Tensor& phase) const {
+  LFNET_CHECK(!options_.is_image(), "the lfnet architecture has no scaled adjoint");
   auto x = apply_phase_stack(y, phase, phi);
   if (phases() == 1) return x * adjoint_scale[0];
   return x * adjoint_scale.index_select(0, phase).unsqueeze(1);
@@ -268,11 +309,69 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   return forward_all(y, phase, BranchSelection{});
 }
 
+torch::Tensor LightFieldNetImpl::pixel_pinv_image(const torch::Tensor& sensor,
+                                                  const torch::Tensor& phase) const {
+  LFNET_CHECK(options_.is_image(), "pixel_pinv_image: only the lfnet architecture has it");
+  LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == options_.measurements,
+              "pixel_pinv_image: expected sensor crops (B, ", options_.measurements,
+              ", h, w), got ", sensor.sizes());
+  const int64_t t = pixel_pinv.size(0), h = sensor.size(2), w = sensor.size(3);
+  const auto x = sensor.to(pixel_pinv.scalar_type());
+  if (t == 1) return torch::einsum("nk,bnij->bkij", {pixel_pinv[0][0], x});
+  // The map of pixel (i, j) of a crop of phase (py, px) is the tile's entry
+  // ((py + i) mod T, (px + j) mod T).
+  auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({x.size(0)}, torch::kInt64);
+  auto out = torch::empty({x.size(0), pixel_pinv.size(3), h, w}, x.options());
+  auto iota = [&](int64_t n) { return torch::arange(n, torch::kInt64).to(x.device()); };
+  const auto values = std::get<0>(at::_unique(ph));
+  for (int64_t k = 0; k < values.size(0); ++k) {
+    const int64_t v = values[k].item<int64_t>();
+    auto rows = (iota(h) + v / t) % t, cols = (iota(w) + v % t) % t;
+    auto map = pixel_pinv.index_select(0, rows).index_select(1, cols);  // (h, w, N, U V)
+    auto index = torch::nonzero(ph == v).squeeze(1).to(x.device());
+    out.index_copy_(0, index, torch::einsum("ijnk,bnij->bkij", {map, x.index_select(0, index)}));
+  }
+  return out;
+}
+
+torch::Tensor LightFieldNetImpl::refine(const torch::Tensor& base, const torch::Tensor& noise) {
+  if (!options_.image.noise_input) return base + image->forward(base);
+  auto sigma =
+      noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
+  auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
+  return base + image->forward(torch::cat({base, channel}, 1));
+}
+
+torch::Tensor LightFieldNetImpl::forward_image(const torch::Tensor& sensor, int64_t phase,
+                                               double noise_sigma) {
+  LFNET_CHECK(options_.is_image(), "forward_image: only the lfnet architecture has it");
+  LFNET_CHECK(sensor.dim() == 4, "forward_image: expected (B, N, H, W), got ", sensor.sizes());
+  const auto& p = options_.patch;
+  const int64_t m = options_.image.multiple(), h = sensor.size(2), w = sensor.size(3);
+  const int64_t ph = (m - h % m) % m, pw = (m - w % m) % m;
+  LFNET_CHECK(phase >= 0 && phase < phases(), "forward_image: phase ", phase, " outside [0, ",
+              phases(), ")");
+  auto base = pixel_pinv_image(
+      sensor, phase == 0 ? torch::Tensor() : torch::full({sensor.size(0)}, phase, torch::kInt64));
+  if (ph > 0 || pw > 0) base = torch::constant_pad_nd(base, {0, pw, 0, ph});
+  auto out = refine(base, torch::full({sensor.size(0)}, noise_sigma, base.options()));
+  return out.slice(2, 0, h).slice(3, 0, w).reshape({sensor.size(0), p.rows, p.cols, h, w});
+}
+
 NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torch::Tensor& phase,
                                               BranchSelection run) {
   auto ph = check_phase(y, phase);
   const auto& p = options_.patch;
   const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
+  if (options_.is_image()) {
+    // A crop: its pixel (0, 0) has the crop's phase.
+    NetworkOutputs out;
+    auto sensor = y.reshape({y.size(0), options_.measurements, p.height, p.width});
+    auto base = pixel_pinv_image(sensor, ph);
+    out.base = base.view(shape);
+    out.output = refine(base, {}).view(shape);
+    return out;
+  }
   const bool run_ae = run.ae && options_.has_ae(), run_cnn = run.cnn && options_.has_cnn();
   const bool need_adjoint =
       run_cnn || (run_ae && options_.ae.input == "adjoint") || options_.residual == "adjoint";
@@ -296,8 +395,14 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   return out;
 }
 
-torch::Tensor LightFieldNetImpl::forward(const torch::Tensor& y, const torch::Tensor& phase) {
-  return forward_all(y, phase).output;
+torch::Tensor LightFieldNetImpl::forward(const torch::Tensor& y, const torch::Tensor& phase,
+                                         const torch::Tensor& noise) {
+  if (!options_.is_image()) return forward_all(y, phase).output;
+  const auto& p = options_.patch;
+  auto ph = check_phase(y, phase);
+  auto sensor = y.reshape({y.size(0), options_.measurements, p.height, p.width});
+  return refine(pixel_pinv_image(sensor, ph), noise)
+      .view({y.size(0), 1, p.rows, p.cols, p.height, p.width});
 }
 
 double cnn_patch_flops(const NetworkOptions& o) {
@@ -324,7 +429,30 @@ double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, in
   return per_position * positions * static_cast<double>(o.patch.rows * o.patch.cols);
 }
 
+double image_pixel_flops(const NetworkOptions& o) {
+  const int64_t views = o.patch.rows * o.patch.cols;
+  return 2.0 * static_cast<double>(o.measurements * views) + o.image.pixel_flops(views, views);
+}
+
+double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {
+  const int64_t m = o.image.multiple();
+  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
+  const int64_t halo = round_up(o.image.receptive_radius()),
+                step = round_up(std::max<int64_t>(1, tile));
+  const int64_t hp = round_up(height), wp = round_up(width);
+  double pixels = 0;
+  for (int64_t y0 = 0; y0 < hp; y0 += step) {
+    for (int64_t x0 = 0; x0 < wp; x0 += step) {
+      const int64_t th = std::min(hp, y0 + step + halo) - std::max<int64_t>(0, y0 - halo);
+      const int64_t tw = std::min(wp, x0 + step + halo) - std::max<int64_t>(0, x0 - halo);
+      pixels += static_cast<double>(th * tw);
+    }
+  }
+  return image_pixel_flops(o) * pixels;
+}
+
 double patch_flops(const NetworkOptions& o, const BranchSelection& run) {
+  if (o.is_image()) return image_pixel_flops(o) * static_cast<double>(o.patch.pixels());
   const auto& p = o.patch;
   const double d = static_cast<double>(p.size()), m = static_cast<double>(o.measurement_size());
   auto conv = [&](int64_t cin, int64_t cout) {

@@ -20,6 +20,7 @@
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
@@ -137,24 +138,31 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   optics::PhiSpec spec = optics::PhiSpec::parse(a.phi);
   nlohmann::json model_info = "untrained default network";
   if (recon::needs_network(method)) {
-    if (!a.model.empty()) {
-      const auto ckpt = train::load_checkpoint(a.model);
-      spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":phi");
-      net = train::build_net(ckpt, a.model);
-      model_info = a.model;
+    const std::string model = a.models.empty() ? "" : a.models.front();
+    const std::string architecture = a.architectures.empty() ? "paper" : a.architectures.front();
+    if (!model.empty()) {
+      const auto ckpt = train::load_checkpoint(model);
+      spec = optics::PhiSpec::from_json(ckpt.phi, model + ":phi");
+      net = train::build_net(ckpt, model);
+      model_info = model;
     } else {
       nn::NetworkOptions no;
       no.measurements = spec.n;
+      LFNET_CHECK_AS(ConfigError, architecture == "paper" || architecture == "lfnet",
+                     "unknown architecture '", architecture, "' (known: paper, lfnet)");
+      if (architecture == "lfnet") {
+        model_info = "untrained lfnet network";
+        no.architecture = "lfnet";
+        no.patch.height = no.patch.width = 48;
+      }
       torch::manual_seed(0);
       net = nn::LightFieldNet(no);
     }
   }
   const auto phi = optics::make_phi(spec);
-  if (net && a.model.empty()) {
-    net->set_phi(
-        optics::patch_matrix_stack(*phi, net->options().patch.height, net->options().patch.width));
-  }
-  const int64_t patch = net ? net->options().patch.height : 9;
+  if (net && a.models.empty()) net->set_phi(phi_tensor(*phi, net->options()));
+  // The patch grid of patch methods (lfnet reconstructs whole images: its crop is no patch).
+  const int64_t patch = net && !net->options().is_image() ? net->options().patch.height : 9;
   recon::ReconstructOptions o;
   o.patch_h = o.patch_w = patch;
   o.stride = stride;
@@ -165,6 +173,8 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
 
   const auto cnn_mode = recon::parse_cnn_mode(a.cnn_mode);
   const bool full = cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn");
+  const int64_t cnn_tile = a.tile > 0 ? a.tile : recon::kDefaultCnnTile;
+  const int64_t image_tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
   nlohmann::json extra = nlohmann::json::object();
   recon::MethodResources resources;
   resources.phi = phi.get();
@@ -175,9 +185,10 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     nn::set_cnn_precision(net, nn::parse_precision(a.precision));
     resources.net = net;
     extra["model"] = model_info;
+    extra["architecture"] = net->options().architecture;
     extra["cnn_mode"] = full ? "full" : "patches";
     extra["precision"] = a.precision;
-    if (full) extra["tile"] = a.tile;
+    if (full) extra["tile"] = cnn_tile;
   } else if (recon::find_method(method).needs() == recon::MethodNeeds::kDictionary) {
     dictionary = bench_dictionary(a, patch);
     resources.dictionary = &dictionary;
@@ -185,7 +196,10 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     extra["dictionary"] = a.dictionary.empty() ? "bench K-SVD (3 iterations)" : a.dictionary;
     extra["omp_atoms"] = resources.coding.omp.max_atoms;
   }
+  resources.tile = image_tile;
   const recon::PatchSolver solver = recon::make_solver(method, resources);
+  const recon::ImageSolver image = recon::make_image_solver(method, resources);
+  if (image) extra["tile"] = image_tile;
   const double flops_per_patch = recon::find_method(method).patch_flops(resources);
   const double setup_seconds = setup_clock.seconds();
   const double setup_peak = status_mb("VmHWM");
@@ -194,8 +208,9 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const auto cpu0 = cpu_seconds();
   Stopwatch clock;
   auto est =
-      full ? recon::reconstruct_sensor_fully_convolutional(net, method, *phi, sensor, o, a.tile)
-           : recon::reconstruct_sensor(*phi, sensor, solver, o);
+      image  ? image(sensor, 0.0)
+      : full ? recon::reconstruct_sensor_fully_convolutional(net, method, *phi, sensor, o, cnn_tile)
+             : recon::reconstruct_sensor(*phi, sensor, solver, o);
   const double seconds = clock.seconds();
   const auto cpu1 = cpu_seconds();
   const double user = cpu1.first - cpu0.first, system = cpu1.second - cpu0.second;
@@ -204,9 +219,11 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const PatchGrid grid(truth.height(), truth.width(), patch, patch, stride);
   // Patch stitching computes flops_per_patch for every patch; the fully convolutional pass
   // computes the CNN once per tile position instead.
-  double flops = flops_per_patch * static_cast<double>(grid.size());
-  if (full) {
-    flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), a.tile) -
+  double flops =
+      image ? nn::image_full_flops(net->options(), truth.height(), truth.width(), image_tile)
+            : flops_per_patch * static_cast<double>(grid.size());
+  if (full && !image) {
+    flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), cnn_tile) -
              nn::cnn_patch_flops(net->options()) * static_cast<double>(grid.size());
   }
   nlohmann::json r = {{"method", method},
@@ -328,19 +345,47 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
     }
   }
   report["cases"] = nlohmann::json::array();
-  for (int64_t stride : a.strides) {
+  // The nets the network methods run with: one narrowed option set per model or architecture,
+  // with whether it reconstructs whole images.
+  std::vector<std::pair<BenchOptions, bool>> nets;
+  const std::vector<std::string> models =
+      a.models.empty() ? std::vector<std::string>{""} : a.models;
+  for (const auto& model : models) {
+    for (const auto& architecture : a.architectures) {
+      BenchOptions n = a;
+      n.models = model.empty() ? std::vector<std::string>{} : std::vector<std::string>{model};
+      n.architectures = {architecture};
+      const bool image =
+          model.empty() ? architecture == "lfnet" : load_model(model, false).network.is_image();
+      nets.emplace_back(n, image);
+      if (!model.empty()) break;  // a checkpoint has its own architecture
+    }
+  }
+  for (size_t s = 0; s < a.strides.size(); ++s) {
+    const int64_t stride = a.strides[s];
     for (const auto& method : a.methods) {
-      auto r = run_case(method, stride, gemm);
-      if (!r.contains("error")) {
-        say("%-4s stride %lld: %.2f s, %.0f patches/s, peak %.0f MB, PSNR %.2f dB\n",
-            method.c_str(), static_cast<long long>(stride), r["seconds"].get<double>(),
-            r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
-            r["psnr_db"].get<double>());
-      } else {
-        say("%-4s stride %lld: %s\n", method.c_str(), static_cast<long long>(stride),
-            r["error"].get<std::string>().c_str());
+      const bool network = recon::needs_network(method);
+      for (const auto& [narrowed, image] : nets) {
+        if (image && s > 0) continue;  // whole images: the stride does not apply
+        auto r = run_case(narrowed, method, stride, gemm);
+        const std::string label =
+            !network ? method
+                     : method + " [" +
+                           (narrowed.models.empty() ? narrowed.architectures.front()
+                                                    : narrowed.models.front()) +
+                           "]";
+        if (!r.contains("error")) {
+          say("%-4s stride %lld: %.2f s, %.0f patches/s, peak %.0f MB, PSNR %.2f dB\n",
+              label.c_str(), static_cast<long long>(stride), r["seconds"].get<double>(),
+              r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
+              r["psnr_db"].get<double>());
+        } else {
+          say("%-4s stride %lld: %s\n", label.c_str(), static_cast<long long>(stride),
+              r["error"].get<std::string>().c_str());
+        }
+        report["cases"].push_back(r);
+        if (!network) break;  // one case for methods without a net
       }
-      report["cases"].push_back(r);
     }
   }
   report["machine"]["load_average_1min_end"] = load_average();

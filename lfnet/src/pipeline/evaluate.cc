@@ -62,6 +62,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       resources.report = report;
     }
     const recon::PatchSolver solver = recon::make_solver(method, resources);
+    const recon::ImageSolver image = recon::make_image_solver(method, resources);
     std::unique_ptr<ProgressBar> patches_bar;
     if (show_progress) {
       patches_bar = std::make_unique<ProgressBar>(
@@ -72,10 +73,13 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
           "patches");
     }
     int64_t shown = 0;
-    result = eval::evaluate(truth.lf, phi, method, solver, options, [&](int64_t done, int64_t) {
-      if (patches_bar) patches_bar->advance(done - shown);
-      shown = done;
-    });
+    result = eval::evaluate(
+        truth.lf, phi, method, solver, options,
+        [&](int64_t done, int64_t) {
+          if (patches_bar) patches_bar->advance(done - shown);
+          shown = done;
+        },
+        image);
   }
   result.record["light_field"] = truth.name;
   if (report) {
@@ -112,7 +116,8 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     if (recon::needs_network(method)) {
       context.net = model.net;
       context.script = model.script;
-      network_patch = model.network.patch;
+      // The lfnet architecture reconstructs whole images: its training crop is no patch size.
+      if (!model.network.is_image()) network_patch = model.network.patch;
       if (context.net) {
         context.net->to(parse_device(a.device));
         nn::set_cnn_precision(context.net, nn::parse_precision(a.precision));

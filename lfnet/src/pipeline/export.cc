@@ -43,6 +43,9 @@ ExportResult export_model(const ExportRequest& a) {
   const auto ckpt = train::load_checkpoint(a.model);
   auto net = train::build_net(ckpt, a.model);
   net->eval();
+  LFNET_CHECK_AS(ConfigError, !net->options().is_image(), a.model,
+                 " is of the lfnet architecture, which export does not write yet; reconstruct "
+                 "with the checkpoint itself");
   const auto spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
   const auto phi = optics::make_phi(spec);
   const auto& o = net->options();

@@ -8,12 +8,23 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/zip_check.h"
 #include "lfnet/io/phi_io.h"
+#include "lfnet/optics/measure.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
 
 namespace fs = std::filesystem;
 
 namespace lfnet::pipeline {
+
+torch::Tensor phi_tensor(const optics::Phi& phi, const nn::NetworkOptions& options) {
+  if (!options.is_image()) {
+    return optics::patch_matrix_stack(phi, options.patch.height, options.patch.width);
+  }
+  LFNET_CHECK_AS(ConfigError, phi.local(), "the lfnet architecture needs a Phi whose ",
+                 "measurements are per pixel; ", phi.spec().label(), " is not");
+  const int64_t t = phi.period();
+  return phi.pixel_weights(0, 0, t, t);
+}
 
 ModelFileKind model_file_kind(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

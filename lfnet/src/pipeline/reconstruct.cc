@@ -98,14 +98,17 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   const auto phi = optics::make_phi(spec);
   recon::ReconstructOptions o = a.options;
   recon::PatchSolver solver;
+  recon::ImageSolver image;
   double train_mean = 0;
   const bool full = recon::parse_cnn_mode(a.cnn_mode) == recon::CnnMode::kFull;
   LFNET_CHECK_AS(ConfigError, !full || method == "net" || method == "cnn",
                  "--cnn-mode full needs --method net or cnn, not '", method, "'");
   if (model) {
     model->check_phi(spec.to_json());
-    o.patch_h = model->network.patch.height;
-    o.patch_w = model->network.patch.width;
+    if (!model->network.is_image()) {  // lfnet reconstructs whole images
+      o.patch_h = model->network.patch.height;
+      o.patch_w = model->network.patch.width;
+    }
     if (model->net) {
       model->net->to(parse_device(a.device));
       nn::set_cnn_precision(model->net, nn::parse_precision(a.precision));
@@ -125,11 +128,16 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
       resources.net = model->net;
       resources.script = model->script.get();
     }
+    resources.tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
     if (needs == recon::MethodNeeds::kDictionary) {
       resources.dictionary = &files.dictionary(a.dictionary);
       resources.coding = dict_coding(*resources.dictionary, a.dict_options, a.dict_method);
     }
     solver = recon::make_solver(method, resources);
+    image = recon::make_image_solver(method, resources);
+    LFNET_CHECK_AS(ConfigError, !(image && full),
+                   "--cnn-mode full applies to the paper's architecture; a model of the lfnet "
+                   "architecture always reconstructs the whole image");
   }
   LFNET_CHECK_AS(ConfigError, !a.match_mean || train_mean > 0,
                  "--match-mean needs a model that records its training measurement mean");
@@ -145,9 +153,16 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     for (int64_t ch = 0; ch < c; ++ch) {
       auto sensor = acq.sensor[ch].clone();
       if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
+      if (image) {
+        const double sigma =
+            a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
+        channels.push_back(image(sensor, sigma));
+        if (progress) progress((ch + 1) * per_channel, c * per_channel);
+        continue;
+      }
       if (full) {
-        channels.push_back(recon::reconstruct_sensor_fully_convolutional(model->net, method, *phi,
-                                                                         sensor, o, a.tile));
+        channels.push_back(recon::reconstruct_sensor_fully_convolutional(
+            model->net, method, *phi, sensor, o, a.tile > 0 ? a.tile : recon::kDefaultCnnTile));
         if (progress) progress((ch + 1) * per_channel, c * per_channel);
         continue;
       }

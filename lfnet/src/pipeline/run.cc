@@ -189,9 +189,12 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
       for (int64_t stride : ev.strides) {
         for (const auto& mode : ev.modes) {
           for (double noise : ev.noise) {
-            nn::PatchShape patch;
-            patch.height = config.dataset.patch_h;
-            patch.width = config.dataset.patch_w;
+            std::optional<nn::PatchShape> patch;  // lfnet reconstructs whole images
+            if (!config.network.is_image()) {
+              patch = nn::PatchShape{};
+              patch->height = config.dataset.patch_h;
+              patch->width = config.dataset.patch_w;
+            }
             const eval::EvalOptions defaults;
             const auto o =
                 make_eval_options(mode, noise, defaults.seed, stride, defaults.reconstruct.batch,

@@ -13,6 +13,7 @@
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/optics/measure.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/train/checkpoint.h"
 #include "lfnet/train/trainer.h"
 
@@ -50,7 +51,7 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
                                                       : 4;
   torch::manual_seed(config.dataset.seed * 16 + stage_code);
   nn::LightFieldNet net(config.stage_network(stage));
-  net->set_phi(optics::patch_matrix_stack(*phi, config.dataset.patch_h, config.dataset.patch_w));
+  net->set_phi(phi_tensor(*phi, net->options()));
   train::RunInfo run;
   run.config = config.raw;
   run.config["resolved_stage"] = stage.name;

@@ -3,6 +3,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/dict/omp.h"
 #include "lfnet/optics/measure.h"
+#include "lfnet/recon/fully_convolutional.h"
 
 namespace lfnet::recon {
 
@@ -10,7 +11,8 @@ namespace lfnet::recon {
 std::unique_ptr<Method> make_network_method(const std::string& branch);  // net, ae or cnn
 std::unique_ptr<Method> make_dictionary_method();
 std::unique_ptr<Method> make_pinv_method();
-std::unique_ptr<Method> make_adjoint_method();  // adjoint_method.cc
+std::unique_ptr<Method> make_adjoint_method();   // adjoint_method.cc
+std::unique_ptr<Method> make_pinv_nlm_method();  // pinv_nlm_method.cc
 std::unique_ptr<Method> make_no_parallax_method();
 
 double linear_patch_flops(const MethodResources& r) {
@@ -24,6 +26,7 @@ void register_builtin_methods(const MethodSink& add) {
   add(make_network_method("cnn"));
   add(make_dictionary_method());
   add(make_pinv_method());
+  add(make_pinv_nlm_method());
   add(make_adjoint_method());
   add(make_no_parallax_method());
 }
@@ -41,7 +44,24 @@ class NetworkMethod : public Method {
   }
   MethodNeeds needs() const override { return MethodNeeds::kNetwork; }
   PatchSolver solver(const MethodResources& r) const override {
+    if (!r.script && r.net->options().is_image()) {
+      check_image_branch();
+      // The U-Net needs a whole sensor image: image_solver() serves sensor images.
+      return [](const torch::Tensor&, const torch::Tensor&) -> torch::Tensor {
+        throw ConfigError(
+            "the lfnet architecture reconstructs sensor images, not per-patch measurements");
+      };
+    }
     return r.script ? script_solver(*r.script, branch_) : network_solver(r.net, branch_);
+  }
+  ImageSolver image_solver(const MethodResources& r) const override {
+    if (r.script || r.net.is_empty() || !r.net->options().is_image()) return {};
+    check_image_branch();
+    auto net = r.net;
+    const int64_t tile = r.tile;
+    return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
+      return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma);
+    };
   }
   double patch_flops(const MethodResources& r) const override {
     if (r.net.is_empty()) return 0;
@@ -52,6 +72,11 @@ class NetworkMethod : public Method {
   }
 
  private:
+  void check_image_branch() const {
+    LFNET_CHECK_AS(ConfigError, branch_ == "net", "method '", branch_,
+                   "' names a branch of the paper's network; a model of the lfnet architecture "
+                   "has none: use --method net");
+  }
   std::string branch_;
 };
 

@@ -77,7 +77,8 @@ std::string method_list(std::optional<MethodNeeds> excluded) {
   return out;
 }
 
-PatchSolver make_solver(const std::string& name, const MethodResources& resources) {
+namespace {
+const Method& checked_method(const std::string& name, const MethodResources& resources) {
   const Method& method = find_method(name);
   LFNET_CHECK(resources.phi != nullptr, "method '", name, "' without a Phi");
   switch (method.needs()) {
@@ -95,7 +96,16 @@ PatchSolver make_solver(const std::string& name, const MethodResources& resource
     case MethodNeeds::kNothing:
       break;
   }
-  return method.solver(resources);
+  return method;
+}
+}  // namespace
+
+PatchSolver make_solver(const std::string& name, const MethodResources& resources) {
+  return checked_method(name, resources).solver(resources);
+}
+
+ImageSolver make_image_solver(const std::string& name, const MethodResources& resources) {
+  return checked_method(name, resources).image_solver(resources);
 }
 
 // ---- the methods that need no more than their registry entry ------------------------------

@@ -229,6 +229,7 @@ Batch to_device(const Batch& batch, const c10::Device& device) {
   Batch out;
   out.y = batch.y.defined() ? batch.y.to(device) : batch.y;
   out.phase = batch.phase.defined() ? batch.phase.to(device) : batch.phase;
+  out.noise = batch.noise.defined() ? batch.noise.to(device) : batch.noise;
   out.target = batch.target.defined() ? batch.target.to(device) : batch.target;
   return out;
 }
@@ -528,7 +529,7 @@ Evaluation Trainer::evaluate(BatchSource& source) {
     if (static_cast<int64_t>(j) % world != rank) continue;  // another rank's share
     const Batch batch = to_device(batches[j], device_);
     check_batch(batch, "validation batch");
-    auto pred = net_->forward(batch.y, batch.phase);
+    auto pred = net_->forward(batch.y, batch.phase, batch.noise);
     loss_sum += loss_(pred, batch.target).item<double>() * static_cast<double>(batch.size());
     squared += (pred.clamp(0, 1) - batch.target).to(torch::kFloat64).square().sum().item<double>();
     patches += batch.size();
@@ -558,7 +559,7 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
   StepOutcome out;
   out.patches = static_cast<double>(batch.size());
   if (!distributed) {
-    auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target);
+    auto loss = loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target);
     out.loss = loss.item<double>();
     if (std::isfinite(out.loss)) loss.backward();
   } else {
@@ -566,7 +567,8 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
     // are added over the ranks and divided by the global batch.
     double local_sum = 0;
     if (batch.size() > 0) {
-      auto loss = loss_(net_->forward(batch.y, batch.phase), batch.target) * out.patches;
+      auto loss =
+          loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target) * out.patches;
       local_sum = loss.item<double>();
       if (std::isfinite(local_sum)) loss.backward();
     }

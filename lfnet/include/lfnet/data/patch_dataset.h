@@ -42,6 +42,10 @@ struct DatasetOptions {
   double jitter_gamma = 0.0;
   double jitter_contrast = 0.0;
   double jitter_brightness = 0.0;
+  // Noise-aware training: each patch (training and validation) draws a sigma uniformly in
+  // [lo, hi] and its measurements get Gaussian noise of that sigma (relative to white, on top
+  // of `effects`); the batch carries the sigmas (train::Batch::noise). Empty: off.
+  std::vector<double> noise_range;
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
 
@@ -65,6 +69,7 @@ struct DatasetOptions {
     f("jitter_gamma", jitter_gamma);
     f("jitter_contrast", jitter_contrast);
     f("jitter_brightness", jitter_brightness);
+    f("noise_range", noise_range);
     f("seed", seed);
     f("effects", effects);
   }
@@ -103,6 +108,7 @@ class PatchDataset : public train::BatchSource {
     std::vector<int> aug;
     std::vector<int64_t> window;  // index into windows_[lf]
     std::vector<float> gamma, contrast, brightness;
+    std::vector<float> sigma;  // per patch with noise_range, else empty
     Draw slice(int64_t begin, int64_t end) const;
   };
   // An angular window: views u0, u0 + step, ... (U of them), and likewise v.

@@ -31,10 +31,12 @@ struct EvalResult {
 };
 
 // Simulates measurements of the grey light field `truth` with `phi`, reconstructs them with
-// `solver` and scores the result. `method` names the solver in the record.
+// `solver` and scores the result. `method` names the solver in the record. A non-empty
+// `image` solver reconstructs sensor images whole instead (per_patch mode still uses `solver`).
 EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::string& method,
                     const recon::PatchSolver& solver, const EvalOptions& options,
-                    const recon::ProgressCallback& progress = {});
+                    const recon::ProgressCallback& progress = {},
+                    const recon::ImageSolver& image = {});
 
 // The no-parallax baseline: every view set to the angular mean of the truth.
 EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,

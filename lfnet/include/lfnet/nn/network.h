@@ -24,6 +24,7 @@
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/nn/conv4d.h"
+#include "lfnet/nn/image_net.h"
 
 namespace lfnet::nn {
 
@@ -86,7 +87,12 @@ struct CnnOptions {
 
 // Everything that defines a LightFieldNet; stored in every checkpoint as "network".
 struct NetworkOptions {
-  PatchShape patch;              // the patch the net reconstructs
+  // "paper": the two-branch network of Gupta et al. on patches (ae, cnn, branches, kernel,
+  // conv_algorithm, head_weights and residual apply). "lfnet": lfnet's own whole-image
+  // architecture (`image`): a U-Net over the per-pixel pseudo-inverse of the sensor image,
+  // trained on crops of `patch` (docs/architectures.md).
+  std::string architecture = "paper";
+  PatchShape patch;              // the patch the net reconstructs (lfnet: the training crop)
   int64_t measurements = 2;      // N: measurement channels per pixel
   std::string branches = "net";  // net (both branches, averaged), ae or cnn (one branch)
   int64_t kernel = 3;            // Conv4d kernel size (odd)
@@ -101,6 +107,7 @@ struct NetworkOptions {
   // (the scaled Phi^T y). Off by default: docs/models.md saw no gain from it.
   std::string residual = "none";
   double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
+  ImageNetOptions image;      // the lfnet architecture's U-Net
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -114,6 +121,8 @@ struct NetworkOptions {
     f("head_weights", head_weights);
     f("residual", residual);
     f("pinv_lambda", pinv_lambda);
+    f("architecture", architecture);
+    f("image", image);
   }
   // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
@@ -122,8 +131,9 @@ struct NetworkOptions {
   // Throws ConfigError naming the bad field.
   void validate() const;
 
-  bool has_ae() const { return branches == "net" || branches == "ae"; }
-  bool has_cnn() const { return branches == "net" || branches == "cnn"; }
+  bool is_image() const { return architecture == "lfnet"; }
+  bool has_ae() const { return !is_image() && (branches == "net" || branches == "ae"); }
+  bool has_cnn() const { return !is_image() && (branches == "net" || branches == "cnn"); }
   int64_t measurement_size() const { return measurements * patch.pixels(); }  // N h w
   // Width of the autoencoder's input: N h w or U V h w.
   int64_t ae_input_size() const;
@@ -173,14 +183,17 @@ struct BranchSelection {
 };
 
 // The reconstruction network. Construct, then set_phi() with the Phi's patch matrices
-// (until then `phi` is a zero matrix of one phase).
+// (until then `phi` is a zero matrix of one phase); for the lfnet architecture, with the
+// per-pixel weights of one period of the Phi (phi_tensor gives either).
 class LightFieldNetImpl : public torch::nn::Module {
  public:
   explicit LightFieldNetImpl(NetworkOptions options);
 
   // y: (B, N h w) measurement vectors; phase: (B) int64 indices into the phi stack, may be
-  // undefined when there is one phase. Returns (B, 1, U, V, h, w).
-  torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {});
+  // undefined when there is one phase; noise: (B) sigma of each patch's measurement noise,
+  // read by noise-aware nets only (undefined: 0). Returns (B, 1, U, V, h, w).
+  torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {},
+                        const torch::Tensor& noise = {});
   NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase = {});
   // The same with only the selected branches run; `output` combines those that ran (with
   // their head weights when both did, else the one alone, plus the residual base).
@@ -189,23 +202,42 @@ class LightFieldNetImpl : public torch::nn::Module {
 
   // Replaces the Phi: `stack` is (P, N h w, U V h w) for any P >= 1. Recomputes the derived
   // buffers (adjoint_scale, base). Parameters are left alone (see remap_phi for fc1).
+  // The lfnet architecture takes the pixel weights of one period T of a local Phi instead,
+  // (N, U, V, T, T) (optics::Phi::pixel_weights at the origin), and derives `pixel_pinv`.
   void set_phi(const torch::Tensor& stack);
+
+  // lfnet architecture: the whole-image reconstruction of sensor images (B, N, H, W) whose
+  // pixel (0, 0) has phase `phase` (0 for a whole image): (B, U, V, H, W). Pads H and W to the
+  // U-Net's multiple (zeros, cropped off again). Peak memory grows with H W:
+  // recon::reconstruct_sensor_tiled bounds it.
+  // `noise_sigma`: the sensor's noise for a noise-aware net (ignored by others).
+  torch::Tensor forward_image(const torch::Tensor& sensor, int64_t phase = 0,
+                              double noise_sigma = 0.0);
+  // lfnet architecture: the per-pixel Tikhonov pseudo-inverse of sensor crops (B, N, h, w)
+  // whose pixel (0, 0) has phase `phase` (B) (undefined: 0), as (B, U V, h, w).
+  torch::Tensor pixel_pinv_image(const torch::Tensor& sensor,
+                                 const torch::Tensor& phase = {}) const;
 
   // The scaled adjoint s_p Phi_p^T y as (B, U V h w), s_p the least-squares scale that maps
   // Phi_p^T Phi_p 1 closest to 1 (so a flat grey patch comes back near its own level).
   torch::Tensor adjoint(const torch::Tensor& y, const torch::Tensor& phase = {}) const;
 
-  int64_t phases() const { return phi.size(0); }
+  int64_t phases() const { return options_.is_image() ? phi.size(3) * phi.size(4) : phi.size(0); }
   const NetworkOptions& options() const { return options_; }
 
   AutoencoderBranch ae{nullptr};
   CnnBranch cnn{nullptr};
+  ImageNet image{nullptr};  // lfnet architecture
   torch::Tensor phi, adjoint_scale, base;
+  torch::Tensor pixel_pinv;  // lfnet architecture: (T, T, N, U V) per-pixel pseudo-inverses
 
  private:
   // Checks y and phase; returns phase (undefined for one phase).
   torch::Tensor check_phase(const torch::Tensor& y, const torch::Tensor& phase) const;
   torch::Tensor scaled_adjoint(const torch::Tensor& y, const torch::Tensor& phase) const;
+  // The lfnet architecture's pseudo-inverse plus U-Net on a base (B, U V, h, w), with a noise
+  // channel (B) when the net is noise-aware.
+  torch::Tensor refine(const torch::Tensor& base, const torch::Tensor& noise);
   NetworkOptions options_;
 };
 TORCH_MODULE(LightFieldNet);
@@ -248,6 +280,12 @@ void set_cnn_precision(LightFieldNet& net, Precision precision);
 double patch_flops(const NetworkOptions& o, const BranchSelection& run);
 double cnn_patch_flops(const NetworkOptions& o);
 double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile);
+// lfnet architecture: nominal floating-point operations per light-field pixel (pseudo-inverse
+// and U-Net).
+double image_pixel_flops(const NetworkOptions& o);
+// lfnet architecture: the operations of a whole H x W light field in tiles of `tile` (halo
+// included, as recon::reconstruct_sensor_tiled computes them).
+double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile);
 
 // Number of trainable parameters.
 int64_t parameter_count(const torch::nn::Module& module);

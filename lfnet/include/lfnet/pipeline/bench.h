@@ -26,8 +26,10 @@ struct BenchOptions {
   std::vector<int64_t> strides = {9, 5, 2};
   int64_t height = 593, width = 840;  // the random scene's size
   std::string phi = "asp:2";
-  int64_t batch = 1024;         // patches per solver call
-  std::string model;            // trained checkpoint; default an untrained net of the default shape
+  int64_t batch = 1024;  // patches per solver call
+  // Trained checkpoints: the network methods are timed once with each (both architectures can
+  // share one run). Empty: an untrained net of each of `architectures`.
+  std::vector<std::string> models;
   std::string dictionary;       // dictionary file; default a small K-SVD dictionary
   std::string save_dictionary;  // write the bench's K-SVD dictionary here
   std::string scene;            // scene spec file; default random_scene(seed) at height x width
@@ -37,9 +39,11 @@ struct BenchOptions {
   int reps = 3;              // repetitions of the kernel timings (the best is kept)
   bool skip_kernels = false;
   std::string device = "cpu";
-  std::string cnn_mode = "patches";       // patches or full (recon::CnnMode)
-  int64_t tile = recon::kDefaultCnnTile;  // tile of cnn_mode full
-  std::string precision = "float32";      // float32 or bfloat16 (the CNN branch's convolutions)
+  std::string cnn_mode = "patches";  // patches or full (recon::CnnMode)
+  std::vector<std::string> architectures = {
+      "paper"};                       // untrained nets without models: paper, lfnet
+  int64_t tile = 0;                   // tile of cnn_mode full and of lfnet models (0: 128 and 256)
+  std::string precision = "float32";  // float32 or bfloat16 (the CNN branch's convolutions)
 };
 
 // FLOP/s of a 2048^3 single-precision matrix product, the best of `reps` after a warm-up.
@@ -58,14 +62,18 @@ dict::Dictionary bench_dictionary(const BenchOptions& options, int64_t patch);
 
 // One case in this process: reconstructs the bench light field with `method` at `stride`; the
 // record has seconds, patches/s, peak memory, CPU use, GFLOP/s and its share of `gemm`, PSNR.
+// Network methods use the first of `options.models`, else an untrained net of the first of
+// `options.architectures`; the record names it ("model", "architecture").
 nlohmann::json bench_case(const BenchOptions& options, const std::string& method, int64_t stride,
                           double gemm);
 
 // The whole run: machine, GEMM, Conv4d kernels, then every stride and method through
-// `run_case` (in this process, or a child process of the caller's for peak memory of its own).
-// `on_case` sees each case's record as it comes.
-using BenchCaseRunner =
-    std::function<nlohmann::json(const std::string& method, int64_t stride, double gemm)>;
+// `run_case` (in this process, or a child process of the caller's for peak memory of its own);
+// network methods once per model (or architecture), each case given options narrowed to that
+// one. Nets of the lfnet architecture reconstruct whole images, so they run at the first
+// stride only.
+using BenchCaseRunner = std::function<nlohmann::json(
+    const BenchOptions& narrowed, const std::string& method, int64_t stride, double gemm)>;
 nlohmann::json bench_report(const BenchOptions& options, const BenchCaseRunner& run_case,
                             const std::function<void(const std::string&)>& print);
 

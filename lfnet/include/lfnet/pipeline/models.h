@@ -35,6 +35,11 @@ struct ModelFile {
   double measurement_mean() const;
 };
 
+// The Phi tensor a net of `options` takes (LightFieldNet::set_phi): the stack of patch
+// matrices for the paper's architecture, the pixel weights of one period for lfnet's (a
+// ConfigError for a Phi that is not local).
+torch::Tensor phi_tensor(const optics::Phi& phi, const nn::NetworkOptions& options);
+
 // What a model file is, by its content.
 enum class ModelFileKind { kCheckpoint, kExported, kDictionary, kOther };
 ModelFileKind model_file_kind(const std::string& path);

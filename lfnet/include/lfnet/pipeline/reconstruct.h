@@ -29,8 +29,11 @@ struct ReconstructRequest {
   bool post_filter = false;           // suppress artefacts with the stride's period
   std::string device = "cpu";         // cpu or cuda[:K], for checkpoints' networks
   std::string cnn_mode = "patches";   // patches, or full (the CNN branch once, in tiles)
-  int64_t tile = 128;                 // tile of cnn_mode full
+  int64_t tile = 0;                   // tile of cnn_mode full and of lfnet models (0: 128, 256)
   std::string precision = "float32";  // float32 or bfloat16 for the CNN branch
+  // The sensor's Gaussian noise sigma (relative to white) for noise-aware models; negative:
+  // the noise_sigma that the acquisition's sensor.json records, else 0.
+  double noise_sigma = -1;
 };
 
 // A reconstruction and its record (method, model, sensor, stride, seconds, phi, mode, shape).

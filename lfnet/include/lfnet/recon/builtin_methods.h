@@ -14,7 +14,7 @@ using MethodSink = std::function<void(std::unique_ptr<Method>)>;
 // Nominal FLOPs of one patch through a linear method: one (U V h w) x (N h w) product.
 double linear_patch_flops(const MethodResources& r);
 
-// Registers net, ae, cnn, dict, pinv, adjoint and no-parallax, in that order.
+// Registers net, ae, cnn, dict, pinv, pinv-nlm, adjoint and no-parallax, in that order.
 void register_builtin_methods(const MethodSink& add);
 
 }  // namespace lfnet::recon

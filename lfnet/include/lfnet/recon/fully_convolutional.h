@@ -54,4 +54,19 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
     nn::LightFieldNet net, const std::string& method, const optics::Phi& phi,
     const torch::Tensor& sensor, const ReconstructOptions& options, int64_t tile = kDefaultCnnTile);
 
+// Spatial tile of the lfnet architecture's whole-image pass, without its halo.
+constexpr int64_t kDefaultImageTile = 256;
+
+// Reconstructs a grey light field (1, U, V, H, W) from a sensor image (N, H, W) with a net of
+// the lfnet architecture, in tiles of about `tile` x `tile` pixels (rounded up to the U-Net's
+// multiple) with a halo of its receptive radius, so peak memory depends on the tile, not on
+// the image. The result equals net->forward_image on the whole image, to float rounding.
+// Runs on the device of the net's weights; returns float32 on the CPU, clamped to [0, 1]
+// when `clamp`. `noise_sigma` conditions a noise-aware net. `progress` gets (tiles done,
+// tiles in all).
+torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tensor& sensor,
+                                       int64_t tile = kDefaultImageTile, bool clamp = true,
+                                       double noise_sigma = 0.0,
+                                       const ProgressCallback& progress = {});
+
 }  // namespace lfnet::recon

@@ -35,6 +35,7 @@ struct MethodResources {
   const dict::Dictionary* dictionary = nullptr;  // kDictionary
   dict::SparseCodingOptions coding;              // kDictionary: OMP or ADMM
   std::shared_ptr<SolverReport> report;          // iterative methods: non-convergence counts
+  int64_t tile = 256;                            // whole-image methods: spatial tile
 };
 
 class Method {
@@ -46,6 +47,9 @@ class Method {
   // The patch solver; a ConfigError when a needed resource is missing. kTruth methods have
   // none (the evaluation computes them from the truth).
   virtual PatchSolver solver(const MethodResources& resources) const = 0;
+  // The whole-image solver, for sensor images; empty when the method works on patches only
+  // (then sensor images are reconstructed patch by patch with solver()).
+  virtual ImageSolver image_solver(const MethodResources&) const { return {}; }
   // Nominal floating-point operations per patch (lfnet bench), 0 when unknown.
   virtual double patch_flops(const MethodResources&) const { return 0; }
 };
@@ -56,8 +60,8 @@ void register_method(std::unique_ptr<Method> method);
 // The method called `name`; unknown names are a ConfigError listing the known ones.
 const Method& find_method(const std::string& name);
 
-// Every registered method's name, in registration order (net, ae, cnn, dict, pinv, adjoint,
-// no-parallax for the built-ins): the order of tables and legends.
+// Every registered method's name, in registration order (net, ae, cnn, dict, pinv, pinv-nlm,
+// adjoint, no-parallax for the built-ins): the order of tables and legends.
 std::vector<std::string> registered_methods();
 
 // "a, b, c": the registered methods, optionally without those needing `excluded`.
@@ -66,5 +70,9 @@ std::string method_list(std::optional<MethodNeeds> excluded = std::nullopt);
 // The solver of `name` with `resources`, after checking that they hold what it needs (the
 // message names the option that supplies it).
 PatchSolver make_solver(const std::string& name, const MethodResources& resources);
+
+// The whole-image solver of `name` with `resources`, or an empty one when the method (with
+// these resources) reconstructs patch by patch. Checks the resources as make_solver does.
+ImageSolver make_image_solver(const std::string& name, const MethodResources& resources);
 
 }  // namespace lfnet::recon

@@ -19,6 +19,12 @@ namespace lfnet::recon {
 using PatchSolver =
     std::function<torch::Tensor(const torch::Tensor& y, const torch::Tensor& phase)>;
 
+// Reconstructs a whole sensor image (N, H, W) at once: a grey light field (1, U, V, H, W).
+// `noise_sigma` is the sensor's Gaussian noise (relative to white), which noise-aware methods
+// read. Methods that see the whole image (the lfnet architecture) give one beside their
+// PatchSolver.
+using ImageSolver = std::function<torch::Tensor(const torch::Tensor& sensor, double noise_sigma)>;
+
 // Called after every band with (patches done, patches in all).
 using ProgressCallback = std::function<void(int64_t done, int64_t total)>;
 

@@ -15,6 +15,8 @@ struct Batch {
   torch::Tensor phase;   // (B) int64 indices into the Phi's patch-matrix stack; may be
                          // undefined when the Phi has one phase
   torch::Tensor target;  // (B, 1, U, V, h, w) float32 true patches, values in [0, 1]
+  torch::Tensor noise;   // (B) float32 sigma of the Gaussian noise on each patch's measurements
+                         // (relative to white, as optics::SensorOptions); undefined: none known
 
   int64_t size() const { return y.defined() ? y.size(0) : 0; }
 };

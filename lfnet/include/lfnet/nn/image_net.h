@@ -1,0 +1,70 @@
+// lfnet's own architecture (docs/architectures.md): a U-Net over the spatial axes that refines
+// the per-pixel pseudo-inverse of the whole sensor image. The views of the light field are its
+// input and output channels, so every layer mixes all views of a neighbourhood; the levels
+// halve the resolution, so the receptive field covers parallax the 9 x 9 patches of the paper
+// cannot see. It is fully convolutional: trained on crops, it runs on whole images.
+#pragma once
+
+#include <torch/nn/module.h>
+#include <torch/nn/modules/conv.h>
+#include <torch/nn/pimpl.h>
+#include <torch/types.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <vector>
+
+#include "lfnet/core/json.h"
+
+namespace lfnet::nn {
+
+// Widths and depth of the U-Net.
+struct ImageNetOptions {
+  int64_t channels = 32;  // feature channels at full resolution, doubled at every level
+  int64_t levels = 3;     // resolutions: full, 1/2, 1/4 ... (1 = no down-sampling)
+  int64_t blocks = 2;     // 3 x 3 convolutions (with ReLU) per level, encoder and decoder alike
+  // Noise-aware: one more input channel holds the sigma of the measurements' noise (relative
+  // to white), so one model serves every noise level (train with dataset.noise_range).
+  bool noise_input = false;
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("channels", channels);
+    f("levels", levels);
+    f("blocks", blocks);
+    f("noise_input", noise_input);
+  }
+  void read(JsonReader& reader);
+  nlohmann::json to_json() const;
+  // Throws ConfigError naming the bad field.
+  void validate() const;
+
+  // Image sides the net takes: multiples of 2^(levels - 1).
+  int64_t multiple() const { return int64_t{1} << (levels - 1); }
+  // Radius in full-resolution pixels beyond which an input pixel cannot change an output
+  // pixel; tiles of tiled inference need a halo at least this wide (rounded to multiple()).
+  int64_t receptive_radius() const;
+  // Nominal floating-point operations per full-resolution pixel for `in` input and `out`
+  // output channels.
+  double pixel_flops(int64_t in, int64_t out) const;
+};
+
+// The U-Net: (B, in, H, W) -> (B, out, H, W) with H and W multiples of options.multiple().
+// Its last convolution starts at zero, so an untrained net adds nothing to its input's estimate.
+class ImageNetImpl : public torch::nn::Module {
+ public:
+  ImageNetImpl(const ImageNetOptions& options, int64_t in, int64_t out);
+  torch::Tensor forward(const torch::Tensor& x);
+
+  const ImageNetOptions& options() const { return options_; }
+
+ private:
+  ImageNetOptions options_;
+  torch::nn::Conv2d input_{nullptr}, output_{nullptr};
+  std::vector<std::vector<torch::nn::Conv2d>> encoder_, decoder_;  // per level
+  std::vector<torch::nn::Conv2d> down_;                            // level l -> l + 1
+  std::vector<torch::nn::ConvTranspose2d> up_;                     // level l + 1 -> l
+};
+TORCH_MODULE(ImageNet);
+
+}  // namespace lfnet::nn

@@ -1,0 +1,104 @@
+#include "lfnet/nn/image_net.h"
+
+#include <torch/torch.h>
+
+#include <string>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/fields.h"
+
+namespace lfnet::nn {
+
+void ImageNetOptions::read(JsonReader& reader) { read_fields(reader, *this); }
+nlohmann::json ImageNetOptions::to_json() const { return fields_to_json(*this); }
+
+void ImageNetOptions::validate() const {
+  if (channels < 1) throw ConfigError("image.channels: must be positive");
+  if (levels < 1 || levels > 6) throw ConfigError("image.levels: must be 1 to 6");
+  if (blocks < 1) throw ConfigError("image.blocks: must be >= 1");
+}
+
+int64_t ImageNetOptions::receptive_radius() const {
+  // Input and output convolutions one pixel each; per level above the bottom, the encoder's
+  // and decoder's blocks, the down-sampling (2 x 2, stride 2) and the alignment of the
+  // up-sampling, each at that level's pixel size; the bottom level's blocks.
+  int64_t r = 2;
+  for (int64_t l = 0; l + 1 < levels; ++l) r += (2 * blocks + 2) << l;
+  return r + (blocks << (levels - 1));
+}
+
+double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
+  auto conv = [](double cin, double cout, double k, double pixels) {
+    return 2.0 * cin * cout * k * k * pixels;
+  };
+  double flops = conv(static_cast<double>(in + (noise_input ? 1 : 0)), channels, 3, 1) +
+                 conv(channels, out, 3, 1);
+  for (int64_t l = 0; l < levels; ++l) {
+    const double c = static_cast<double>(channels << l),
+                 share = 1.0 / static_cast<double>(1 << (2 * l));
+    const bool bottom = l + 1 == levels;
+    flops += conv(c, c, 3, share) * static_cast<double>(blocks * (bottom ? 1 : 2));
+    // down: 2 x 2 stride 2 onto the next level; up: the transposed one back.
+    if (!bottom) flops += 2 * conv(c, 2 * c, 2, share / 4);
+  }
+  return flops;
+}
+
+namespace {
+torch::nn::Conv2d conv3(int64_t in, int64_t out) {
+  return torch::nn::Conv2d(torch::nn::Conv2dOptions(in, out, 3).padding(1));
+}
+}  // namespace
+
+ImageNetImpl::ImageNetImpl(const ImageNetOptions& options, int64_t in, int64_t out)
+    : options_(options) {
+  options_.validate();
+  input_ = register_module("input", conv3(in, options_.channels));
+  for (int64_t l = 0; l < options_.levels; ++l) {
+    const int64_t c = options_.channels << l;
+    const bool bottom = l + 1 == options_.levels;
+    std::vector<torch::nn::Conv2d> enc, dec;
+    for (int64_t b = 0; b < options_.blocks; ++b) {
+      const std::string suffix = std::to_string(l) + "_" + std::to_string(b);
+      enc.push_back(register_module("enc" + suffix, conv3(c, c)));
+      if (!bottom) dec.push_back(register_module("dec" + suffix, conv3(c, c)));
+    }
+    encoder_.push_back(std::move(enc));
+    decoder_.push_back(std::move(dec));
+    if (!bottom) {
+      down_.push_back(
+          register_module("down" + std::to_string(l),
+                          torch::nn::Conv2d(torch::nn::Conv2dOptions(c, 2 * c, 2).stride(2))));
+      up_.push_back(register_module(
+          "up" + std::to_string(l),
+          torch::nn::ConvTranspose2d(torch::nn::ConvTranspose2dOptions(2 * c, c, 2).stride(2))));
+    }
+  }
+  output_ = register_module("output", conv3(options_.channels, out));
+  torch::NoGradGuard no_grad;
+  output_->weight.zero_();
+  output_->bias.zero_();
+}
+
+torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
+  const int64_t m = options_.multiple();
+  LFNET_CHECK(x.dim() == 4 && x.size(2) % m == 0 && x.size(3) % m == 0,
+              "ImageNet: expected (B, C, H, W) with H and W multiples of ", m, ", got ", x.sizes());
+  auto h = torch::relu(input_->forward(x));
+  std::vector<torch::Tensor> skips;
+  const int64_t levels = options_.levels;
+  for (int64_t l = 0; l < levels; ++l) {
+    for (auto& conv : encoder_[l]) h = torch::relu(conv->forward(h));
+    if (l + 1 < levels) {
+      skips.push_back(h);
+      h = torch::relu(down_[l]->forward(h));
+    }
+  }
+  for (int64_t l = levels - 2; l >= 0; --l) {
+    h = torch::relu(up_[l]->forward(h)) + skips[l];
+    for (auto& conv : decoder_[l]) h = torch::relu(conv->forward(h));
+  }
+  return output_->forward(h);
+}
+
+}  // namespace lfnet::nn

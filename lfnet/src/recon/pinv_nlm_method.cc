@@ -1,0 +1,52 @@
+// pinv-nlm: the pseudo-inverse, then non-local means over all views: the classical baseline
+// for noisy sensor images (docs/methods.md).
+#include "lfnet/core/error.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/recon/builtin_methods.h"
+#include "lfnet/recon/denoise.h"
+
+namespace lfnet::recon {
+
+namespace {
+
+class PinvNlmMethod : public Method {
+ public:
+  std::string name() const override { return "pinv-nlm"; }
+  std::string summary() const override {
+    return "the pseudo-inverse, then non-local means over all views (sensor images; the noise "
+           "sigma sets its strength)";
+  }
+  PatchSolver solver(const MethodResources&) const override {
+    return [](const torch::Tensor&, const torch::Tensor&) -> torch::Tensor {
+      throw ConfigError("pinv-nlm denoises whole sensor images, not per-patch measurements");
+    };
+  }
+  ImageSolver image_solver(const MethodResources& r) const override {
+    const auto pinv = optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w);
+    // The pseudo-inverse's noise per unit of measurement noise (the same for every phase of
+    // the periodic models, up to their small differences: the mean over phases).
+    double gain = 0;
+    for (int64_t i = 0; i < pinv.size(0); ++i) gain += pinv_noise_sigma(pinv[i], 1.0);
+    gain /= static_cast<double>(pinv.size(0));
+    ReconstructOptions ro;
+    ro.patch_h = r.patch_h;
+    ro.patch_w = r.patch_w;
+    ro.stride = r.phi->local() ? r.patch_h : ro.stride;  // per pixel: overlaps add nothing
+    ro.clamp = false;                                    // clamping would bias the noise
+    const optics::Phi* phi = r.phi;
+    return [phi, pinv, gain, ro](const torch::Tensor& sensor, double sigma) {
+      auto lf = reconstruct_sensor(*phi, sensor, pinv_solver(pinv), ro);  // (1, U, V, H, W)
+      const auto shape = lf.sizes().vec();
+      auto views = lf.reshape({shape[1] * shape[2], shape[3], shape[4]});
+      return non_local_means(views, sigma * gain).reshape(shape).clamp(0.0, 1.0);
+    };
+  }
+  double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }
+};
+
+}  // namespace
+
+// Declared and registered in builtin_methods.cc.
+std::unique_ptr<Method> make_pinv_nlm_method() { return std::make_unique<PinvNlmMethod>(); }
+
+}  // namespace lfnet::recon

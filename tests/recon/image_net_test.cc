@@ -1,0 +1,187 @@
+// The lfnet architecture: its pseudo-inverse input, tiled inference and option checks.
+#include <torch/torch.h>
+#include <catch2/catch.hpp>
+
+#include "lfnet/core/error.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/recon/fully_convolutional.h"
+#include "lfnet/recon/reconstruct.h"
+#include "support/test_support.h"
+
+using namespace lfnet;
+
+namespace {
+
+nn::NetworkOptions image_options(const optics::Phi& phi, int64_t levels = 3) {
+  nn::NetworkOptions o;
+  o.architecture = "lfnet";
+  o.measurements = phi.measurements();
+  o.patch = {phi.rows(), phi.cols(), 16, 16};
+  o.image.channels = 6;
+  o.image.levels = levels;
+  o.image.blocks = 1;
+  return o;
+}
+
+nn::LightFieldNet image_net(const optics::Phi& phi, int64_t levels = 3) {
+  nn::LightFieldNet net(image_options(phi, levels));
+  const int64_t t = phi.period();
+  net->set_phi(phi.pixel_weights(0, 0, t, t));
+  return net;
+}
+
+// Random weights everywhere, the last convolution included, so the U-Net is not the identity.
+void randomise(nn::LightFieldNet& net, uint64_t seed) {
+  torch::manual_seed(seed);
+  torch::NoGradGuard no_grad;
+  for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
+}
+
+torch::Tensor random_light_field(const optics::Phi& phi, int64_t h, int64_t w, uint64_t seed) {
+  auto gen = torch::make_generator<at::CPUGeneratorImpl>(seed);
+  return torch::rand({phi.rows(), phi.cols(), h, w}, gen);
+}
+
+}  // namespace
+
+TEST_CASE("an untrained lfnet net returns the per-pixel pseudo-inverse of the pinv method",
+          "[recon][image]") {
+  for (const std::string name : {"asp", "mask"}) {
+    INFO(name);
+    auto spec = optics::PhiSpec::parse(name + ":2");
+    const auto phi = optics::make_phi(spec);
+    auto lf = random_light_field(*phi, 41, 30, 3);
+    auto sensor = optics::simulate_sensor(*phi, lf);
+    recon::ReconstructOptions ro;
+    ro.stride = 3;
+    auto pinv = recon::reconstruct_sensor(
+        *phi, sensor, recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9)), ro);
+    auto net = image_net(*phi);
+    // Tiles of 8 start at every phase of the mask's period.
+    for (int64_t tile : {8, 12, 256}) {
+      INFO("tile " << tile);
+      auto est = recon::reconstruct_sensor_tiled(net, sensor, tile);
+      REQUIRE(est.sizes() == pinv.sizes());
+      CHECK(torch::allclose(est, pinv, 1e-5, 1e-5));
+    }
+  }
+}
+
+TEST_CASE("the pseudo-inverse of a crop follows optics::patch_phase", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:3"));
+  REQUIRE(phi->period() > 1);
+  auto net = image_net(*phi);
+  auto lf = random_light_field(*phi, 40, 40, 5);
+  auto sensor = optics::simulate_sensor(*phi, lf);
+  for (auto [y0, x0] : {std::pair<int64_t, int64_t>{0, 0}, {3, 7}, {5, 2}, {11, 13}}) {
+    INFO(y0 << ", " << x0);
+    const int64_t h = 8, w = 12;
+    auto crop = sensor.slice(1, y0, y0 + h).slice(2, x0, x0 + w).unsqueeze(0);
+    auto phase = torch::full({1}, optics::patch_phase(*phi, y0, x0), torch::kInt64);
+    auto got = net->pixel_pinv_image(crop, phase).flatten();
+    auto want = phi->pinv_matrix(y0, x0, h, w, 1e-3).matmul(crop.flatten());
+    CHECK(torch::allclose(got, want, 1e-5, 1e-5));
+  }
+}
+
+TEST_CASE("tiled inference of the lfnet architecture equals one pass over the whole image",
+          "[recon][image]") {
+  for (const std::string name : {"asp", "mask"}) {
+    for (int64_t levels : {1, 3}) {
+      INFO(name << ", " << levels << " levels");
+      const auto phi = optics::make_phi(optics::PhiSpec::parse(name + ":2"));
+      auto net = image_net(*phi, levels);
+      randomise(net, 7 + levels);
+      auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 70, 53, 9));
+      torch::Tensor whole;
+      {
+        torch::NoGradGuard no_grad;
+        whole = net->forward_image(sensor.unsqueeze(0)).unsqueeze(0).squeeze(1);
+      }
+      REQUIRE(whole.sizes() == torch::IntArrayRef({1, phi->rows(), phi->cols(), 70, 53}));
+      // Without clamping, so the comparison sees every value; the U-Net's output is far from
+      // the pseudo-inverse (random weights), so a wrong halo would show.
+      for (int64_t tile : {4, 16, 20, 64}) {
+        INFO("tile " << tile);
+        auto tiled = recon::reconstruct_sensor_tiled(net, sensor, tile, false);
+        CHECK(torch::allclose(tiled, whole, 1e-4, 1e-4));
+      }
+    }
+  }
+}
+
+TEST_CASE("a crop through forward() is forward_image of that crop", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));
+  auto net = image_net(*phi);
+  randomise(net, 4);
+  auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 40, 40, 2));
+  const int64_t y0 = 5, x0 = 9;
+  auto crop = sensor.slice(1, y0, y0 + 16).slice(2, x0, x0 + 16).unsqueeze(0).contiguous();
+  const int64_t phase = optics::patch_phase(*phi, y0, x0);
+  torch::NoGradGuard no_grad;
+  auto via_forward = net->forward(crop.flatten(1), torch::full({1}, phase, torch::kInt64));
+  auto via_image = net->forward_image(crop, phase);
+  CHECK(torch::allclose(via_forward.squeeze(1), via_image, 1e-5, 1e-5));
+}
+
+TEST_CASE("the U-Net's FLOP count matches its layers", "[recon][image]") {
+  nn::NetworkOptions o;
+  o.architecture = "lfnet";
+  o.measurements = 2;
+  o.image.channels = 8;
+  o.image.levels = 1;
+  o.image.blocks = 1;
+  // pinv (2 N V), input conv (V -> c), one block (c -> c), output conv (c -> V), 3 x 3 each.
+  const double v = 25, c = 8;
+  CHECK(nn::image_pixel_flops(o) ==
+        Approx(2 * 2 * v + 2 * 9 * (v * c + c * c + c * v)).epsilon(1e-12));
+  o.image.levels = 2;
+  // The second level adds a block at a quarter of the pixels, and the 2 x 2 down and up
+  // convolutions between c and 2 c channels at a quarter of the pixels.
+  const double two = 2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c +
+                     (2 * 9 * 2 * c * 2 * c + 2 * 2 * 4 * c * 2 * c) / 4;
+  CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + two).epsilon(1e-12));
+}
+
+TEST_CASE("the lfnet architecture's options and Phi are checked", "[recon][image]") {
+  nn::NetworkOptions o;
+  o.architecture = "unet";
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("architecture") && Catch::Contains("lfnet"));
+  o.architecture = "lfnet";
+  o.patch = {5, 5, 18, 16};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("multiples of 4"));
+  o.patch = {5, 5, 16, 16};
+  o.image.levels = 0;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.levels"));
+  o.image.levels = 3;
+  nn::LightFieldNet net(o);
+  CHECK_THROWS_WITH(net->set_phi(torch::rand({1, 2 * 256, 25 * 256})),
+                    Catch::Contains("pixel weights of one period"));
+  CHECK(!o.has_ae());
+  CHECK(!o.has_cnn());
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  net->set_phi(phi->pixel_weights(0, 0, 1, 1));
+  CHECK_THROWS_AS(recon::reconstruct_sensor_tiled(net, torch::rand({3, 20, 20})), ConfigError);
+}
+
+TEST_CASE("a noise-aware lfnet net reads the noise sigma, tiled or whole", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));
+  auto o = image_options(*phi);
+  o.image.noise_input = true;
+  nn::LightFieldNet net(o);
+  net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
+  randomise(net, 11);
+  auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 44, 37, 6));
+  torch::NoGradGuard no_grad;
+  auto quiet = net->forward_image(sensor.unsqueeze(0), 0, 0.0);
+  auto loud = net->forward_image(sensor.unsqueeze(0), 0, 0.2);
+  CHECK((quiet - loud).abs().max().item<double>() > 1e-3);
+  auto tiled = recon::reconstruct_sensor_tiled(net, sensor, 16, false, 0.2);
+  CHECK(torch::allclose(tiled, loud, 1e-4, 1e-4));
+  // Through forward(), the batch's noise tensor is that channel.
+  auto crop = sensor.slice(1, 0, 16).slice(2, 0, 16).unsqueeze(0).contiguous();
+  auto phase = torch::zeros({1}, torch::kInt64);
+  CHECK(torch::allclose(net->forward(crop.flatten(1), phase, torch::full({1}, 0.2)).squeeze(1),
+                        net->forward_image(crop, 0, 0.2), 1e-5, 1e-5));
+}
