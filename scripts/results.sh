@@ -89,7 +89,7 @@ noise-sweep() {
   local tmp
   tmp=$(mktemp)
   for sigma in 0 0.1 0.2; do
-    for method in net dict pinv no-parallax; do
+    for method in net dict pinv pinv-nlm no-parallax; do
       local variant=""
       [[ $method == net || $method == dict ]] && variant="trained without noise"
       VARIANT=$variant record "$tmp" --model models/asp-n2.ckpt \
@@ -100,6 +100,10 @@ noise-sweep() {
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
     VARIANT="trained at sigma 0.2" record "$tmp" --model $pq/noise-trained-0.2.ckpt \
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
+    if [[ -f models/lfnet-asp-n2.ckpt ]]; then
+      VARIANT="lfnet-asp-n2, trained without noise" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+        --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
+    fi
   done
   mv "$tmp" results/noise-sweep/records.jsonl
 }
