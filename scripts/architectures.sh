@@ -34,7 +34,8 @@ for name in "${steps[@]}"; do
   sets=()
   for s in ${variants[$name]}; do sets+=(--set "$s"); done
   "$lfnet" --threads "$threads" --log-level warn experiment "$config" --scale quick \
-    --out "$out" --force "${sets[@]}" --set 'evaluation.methods=["net"]'
+    --out "$out" --force "${sets[@]}" --set network.image.noise_input=false \
+    --set 'evaluation.methods=["net"]'
   /usr/bin/python3 - "$out" "$name" "$records" <<'PY'
 import json, pathlib, sys
 out, name, dest = pathlib.Path(sys.argv[1]), sys.argv[2], pathlib.Path(sys.argv[3])
