@@ -36,19 +36,7 @@ for name in "${steps[@]}"; do
   "$lfnet" --threads "$threads" --log-level warn experiment "$config" --scale quick \
     --out "$out" --force "${sets[@]}" --set network.image.noise_input=false \
     --set 'evaluation.methods=["net"]'
-  /usr/bin/python3 - "$out" "$name" "$records" <<'PY'
-import json, pathlib, sys
-out, name, dest = pathlib.Path(sys.argv[1]), sys.argv[2], pathlib.Path(sys.argv[3])
-seconds = sum(json.loads(l)["record"]["seconds"] for l in open(out / "training.jsonl") if l.strip())
-kept = [l for l in (dest.read_text().splitlines() if dest.exists() else [])
-        if json.loads(l).get("variant") != name]
-for l in open(out / "results.jsonl"):
-    r = json.loads(l)
-    r["variant"] = name
-    r["training_seconds"] = seconds
-    kept.append(json.dumps(r))
-dest.write_text("\n".join(kept) + "\n")
-PY
+  scripts/label-records.py "$out" "$name" "$records"
   echo "== $name: done ($(date -u +%H:%M))"
 done
 

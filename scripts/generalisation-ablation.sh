@@ -25,20 +25,7 @@ for step in "${steps[@]}"; do
   cp "$out/models/joint.ckpt" "$model.tmp" && mv "$model.tmp" "$model"
   cp "$out/training.jsonl" "models/generalisation/$step.training.jsonl"
   # The step's cross-scene records, labelled with the step and its training time.
-  /usr/bin/python3 - "$out" "$step" <<'PY'
-import json, pathlib, sys
-out, step = pathlib.Path(sys.argv[1]), sys.argv[2]
-seconds = sum(json.loads(l)["record"]["seconds"] for l in open(out / "training.jsonl") if l.strip())
-dest = pathlib.Path("results/generalisation-ablation/records.jsonl")
-kept = [l for l in (dest.read_text().splitlines() if dest.exists() else [])
-        if json.loads(l).get("variant") != step]
-for l in open(out / "results.jsonl"):
-    r = json.loads(l)
-    r["variant"] = step
-    r["training_seconds"] = seconds
-    kept.append(json.dumps(r))
-dest.write_text("\n".join(kept) + "\n")
-PY
+  scripts/label-records.py "$out" "$step" "results/generalisation-ablation/records.jsonl"
   echo "== $step: done ($(date -u +%H:%M))"
 done
 
