@@ -105,9 +105,13 @@ TEST_CASE(
       run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq"),
                   out) == 0);
   for (const auto& [model, name] : {std::pair{ckpt, "rec_ck"}, std::pair{pt, "rec_pt"}}) {
-    REQUIRE(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acq") +
-                            " --stride 4 --out " + (tmp / name),
-                        out) == 0);
+    std::string command = lfnet;
+    for (const std::string& part :
+         {std::string("reconstruct --model "), std::string(model), std::string(" --sensor "),
+          tmp / "acq", std::string(" --stride 4 --out "), tmp / name}) {
+      command += part;
+    }
+    REQUIRE(run_command(command, out) == 0);
   }
   auto rec_ck = lfnet::io::read_light_field(tmp / "rec_ck").data();
   auto rec_pt = lfnet::io::read_light_field(tmp / "rec_pt").data();
@@ -117,9 +121,13 @@ TEST_CASE(
   for (const std::string method : {"net", "ae"}) {
     INFO(method);
     for (const auto& [model, name] : {std::pair{ckpt, "ck.json"}, std::pair{pt, "pt.json"}}) {
-      REQUIRE(run_command(lfnet + "evaluate --model " + model + " --method " + method + " --lf " +
-                              (tmp / "lf") + " --stride 9 --json " + (tmp / name),
-                          out) == 0);
+      std::string command = lfnet;
+      for (const std::string& part :
+           {std::string("evaluate --model "), std::string(model), std::string(" --method "), method,
+            std::string(" --lf "), tmp / "lf", std::string(" --stride 9 --json "), tmp / name}) {
+        command += part;
+      }
+      REQUIRE(run_command(command, out) == 0);
     }
     const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
     CHECK(std::abs(a["psnr_db"].get<double>() - b["psnr_db"].get<double>()) < 1e-4);
