@@ -2,6 +2,7 @@
 
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <string>
 
 #include "lfnet/core/error.h"
@@ -42,6 +43,24 @@ double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
     if (!bottom) flops += 2 * conv(c, 2 * c, 2, share / 4);
   }
   return flops;
+}
+
+std::vector<ImageTile> image_tiles(const ImageNetOptions& options, int64_t height, int64_t width,
+                                   int64_t tile, int64_t* step_out) {
+  const int64_t m = options.multiple();
+  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
+  const int64_t halo = round_up(options.receptive_radius());
+  const int64_t step = round_up(std::max<int64_t>(1, tile));
+  const int64_t hp = round_up(height), wp = round_up(width);
+  if (step_out) *step_out = step;
+  std::vector<ImageTile> tiles;
+  for (int64_t y0 = 0; y0 < hp; y0 += step) {
+    for (int64_t x0 = 0; x0 < wp; x0 += step) {
+      tiles.push_back({y0, x0, std::max<int64_t>(0, y0 - halo), std::min(hp, y0 + step + halo),
+                       std::max<int64_t>(0, x0 - halo), std::min(wp, x0 + step + halo)});
+    }
+  }
+  return tiles;
 }
 
 namespace {

@@ -435,18 +435,9 @@ double image_pixel_flops(const NetworkOptions& o) {
 }
 
 double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {
-  const int64_t m = o.image.multiple();
-  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
-  const int64_t halo = round_up(o.image.receptive_radius()),
-                step = round_up(std::max<int64_t>(1, tile));
-  const int64_t hp = round_up(height), wp = round_up(width);
   double pixels = 0;
-  for (int64_t y0 = 0; y0 < hp; y0 += step) {
-    for (int64_t x0 = 0; x0 < wp; x0 += step) {
-      const int64_t th = std::min(hp, y0 + step + halo) - std::max<int64_t>(0, y0 - halo);
-      const int64_t tw = std::min(wp, x0 + step + halo) - std::max<int64_t>(0, x0 - halo);
-      pixels += static_cast<double>(th * tw);
-    }
+  for (const auto& t : image_tiles(o.image, height, width, tile)) {
+    pixels += static_cast<double>((t.a1 - t.a0) * (t.b1 - t.b0));
   }
   return image_pixel_flops(o) * pixels;
 }

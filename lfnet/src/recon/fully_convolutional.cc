@@ -116,28 +116,23 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   torch::NoGradGuard no_grad;
   net->eval();
   const int64_t m = o.image.multiple(), h = sensor.size(1), w = sensor.size(2);
-  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
-  const int64_t halo = round_up(o.image.receptive_radius()), step = round_up(tile);
-  const int64_t hp = round_up(h), wp = round_up(w), t = net->pixel_pinv.size(0);
+  const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->pixel_pinv.size(0);
   const auto device = net->pixel_pinv.device();
   auto padded = torch::constant_pad_nd(sensor.to(torch::kFloat32), {0, wp - w, 0, hp - h});
   auto out = torch::empty({1, o.patch.rows, o.patch.cols, h, w}, torch::kFloat32);
-  const int64_t tiles = ((hp + step - 1) / step) * ((wp + step - 1) / step);
-  int64_t done = 0;
-  for (int64_t y0 = 0; y0 < hp; y0 += step) {
-    for (int64_t x0 = 0; x0 < wp; x0 += step) {
-      const int64_t a0 = std::max<int64_t>(0, y0 - halo), a1 = std::min(hp, y0 + step + halo);
-      const int64_t b0 = std::max<int64_t>(0, x0 - halo), b1 = std::min(wp, x0 + step + halo);
-      auto crop = padded.slice(1, a0, a1).slice(2, b0, b1).unsqueeze(0).to(device);
-      auto est = net->forward_image(crop, (a0 % t) * t + b0 % t, noise_sigma).to(torch::kCPU);
-      const int64_t th = std::min(y0 + step, h) - y0, tw = std::min(x0 + step, w) - x0;
-      if (th > 0 && tw > 0) {
-        out.slice(3, y0, y0 + th)
-            .slice(4, x0, x0 + tw)
-            .copy_(est.slice(3, y0 - a0, y0 - a0 + th).slice(4, x0 - b0, x0 - b0 + tw));
-      }
-      if (progress) progress(++done, tiles);
+  int64_t step = 0, done = 0;
+  const auto tiles = nn::image_tiles(o.image, h, w, tile, &step);
+  for (const auto& c : tiles) {
+    auto crop = padded.slice(1, c.a0, c.a1).slice(2, c.b0, c.b1).unsqueeze(0).to(device);
+    auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma).to(torch::kCPU);
+    const int64_t th = std::min(c.y0 + step, h) - c.y0, tw = std::min(c.x0 + step, w) - c.x0;
+    if (th > 0 && tw > 0) {
+      out.slice(3, c.y0, c.y0 + th)
+          .slice(4, c.x0, c.x0 + tw)
+          .copy_(
+              est.slice(3, c.y0 - c.a0, c.y0 - c.a0 + th).slice(4, c.x0 - c.b0, c.x0 - c.b0 + tw));
     }
+    if (progress) progress(++done, static_cast<int64_t>(tiles.size()));
   }
   if (clamp) out.clamp_(0.0, 1.0);
   return out;

@@ -49,6 +49,19 @@ struct ImageNetOptions {
   double pixel_flops(int64_t in, int64_t out) const;
 };
 
+// One tile of tiled inference over an H x W image padded to the U-Net's multiple: its core
+// [y0, y0 + step) x [x0, x0 + step) and the crop computed for it, [a0, a1) x [b0, b1), the core
+// with a halo of the receptive radius, both rounded to the multiple and clipped to the padded
+// image. Tiles start at multiples of the multiple, so every crop down-samples on the grid of
+// the whole image.
+struct ImageTile {
+  int64_t y0 = 0, x0 = 0, a0 = 0, a1 = 0, b0 = 0, b1 = 0;
+};
+// The tiles of `tile` x `tile` pixels (rounded up to the multiple) covering height x width,
+// row by row; `step` receives the rounded tile side.
+std::vector<ImageTile> image_tiles(const ImageNetOptions& options, int64_t height, int64_t width,
+                                   int64_t tile, int64_t* step = nullptr);
+
 // The U-Net: (B, in, H, W) -> (B, out, H, W) with H and W multiples of options.multiple().
 // Its last convolution starts at zero, so an untrained net adds nothing to its input's estimate.
 class ImageNetImpl : public torch::nn::Module {
