@@ -102,3 +102,28 @@ TEST_CASE("loss options are strict and name the bad field", "[nn][loss]") {
   CHECK_THROWS_WITH(loss(torch::zeros({1, 1, 3, 3, 9, 9}), torch::zeros({1, 1, 3, 3, 9, 9})),
                     Catch::Contains("5, 5"));
 }
+
+TEST_CASE("noise_scale weighs each patch by s / (s + sigma)", "[nn][loss]") {
+  auto target = torch::zeros({2, 1, 3, 3, 2, 2});
+  auto pred = target.clone();
+  pred[0][0][1][1][0][0] = 1.0;  // patch 0: one unit error
+  pred[1][0][1][1][1][1] = 2.0;  // patch 1: an error of 4 when squared
+  const auto sigma = torch::tensor({0.0f, 0.3f});
+  LossOptions plain;
+  plain.name = "l2";
+  LossOptions weighted = plain;
+  weighted.noise_scale = 0.1;
+  const double n = 2 * 9 * 4;
+  // Without a noise_scale, the sigmas change nothing.
+  CHECK(ReconstructionLoss(plain, 3, 3)(pred, target, sigma).item<double>() == Approx(5.0 / n));
+  // With it, the noiseless patch keeps its weight 1 and the sigma 0.3 patch weighs 0.25.
+  CHECK(ReconstructionLoss(weighted, 3, 3)(pred, target, sigma).item<double>() ==
+        Approx((1.0 + 4.0 * 0.25) / n));
+  // Batches that carry no sigmas (no noise_range) are not weighted.
+  CHECK(ReconstructionLoss(weighted, 3, 3)(pred, target).item<double>() == Approx(5.0 / n));
+  CHECK_THROWS_WITH(ReconstructionLoss(weighted, 3, 3)(pred, target, torch::zeros({3})),
+                    Catch::Contains("3 noise sigmas"));
+  CHECK_THROWS_WITH(
+      LossOptions::from_json(nlohmann::json::parse(R"({"noise_scale": -1})"), "$.loss"),
+      Catch::Contains("$.loss.noise_scale"));
+}

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "lfnet/core/error.h"
 
@@ -50,6 +51,8 @@ void LossOptions::read(JsonReader& reader) {
   } catch (const ConfigError& e) {
     throw ConfigError(reader.path_of("reduction") + ": " + e.what());
   }
+  LFNET_CHECK_AS(ConfigError, noise_scale >= 0 && std::isfinite(noise_scale),
+                 reader.path_of("noise_scale"), ": must be >= 0, got ", noise_scale);
 }
 
 nlohmann::json LossOptions::to_json() const { return fields_to_json(*this); }
@@ -57,6 +60,8 @@ nlohmann::json LossOptions::to_json() const { return fields_to_json(*this); }
 void LossOptions::validate() const {
   kind();
   reduction_kind();
+  LFNET_CHECK_AS(ConfigError, noise_scale >= 0 && std::isfinite(noise_scale),
+                 "loss.noise_scale must be >= 0, got ", noise_scale);
 }
 
 LossKind LossOptions::kind() const {
@@ -84,7 +89,8 @@ ReconstructionLoss::ReconstructionLoss(const LossOptions& options, int64_t rows,
 }
 
 torch::Tensor ReconstructionLoss::operator()(const torch::Tensor& prediction,
-                                             const torch::Tensor& target) const {
+                                             const torch::Tensor& target,
+                                             const torch::Tensor& noise) const {
   LFNET_CHECK(prediction.sizes() == target.sizes(), "loss: prediction ", prediction.sizes(),
               " and target ", target.sizes(), " differ in shape");
   LFNET_CHECK(prediction.dim() >= 5 && prediction.size(-4) == rows_ && prediction.size(-3) == cols_,
@@ -93,6 +99,14 @@ torch::Tensor ReconstructionLoss::operator()(const torch::Tensor& prediction,
   auto diff = prediction - target;
   auto err = kind_ == LossKind::kL1 ? diff.abs() : diff.square();
   if (kind_ == LossKind::kWeightedL2) err = err * weights_.to(err.options());
+  if (options_.noise_scale > 0 && noise.defined()) {
+    LFNET_CHECK(noise.numel() == prediction.size(0), "loss: ", noise.numel(),
+                " noise sigmas for a batch of ", prediction.size(0));
+    std::vector<int64_t> shape(static_cast<size_t>(err.dim()), 1);
+    shape[0] = prediction.size(0);
+    auto weight = options_.noise_scale / (noise.to(err.options()) + options_.noise_scale);
+    err = err * weight.view(shape);
+  }
   auto total = err.sum();
   if (reduction_ == LossReduction::kMean) return total / static_cast<double>(err.numel());
   return total / static_cast<double>(prediction.size(0));

@@ -112,6 +112,9 @@ void TrainerOptions::validate() const {
   } catch (const ConfigError& e) {
     fail("loss.reduction", e.what());
   }
+  if (!(loss.noise_scale >= 0 && std::isfinite(loss.noise_scale))) {
+    fail("loss.noise_scale", "must be >= 0");
+  }
   if (!(clip_grad_norm >= 0)) fail("clip_grad_norm", "must be >= 0");
   if (on_nonfinite != "stop" && on_nonfinite != "skip") {
     fail("on_nonfinite", "'" + on_nonfinite + "' is unknown (known: stop, skip)");
@@ -530,7 +533,8 @@ Evaluation Trainer::evaluate(BatchSource& source) {
     const Batch batch = to_device(batches[j], device_);
     check_batch(batch, "validation batch");
     auto pred = net_->forward(batch.y, batch.phase, batch.noise);
-    loss_sum += loss_(pred, batch.target).item<double>() * static_cast<double>(batch.size());
+    loss_sum +=
+        loss_(pred, batch.target, batch.noise).item<double>() * static_cast<double>(batch.size());
     squared += (pred.clamp(0, 1) - batch.target).to(torch::kFloat64).square().sum().item<double>();
     patches += batch.size();
     elements += batch.target.numel();
@@ -559,7 +563,7 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
   StepOutcome out;
   out.patches = static_cast<double>(batch.size());
   if (!distributed) {
-    auto loss = loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target);
+    auto loss = loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target, batch.noise);
     out.loss = loss.item<double>();
     if (std::isfinite(out.loss)) loss.backward();
   } else {
@@ -568,7 +572,8 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
     double local_sum = 0;
     if (batch.size() > 0) {
       auto loss =
-          loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target) * out.patches;
+          loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target, batch.noise) *
+          out.patches;
       local_sum = loss.item<double>();
       if (std::isfinite(local_sum)) loss.backward();
     }

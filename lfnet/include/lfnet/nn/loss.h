@@ -38,11 +38,16 @@ enum class LossReduction {
 struct LossOptions {
   std::string name = "weighted_l2";  // weighted_l2, l2 or l1
   std::string reduction = "mean";    // mean or sum (see LossReduction)
+  // Noise-aware training (dataset.noise_range): a patch measured with noise sigma weighs
+  // noise_scale / (noise_scale + sigma), so that noisy patches, whose errors are larger, do not
+  // drown the nearly noiseless ones. 0: every patch weighs 1.
+  double noise_scale = 0.0;
 
   template <typename Fields>
   void fields(Fields& f) {
     f("name", name);
     f("reduction", reduction);
+    f("noise_scale", noise_scale);
   }
   static LossOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
@@ -59,8 +64,10 @@ class ReconstructionLoss {
  public:
   ReconstructionLoss(const LossOptions& options, int64_t rows, int64_t cols);
 
-  // Scalar loss of `prediction` against `target` (same shape).
-  torch::Tensor operator()(const torch::Tensor& prediction, const torch::Tensor& target) const;
+  // Scalar loss of `prediction` against `target` (same shape). `noise`: the patches' noise
+  // sigmas (B), which weigh them when options().noise_scale > 0; undefined: no noise.
+  torch::Tensor operator()(const torch::Tensor& prediction, const torch::Tensor& target,
+                           const torch::Tensor& noise = {}) const;
 
   const LossOptions& options() const { return options_; }
   // The (U, V) weights in use: view_weights for weighted_l2, ones otherwise.
