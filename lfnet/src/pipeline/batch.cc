@@ -172,7 +172,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
       spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
       context.net = model.net;
       context.script = model.script;
-      if (!model.network.is_image()) patch = model.network.patch;  // lfnet: whole images
+      patch = model.network.patch_grid();
     } else {
       LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
                      "evaluating light-field folders needs --model or --phi");

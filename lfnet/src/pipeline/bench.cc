@@ -162,7 +162,8 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const auto phi = optics::make_phi(spec);
   if (net && a.models.empty()) net->set_phi(phi_tensor(*phi, net->options()));
   // The patch grid of patch methods (lfnet reconstructs whole images: its crop is no patch).
-  const int64_t patch = net && !net->options().is_image() ? net->options().patch.height : 9;
+  const auto net_grid = net ? net->options().patch_grid() : std::nullopt;
+  const int64_t patch = net_grid ? net_grid->height : 9;
   recon::ReconstructOptions o;
   o.patch_h = o.patch_w = patch;
   o.stride = stride;

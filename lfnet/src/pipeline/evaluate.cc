@@ -116,8 +116,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     if (recon::needs_network(method)) {
       context.net = model.net;
       context.script = model.script;
-      // The lfnet architecture reconstructs whole images: its training crop is no patch size.
-      if (!model.network.is_image()) network_patch = model.network.patch;
+      network_patch = model.network.patch_grid();
       if (context.net) {
         context.net->to(parse_device(a.device));
         nn::set_cnn_precision(context.net, nn::parse_precision(a.precision));

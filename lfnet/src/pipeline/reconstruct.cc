@@ -105,9 +105,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
                  "--cnn-mode full needs --method net or cnn, not '", method, "'");
   if (model) {
     model->check_phi(spec.to_json());
-    if (!model->network.is_image()) {  // lfnet reconstructs whole images
-      o.patch_h = model->network.patch.height;
-      o.patch_w = model->network.patch.width;
+    if (const auto grid = model->network.patch_grid()) {  // lfnet: whole images
+      o.patch_h = grid->height;
+      o.patch_w = grid->width;
     }
     if (model->net) {
       model->net->to(parse_device(a.device));

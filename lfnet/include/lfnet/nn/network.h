@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -132,6 +133,12 @@ struct NetworkOptions {
   void validate() const;
 
   bool is_image() const { return architecture == "lfnet"; }
+  // The patch grid that reconstruction with this network uses: its patch shape, or none for
+  // the lfnet architecture, which reconstructs whole images (its training crop is no patch).
+  std::optional<PatchShape> patch_grid() const {
+    if (is_image()) return std::nullopt;
+    return patch;
+  }
   bool has_ae() const { return !is_image() && (branches == "net" || branches == "ae"); }
   bool has_cnn() const { return !is_image() && (branches == "net" || branches == "cnn"); }
   int64_t measurement_size() const { return measurements * patch.pixels(); }  // N h w
