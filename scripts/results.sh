@@ -100,10 +100,19 @@ noise-sweep() {
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
     VARIANT="trained at sigma 0.2" record "$tmp" --model $pq/noise-trained-0.2.ckpt \
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
-    if [[ -f models/lfnet-asp-n2.ckpt ]]; then
-      VARIANT="lfnet-asp-n2, trained without noise" record "$tmp" --model models/lfnet-asp-n2.ckpt \
-        --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
-    fi
+    # lfnet's architecture (scripts/noise-models.sh): without noise, noise-aware, one sigma.
+    local name model
+    for name in lfnet-asp-n2 lfnet-asp-n2-noise lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
+      model=models/$name.ckpt
+      [[ -f $model ]] || continue
+      case $name in
+        lfnet-asp-n2) variant="lfnet-asp-n2, trained without noise" ;;
+        lfnet-asp-n2-noise) variant="lfnet-asp-n2-noise, noise-aware" ;;
+        *) variant="lfnet, trained at sigma ${name#lfnet-noise/sigma-}" ;;
+      esac
+      VARIANT=$variant record "$tmp" --model "$model" --lf ../shared/data/hci_antinous \
+        --method net --mode sensor --stride 5 --noise "$sigma"
+    done
   done
   mv "$tmp" results/noise-sweep/records.jsonl
 }
