@@ -13,6 +13,7 @@
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/recon/reconstruct.h"
 #include "lfnet/train/checkpoint.h"
@@ -237,23 +238,133 @@ TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[ap
     std::string out;
     const auto network = lfnet::nn::NetworkOptions::from_json(
         lfnet::train::load_checkpoint(model.string()).network, "$.network");
-    if (network.is_image()) {
-      // Export does not write the lfnet architecture yet: a one-line refusal, no file.
-      CHECK(run_command(lfnet_binary() + " --log-level warn export --model " + model.string() +
-                            " --out " + pt,
-                        out) != 0);
-      CHECK(out.find("lfnet architecture") != std::string::npos);
-      CHECK_FALSE(fs::exists(pt));
-      continue;
-    }
-    // export compares the file with the checkpoint on 256 patches and fails above 1e-5.
+    // export compares the file with the checkpoint on 256 patches (the lfnet architecture: on
+    // a sensor image in tiles) and fails above 1e-5.
     REQUIRE(run_command(lfnet_binary() + " --threads 2 --log-level warn export --model " +
                             model.string() + " --out " + pt,
                         out) == 0);
     std::printf("%s", out.c_str());
-    CHECK(out.find("max |exported - checkpoint| on 256 patches") != std::string::npos);
+    CHECK(out.find(network.is_image()
+                       ? "max |exported - checkpoint| on a "
+                       : "max |exported - checkpoint| on 256 patches") != std::string::npos);
     const auto loaded = lfnet::nn::load_script(pt);
     CHECK(loaded.meta.phi == lfnet::train::load_checkpoint(model.string()).phi);
+  }
+}
+
+TEST_CASE(
+    "a net of the lfnet architecture exports: the file reconstructs like the checkpoint in "
+    "LibTorch, in Python and through lfnet evaluate",
+    "[app][export][image]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  std::string out;
+  REQUIRE(run_command(lfnet + "render --random 7 --size 45x38 --out " + (tmp / "lf"), out) == 0);
+  auto lf = lfnet::io::read_light_field(tmp / "lf").central(5).grey().data()[0];
+  // asp (period 1) and mask (period 2: tiles of every phase).
+  for (const std::string name : {"asp", "mask"}) {
+    INFO(name);
+    auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(name + ":2"));
+    lfnet::nn::NetworkOptions o;
+    o.architecture = "lfnet";
+    o.measurements = phi->measurements();
+    o.patch = {phi->rows(), phi->cols(), 16, 16};
+    o.image.channels = 4;
+    o.image.levels = 2;
+    o.image.blocks = 1;
+    o.image.noise_input = true;
+    lfnet::nn::LightFieldNet net(o);
+    const int64_t t = phi->period();
+    net->set_phi(phi->pixel_weights(0, 0, t, t));
+    {
+      // Random weights everywhere, the last layer included, so the U-Net is not the identity.
+      torch::manual_seed(5);
+      torch::NoGradGuard no_grad;
+      for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
+    }
+    net->eval();
+    const std::string ckpt = tmp / (name + ".ckpt"), pt = tmp / (name + ".pt");
+    lfnet::train::Checkpoint ck;
+    ck.network = o.to_json();
+    ck.phi = phi->spec().to_json();
+    ck.config = {{"measurement_mean", 0.3}};
+    ck.model = lfnet::train::module_state(*net);
+    ck.training.stage = "joint_scratch";
+    lfnet::train::save_checkpoint(ck, ckpt);
+    REQUIRE(run_command(lfnet + "export --model " + ckpt + " --out " + pt, out) == 0);
+    CHECK(out.find("(" + name + ":2, lfnet, " + std::to_string(t * t) + " phases)") !=
+          std::string::npos);
+    CHECK(out.find("max |exported - checkpoint| on a ") != std::string::npos);
+    CHECK(out.find(" sensor image in tiles of 4: ") != std::string::npos);
+
+    // LibTorch: whole images, tiles with halos (one tile, and many) and the simulation.
+    const auto scripted = lfnet::nn::load_script(pt);
+    CHECK(scripted.network.is_image());
+    auto sensor = lfnet::optics::simulate_sensor(*phi, lf);
+    const double sigma = 0.1;
+    torch::Tensor whole, tiled;
+    {
+      torch::NoGradGuard no_grad;
+      whole = net->forward_image(sensor.unsqueeze(0), 0, sigma);
+    }
+    for (int64_t tile : {8, 1000}) {
+      INFO("tile " << tile);
+      tiled = lfnet::recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
+      CHECK(max_abs_diff(scripted.reconstruct_image(sensor, tile, false, sigma), tiled[0]) <= 1e-5);
+    }
+    // The noise channel is read: another sigma gives another result.
+    CHECK(max_abs_diff(scripted.reconstruct_image(sensor, 8, false, 0.0), tiled[0]) > 1e-3);
+    CHECK(max_abs_diff(tiled, whole) <= 1e-4);
+    auto simulated = scripted.module.get_method("simulate")({lf}).toTensor();
+    CHECK(max_abs_diff(simulated, sensor) <= 1e-5);
+    CHECK_THROWS_WITH(scripted.forward(torch::zeros({1, o.measurements * 81})),
+                      Catch::Contains("lfnet architecture"));
+
+    // evaluate with the file gives the checkpoint's PSNR.
+    for (const auto& [model, json] : {std::pair{ckpt, "ck.json"}, std::pair{pt, "pt.json"}}) {
+      std::string command = lfnet;
+      for (const std::string& part :
+           {std::string("evaluate --model "), std::string(model), std::string(" --lf "), tmp / "lf",
+            std::string(" --json "), tmp / json}) {
+        command += part;
+      }
+      REQUIRE(run_command(command, out) == 0);
+    }
+    const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
+    CHECK(std::abs(a["psnr_db"].get<double>() - b["psnr_db"].get<double>()) < 1e-4);
+
+    // Python: Debian's python3-torch runs the file with the same numbers.
+    const std::string python = lfnet::test::python_with("torch");
+    if (python.empty()) {
+      WARN("python3 with torch not found: the Python half of the export test is skipped");
+      continue;
+    }
+    const std::string dir = tmp / ("reference-" + name);
+    fs::create_directories(dir);
+    tiled = lfnet::recon::reconstruct_sensor_tiled(net, sensor, 8, false, sigma);
+    write_raw(dir + "/sensor.f32", sensor);
+    write_raw(dir + "/whole.f32", whole);
+    write_raw(dir + "/tiled.f32", tiled);
+    write_raw(dir + "/lf.f32", lf);
+    write_raw(dir + "/simulated.f32", sensor);
+    lfnet::write_json_file(dir + "/reference.json", {{"tile", 8},
+                                                     {"noise_sigma", sigma},
+                                                     {"shapes",
+                                                      {{"sensor", sensor.sizes().vec()},
+                                                       {"whole", whole.sizes().vec()},
+                                                       {"tiled", tiled.sizes().vec()},
+                                                       {"lf", lf.sizes().vec()},
+                                                       {"simulated", sensor.sizes().vec()}}}});
+    REQUIRE(run_command(python + " " + LFNET_SOURCE_DIR + "/tests/apps/check_export_image.py " +
+                            pt + " " + dir,
+                        out) == 0);
+    INFO(out);
+    const auto result = nlohmann::json::parse(out.substr(out.rfind("\n{") + 1));
+    CHECK(result["forward_max_diff"].get<double>() <= 1e-5);
+    CHECK(result["reconstruct_max_diff"].get<double>() <= 1e-5);
+    CHECK(result["simulate_max_diff"].get<double>() <= 1e-5);
+    CHECK(result["output_shape"] == nlohmann::json({5, 5, 45, 38}));
+    CHECK(result["noise_input"] == true);
   }
 }
 

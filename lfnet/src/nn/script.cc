@@ -2,6 +2,8 @@
 
 #include <torch/csrc/jit/frontend/resolver.h>
 #include <torch/csrc/jit/frontend/sugared_value.h>
+#include <torch/csrc/jit/frontend/tracer.h>
+#include <torch/csrc/jit/passes/shape_analysis.h>
 #include <torch/csrc/jit/serialization/import.h>
 #include <torch/torch.h>
 #include <unistd.h>
@@ -280,6 +282,87 @@ def simulate(self, lf: Tensor) -> Tensor:
     return meas.view([by, bx, nm, blk, blk]).permute([2, 0, 3, 1, 4]).reshape([nm, H, W])
 )TS";
 
+// The methods of an exported net of the lfnet architecture (docs/export.md). The U-Net is the
+// submodule `image`, traced from the C++ module itself; these methods repeat only the
+// per-pixel pseudo-inverse, the padding and the noise channel of network.cc and the tiles of
+// nn::image_tiles / recon::reconstruct_sensor_tiled, op for op.
+constexpr const char* kImageSource = R"TS(
+def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
+    t = self.pixel_pinv.size(0)
+    x = sensor.to(self.pixel_pinv.dtype)
+    if t == 1:
+        return torch.einsum("nk,bnij->bkij", [self.pixel_pinv[0][0], x])
+    h = x.size(2)
+    w = x.size(3)
+    rows = torch.remainder(torch.arange(h, device=x.device) + phase // t, t)
+    cols = torch.remainder(torch.arange(w, device=x.device) + phase % t, t)
+    m = self.pixel_pinv.index_select(0, rows).index_select(1, cols)
+    return torch.einsum("ijnk,bnij->bkij", [m, x])
+
+def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
+    if sensor.dim() != 4 or sensor.size(1) != self.measurements:
+        raise ValueError("forward_image: expected sensor images (B, N, H, W) with N the measurements")
+    if phase < 0 or phase >= self.period * self.period:
+        raise ValueError("forward_image: phase outside [0, period^2)")
+    b = sensor.size(0)
+    h = sensor.size(2)
+    w = sensor.size(3)
+    m = self.multiple
+    ph = (m - h % m) % m
+    pw = (m - w % m) % m
+    base = self.pixel_pinv_image(sensor, phase)
+    if ph > 0 or pw > 0:
+        base = torch.constant_pad_nd(base, [0, pw, 0, ph])
+    x = base
+    if self.noise_input:
+        x = torch.cat([base, base.new_full([b, 1, base.size(2), base.size(3)], noise_sigma)], 1)
+    out = base + self.image.forward(x)
+    return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
+
+def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
+    return self.forward_image(sensor, phase, noise_sigma)
+
+def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
+    if sensor.dim() != 3 or sensor.size(0) != self.measurements:
+        raise ValueError("reconstruct: expected a sensor image (N, H, W) with N the measurements")
+    if tile < 1:
+        raise ValueError("reconstruct: the tile must be positive")
+    m = self.multiple
+    t = self.period
+    h = sensor.size(1)
+    w = sensor.size(2)
+    hp = (h + m - 1) // m * m
+    wp = (w + m - 1) // m * m
+    halo = (self.receptive_radius + m - 1) // m * m
+    step = (tile + m - 1) // m * m
+    padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
+    out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)
+    for y0 in range(0, hp, step):
+        for x0 in range(0, wp, step):
+            a0 = max(0, y0 - halo)
+            a1 = min(hp, y0 + step + halo)
+            b0 = max(0, x0 - halo)
+            b1 = min(wp, x0 + step + halo)
+            crop = padded.narrow(1, a0, a1 - a0).narrow(2, b0, b1 - b0).unsqueeze(0)
+            est = self.forward_image(crop, (a0 % t) * t + b0 % t, noise_sigma)[0]
+            th = min(y0 + step, h) - y0
+            tw = min(x0 + step, w) - x0
+            if th > 0 and tw > 0:
+                out.narrow(2, y0, th).narrow(3, x0, tw).copy_(est.narrow(2, y0 - a0, th).narrow(3, x0 - b0, tw))
+    if clamp:
+        out.clamp_(0.0, 1.0)
+    return out
+
+def simulate(self, lf: Tensor) -> Tensor:
+    t = self.phi.size(3)
+    h = lf.size(2)
+    w = lf.size(3)
+    rows = torch.remainder(torch.arange(h, device=lf.device), t)
+    cols = torch.remainder(torch.arange(w, device=lf.device), t)
+    weights = self.phi.index_select(3, rows).index_select(4, cols)
+    return (weights * lf.to(self.phi.dtype).unsqueeze(0)).sum([1, 2])
+)TS";
+
 // A float literal that TorchScript reads back as the same double.
 std::string literal(double v) {
   char buf[64];
@@ -430,6 +513,27 @@ std::string class_name(const std::string& path) {
 
 std::string metadata_text(const jit::Module& m) { return m.attr("metadata").toStringRef(); }
 
+// Gives `image` a `forward` traced from the C++ U-Net `unet`, whose parameters `image` holds
+// as the very same tensors, so the trace reads them as the module's attributes. The U-Net has
+// no size-dependent operations, so the trace serves images of every size (multiples of the
+// U-Net's multiple); shapes are erased from the traced graph.
+void trace_image_net(ImageNet unet, jit::Module& image, int64_t channels) {
+  torch::NoGradGuard no_grad;
+  const int64_t m = unet->options().multiple();
+  const jit::Stack example{torch::rand({1, channels, 2 * m, 2 * m})};
+  auto run = [&](jit::Stack inputs) -> jit::Stack {
+    return {unet->forward(inputs.at(0).toTensor())};
+  };
+  auto traced = jit::tracer::trace(
+      example, run, [](const torch::autograd::Variable&) { return std::string(); },
+      /*strict=*/true, /*force_outplace=*/false, &image);
+  auto graph = traced.first->graph;
+  jit::EraseShapeInformation(graph);
+  auto* fn = image._ivalue()->compilation_unit()->create_function(
+      c10::QualifiedName(*image.type()->name(), "forward"), graph);
+  image.type()->addMethod(fn);
+}
+
 }  // namespace
 
 nlohmann::json ScriptMetadata::to_json(const NetworkOptions& network, int64_t phases) const {
@@ -480,15 +584,18 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
     }
     return it->second;
   };
+  // The lfnet architecture's U-Net is traced with the net's own tensors (see trace_image_net)
+  // and gets copies afterwards.
+  const bool image = o.is_image();
   for (const auto& p : net->named_parameters()) {
     const auto [path, leaf] = split(p.key());
-    module_at(path).register_parameter(leaf, p.value().detach().clone(), false);
+    module_at(path).register_parameter(leaf, image ? p.value() : p.value().detach().clone(), false);
   }
   std::string accessors;
   for (const auto& b : net->named_buffers()) {
-    if (b.key() == "phi") {
+    if (!image && b.key() == "phi") {
       accessors += register_stack(root, "phi", "phi_stack", b.value());
-    } else if (b.key() == "base") {
+    } else if (!image && b.key() == "base") {
       accessors += register_stack(root, "base", "base_stack", b.value());
     } else {
       const auto [path, leaf] = split(b.key());
@@ -510,6 +617,20 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
     module_at(parent).register_module(leaf, children.at(path));
   }
 
+  if (image) {
+    LFNET_CHECK_AS(ConfigError, net->pixel_pinv.size(0) == meta.period,
+                   "export: the net's Phi has period ", net->pixel_pinv.size(0), ", not ",
+                   meta.period);
+    auto unet = module_at("image");
+    trace_image_net(net->image, unet, o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0));
+    for (const auto& p : net->named_parameters()) {
+      const auto [path, leaf] = split(p.key());
+      module_at(path).register_parameter(leaf, p.value().detach().clone(), false);
+    }
+    root.register_attribute("multiple", c10::IntType::get(), o.image.multiple());
+    root.register_attribute("receptive_radius", c10::IntType::get(), o.image.receptive_radius());
+    root.register_attribute("noise_input", c10::BoolType::get(), o.image.noise_input);
+  }
   const auto metadata = meta.to_json(o, phases);
   root.register_attribute("format_version", c10::IntType::get(), kScriptFormatVersion);
   root.register_attribute("metadata", c10::StringType::get(), metadata.dump(2));
@@ -522,7 +643,8 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
   root.register_attribute("period", c10::IntType::get(), meta.period);
   root.register_attribute("block", c10::IntType::get(), meta.block);
   root.register_attribute("local", c10::BoolType::get(), meta.local);
-  root.define(with_dtypes(accessors + network_source(o) + kCommonSource),
+  root.define(with_dtypes(image ? std::string(kImageSource)
+                                : accessors + network_source(o) + kCommonSource),
               std::make_shared<ScriptResolver>());
   root.eval();
   return root;
@@ -549,10 +671,22 @@ bool is_script_file(const std::string& path) {
 
 torch::Tensor ScriptedNetwork::forward(const torch::Tensor& y, const torch::Tensor& phase,
                                        const std::string& branch) const {
+  LFNET_CHECK_AS(ConfigError, !network.is_image(), "exported model ", path,
+                 " is of the lfnet architecture, which reconstructs whole sensor images, not "
+                 "patches");
   torch::NoGradGuard no_grad;
   c10::IValue ph = phase.defined() ? c10::IValue(phase) : c10::IValue();
   auto fn = module.get_method("forward_branch");
   return fn({y, ph, branch}).toTensor();
+}
+
+torch::Tensor ScriptedNetwork::reconstruct_image(const torch::Tensor& sensor, int64_t tile,
+                                                 bool clamp, double noise_sigma) const {
+  LFNET_CHECK_AS(ConfigError, network.is_image(), "exported model ", path,
+                 " is of the paper's architecture, which reconstructs patches");
+  torch::NoGradGuard no_grad;
+  auto fn = module.get_method("reconstruct");
+  return fn({sensor, tile, clamp, noise_sigma}).toTensor();
 }
 
 ScriptedNetwork load_script(const std::string& path) {

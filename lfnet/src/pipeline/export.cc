@@ -10,6 +10,7 @@
 #include "lfnet/core/version.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/train/checkpoint.h"
 
 namespace fs = std::filesystem;
@@ -43,9 +44,6 @@ ExportResult export_model(const ExportRequest& a) {
   const auto ckpt = train::load_checkpoint(a.model);
   auto net = train::build_net(ckpt, a.model);
   net->eval();
-  LFNET_CHECK_AS(ConfigError, !net->options().is_image(), a.model,
-                 " is of the lfnet architecture, which export does not write yet; reconstruct "
-                 "with the checkpoint itself");
   const auto spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
   const auto phi = optics::make_phi(spec);
   const auto& o = net->options();
@@ -73,18 +71,34 @@ ExportResult export_model(const ExportRequest& a) {
   // Read the file back and compare it with the checkpoint's net on realistic inputs.
   const auto loaded = nn::load_script(a.out);
   double diff = 0;
-  if (a.check > 0) {
+  ExportResult r;
+  if (a.check > 0 && o.is_image()) {
+    // A sensor image wider than two halos, with sides that are no multiples of the U-Net's, in
+    // many tiles.
+    auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
+    const int64_t m = o.image.multiple(), halo = o.image.receptive_radius();
+    auto sensor = torch::rand({o.measurements, 2 * halo + m + 3, 3 * halo + 1}, gen);
+    const double sigma = o.image.noise_input ? 0.05 : 0.0;
+    const int64_t tile = 2 * m;
+    auto want = recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
+    auto got = loaded.reconstruct_image(sensor, tile, false, sigma);
+    diff = (got - want.squeeze(0)).abs().max().item<double>();
+    r.compared = "a " + std::to_string(sensor.size(1)) + " x " + std::to_string(sensor.size(2)) +
+                 " sensor image in tiles of " + std::to_string(tile);
+    LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
+                   diff, " on a sensor image (more than 1e-5): please report this");
+  } else if (a.check > 0) {
     auto [y, phase] = check_inputs(net, a.check);
     torch::NoGradGuard no_grad;
     auto want = net->forward(y, phase).reshape({a.check, -1});
     auto got = loaded.forward(y, phase).reshape({a.check, -1});
     diff = (got - want).abs().max().item<double>();
+    r.compared = std::to_string(a.check) + " patches";
     LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
                    diff, " on ", a.check, " patches (more than 1e-5): please report this");
   }
-  ExportResult r;
   r.phi = spec.label();
-  r.branches = o.branches;
+  r.branches = o.is_image() ? "lfnet" : o.branches;
   r.phases = net->phases();
   r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
   r.max_difference = diff;

@@ -44,7 +44,7 @@ class NetworkMethod : public Method {
   }
   MethodNeeds needs() const override { return MethodNeeds::kNetwork; }
   PatchSolver solver(const MethodResources& r) const override {
-    if (!r.script && r.net->options().is_image()) {
+    if (is_image(r)) {
       check_image_branch();
       // The U-Net needs a whole sensor image: image_solver() serves sensor images.
       return [](const torch::Tensor&, const torch::Tensor&) -> torch::Tensor {
@@ -55,10 +55,16 @@ class NetworkMethod : public Method {
     return r.script ? script_solver(*r.script, branch_) : network_solver(r.net, branch_);
   }
   ImageSolver image_solver(const MethodResources& r) const override {
-    if (r.script || r.net.is_empty() || !r.net->options().is_image()) return {};
+    if (!is_image(r)) return {};
     check_image_branch();
-    auto net = r.net;
     const int64_t tile = r.tile;
+    if (r.script) {
+      const auto* script = r.script;
+      return [script, tile](const torch::Tensor& sensor, double noise_sigma) {
+        return script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0);
+      };
+    }
+    auto net = r.net;
     return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
       return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma);
     };
@@ -72,6 +78,11 @@ class NetworkMethod : public Method {
   }
 
  private:
+  // Whether the model (a checkpoint's net or an exported one) is of the lfnet architecture.
+  static bool is_image(const MethodResources& r) {
+    if (r.script) return r.script->network.is_image();
+    return !r.net.is_empty() && r.net->options().is_image();
+  }
   void check_image_branch() const {
     LFNET_CHECK_AS(ConfigError, branch_ == "net", "method '", branch_,
                    "' names a branch of the paper's network; a model of the lfnet architecture "

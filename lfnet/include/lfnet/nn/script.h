@@ -14,6 +14,15 @@
 //                                     sensor (N, H, W) -> light field (U, V, H, W)
 //   simulate(lf)                      lf (U, V, H, W) -> noiseless sensor image (N, H, W)
 //   phi_stack()                       the patch matrices (P, N h w, U V h w)
+// A net of the lfnet architecture (whole images; its U-Net is the submodule `image`, traced
+// from the C++ module) has instead:
+//   forward(sensor, phase=0, noise_sigma=0.0)   sensor (B, N, H, W) -> (B, U, V, H, W)
+//   reconstruct(sensor, tile=256, clamp=True, noise_sigma=0.0)
+//                                     sensor (N, H, W) -> light field (U, V, H, W), in tiles
+//   pixel_pinv_image(sensor, phase=0) the per-pixel pseudo-inverse (B, U V, H, W)
+//   simulate(lf)                      lf (U, V, H, W) -> noiseless sensor image (N, H, W)
+// and the attributes multiple, receptive_radius and noise_input; phi and pixel_pinv are
+// plain buffers.
 // Attributes: format_version, metadata (the JSON below), phi_spec (JSON), patch_shape
 // [U, V, h, w], measurements, period, block. The same JSON is the extra file "lfnet.json".
 // The Phi stack (and the pinv base) is stored as flat indices and values when that halves its
@@ -74,6 +83,10 @@ struct ScriptedNetwork {
   // undefined for a one-phase Phi.
   torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {},
                         const std::string& branch = "net") const;
+  // The lfnet architecture: reconstruct(sensor, tile, clamp, noise_sigma) of the module,
+  // without autograd: sensor (N, H, W) -> (U, V, H, W). ConfigError for the paper's.
+  torch::Tensor reconstruct_image(const torch::Tensor& sensor, int64_t tile, bool clamp,
+                                  double noise_sigma) const;
 };
 
 // Loads an exported file on the CPU. A missing file is an IoError; a TorchScript file without
