@@ -25,6 +25,18 @@ using lfnet::test::run_command;
 
 namespace {
 
+// `net`, trained for `phi` (as far as the file says) up to `stage`, saved as a checkpoint.
+void save_net(const lfnet::nn::LightFieldNet& net, const lfnet::optics::Phi& phi,
+              const std::string& stage, const std::string& path) {
+  lfnet::train::Checkpoint ck;
+  ck.network = net->options().to_json();
+  ck.phi = phi.spec().to_json();
+  ck.config = {{"measurement_mean", 0.3}};
+  ck.model = lfnet::train::module_state(*net);
+  ck.training.stage = stage;
+  lfnet::train::save_checkpoint(ck, path);
+}
+
 // A randomly initialised asp:2 net with a pinv residual, saved as a checkpoint.
 void write_checkpoint(const std::string& path) {
   auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
@@ -36,13 +48,7 @@ void write_checkpoint(const std::string& path) {
   torch::manual_seed(3);
   lfnet::nn::LightFieldNet net(o);
   net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
-  lfnet::train::Checkpoint ck;
-  ck.network = o.to_json();
-  ck.phi = phi->spec().to_json();
-  ck.config = {{"measurement_mean", 0.3}};
-  ck.model = lfnet::train::module_state(*net);
-  ck.training.stage = "joint";
-  lfnet::train::save_checkpoint(ck, path);
+  save_net(net, *phi, "joint", path);
 }
 
 void write_raw(const std::string& path, const torch::Tensor& t) {
@@ -284,13 +290,7 @@ TEST_CASE(
     }
     net->eval();
     const std::string ckpt = tmp / (name + ".ckpt"), pt = tmp / (name + ".pt");
-    lfnet::train::Checkpoint ck;
-    ck.network = o.to_json();
-    ck.phi = phi->spec().to_json();
-    ck.config = {{"measurement_mean", 0.3}};
-    ck.model = lfnet::train::module_state(*net);
-    ck.training.stage = "joint_scratch";
-    lfnet::train::save_checkpoint(ck, ckpt);
+    save_net(net, *phi, "joint_scratch", ckpt);
     REQUIRE(run_command(lfnet + "export --model " + ckpt + " --out " + pt, out) == 0);
     CHECK(out.find("(" + name + ":2, lfnet, " + std::to_string(t * t) + " phases)") !=
           std::string::npos);
