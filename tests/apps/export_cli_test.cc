@@ -291,9 +291,18 @@ TEST_CASE(
     net->eval();
     const std::string ckpt = tmp / (name + ".ckpt"), pt = tmp / (name + ".pt");
     save_net(net, *phi, "joint_scratch", ckpt);
-    REQUIRE(run_command(lfnet + "export --model " + ckpt + " --out " + pt, out) == 0);
-    CHECK(out.find("(" + name + ":2, lfnet, " + std::to_string(t * t) + " phases)") !=
-          std::string::npos);
+    std::string export_command = lfnet;
+    export_command += "export --model ";
+    export_command += ckpt;
+    export_command += " --out ";
+    export_command += pt;
+    REQUIRE(run_command(export_command, out) == 0);
+    std::string summary = "(";
+    summary += name;
+    summary += ":2, lfnet, ";
+    summary += std::to_string(t * t);
+    summary += " phases)";
+    CHECK(out.find(summary) != std::string::npos);
     CHECK(out.find("max |exported - checkpoint| on a ") != std::string::npos);
     CHECK(out.find(" sensor image in tiles of 4: ") != std::string::npos);
 
@@ -355,9 +364,13 @@ TEST_CASE(
                                                        {"tiled", tiled.sizes().vec()},
                                                        {"lf", lf.sizes().vec()},
                                                        {"simulated", sensor.sizes().vec()}}}});
-    REQUIRE(run_command(python + " " + LFNET_SOURCE_DIR + "/tests/apps/check_export_image.py " +
-                            pt + " " + dir,
-                        out) == 0);
+    std::string check_command = python;
+    for (const std::string& part :
+         {std::string(" ") + LFNET_SOURCE_DIR + "/tests/apps/check_export_image.py ", pt,
+          std::string(" "), dir}) {
+      check_command += part;
+    }
+    REQUIRE(run_command(check_command, out) == 0);
     INFO(out);
     const auto result = nlohmann::json::parse(out.substr(out.rfind("\n{") + 1));
     CHECK(result["forward_max_diff"].get<double>() <= 1e-5);
