@@ -44,7 +44,7 @@ void write_checkpoint(const std::string& path) {
   o.ae.hidden = {64, 32, 64, 32, 64};
   o.cnn.channels = 4;
   o.cnn.depth = 3;
-  o.residual = "pinv";
+  o.residual = lfnet::nn::Residual::kPinv;
   torch::manual_seed(3);
   lfnet::nn::LightFieldNet net(o);
   net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
@@ -272,7 +272,7 @@ TEST_CASE(
     INFO(name);
     auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(name + ":2"));
     lfnet::nn::NetworkOptions o;
-    o.architecture = "lfnet";
+    o.architecture = lfnet::nn::Architecture::kLfnet;
     o.measurements = phi->measurements();
     o.patch = {phi->rows(), phi->cols(), 16, 16};
     o.image.channels = 4;

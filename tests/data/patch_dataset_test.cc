@@ -156,7 +156,7 @@ TEST_CASE("training patches come from every angular window and step of a wider g
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto o = small_options();
   o.augment = false;
-  o.angular_windows = "any";
+  o.angular_windows = lfnet::data::AngularWindows::kAny;
   o.angular_steps = {1, 2};
   data::PatchDataset ds({labelled_grid()}, *phi, o);
   ds.start_epoch(0, 200);
@@ -189,9 +189,11 @@ TEST_CASE("training patches come from every angular window and step of a wider g
   narrow.start_epoch(0, 16);
   CHECK(narrow.next_train().target.size(0) == 16);
   // Bad options name themselves.
-  o.angular_windows = "every";
-  CHECK_THROWS_WITH(o.validate(), Catch::Contains("angular_windows"));
-  o.angular_windows = "any";
+  const nlohmann::json every = {{"angular_windows", "every"}};
+  JsonReader bad(every, "$");
+  CHECK_THROWS_WITH(data::DatasetOptions::from_json(bad),
+                    Catch::Contains("$.angular_windows") && Catch::Contains("central, any"));
+  o.angular_windows = lfnet::data::AngularWindows::kAny;
   o.angular_steps = {0};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("angular_steps"));
 }

@@ -190,7 +190,7 @@ int main(int argc, char** argv) {
     auto y = test.mm(phi.t());
     for (const std::string method : {"omp", "admm"}) {
       lfnet::dict::SparseCodingOptions so;
-      so.method = method;
+      so.method = lfnet::dict::from_string(method, so.method);
       so.omp.max_atoms = a.sparsity;
       lfnet::dict::SparseCoder coder(learned.dictionary, so);
       watch.reset();

@@ -83,7 +83,7 @@ TEST_CASE("OMP recovers an exactly sparse patch from compressive measurements",
 TEST_CASE("ADMM-LASSO recovers an exactly sparse patch to its tolerance", "[dict][sparse_coding]") {
   const Problem p = make_problem(1000, 8, 5, 43);
   SparseCodingOptions o;
-  o.method = "admm";
+  o.method = lfnet::dict::CodingMethod::kAdmm;
   o.admm.double_precision = GENERATE(false, true);
   INFO("double precision " << o.admm.double_precision);
   o.admm.lambda = 1e-4;  // relative to ||Theta^T y||_inf
@@ -113,7 +113,7 @@ TEST_CASE("ADMM-LASSO recovers an exactly sparse patch to its tolerance", "[dict
 TEST_CASE("ADMM reports non-convergence rather than a silent answer", "[dict][sparse_coding]") {
   const Problem p = make_problem(300, 6, 5, 47);
   SparseCodingOptions o;
-  o.method = "admm";
+  o.method = lfnet::dict::CodingMethod::kAdmm;
   o.admm.max_iterations = 1;
   SparseCoder coder(p.dict, o);
   auto r = coder.code(p.a, p.y);
@@ -145,7 +145,7 @@ TEST_CASE("ADMM solves the LASSO that scikit-learn solves", "[dict][sparse_codin
   truth.slice(1, 0, 4).normal_();
   auto y = truth.mm(theta.t()) + 0.05 * torch::randn({b, m}, torch::kFloat64);
   SparseCodingOptions o;
-  o.method = "admm";
+  o.method = lfnet::dict::CodingMethod::kAdmm;
   o.normalize_columns = false;
   o.admm.lambda = lambda;
   o.admm.relative_lambda = false;
@@ -187,7 +187,7 @@ TEST_CASE("Sparse coding gives finite output on degenerate input", "[dict][spars
   {
     INFO("method " << method);
     SparseCodingOptions o;
-    o.method = method;
+    o.method = lfnet::dict::from_string(method, o.method);
     SparseCoder coder(p.dict, o);
 
     SECTION("zero measurements: zero patches, converged") {
@@ -265,7 +265,7 @@ TEST_CASE("OMP's residual tolerance stops at the noise level", "[dict][sparse_co
 
 TEST_CASE("Sparse coding options are strict and input is checked", "[dict][sparse_coding]") {
   SparseCodingOptions o;
-  o.method = "admm";
+  o.method = lfnet::dict::CodingMethod::kAdmm;
   o.admm.rho = 2.5;
   o.omp.residual_tolerance = 1e-4;
   auto back = SparseCodingOptions::from_json(o.to_json());

@@ -61,7 +61,7 @@ std::shared_ptr<dist::Communicator> borrow(dist::Communicator& c) {
 
 train::TrainerOptions quick_options(int64_t epochs, int64_t batch, const std::string& out) {
   train::TrainerOptions o;
-  o.stage = "joint";
+  o.stage = lfnet::train::Stage::kJoint;
   o.epochs = epochs;
   o.batch_size = batch;
   o.lr = 1e-3;

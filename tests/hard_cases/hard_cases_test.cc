@@ -170,7 +170,7 @@ std::vector<std::pair<std::string, recon::PatchSolver>> solvers(const optics::Ph
   omp.omp.max_atoms = 6;
   out.emplace_back("dict-omp", recon::dictionary_solver(phi, d, omp, kPatch, kPatch));
   dict::SparseCodingOptions admm;
-  admm.method = "admm";
+  admm.method = lfnet::dict::CodingMethod::kAdmm;
   admm.admm.max_iterations = admm_iterations;
   out.emplace_back("dict-admm", recon::dictionary_solver(phi, d, admm, kPatch, kPatch));
   return out;
@@ -383,7 +383,7 @@ TEST_CASE("OMP and ADMM stop within their bounds and report non-convergence", "[
     CHECK(r.nonzeros.max().item<int64_t>() <= 6);
     for (int64_t limit : {3, 2000}) {
       dict::SparseCodingOptions admm;
-      admm.method = "admm";
+      admm.method = lfnet::dict::CodingMethod::kAdmm;
       admm.admm.max_iterations = limit;
       auto a = dict::SparseCoder(d.atoms, admm).code(c.a, c.y);
       CHECK(finite(a.patches));
@@ -403,7 +403,7 @@ TEST_CASE("the dict method reports patches that did not converge", "[hard_cases]
   auto sensor = optics::simulate_sensor(*phi, hard_scenes()["random"][0]);
   const int64_t patches = 9;  // 3 x 3 at stride 7 on 23 x 23
   dict::SparseCodingOptions admm;
-  admm.method = "admm";
+  admm.method = lfnet::dict::CodingMethod::kAdmm;
   admm.admm.max_iterations = 3;
   auto report = std::make_shared<recon::SolverReport>();
   auto est = recon::reconstruct_sensor(

@@ -42,7 +42,7 @@ TEST_CASE("view weights generalise to other angular sizes", "[nn][loss]") {
 
 TEST_CASE("weighted L2 of a one-hot error is W(u, v)", "[nn][loss]") {
   LossOptions sum_options;
-  sum_options.reduction = "sum";
+  sum_options.reduction = lfnet::nn::LossReduction::kSum;
   ReconstructionLoss sum_loss(sum_options, 5, 5);
   ReconstructionLoss mean_loss(LossOptions{}, 5, 5);
   auto weights = lfnet::nn::view_weights(5, 5);
@@ -66,11 +66,11 @@ TEST_CASE("plain L2 and L1 match hand computation", "[nn][loss]") {
   pred[0][0][0][0][0][0] = 0.5;  // corner view: the weight must not apply
   pred[1][0][1][2][1][1] = -2.0;
   LossOptions l2;
-  l2.name = "l2";
+  l2.name = lfnet::nn::LossKind::kL2;
   LossOptions l1;
-  l1.name = "l1";
+  l1.name = lfnet::nn::LossKind::kL1;
   LossOptions l1_sum = l1;
-  l1_sum.reduction = "sum";
+  l1_sum.reduction = lfnet::nn::LossReduction::kSum;
   const double n = 2 * 9 * 4;
   CHECK(ReconstructionLoss(l2, 3, 3)(pred, target).item<double>() == Approx((0.25 + 4.0) / n));
   CHECK(ReconstructionLoss(l1, 3, 3)(pred, target).item<double>() == Approx(2.5 / n));
@@ -91,7 +91,7 @@ TEST_CASE("the weighted loss has the gradient 2 W (l_hat - l) / n", "[nn][loss]"
 }
 
 TEST_CASE("loss options are strict and name the bad field", "[nn][loss]") {
-  CHECK(LossOptions::from_json(nlohmann::json::parse(R"({"name": "l1"})")).kind() ==
+  CHECK(LossOptions::from_json(nlohmann::json::parse(R"({"name": "l1"})")).name ==
         lfnet::nn::LossKind::kL1);
   CHECK_THROWS_WITH(
       LossOptions::from_json(nlohmann::json::parse(R"({"name": "ssim"})"), "$.train.loss"),
@@ -110,7 +110,7 @@ TEST_CASE("noise_scale weighs each patch by s / (s + sigma)", "[nn][loss]") {
   pred[1][0][1][1][1][1] = 2.0;  // patch 1: an error of 4 when squared
   const auto sigma = torch::tensor({0.0f, 0.3f});
   LossOptions plain;
-  plain.name = "l2";
+  plain.name = lfnet::nn::LossKind::kL2;
   LossOptions weighted = plain;
   weighted.noise_scale = 0.1;
   const double n = 2 * 9 * 4;

@@ -18,7 +18,7 @@ NetworkOptions small_options(const std::string& branches = "net") {
   NetworkOptions o;
   o.patch = {3, 3, 5, 5};
   o.measurements = 2;
-  o.branches = branches;
+  o.branches = lfnet::nn::from_string(branches, o.branches);
   o.ae.hidden = {40, 20, 40, 20, 40};
   o.cnn.channels = 4;
   o.cnn.depth = 3;
@@ -38,7 +38,7 @@ TEST_CASE("each branch and the two-branch net give (B, 1, U, V, h, w)", "[nn][ne
   for (const std::string branches : {"ae", "cnn", "net"}) {
     INFO(branches);
     NetworkOptions o;  // defaults: 5 x 5 x 9 x 9 patches, N = 2
-    o.branches = branches;
+    o.branches = lfnet::nn::from_string(branches, o.branches);
     LightFieldNet net(o);
     net->set_phi(random_phi(o, 1, 1));
     auto y = torch::rand({3, 162});
@@ -106,7 +106,7 @@ TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it",
   CHECK((first.cnn - second.cnn).abs().max().item<double>() > 1e-4);
   lfnet::test::require_close(first.ae, second.ae, 0);
 
-  o.ae.input = "adjoint";  // then the AE reads Phi^T y and changes too
+  o.ae.input = lfnet::nn::AeInput::kAdjoint;  // then the AE reads Phi^T y and changes too
   LightFieldNet net2(o);
   net2->set_phi(random_phi(o, 1, 3));
   auto a = net2->forward_all(y).ae;
@@ -155,7 +155,7 @@ TEST_CASE("the adjoint of a flat patch under a view-averaging Phi is the flat pa
 TEST_CASE("the pinv residual adds the Tikhonov pseudo-inverse estimate", "[nn][network]") {
   torch::manual_seed(4);
   auto o = small_options("ae");
-  o.residual = "pinv";
+  o.residual = lfnet::nn::Residual::kPinv;
   o.pinv_lambda = 1e-2;
   LightFieldNet net(o);
   auto stack = random_phi(o, 2, 6);
@@ -246,7 +246,7 @@ TEST_CASE("the net trains: gradients reach every parameter", "[nn][network]") {
 
 TEST_CASE("forward_all runs only the selected branches", "[nn][network]") {
   auto o = small_options("net");
-  o.residual = "pinv";
+  o.residual = lfnet::nn::Residual::kPinv;
   torch::manual_seed(5);
   LightFieldNet net(o);
   net->set_phi(random_phi(o, 2, 11));

@@ -20,7 +20,7 @@ NetworkOptions small_options(const std::string& branches) {
   NetworkOptions o;
   o.patch = {3, 3, 5, 5};
   o.measurements = 2;
-  o.branches = branches;
+  o.branches = lfnet::nn::from_string(branches, o.branches);
   o.ae.hidden = {40, 20, 40, 20, 40};
   o.cnn.channels = 4;
   o.cnn.depth = 3;
@@ -52,27 +52,27 @@ std::vector<Variant> variants() {
   v.push_back({"net, per-pixel Phi, auto", small_options("net")});
   {
     Variant x{"net, 4 phases, pinv residual, stacked", small_options("net"), 2};
-    x.options.residual = "pinv";
-    x.options.conv_algorithm = "stacked";
+    x.options.residual = lfnet::nn::Residual::kPinv;
+    x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kStacked;
     v.push_back(x);
   }
   {
     Variant x{"net, dense Phi, adjoint residual, fused_input, weights not summing to 1",
               small_options("net"), 1, false};
-    x.options.residual = "adjoint";
-    x.options.conv_algorithm = "fused_input";
+    x.options.residual = lfnet::nn::Residual::kAdjoint;
+    x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedInput;
     x.options.head_weights = {0.7, 0.6};
     v.push_back(x);
   }
   {
     Variant x{"ae on the adjoint, 4 phases, fused_output", small_options("ae"), 2};
-    x.options.ae.input = "adjoint";
-    x.options.conv_algorithm = "fused_output";
+    x.options.ae.input = lfnet::nn::AeInput::kAdjoint;
+    x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedOutput;
     v.push_back(x);
   }
   {
     Variant x{"cnn, 9 phases, dense Phi, pinv residual, kernel 5", small_options("cnn"), 3, false};
-    x.options.residual = "pinv";
+    x.options.residual = lfnet::nn::Residual::kPinv;
     x.options.kernel = 5;
     v.push_back(x);
   }
@@ -144,7 +144,7 @@ TEST_CASE("an exported net gives the C++ net's outputs, in memory and after a ro
                           Catch::Contains("has no '" + branch + "' branch"));
         continue;
       }
-      auto branch_want = variant.options.branches == "net"
+      auto branch_want = variant.options.branches == lfnet::nn::Branches::kNet
                              ? (parts.base.defined() ? t + parts.base : t)
                              : parts.output;
       CHECK(max_abs_diff(loaded.forward(y, ph, branch), branch_want.reshape(shape)) <= 1e-5);

@@ -95,7 +95,7 @@ TEST_CASE("shot noise is Poisson in electrons, or its Gaussian approximation", "
     for (const char* model : {"poisson", "gaussian"}) {
       SensorOptions o;
       o.photons_at_white = photons;
-      o.shot = SensorOptions::Shot{model};
+      o.shot = SensorOptions::Shot{from_string(model, lfnet::optics::ShotNoiseModel{})};
       auto y = torch::full({kSamples}, 0.8, torch::kFloat64);
       auto out = apply_sensor_effects(y, o, 3);
       auto [mean, std] = moments(out);

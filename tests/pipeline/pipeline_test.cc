@@ -136,17 +136,18 @@ TEST_CASE("the dict method codes as its dictionary recommends, unless told other
           "[pipeline][dict]") {
   dict::Dictionary d;
   // No recommendation: the library's default, OMP.
-  CHECK(pipeline::dict_coding(d, "", "").method == "omp");
+  CHECK(pipeline::dict_coding(d, "", "").method == lfnet::dict::CodingMethod::kOmp);
   d.training["coding"] = {{"method", "admm"}, {"admm", {{"lambda", 0.001}}}};
   auto c = pipeline::dict_coding(d, "", "");
-  CHECK(c.method == "admm");
+  CHECK(c.method == lfnet::dict::CodingMethod::kAdmm);
   CHECK(c.admm.lambda == 0.001);
   // --dict-options overrides field by field; --dict-method last.
   c = pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "");
-  CHECK(c.method == "admm");
+  CHECK(c.method == lfnet::dict::CodingMethod::kAdmm);
   CHECK(c.admm.lambda == 0.001);
   CHECK(c.admm.rho == 2.0);
-  CHECK(pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "omp").method == "omp");
+  CHECK(pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "omp").method ==
+        lfnet::dict::CodingMethod::kOmp);
   // From a file, and errors that name the option and the JSON path.
   test::TempDir tmp;
   write_json_file(tmp / "coding.json", {{"omp", {{"max_atoms", 20}}}});
@@ -154,7 +155,8 @@ TEST_CASE("the dict method codes as its dictionary recommends, unless told other
   CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": {"max_atom": 20}})", ""),
                     Catch::Contains("--dict-options:$.omp.max_atom"));
   CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": )", ""), Catch::Contains("--dict-options"));
-  CHECK_THROWS_WITH(pipeline::dict_coding(d, "", "lasso"), Catch::Contains("omp or admm"));
+  CHECK_THROWS_WITH(pipeline::dict_coding(d, "", "lasso"),
+                    Catch::Contains("--dict-method") && Catch::Contains("known: omp, admm"));
 }
 
 TEST_CASE("write_acquisition writes what the optics simulate, and read_acquisition reads it",

@@ -16,8 +16,8 @@ nn::LightFieldNet make_net(const optics::Phi& phi, int64_t kernel, const std::st
   nn::NetworkOptions o;
   o.measurements = phi.measurements();
   o.kernel = kernel;
-  o.branches = branches;
-  o.residual = residual;
+  o.branches = lfnet::nn::from_string(branches, o.branches);
+  o.residual = lfnet::nn::from_string(residual, o.residual);
   o.cnn.channels = 4;
   o.cnn.depth = 3;
   o.ae.hidden = {32, 16, 32, 16, 32};

@@ -24,7 +24,7 @@ nn::NetworkOptions small_options() {
   o.ae.hidden = {40, 20, 40, 20, 40};
   o.cnn.channels = 4;
   o.cnn.depth = 3;
-  o.residual = "pinv";
+  o.residual = lfnet::nn::Residual::kPinv;
   return o;
 }
 

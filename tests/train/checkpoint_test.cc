@@ -93,8 +93,9 @@ TEST_CASE("save then load gives identical outputs for every model", "[train][che
         INFO(branches << " residual " << residual << " phases " << phases);
         torch::manual_seed(10 + case_index);
         auto o = lfnet::test::small_net_options(branches);
-        o.residual = residual;
-        o.ae.input = case_index % 2 ? "adjoint" : "measurements";
+        o.residual = lfnet::nn::from_string(residual, o.residual);
+        o.ae.input =
+            case_index % 2 ? lfnet::nn::AeInput::kAdjoint : lfnet::nn::AeInput::kMeasurements;
         LightFieldNet net(o);
         net->set_phi(
             lfnet::test::gaussian_phi(phases, o.measurement_size(), o.patch.size(), case_index));
@@ -229,7 +230,7 @@ TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[tra
   for (int64_t period : {1, 3}) {
     INFO("period " << period);
     NetworkOptions o;
-    o.architecture = "lfnet";
+    o.architecture = lfnet::nn::Architecture::kLfnet;
     o.measurements = 2;
     o.patch = {3, 3, 8, 8};
     o.image.channels = 4;

@@ -69,7 +69,7 @@ nn::NetworkOptions small_net_options(const std::string& branches) {
   nn::NetworkOptions o;
   o.patch = {3, 3, 5, 5};
   o.measurements = 2;
-  o.branches = branches;
+  o.branches = lfnet::nn::from_string(branches, o.branches);
   o.ae.hidden = {64, 32, 64, 32, 64};
   o.cnn.channels = 4;
   o.cnn.depth = 3;

@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
   lfnet::nn::NetworkOptions options;
   auto phi = torch::randn({1, options.measurement_size(), options.patch.size()}) / 45.0;
   for (const std::string branches : {"ae", "cnn", "net"}) {
-    options.branches = branches;
+    options.branches = lfnet::nn::from_string(branches, options.branches);
     lfnet::nn::LightFieldNet net(options);
     net->set_phi(phi);
     torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(1e-3));

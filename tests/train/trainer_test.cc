@@ -21,7 +21,7 @@ namespace {
 
 TrainerOptions quick_options(const std::string& stage, const std::string& out_dir, int64_t epochs) {
   TrainerOptions o;
-  o.stage = stage;
+  o.stage = lfnet::train::from_string(stage, o.stage);
   o.epochs = epochs;
   o.batch_size = 32;
   o.lr = 1e-3;
@@ -83,15 +83,15 @@ TEST_CASE("learning-rate schedules", "[train][trainer]") {
   TrainerOptions o;
   o.lr = 0.1;
   o.epochs = 10;
-  o.schedule.name = "constant";
+  o.schedule.name = lfnet::train::ScheduleKind::kConstant;
   CHECK(lfnet::train::learning_rate(o, 7, 3, 10) == 0.1);
-  o.schedule.name = "step";
+  o.schedule.name = lfnet::train::ScheduleKind::kStep;
   o.schedule.step_epochs = 3;
   o.schedule.gamma = 0.5;
   CHECK(lfnet::train::learning_rate(o, 2, 9, 10) == Approx(0.1));
   CHECK(lfnet::train::learning_rate(o, 3, 0, 10) == Approx(0.05));
   CHECK(lfnet::train::learning_rate(o, 9, 0, 10) == Approx(0.0125));
-  o.schedule.name = "cosine";
+  o.schedule.name = lfnet::train::ScheduleKind::kCosine;
   o.schedule.min_factor = 0.01;
   CHECK(lfnet::train::learning_rate(o, 0, 0, 10) == Approx(0.1));
   CHECK(lfnet::train::learning_rate(o, 5, 0, 10) == Approx(0.1 * (0.01 + 0.99 * 0.5)));
@@ -105,9 +105,12 @@ TEST_CASE("trainer options parse strictly and name the bad field", "[train][trai
   auto o = TrainerOptions::from_json(nlohmann::json::parse(
       R"({"stage": "ae", "epochs": 3, "lr": 0.01, "schedule": {"name": "step", "gamma": 0.5},
           "loss": {"name": "l1"}, "on_nonfinite": "skip"})"));
-  CHECK(o.stage == "ae");
+  CHECK(o.stage == lfnet::train::Stage::kAe);
+  CHECK(o.schedule.name == lfnet::train::ScheduleKind::kStep);
+  CHECK(o.on_nonfinite == lfnet::train::OnNonFinite::kSkip);
+  CHECK(o.to_json()["on_nonfinite"] == "skip");
   CHECK(o.schedule.gamma == 0.5);
-  CHECK(o.loss.name == "l1");
+  CHECK(o.loss.name == lfnet::nn::LossKind::kL1);
   CHECK(TrainerOptions::from_json(o.to_json()).to_json() == o.to_json());
   CHECK_THROWS_WITH(
       TrainerOptions::from_json(nlohmann::json::parse(R"({"learning_rate": 1})"), "$.train"),
@@ -329,7 +332,7 @@ TEST_CASE("with on_nonfinite = skip a poisoned batch is dropped", "[train][train
   auto inner = lfnet::test::make_source(lfnet::test::smooth_patches(200, o.patch, 4), phi);
   PoisonedSource source(*inner, 0, 1, /*in_y=*/false);
   auto options = quick_options("ae", "", 2);
-  options.on_nonfinite = "skip";
+  options.on_nonfinite = lfnet::train::OnNonFinite::kSkip;
   Trainer trainer(make_net(o, phi, 5), options,
                   run_info(lfnet::test::synthetic_phi_spec("random", 2, 3)));
   auto records = trainer.fit(source);
@@ -347,12 +350,13 @@ TEST_CASE("a far too large learning rate is detected and the last good checkpoin
   auto phi = lfnet::test::gaussian_phi(1, o.measurement_size(), o.patch.size(), 8);
   auto source = lfnet::test::make_source(lfnet::test::smooth_patches(200, o.patch, 9), phi);
   auto options = quick_options("joint", dir.path().string(), 3);
-  options.schedule.name = "step";  // a sane first epoch, then lr = 1e-3 * 1e12
+  options.schedule.name =
+      lfnet::train::ScheduleKind::kStep;  // a sane first epoch, then lr = 1e-3 * 1e12
   options.schedule.step_epochs = 1;
   options.schedule.gamma = 1e12;
   for (const std::string policy : {"stop", "skip"}) {
     INFO(policy);
-    options.on_nonfinite = policy;
+    options.on_nonfinite = lfnet::train::from_string(policy, options.on_nonfinite);
     Trainer trainer(make_net(o, phi, 10), options,
                     run_info(lfnet::test::synthetic_phi_spec("random", 2, 8)));
     CHECK_THROWS_WITH(trainer.fit(*source),
@@ -454,7 +458,7 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
       // The pseudo-inverse alone: a net whose branches output zero, plus the pinv base.
       auto o = lfnet::test::small_net_options("ae");
       o.measurements = n;
-      o.residual = "pinv";
+      o.residual = lfnet::nn::Residual::kPinv;
       auto net = make_net(o, phi, 43);
       torch::NoGradGuard no_grad;
       for (auto& p : net->ae->parameters()) p.zero_();
@@ -464,7 +468,7 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
     }
     for (const std::string residual : {"none", "pinv", "adjoint"}) {
       auto o = base;
-      o.residual = residual;
+      o.residual = lfnet::nn::from_string(residual, o.residual);
       Trainer t(make_net(o, phi, 44), quick_options("joint", "", 12),
                 run_info(lfnet::test::synthetic_phi_spec("random", n, 41)));
       auto records = t.fit(*source);
@@ -477,7 +481,7 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
 TEST_CASE("the lfnet architecture trains on crops, from its pseudo-inverse upward", "[train]") {
   lfnet::test::TempDir dir;
   lfnet::nn::NetworkOptions o;
-  o.architecture = "lfnet";
+  o.architecture = lfnet::nn::Architecture::kLfnet;
   o.measurements = 2;
   o.patch = {3, 3, 8, 8};
   o.image.channels = 8;

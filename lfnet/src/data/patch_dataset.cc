@@ -3,11 +3,22 @@
 #include <algorithm>
 #include <cmath>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/dist/communicator.h"
 #include "lfnet/optics/measure.h"
 
 namespace lfnet::data {
+
+namespace {
+constexpr EnumName<AngularWindows> kAngularWindows[] = {{AngularWindows::kCentral, "central"},
+                                                        {AngularWindows::kAny, "any"}};
+}  // namespace
+
+std::string to_string(AngularWindows value) { return name_of(value, kAngularWindows); }
+AngularWindows from_string(const std::string& name, AngularWindows) {
+  return value_of(name, kAngularWindows);
+}
 
 DatasetOptions DatasetOptions::from_json(JsonReader& r) {
   DatasetOptions o;
@@ -50,10 +61,6 @@ void DatasetOptions::validate() const {
                                     std::isfinite(noise_range[1])))) {
     throw ConfigError("noise_range must be [lo, hi] with 0 <= lo <= hi, or empty");
   }
-  if (angular_windows != "central" && angular_windows != "any") {
-    throw ConfigError("angular_windows must be \"central\" or \"any\", got \"" + angular_windows +
-                      "\"");
-  }
   if (angular_steps.empty()) throw ConfigError("angular_steps must list at least one step");
   for (int64_t step : angular_steps) {
     if (step < 1 || step > 8) throw ConfigError("angular_steps must lie in 1..8");
@@ -94,7 +101,7 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
     for (int64_t step : options_.angular_steps) {
       const int64_t su = step * (nu - 1) + 1, sv = step * (nv - 1) + 1;
       if (su > lf.rows() || sv > lf.cols()) continue;
-      if (options_.angular_windows == "central") {
+      if (options_.angular_windows == AngularWindows::kCentral) {
         windows.push_back({central_start(lf.rows(), su), central_start(lf.cols(), sv), step});
         continue;
       }

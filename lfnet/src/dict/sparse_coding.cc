@@ -9,6 +9,7 @@
 #include <numeric>
 #include <string_view>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/dict/omp.h"
@@ -74,9 +75,17 @@ AdmmOptions AdmmOptions::from_json(const nlohmann::json& j, const std::string& p
   return o;
 }
 
+namespace {
+constexpr EnumName<CodingMethod> kCodingMethods[] = {{CodingMethod::kOmp, "omp"},
+                                                     {CodingMethod::kAdmm, "admm"}};
+}  // namespace
+
+std::string to_string(CodingMethod value) { return name_of(value, kCodingMethods); }
+CodingMethod from_string(const std::string& name, CodingMethod) {
+  return value_of(name, kCodingMethods);
+}
+
 void SparseCodingOptions::validate() const {
-  LFNET_CHECK_AS(ConfigError, method == "omp" || method == "admm",
-                 "sparse coding method must be \"omp\" or \"admm\", got \"", method, "\"");
   LFNET_CHECK_AS(ConfigError, cache_size >= 0, "cache_size must be >= 0, got ", cache_size);
   omp.validate();
   admm.validate();
@@ -153,7 +162,7 @@ std::shared_ptr<const PreparedOperator> SparseCoder::prepare(const torch::Tensor
   }
   theta.mul_(alive.to(torch::kFloat64).unsqueeze(0));
   op->theta = theta.contiguous();
-  if (options_.method == "omp") {
+  if (options_.method == CodingMethod::kOmp) {
     op->gram = op->theta.t().mm(op->theta);
   } else {
     const int64_t m = theta.size(0);
@@ -186,7 +195,7 @@ SparseCodingResult SparseCoder::code(const PreparedOperator& op,
   auto y = measurements.detach().to(torch::kCPU, torch::kFloat64).contiguous();
   LFNET_CHECK_AS(NumericalError, torch::isfinite(y).all().item<bool>(),
                  "SparseCoder: the measurements have NaN or inf entries");
-  SparseCodingResult r = options_.method == "omp" ? code_omp(op, y) : code_admm(op, y);
+  SparseCodingResult r = options_.method == CodingMethod::kOmp ? code_omp(op, y) : code_admm(op, y);
   // Last line of defence: a non-finite patch is replaced by zero and reported.
   auto finite = torch::isfinite(r.patches).all(1).logical_and(torch::isfinite(r.residual_sq));
   if (!finite.all().item<bool>()) {

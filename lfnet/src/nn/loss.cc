@@ -7,6 +7,7 @@
 #include <limits>
 #include <vector>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 
 namespace lfnet::nn {
@@ -41,16 +42,6 @@ LossOptions LossOptions::from_json(const nlohmann::json& j, const std::string& p
 
 void LossOptions::read(JsonReader& reader) {
   read_fields(reader, *this);
-  try {
-    kind();
-  } catch (const ConfigError& e) {
-    throw ConfigError(reader.path_of("name") + ": " + e.what());
-  }
-  try {
-    reduction_kind();
-  } catch (const ConfigError& e) {
-    throw ConfigError(reader.path_of("reduction") + ": " + e.what());
-  }
   LFNET_CHECK_AS(ConfigError, noise_scale >= 0 && std::isfinite(noise_scale),
                  reader.path_of("noise_scale"), ": must be >= 0, got ", noise_scale);
 }
@@ -58,29 +49,28 @@ void LossOptions::read(JsonReader& reader) {
 nlohmann::json LossOptions::to_json() const { return fields_to_json(*this); }
 
 void LossOptions::validate() const {
-  kind();
-  reduction_kind();
   LFNET_CHECK_AS(ConfigError, noise_scale >= 0 && std::isfinite(noise_scale),
                  "loss.noise_scale must be >= 0, got ", noise_scale);
 }
 
-LossKind LossOptions::kind() const {
-  if (name == "weighted_l2") return LossKind::kWeightedL2;
-  if (name == "l2") return LossKind::kL2;
-  if (name == "l1") return LossKind::kL1;
-  throw ConfigError("loss name '" + name + "' is unknown (known: weighted_l2, l2, l1)");
-}
+namespace {
+constexpr EnumName<LossKind> kLossKinds[] = {
+    {LossKind::kWeightedL2, "weighted_l2"}, {LossKind::kL2, "l2"}, {LossKind::kL1, "l1"}};
+constexpr EnumName<LossReduction> kReductions[] = {{LossReduction::kMean, "mean"},
+                                                   {LossReduction::kSum, "sum"}};
+}  // namespace
 
-LossReduction LossOptions::reduction_kind() const {
-  if (reduction == "mean") return LossReduction::kMean;
-  if (reduction == "sum") return LossReduction::kSum;
-  throw ConfigError("loss reduction '" + reduction + "' is unknown (known: mean, sum)");
+std::string to_string(LossKind value) { return name_of(value, kLossKinds); }
+std::string to_string(LossReduction value) { return name_of(value, kReductions); }
+LossKind from_string(const std::string& name, LossKind) { return value_of(name, kLossKinds); }
+LossReduction from_string(const std::string& name, LossReduction) {
+  return value_of(name, kReductions);
 }
 
 ReconstructionLoss::ReconstructionLoss(const LossOptions& options, int64_t rows, int64_t cols)
     : options_(options),
-      kind_(options.kind()),
-      reduction_(options.reduction_kind()),
+      kind_(options.name),
+      reduction_(options.reduction),
       rows_(rows),
       cols_(cols) {
   weights_ = kind_ == LossKind::kWeightedL2 ? view_weights(rows, cols)

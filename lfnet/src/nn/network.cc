@@ -6,11 +6,34 @@
 #include <cmath>
 #include <vector>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 
 namespace lfnet::nn {
 
 // ---- options -------------------------------------------------------------------------------
+
+namespace {
+constexpr EnumName<Architecture> kArchitectures[] = {{Architecture::kPaper, "paper"},
+                                                     {Architecture::kLfnet, "lfnet"}};
+constexpr EnumName<Branches> kBranches[] = {
+    {Branches::kNet, "net"}, {Branches::kAe, "ae"}, {Branches::kCnn, "cnn"}};
+constexpr EnumName<Residual> kResiduals[] = {
+    {Residual::kNone, "none"}, {Residual::kPinv, "pinv"}, {Residual::kAdjoint, "adjoint"}};
+constexpr EnumName<AeInput> kAeInputs[] = {{AeInput::kMeasurements, "measurements"},
+                                           {AeInput::kAdjoint, "adjoint"}};
+}  // namespace
+
+std::string to_string(Architecture value) { return name_of(value, kArchitectures); }
+std::string to_string(Branches value) { return name_of(value, kBranches); }
+std::string to_string(Residual value) { return name_of(value, kResiduals); }
+std::string to_string(AeInput value) { return name_of(value, kAeInputs); }
+Architecture from_string(const std::string& name, Architecture) {
+  return value_of(name, kArchitectures);
+}
+Branches from_string(const std::string& name, Branches) { return value_of(name, kBranches); }
+Residual from_string(const std::string& name, Residual) { return value_of(name, kResiduals); }
+AeInput from_string(const std::string& name, AeInput) { return value_of(name, kAeInputs); }
 
 void PatchShape::read(JsonReader& reader) { read_fields(reader, *this); }
 nlohmann::json PatchShape::to_json() const { return fields_to_json(*this); }
@@ -41,9 +64,6 @@ void NetworkOptions::validate() const {
   if (patch.rows < 1 || patch.cols < 1 || patch.height < 1 || patch.width < 1) {
     fail("patch", "every size must be positive, got " + patch.to_json().dump());
   }
-  if (architecture != "paper" && architecture != "lfnet") {
-    fail("architecture", "'" + architecture + "' is unknown (known: paper, lfnet)");
-  }
   if (is_image()) {
     image.validate();
     const int64_t m = image.multiple();
@@ -53,16 +73,8 @@ void NetworkOptions::validate() const {
     }
   }
   if (measurements < 1) fail("measurements", "must be >= 1, got " + std::to_string(measurements));
-  if (branches != "net" && branches != "ae" && branches != "cnn") {
-    fail("branches", "'" + branches + "' is unknown (known: net, ae, cnn)");
-  }
   if (kernel < 1 || kernel % 2 == 0) {
     fail("kernel", "must be odd and positive, got " + std::to_string(kernel));
-  }
-  try {
-    parse_conv4d_algorithm(conv_algorithm);
-  } catch (const ConfigError& e) {
-    fail("conv_algorithm", e.what());
   }
   if (ae.hidden.size() != 5) {
     fail("ae.hidden", "needs the 5 widths of fc1 .. fc5, got " + std::to_string(ae.hidden.size()));
@@ -70,17 +82,11 @@ void NetworkOptions::validate() const {
   for (auto w : ae.hidden) {
     if (w < 1) fail("ae.hidden", "widths must be positive, got " + std::to_string(w));
   }
-  if (ae.input != "measurements" && ae.input != "adjoint") {
-    fail("ae.input", "'" + ae.input + "' is unknown (known: measurements, adjoint)");
-  }
   if (cnn.channels < 1) fail("cnn.channels", "must be positive");
   if (cnn.depth < 1) fail("cnn.depth", "must be >= 1");
   if (head_weights.size() != 2 || !std::isfinite(head_weights[0]) ||
       !std::isfinite(head_weights[1])) {
     fail("head_weights", "needs two finite weights (ae, cnn)");
-  }
-  if (residual != "none" && residual != "pinv" && residual != "adjoint") {
-    fail("residual", "'" + residual + "' is unknown (known: none, pinv, adjoint)");
   }
   if (!(pinv_lambda > 0) || !std::isfinite(pinv_lambda)) {
     fail("pinv_lambda", "must be positive and finite");
@@ -88,7 +94,7 @@ void NetworkOptions::validate() const {
 }
 
 int64_t NetworkOptions::ae_input_size() const {
-  return ae.input == "adjoint" ? patch.size() : measurement_size();
+  return ae.input == AeInput::kAdjoint ? patch.size() : measurement_size();
 }
 
 // ---- branches ------------------------------------------------------------------------------
@@ -104,7 +110,7 @@ AutoencoderBranchImpl::AutoencoderBranchImpl(const NetworkOptions& options)
   }
   Conv4dOptions conv_options;
   conv_options.kernel = options.kernel;
-  conv_options.algorithm = parse_conv4d_algorithm(options.conv_algorithm);
+  conv_options.algorithm = options.conv_algorithm;
   conv = register_module("conv", Conv4d(conv_options));
 }
 
@@ -119,7 +125,7 @@ torch::Tensor AutoencoderBranchImpl::forward(const torch::Tensor& input) {
 }
 
 CnnBranchImpl::CnnBranchImpl(const NetworkOptions& options) {
-  const auto algorithm = parse_conv4d_algorithm(options.conv_algorithm);
+  const auto algorithm = options.conv_algorithm;
   for (int64_t i = 0; i < options.cnn.depth; ++i) {
     Conv4dOptions conv_options;
     conv_options.in_channels = i == 0 ? 1 : options.cnn.channels;
@@ -224,7 +230,7 @@ LightFieldNetImpl::LightFieldNetImpl(NetworkOptions options) : options_(std::mov
   const int64_t m = options_.measurement_size(), d = options_.patch.size();
   phi = register_buffer("phi", torch::zeros({1, m, d}));
   adjoint_scale = register_buffer("adjoint_scale", torch::ones({1}));
-  if (options_.residual == "pinv") base = register_buffer("base", torch::zeros({1, m, d}));
+  if (options_.residual == Residual::kPinv) base = register_buffer("base", torch::zeros({1, m, d}));
   if (options_.has_ae()) ae = register_module("ae", AutoencoderBranch(options_));
   if (options_.has_cnn()) cnn = register_module("cnn", CnnBranch(options_));
 }
@@ -373,12 +379,12 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
     return out;
   }
   const bool run_ae = run.ae && options_.has_ae(), run_cnn = run.cnn && options_.has_cnn();
-  const bool need_adjoint =
-      run_cnn || (run_ae && options_.ae.input == "adjoint") || options_.residual == "adjoint";
+  const bool need_adjoint = run_cnn || (run_ae && options_.ae.input == AeInput::kAdjoint) ||
+                            options_.residual == Residual::kAdjoint;
   torch::Tensor x0 = need_adjoint ? scaled_adjoint(y, ph) : torch::Tensor();
 
   NetworkOutputs out;
-  if (run_ae) out.ae = ae->forward(options_.ae.input == "adjoint" ? x0 : y);
+  if (run_ae) out.ae = ae->forward(options_.ae.input == AeInput::kAdjoint ? x0 : y);
   if (run_cnn) out.cnn = cnn->forward(x0.view(shape));
   if (out.ae.defined() && out.cnn.defined()) {
     const double a = options_.head_weights[0], b = options_.head_weights[1];
@@ -388,8 +394,8 @@ NetworkOutputs LightFieldNetImpl::forward_all(const torch::Tensor& y, const torc
   } else {
     out.output = out.ae.defined() ? out.ae : out.cnn;
   }
-  if (options_.residual == "pinv") out.base = apply_phase_stack(y, ph, base).view(shape);
-  if (options_.residual == "adjoint") out.base = x0.view(shape);
+  if (options_.residual == Residual::kPinv) out.base = apply_phase_stack(y, ph, base).view(shape);
+  if (options_.residual == Residual::kAdjoint) out.base = x0.view(shape);
   // With no branch run (a selection that leaves none), the output is the base alone.
   if (out.base.defined()) out.output = out.output.defined() ? out.output + out.base : out.base;
   return out;
@@ -451,7 +457,7 @@ double patch_flops(const NetworkOptions& o, const BranchSelection& run) {
   };
   const bool ae = run.ae && o.has_ae(), cnn = run.cnn && o.has_cnn();
   double flops = 0;
-  if (cnn || (ae && o.ae.input == "adjoint")) flops += 2 * m * d;
+  if (cnn || (ae && o.ae.input == AeInput::kAdjoint)) flops += 2 * m * d;
   if (ae) {
     double in = static_cast<double>(o.ae_input_size());
     std::vector<int64_t> widths = o.ae.hidden;
@@ -463,7 +469,7 @@ double patch_flops(const NetworkOptions& o, const BranchSelection& run) {
     flops += conv(1, 1);
   }
   if (cnn) flops += cnn_patch_flops(o);
-  if (o.residual == "pinv") flops += 2 * m * d;
+  if (o.residual == Residual::kPinv) flops += 2 * m * d;
   return flops;
 }
 

@@ -380,7 +380,7 @@ std::string conv_call(Conv4dAlgorithm algorithm, const std::string& x, const std
 // The net-specific methods: the branches with their layers unrolled and each Conv4d's
 // algorithm resolved as the C++ layer resolves it, and _parts (forward_all).
 std::string network_source(const NetworkOptions& o) {
-  const auto algorithm = parse_conv4d_algorithm(o.conv_algorithm);
+  const auto algorithm = o.conv_algorithm;
   std::ostringstream s;
   if (o.has_ae()) {
     s << "def _ae(self, x: Tensor) -> Tensor:\n    b = x.size(0)\n";
@@ -408,7 +408,8 @@ std::string network_source(const NetworkOptions& o) {
     }
     s << "    return z.transpose(1, 2).contiguous()\n\n";
   }
-  const bool need_adjoint = o.has_cnn() || o.ae.input == "adjoint" || o.residual == "adjoint";
+  const bool need_adjoint =
+      o.has_cnn() || o.ae.input == AeInput::kAdjoint || o.residual == Residual::kAdjoint;
   s << "def _parts(self, y: Tensor, phase: Optional[Tensor]) -> Dict[str, Tensor]:\n"
     << "    y, ph = self._check(y, phase)\n"
     << "    ps = self.patch_shape\n"
@@ -416,7 +417,7 @@ std::string network_source(const NetworkOptions& o) {
     << "    parts: Dict[str, Tensor] = {}\n";
   if (need_adjoint) s << "    x0 = self._adjoint(y, ph)\n";
   if (o.has_ae())
-    s << "    ae = self._ae(" << (o.ae.input == "adjoint" ? "x0" : "y")
+    s << "    ae = self._ae(" << (o.ae.input == AeInput::kAdjoint ? "x0" : "y")
       << ")\n    parts[\"ae\"] = ae\n";
   if (o.has_cnn()) s << "    cnn = self._cnn(x0.view(shape))\n    parts[\"cnn\"] = cnn\n";
   if (o.has_ae() && o.has_cnn()) {
@@ -429,12 +430,12 @@ std::string network_source(const NetworkOptions& o) {
   } else {
     s << "    out = " << (o.has_ae() ? "ae" : "cnn") << "\n";
   }
-  if (o.residual == "pinv") {
+  if (o.residual == Residual::kPinv) {
     s << "    base = self._apply_stack(y, ph, self.base_stack()).view(shape)\n";
-  } else if (o.residual == "adjoint") {
+  } else if (o.residual == Residual::kAdjoint) {
     s << "    base = x0.view(shape)\n";
   }
-  if (o.residual != "none") s << "    parts[\"base\"] = base\n    out = out + base\n";
+  if (o.residual != Residual::kNone) s << "    parts[\"base\"] = base\n    out = out + base\n";
   s << "    parts[\"output\"] = out\n    return parts\n\n";
   return s.str();
 }
@@ -635,7 +636,7 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
   root.register_attribute("format_version", c10::IntType::get(), kScriptFormatVersion);
   root.register_attribute("metadata", c10::StringType::get(), metadata.dump(2));
   root.register_attribute("phi_spec", c10::StringType::get(), meta.phi.dump());
-  root.register_attribute("branches", c10::StringType::get(), o.branches);
+  root.register_attribute("branches", c10::StringType::get(), to_string(o.branches));
   root.register_attribute(
       "patch_shape", c10::ListType::ofInts(),
       c10::List<int64_t>({o.patch.rows, o.patch.cols, o.patch.height, o.patch.width}));

@@ -5,11 +5,22 @@
 
 #include <cmath>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/optics/counter_rng.h"
 
 namespace lfnet::optics {
+
+namespace {
+constexpr EnumName<ShotNoiseModel> kShotNoiseModels[] = {{ShotNoiseModel::kPoisson, "poisson"},
+                                                         {ShotNoiseModel::kGaussian, "gaussian"}};
+}  // namespace
+
+std::string to_string(ShotNoiseModel value) { return name_of(value, kShotNoiseModels); }
+ShotNoiseModel from_string(const std::string& name, ShotNoiseModel) {
+  return value_of(name, kShotNoiseModels);
+}
 
 bool SensorOptions::empty() const {
   return !gaussian && !shot && !read && !saturation && !adc && !gain;
@@ -21,10 +32,6 @@ void SensorOptions::validate() const {
   };
   check(photons_at_white > 0, "$.photons_at_white must be > 0");
   if (gaussian) check(gaussian->sigma >= 0, "$.gaussian.sigma must be >= 0");
-  if (shot) {
-    check(shot->model == "poisson" || shot->model == "gaussian",
-          "$.shot.model must be \"poisson\" or \"gaussian\", got \"" + shot->model + "\"");
-  }
   if (read) check(read->electrons >= 0, "$.read.electrons must be >= 0");
   if (saturation) check(saturation->full_well > 0, "$.saturation.full_well must be > 0");
   if (adc) {
@@ -116,7 +123,7 @@ torch::Tensor apply_sensor_effects(const torch::Tensor& y, const SensorOptions& 
         s *= 1.0 + options.gain->spread * gain_rng.normal(static_cast<uint64_t>(pid[i]));
       if (options.shot) {
         const double lambda = k * std::max(s, 0.0);
-        const double electrons = options.shot->model == "poisson"
+        const double electrons = options.shot->model == ShotNoiseModel::kPoisson
                                      ? poisson(lambda, shot_rng.sub(e))
                                      : lambda + std::sqrt(lambda) * shot_rng.normal(e);
         s = electrons / k;

@@ -139,7 +139,13 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   nlohmann::json model_info = "untrained default network";
   if (recon::needs_network(method)) {
     const std::string model = a.models.empty() ? "" : a.models.front();
-    const std::string architecture = a.architectures.empty() ? "paper" : a.architectures.front();
+    auto architecture = nn::Architecture::kPaper;
+    try {
+      if (!a.architectures.empty())
+        architecture = nn::from_string(a.architectures.front(), architecture);
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("--architecture: ") + e.what());
+    }
     if (!model.empty()) {
       const auto ckpt = train::load_checkpoint(model);
       spec = optics::PhiSpec::from_json(ckpt.phi, model + ":phi");
@@ -148,11 +154,9 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     } else {
       nn::NetworkOptions no;
       no.measurements = spec.n;
-      LFNET_CHECK_AS(ConfigError, architecture == "paper" || architecture == "lfnet",
-                     "unknown architecture '", architecture, "' (known: paper, lfnet)");
-      if (architecture == "lfnet") {
+      if (architecture == nn::Architecture::kLfnet) {
         model_info = "untrained lfnet network";
-        no.architecture = "lfnet";
+        no.architecture = architecture;
         no.patch.height = no.patch.width = 48;
       }
       torch::manual_seed(0);
@@ -186,7 +190,7 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     nn::set_cnn_precision(net, nn::parse_precision(a.precision));
     resources.net = net;
     extra["model"] = model_info;
-    extra["architecture"] = net->options().architecture;
+    extra["architecture"] = nn::to_string(net->options().architecture);
     extra["cnn_mode"] = full ? "full" : "patches";
     extra["precision"] = a.precision;
     if (full) extra["tile"] = cnn_tile;

@@ -203,7 +203,9 @@ train::TrainerOptions ExperimentConfig::stage_options(const StageConfig& stage) 
 
 nn::NetworkOptions ExperimentConfig::stage_network(const StageConfig& stage) const {
   nn::NetworkOptions o = network;
-  o.branches = (stage.name == "ae" || stage.name == "cnn") ? stage.name : "net";
+  o.branches = stage.name == "ae"    ? nn::Branches::kAe
+               : stage.name == "cnn" ? nn::Branches::kCnn
+                                     : nn::Branches::kNet;
   o.validate();
   return o;
 }

@@ -98,7 +98,7 @@ ExportResult export_model(const ExportRequest& a) {
                    diff, " on ", a.check, " patches (more than 1e-5): please report this");
   }
   r.phi = spec.label();
-  r.branches = o.is_image() ? "lfnet" : o.branches;
+  r.branches = o.is_image() ? "lfnet" : nn::to_string(o.branches);
   r.phases = net->phases();
   r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
   r.max_difference = diff;

@@ -130,9 +130,11 @@ dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
     coding = merge(patch, option + (inline_json ? "" : " " + options) + ":$");
   }
   if (!method.empty()) {
-    LFNET_CHECK_AS(ConfigError, method == "omp" || method == "admm",
-                   "--dict-method must be omp or admm, got ", method);
-    coding.method = method;
+    try {
+      coding.method = dict::from_string(method, coding.method);
+    } catch (const ConfigError& e) {
+      throw ConfigError(std::string("--dict-method: ") + e.what());
+    }
   }
   return coding;
 }

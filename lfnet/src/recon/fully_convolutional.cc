@@ -65,10 +65,10 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
   LFNET_CHECK_AS(ConfigError, method == "net" || method == "cnn",
                  "a fully convolutional CNN pass needs the method net or cnn, not '", method, "'");
   const auto& o = net->options();
-  LFNET_CHECK_AS(ConfigError, o.has_cnn(), "the model was trained as '", o.branches,
+  LFNET_CHECK_AS(ConfigError, o.has_cnn(), "the model was trained as '", nn::to_string(o.branches),
                  "' and has no CNN branch to run fully convolutionally");
-  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != "ae", "the model has no '", method,
-                 "' branch");
+  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != nn::Branches::kAe,
+                 "the model has no '", method, "' branch");
   net->eval();
   // Everything here is inference: the tensors made under the guard are updated in place.
   torch::InferenceMode inference;
@@ -81,15 +81,16 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
     return net->adjoint(y.to(device), phase.defined() ? phase.to(device) : phase).to(torch::kCPU);
   };
   auto x0 = reconstruct_sensor(phi, sensor, adjoint, raw);  // (1, U, V, H, W)
-  const double cnn_weight = method == "net" && o.branches == "net" ? o.head_weights[1] : 1.0;
+  const double cnn_weight =
+      method == "net" && o.branches == nn::Branches::kNet ? o.head_weights[1] : 1.0;
   auto out = cnn_over_light_field(net->cnn, x0[0], tile).mul_(cnn_weight).unsqueeze(0);
   // The rest per patch: the weighted autoencoder branch and the residual base.
   const bool ae = method == "net" && o.has_ae();
-  if (ae || o.residual != "none") {
+  if (ae || o.residual != nn::Residual::kNone) {
     nn::BranchSelection run;
     run.ae = ae;
     run.cnn = false;
-    const double ae_weight = o.branches == "net" ? o.head_weights[0] : 1.0;
+    const double ae_weight = o.branches == nn::Branches::kNet ? o.head_weights[0] : 1.0;
     PatchSolver rest = [&](const torch::Tensor& y, const torch::Tensor& phase) {
       torch::InferenceMode guard;
       auto r = net->forward_all(y.to(device), phase.defined() ? phase.to(device) : phase, run);

@@ -13,8 +13,9 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
   LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
                  "' is not a network method (net, ae, cnn)");
   const auto& o = net->options();
-  LFNET_CHECK_AS(ConfigError, method == "net" || o.branches == "net" || o.branches == method,
-                 "the model was trained as '", o.branches, "' and has no '", method, "' branch");
+  const auto branches = nn::to_string(o.branches);
+  LFNET_CHECK_AS(ConfigError, method == "net" || branches == "net" || branches == method,
+                 "the model was trained as '", branches, "' and has no '", method, "' branch");
   net->eval();
   // The `ae` and `cnn` methods run their branch alone. Measurements go to the net's device
   // and patches come back to the CPU, where they are stitched.
@@ -26,9 +27,9 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
     const auto device = net->phi.device();
     auto out = net->forward_all(y.to(device), phase.defined() ? phase.to(device) : phase, run);
     torch::Tensor patch = out.output;
-    if (method == "ae" && net->options().branches == "net") {
+    if (method == "ae" && net->options().branches == nn::Branches::kNet) {
       patch = out.base.defined() ? out.ae + out.base : out.ae;
-    } else if (method == "cnn" && net->options().branches == "net") {
+    } else if (method == "cnn" && net->options().branches == nn::Branches::kNet) {
       patch = out.base.defined() ? out.cnn + out.base : out.cnn;
     }
     return patch.reshape({y.size(0), -1}).to(torch::kCPU);
@@ -38,7 +39,7 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
 PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& method) {
   LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
                  "' is not a network method (net, ae, cnn)");
-  const auto& branches = net.network.branches;
+  const auto branches = nn::to_string(net.network.branches);
   LFNET_CHECK_AS(ConfigError, method == "net" || branches == "net" || branches == method,
                  "the model was trained as '", branches, "' and has no '", method, "' branch");
   return [net, method](const torch::Tensor& y, const torch::Tensor& phase) {

@@ -8,6 +8,7 @@
 #include <optional>
 #include <sstream>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
@@ -24,8 +25,6 @@ double number_or(const nlohmann::json& j, double fallback) {
 std::string param_key(const torch::Tensor& p) {
   return c10::guts::to_string(p.unsafeGetTensorImpl());
 }
-
-std::string branches_of_stage(const std::string& stage) { return stage == "joint" ? "net" : stage; }
 
 // The global L2 norm of the gradients (NaN or inf when any is).
 double gradient_norm(const torch::nn::Module& module) {
@@ -51,14 +50,44 @@ std::string format_double(double v) {
 
 // ---- options -------------------------------------------------------------------------------
 
+namespace {
+constexpr EnumName<Stage> kStages[] = {
+    {Stage::kAe, "ae"}, {Stage::kCnn, "cnn"}, {Stage::kJoint, "joint"}};
+constexpr EnumName<ScheduleKind> kSchedules[] = {{ScheduleKind::kConstant, "constant"},
+                                                 {ScheduleKind::kStep, "step"},
+                                                 {ScheduleKind::kCosine, "cosine"}};
+constexpr EnumName<OnNonFinite> kOnNonFinite[] = {{OnNonFinite::kStop, "stop"},
+                                                  {OnNonFinite::kSkip, "skip"}};
+}  // namespace
+
+std::string to_string(Stage value) { return name_of(value, kStages); }
+std::string to_string(ScheduleKind value) { return name_of(value, kSchedules); }
+std::string to_string(OnNonFinite value) { return name_of(value, kOnNonFinite); }
+Stage from_string(const std::string& name, Stage) { return value_of(name, kStages); }
+ScheduleKind from_string(const std::string& name, ScheduleKind) {
+  return value_of(name, kSchedules);
+}
+OnNonFinite from_string(const std::string& name, OnNonFinite) {
+  return value_of(name, kOnNonFinite);
+}
+
+nn::Branches branches_of_stage(Stage stage) {
+  switch (stage) {
+    case Stage::kAe:
+      return nn::Branches::kAe;
+    case Stage::kCnn:
+      return nn::Branches::kCnn;
+    case Stage::kJoint:
+      break;
+  }
+  return nn::Branches::kNet;
+}
+
 void LrScheduleOptions::read(JsonReader& reader) { read_fields(reader, *this); }
 
 nlohmann::json LrScheduleOptions::to_json() const { return fields_to_json(*this); }
 
 void LrScheduleOptions::validate() const {
-  if (name != "constant" && name != "step" && name != "cosine") {
-    throw ConfigError("name: '" + name + "' is unknown (known: constant, step, cosine)");
-  }
   if (step_epochs < 1) throw ConfigError("step_epochs: must be >= 1");
   if (!(gamma > 0) || !std::isfinite(gamma)) throw ConfigError("gamma: must be positive");
   if (!(min_factor >= 0 && min_factor <= 1)) throw ConfigError("min_factor: must lie in [0, 1]");
@@ -84,9 +113,6 @@ void TrainerOptions::validate() const {
   auto fail = [](const std::string& field, const std::string& what) {
     throw ConfigError(field + ": " + what);
   };
-  if (stage != "ae" && stage != "cnn" && stage != "joint") {
-    fail("stage", "'" + stage + "' is unknown (known: ae, cnn, joint)");
-  }
   if (device != "cpu" && device != "cuda" && device.rfind("cuda:", 0) != 0) {
     fail("device", "'" + device + "' is unknown (known: cpu, cuda, cuda:K)");
   }
@@ -102,23 +128,10 @@ void TrainerOptions::validate() const {
   } catch (const ConfigError& e) {
     throw ConfigError(std::string("schedule.") + e.what());
   }
-  try {
-    loss.kind();
-  } catch (const ConfigError& e) {
-    fail("loss.name", e.what());
-  }
-  try {
-    loss.reduction_kind();
-  } catch (const ConfigError& e) {
-    fail("loss.reduction", e.what());
-  }
   if (!(loss.noise_scale >= 0 && std::isfinite(loss.noise_scale))) {
     fail("loss.noise_scale", "must be >= 0");
   }
   if (!(clip_grad_norm >= 0)) fail("clip_grad_norm", "must be >= 0");
-  if (on_nonfinite != "stop" && on_nonfinite != "skip") {
-    fail("on_nonfinite", "'" + on_nonfinite + "' is unknown (known: stop, skip)");
-  }
   if (max_skipped_batches < 0) fail("max_skipped_batches", "must be >= 0");
 }
 
@@ -128,10 +141,10 @@ double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch
       (static_cast<double>(epoch) + static_cast<double>(batch) / static_cast<double>(batches)) /
       static_cast<double>(options.epochs);
   double factor = 1.0;
-  if (s.name == "step") {
+  if (s.name == ScheduleKind::kStep) {
     const int64_t steps_taken = epoch / s.step_epochs;  // whole steps only
     factor = std::pow(s.gamma, static_cast<double>(steps_taken));
-  } else if (s.name == "cosine") {
+  } else if (s.name == ScheduleKind::kCosine) {
     factor = s.min_factor + (1 - s.min_factor) * 0.5 * (1 + std::cos(M_PI * progress));
   }
   const int64_t warmup = s.warmup_epochs * batches, global = epoch * batches + batch;
@@ -252,11 +265,11 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
       run_(std::move(run)),
       loss_(options_.loss, net_->options().patch.rows, net_->options().patch.cols) {
   options_.validate();
-  const auto& branches = net_->options().branches;
+  const auto branches = net_->options().branches;
   LFNET_CHECK_AS(ConfigError, branches_of_stage(options_.stage) == branches, "stage '",
-                 options_.stage, "' trains a net with branches '",
-                 branches_of_stage(options_.stage), "', but this net has branches '", branches,
-                 "'");
+                 to_string(options_.stage), "' trains a net with branches '",
+                 nn::to_string(branches_of_stage(options_.stage)), "', but this net has branches '",
+                 nn::to_string(branches), "'");
   LFNET_CHECK_AS(ConfigError, run_.phi.is_object() && !run_.phi.empty(),
                  "the run needs the Phi spec of its measurements (RunInfo::phi)");
   LFNET_CHECK(net_->phi.abs().sum().item<double>() > 0,
@@ -264,7 +277,7 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
   device_ = parse_device(options_.device);
   net_->to(device_);
   optimizer_ = make_adam(net_, options_);
-  state_.stage = options_.stage;
+  state_.stage = to_string(options_.stage);
   comm_ = std::make_shared<dist::LocalCommunicator>();
 }
 
@@ -368,10 +381,10 @@ void Trainer::resume(const std::string& path) {
   const std::string what = "checkpoint " + path;
   auto ck = load_checkpoint(path);
   check_phi(ck, run_.phi, what);
-  if (ck.training.stage != options_.stage) {
+  if (ck.training.stage != to_string(options_.stage)) {
     throw CheckpointError(what + " is from stage '" + ck.training.stage +
-                          "'; resume it with that stage, or start stage '" + options_.stage +
-                          "' from it with --init");
+                          "'; resume it with that stage, or start stage '" +
+                          to_string(options_.stage) + "' from it with --init");
   }
   check_architecture(net_, ck.model, what);
   if (!torch::equal(ck.model.at("phi"), net_->phi.to(torch::kCPU))) {
@@ -402,7 +415,7 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   const bool phi_changed = ck.phi != run_.phi || !old_phi.defined() ||
                            old_phi.sizes() != net_->phi.sizes() ||
                            !torch::equal(old_phi, net_->phi.to(torch::kCPU));
-  const bool fc1_reads_measurements = net_->options().ae.input == "measurements";
+  const bool fc1_reads_measurements = net_->options().ae.input == nn::AeInput::kMeasurements;
   InitReport report;
   {
     torch::NoGradGuard no_grad;
@@ -445,7 +458,7 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   optimizer_ = make_adam(net_, options_);
   auto origin = state_.origin;
   state_ = TrainingState{};
-  state_.stage = options_.stage;
+  state_.stage = to_string(options_.stage);
   state_.origin = origin;
   state_.origin[prefix.empty() ? "all" : prefix.substr(0, prefix.size() - 1)] = {
       {"checkpoint", path},
@@ -618,7 +631,7 @@ void Trainer::save_checkpoints(const EpochRecord& record) {
 
 std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& hooks) {
   std::vector<EpochRecord> records;
-  const bool skip = options_.on_nonfinite == "skip";
+  const bool skip = options_.on_nonfinite == OnNonFinite::kSkip;
   const bool distributed = comm_->world_size() > 1;
   const bool lead = comm_->rank() == 0;  // the rank that writes checkpoints and shows progress
   if (distributed) {

@@ -21,6 +21,11 @@
 
 namespace lfnet::data {
 
+// Which angular windows training patches come from; by name "central", "any".
+enum class AngularWindows { kCentral, kAny };
+std::string to_string(AngularWindows value);
+AngularWindows from_string(const std::string& name, AngularWindows);
+
 // Options of the patch data set.
 struct DatasetOptions {
   int64_t patch_h = 9;                // spatial patch height
@@ -34,7 +39,7 @@ struct DatasetOptions {
   // central window at each step) or "any" (every window that fits). `angular_steps` are the
   // view spacings: 2 takes every second view, which doubles the baseline and the disparity.
   // Validation always uses the central window at step 1.
-  std::string angular_windows = "central";
+  AngularWindows angular_windows = AngularWindows::kCentral;
   std::vector<int64_t> angular_steps = {1};
   // Photometric jitter of training patches, drawn per patch (0: off): the patch is raised to
   // a gamma exp(+-gamma), its contrast about its mean scaled by exp(+-contrast), its level
@@ -52,7 +57,7 @@ struct DatasetOptions {
   // Whether training draws windows other than the central one at step 1, so that light
   // fields should come with their whole angular grid.
   bool needs_whole_grids() const {
-    return angular_windows != "central" || angular_steps != std::vector<int64_t>{1};
+    return angular_windows != AngularWindows::kCentral || angular_steps != std::vector<int64_t>{1};
   }
 
   template <typename Fields>

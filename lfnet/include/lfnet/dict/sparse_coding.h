@@ -71,9 +71,14 @@ struct AdmmOptions {
   static AdmmOptions from_json(const nlohmann::json& j, const std::string& path);
 };
 
+// How patches are coded: greedy OMP or the ADMM-LASSO; by name "omp", "admm".
+enum class CodingMethod { kOmp, kAdmm };
+std::string to_string(CodingMethod value);
+CodingMethod from_string(const std::string& name, CodingMethod);
+
 // How patches are coded.
 struct SparseCodingOptions {
-  std::string method = "omp";     // "omp" or "admm"
+  CodingMethod method = CodingMethod::kOmp;  // omp or admm
   bool normalize_columns = true;  // code over unit-norm columns of Theta = A D and scale the
                                   // coefficients back (with ADMM: an L1 weighted by the norms)
   int64_t cache_size = 16;        // prepared operators kept, one per distinct A (a mask Phi

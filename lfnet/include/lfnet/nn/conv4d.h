@@ -23,6 +23,9 @@ enum class Conv4dAlgorithm {
 // "stacked", "fused_output", "fused_input", "auto"; anything else is a ConfigError.
 Conv4dAlgorithm parse_conv4d_algorithm(const std::string& name);
 std::string to_string(Conv4dAlgorithm algorithm);
+inline Conv4dAlgorithm from_string(const std::string& name, Conv4dAlgorithm) {
+  return parse_conv4d_algorithm(name);
+}
 
 // The algorithm a layer of Cin -> Cout channels runs: `algorithm` itself unless kAuto.
 Conv4dAlgorithm resolve_conv4d_algorithm(Conv4dAlgorithm algorithm, int64_t in_channels,

@@ -34,10 +34,16 @@ enum class LossReduction {
   kSum,   // summed over views and pixels of each patch, averaged over the batch (the paper's)
 };
 
+// By name: "weighted_l2", "l2", "l1"; "mean", "sum" (core/enum_names.h).
+std::string to_string(LossKind value);
+std::string to_string(LossReduction value);
+LossKind from_string(const std::string& name, LossKind);
+LossReduction from_string(const std::string& name, LossReduction);
+
 // Which loss and how it is reduced; strict JSON (LossOptions::from_json).
 struct LossOptions {
-  std::string name = "weighted_l2";  // weighted_l2, l2 or l1
-  std::string reduction = "mean";    // mean or sum (see LossReduction)
+  LossKind name = LossKind::kWeightedL2;           // weighted_l2, l2 or l1
+  LossReduction reduction = LossReduction::kMean;  // mean or sum
   // Noise-aware training (dataset.noise_range): a patch measured with noise sigma weighs
   // noise_scale / (noise_scale + sigma), so that noisy patches, whose errors are larger, do not
   // drown the nearly noiseless ones. 0: every patch weighs 1.
@@ -54,8 +60,6 @@ struct LossOptions {
   nlohmann::json to_json() const;
   // Throws ConfigError naming the bad field.
   void validate() const;
-  LossKind kind() const;
-  LossReduction reduction_kind() const;
 };
 
 // A reconstruction loss for patches laid out (B, ..., U, V, h, w): the views are dimensions

@@ -52,6 +52,20 @@ struct PatchShape {
   }
 };
 
+// The closed sets of NetworkOptions, read and written by name (core/enum_names.h).
+enum class Architecture { kPaper, kLfnet };      // "paper", "lfnet"
+enum class Branches { kNet, kAe, kCnn };         // "net", "ae", "cnn"
+enum class Residual { kNone, kPinv, kAdjoint };  // "none", "pinv", "adjoint"
+enum class AeInput { kMeasurements, kAdjoint };  // "measurements", "adjoint"
+std::string to_string(Architecture value);
+std::string to_string(Branches value);
+std::string to_string(Residual value);
+std::string to_string(AeInput value);
+Architecture from_string(const std::string& name, Architecture);
+Branches from_string(const std::string& name, Branches);
+Residual from_string(const std::string& name, Residual);
+AeInput from_string(const std::string& name, AeInput);
+
 // The autoencoder branch's sizes and input.
 struct AutoencoderOptions {
   // Output widths of fc1 .. fc5, alternately expanding and contracting; fc6 maps the last to
@@ -61,7 +75,7 @@ struct AutoencoderOptions {
   // What fc1 reads. "measurements": the measurement vector y (N h w values), as in the paper.
   // "adjoint": the scaled Phi^T y (U V h w values), which carries the patch's phase (periodic
   // masks) and does not change width when N does.
-  std::string input = "measurements";
+  AeInput input = AeInput::kMeasurements;
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -92,13 +106,13 @@ struct NetworkOptions {
   // conv_algorithm, head_weights and residual apply). "lfnet": lfnet's own whole-image
   // architecture (`image`): a U-Net over the per-pixel pseudo-inverse of the sensor image,
   // trained on crops of `patch` (docs/architectures.md).
-  std::string architecture = "paper";
-  PatchShape patch;              // the patch the net reconstructs (lfnet: the training crop)
-  int64_t measurements = 2;      // N: measurement channels per pixel
-  std::string branches = "net";  // net (both branches, averaged), ae or cnn (one branch)
-  int64_t kernel = 3;            // Conv4d kernel size (odd)
-  std::string conv_algorithm =
-      "auto";  // Conv4d algorithm: auto, stacked, fused_output, fused_input
+  Architecture architecture = Architecture::kPaper;
+  PatchShape patch;                    // the patch the net reconstructs (lfnet: the training crop)
+  int64_t measurements = 2;            // N: measurement channels per pixel
+  Branches branches = Branches::kNet;  // net (both branches, averaged), ae or cnn (one branch)
+  int64_t kernel = 3;                  // Conv4d kernel size (odd)
+  // Conv4d algorithm: auto, stacked, fused_output, fused_input
+  Conv4dAlgorithm conv_algorithm = Conv4dAlgorithm::kAuto;
   AutoencoderOptions ae;
   CnnOptions cnn;
   // Weights of the (ae, cnn) outputs in the two-branch head; they apply to "net" only.
@@ -106,7 +120,7 @@ struct NetworkOptions {
   // A fixed linear estimate added to the output, so the branches learn a correction:
   // "none" (the paper), "pinv" (Tikhonov pseudo-inverse, lambda = pinv_lambda) or "adjoint"
   // (the scaled Phi^T y). Off by default: docs/models.md saw no gain from it.
-  std::string residual = "none";
+  Residual residual = Residual::kNone;
   double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
   ImageNetOptions image;      // the lfnet architecture's U-Net
 
@@ -132,15 +146,15 @@ struct NetworkOptions {
   // Throws ConfigError naming the bad field.
   void validate() const;
 
-  bool is_image() const { return architecture == "lfnet"; }
+  bool is_image() const { return architecture == Architecture::kLfnet; }
   // The patch grid that reconstruction with this network uses: its patch shape, or none for
   // the lfnet architecture, which reconstructs whole images (its training crop is no patch).
   std::optional<PatchShape> patch_grid() const {
     if (is_image()) return std::nullopt;
     return patch;
   }
-  bool has_ae() const { return !is_image() && (branches == "net" || branches == "ae"); }
-  bool has_cnn() const { return !is_image() && (branches == "net" || branches == "cnn"); }
+  bool has_ae() const { return !is_image() && branches != Branches::kCnn; }
+  bool has_cnn() const { return !is_image() && branches != Branches::kAe; }
   int64_t measurement_size() const { return measurements * patch.pixels(); }  // N h w
   // Width of the autoencoder's input: N h w or U V h w.
   int64_t ae_input_size() const;

@@ -14,6 +14,12 @@
 
 namespace lfnet::optics {
 
+// Photon shot noise drawn from the Poisson law or its Gaussian approximation; by name
+// "poisson", "gaussian".
+enum class ShotNoiseModel { kPoisson, kGaussian };
+std::string to_string(ShotNoiseModel value);
+ShotNoiseModel from_string(const std::string& name, ShotNoiseModel);
+
 // Which effects a simulation applies; each is applied only when present. Applied in the
 // order of a real pixel: gain, shot, saturation, read, gaussian, adc.
 struct SensorOptions {
@@ -28,7 +34,7 @@ struct SensorOptions {
   };
   // Photon shot noise: electrons ~ Poisson(photons_at_white * y).
   struct Shot {
-    std::string model = "poisson";  // "poisson" or "gaussian" (its approximation)
+    ShotNoiseModel model = ShotNoiseModel::kPoisson;  // poisson, or gaussian (its approximation)
 
     template <typename Fields>
     void fields(Fields& f) {

@@ -22,13 +22,26 @@
 
 namespace lfnet::train {
 
+// The closed sets of the trainer's options, read and written by name (core/enum_names.h).
+enum class Stage { kAe, kCnn, kJoint };                 // "ae", "cnn", "joint"
+enum class ScheduleKind { kConstant, kStep, kCosine };  // "constant", "step", "cosine"
+enum class OnNonFinite { kStop, kSkip };                // "stop", "skip"
+std::string to_string(Stage value);
+std::string to_string(ScheduleKind value);
+std::string to_string(OnNonFinite value);
+Stage from_string(const std::string& name, Stage);
+ScheduleKind from_string(const std::string& name, ScheduleKind);
+OnNonFinite from_string(const std::string& name, OnNonFinite);
+// The branches a stage trains: ae, cnn, or both (net) for joint.
+nn::Branches branches_of_stage(Stage stage);
+
 // The learning-rate schedule: a factor on TrainerOptions::lr per step.
 struct LrScheduleOptions {
-  std::string name = "cosine";  // constant, step or cosine (evaluated every step)
-  int64_t step_epochs = 20;     // step: multiply by gamma every step_epochs epochs
-  double gamma = 0.1;           // step: the factor
-  double min_factor = 0.01;     // cosine: the last learning rate as a fraction of lr
-  int64_t warmup_epochs = 0;    // linear warm-up from lr / steps over this many epochs
+  ScheduleKind name = ScheduleKind::kCosine;  // constant, step or cosine (evaluated every step)
+  int64_t step_epochs = 20;                   // step: multiply by gamma every step_epochs epochs
+  double gamma = 0.1;                         // step: the factor
+  double min_factor = 0.01;                   // cosine: the last learning rate as a fraction of lr
+  int64_t warmup_epochs = 0;  // linear warm-up from lr / steps over this many epochs
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -45,7 +58,7 @@ struct LrScheduleOptions {
 
 // Everything the Trainer does, with strict JSON (TrainerOptions::from_json).
 struct TrainerOptions {
-  std::string stage = "joint";  // ae, cnn or joint: must match the net's branches (ae, cnn, net)
+  Stage stage = Stage::kJoint;  // ae, cnn or joint: must match the net's branches (ae, cnn, net)
   int64_t epochs = 60;          // total epochs (the paper: about 60)
   int64_t batch_size = 64;      // patches per step
   // Adam. The paper used 1e-5 in Caffe; 1e-3 with the cosine decay converges within a CPU
@@ -60,7 +73,7 @@ struct TrainerOptions {
   double clip_grad_norm = 0.0;  // clip the global gradient norm to this (0: off)
   // What a non-finite loss or gradient does: "stop" throws NumericalError; "skip" drops the
   // batch, at most max_skipped_batches per epoch. Diverged weights always stop.
-  std::string on_nonfinite = "stop";
+  OnNonFinite on_nonfinite = OnNonFinite::kStop;
   int64_t max_skipped_batches = 10;
   // last.ckpt (everything, for resume) is written after every epoch, best.ckpt (the model of
   // the best validation PSNR, without Adam moments) whenever it improves; "" writes none.
