@@ -7,7 +7,7 @@ Usage:
   figures.py training LOG.jsonl STEM training curves of a run (RUN/training.jsonl)
 
 Kinds of a spec (each has "stem": the output path without extension, and "title"):
-  pareto    points [{method, variant, n, stride, seconds, psnr_db, front}]
+  pareto    points [{method, variant, n, stride, whole_image, seconds, psnr_db, front}]
   heatmaps  panels [{label, psnr}] of U x V per-view PSNR, one shared colour range
   views     panels [{label, psnr_db, view, epi}] (16-bit PNG crops); the first is the truth
   sweep     series [{label, method, x, y, kind: ours|paper|baseline}], xlabel, xlog
@@ -65,7 +65,7 @@ def pareto(spec):
     colour = Colours()
     ns = sorted({p["n"] for p in points})
     marker = {n: MARKERS[i % len(MARKERS)] for i, n in enumerate(ns)}
-    strides = {p["stride"] for p in points}
+    strides = {p["stride"] for p in points if not p.get("whole_image")}
     fig, ax = plt.subplots(figsize=(11, 6), dpi=120)
     seconds = [p["seconds"] for p in points if p["seconds"] > 0]
     x_floor = min(seconds) / 2 if seconds else 1e-3
@@ -85,7 +85,9 @@ def pareto(spec):
                    color=colour(series_name(p)), edgecolors="black" if p.get("front") else "none",
                    linewidths=1.2, zorder=3)
         notes = []
-        if len(strides) > 1:
+        if p.get("whole_image"):
+            notes.append("whole")
+        elif len(strides) > 1:
             notes.append(f"s{p['stride']}")
         if p["psnr_db"] > y_top + pad / 2:
             notes.append(f"↑ {p['psnr_db']:.1f} dB")
@@ -116,7 +118,8 @@ def pareto(spec):
     fig.subplots_adjust(left=0.07, right=0.7, top=0.93, bottom=0.1)
     fig.legend(handles=method_handles, title="method", fontsize=8, loc="upper left",
                bbox_to_anchor=(0.71, 0.93))
-    camera_title = "camera" + ("\n(sK beside a point:\npatch stride K)" if len(strides) > 1 else "")
+    camera_title = "camera" + ("\n(sK beside a point:\npatch stride K;\nwhole: no patches)"
+                               if len(strides) > 1 else "")
     fig.legend(handles=camera_handles, title=camera_title, fontsize=8, title_fontsize=8,
                loc="lower left", bbox_to_anchor=(0.71, 0.1))
     save(fig, spec["stem"])

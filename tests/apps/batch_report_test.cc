@@ -210,6 +210,22 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
       }
     }
   }
+  // A whole-image reconstruction (the lfnet architecture) beside a stride sweep: no stride.
+  fs::create_directories(tmp / "results/d");
+  std::ofstream(tmp / "results/d/section.json")
+      << R"({"title": "Strides", "order": 4, "sweep": {"x": "stride", "label": "stride"}})";
+  {
+    std::ofstream d(tmp / "results/d/records.jsonl");
+    for (int stride : {2, 9}) {
+      auto r = nlohmann::json::parse(record("net", 29.0 - stride * 0.1, 60.0 / stride));
+      r["stride"] = stride;
+      d << r.dump() << "\n";
+    }
+    auto whole = nlohmann::json::parse(record("net", 31.5, 20.0));
+    whole["variant"] = "lfnet";
+    whole["whole_image"] = true;
+    d << whole.dump() << "\n";
+  }
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
                           (tmp / "docs/RESULTS.md"),
@@ -268,13 +284,29 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   REQUIRE(by_stem.count("b_views"));
   REQUIRE(by_stem["b_views"]["panels"].size() == 1);
   CHECK(by_stem["b_views"]["panels"][0]["label"] == "fine tuned");
-  // The Pareto points carry method, camera and stride apart; dict is off the front.
+  // The Pareto points carry method, camera and stride apart; dict is off the front, and so are
+  // the stride sweep's nets (slower than the whole-image net and worse).
   REQUIRE(by_stem.count("pareto"));
+  int whole_points = 0;
   for (const auto& p : by_stem["pareto"]["points"]) {
     CHECK(p["n"] == 2);
-    CHECK(p["stride"] == 5);
-    CHECK(p["front"] == (p["method"] != "dict"));
+    if (p["whole_image"] == true) {
+      ++whole_points;
+      CHECK(p["variant"] == "lfnet");
+      CHECK(p["front"] == true);
+    } else if (p["stride"] == 5) {
+      CHECK(p["front"] == (p["method"] != "dict"));
+    } else {
+      CHECK(p["front"] == false);
+    }
   }
+  CHECK(whole_points == 1);
+  CHECK(text.find("| net (lfnet) | whole image | 2 | 31.50 | 20.00 |") != std::string::npos);
+  CHECK(text.find("| lfnet | whole image |") != std::string::npos);
+  // The stride sweep plots the patch nets only: a whole-image record has no stride.
+  REQUIRE(by_stem.count("d_sweep"));
+  REQUIRE(by_stem["d_sweep"]["series"].size() == 1);
+  CHECK(by_stem["d_sweep"]["series"][0]["x"] == nlohmann::json({2, 9}));
   // The sweep: net and the pinv baseline against N, and the paper's numbers as their own series.
   REQUIRE(by_stem.count("c_sweep"));
   std::map<std::string, nlohmann::json> series;

@@ -138,6 +138,11 @@ TEST_CASE(
     }
     const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
     CHECK(std::abs(a["psnr_db"].get<double>() - b["psnr_db"].get<double>()) < 1e-4);
+    // Patch by patch: the records count the patches and carry no whole_image.
+    for (const auto& r : {a, b}) {
+      CHECK_FALSE(r.contains("whole_image"));
+      CHECK(r["patches"].get<int64_t>() > 0);
+    }
     CHECK(std::abs(a["ssim"].get<double>() - b["ssim"].get<double>()) < 1e-6);
   }
   // Another Phi's measurements are refused as for the checkpoint.
@@ -341,6 +346,11 @@ TEST_CASE(
     }
     const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
     CHECK(std::abs(a["psnr_db"].get<double>() - b["psnr_db"].get<double>()) < 1e-4);
+    // Both reconstruct the whole image: the records say so, and count no patches.
+    for (const auto& r : {a, b}) {
+      CHECK(r.value("whole_image", false));
+      CHECK(r["patches"] == 0);
+    }
 
     // Python: Debian's python3-torch runs the file with the same numbers.
     const std::string python = lfnet::test::python_with("torch");

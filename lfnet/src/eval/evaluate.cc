@@ -79,7 +79,11 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   }
   const double seconds = clock.seconds();
   LightField est(estimate);
-  auto record = base_record(phi, method, options, grid.size(), seconds);
+  // A whole-image solver (the lfnet architecture) uses no patches: the record says so, and
+  // keeps the stride it was asked for only as a setting.
+  const bool whole_image = image && options.mode == optics::SimulationMode::kSensor;
+  auto record = base_record(phi, method, options, whole_image ? 0 : grid.size(), seconds);
+  if (whole_image) record["whole_image"] = true;
   record.update(score(est, truth));
   return {estimate, record};
 }

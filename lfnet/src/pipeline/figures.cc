@@ -62,6 +62,7 @@ nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::st
                     {"variant", p.variant},
                     {"n", p.n},
                     {"stride", p.stride},
+                    {"whole_image", p.whole_image},
                     {"seconds", p.seconds},
                     {"psnr_db", p.psnr_db},
                     {"front", p.front}});

@@ -8,6 +8,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <set>
@@ -62,13 +63,23 @@ std::string setting(const nlohmann::json& r, const std::string& key) {
   if (key == "method") return r.value("method", "");
   if (key == "phi") return phi_name(r);
   if (key == "n") return std::to_string(r.value("measurements", 0));
-  if (key == "stride") return std::to_string(r.value("stride", 0));
+  if (key == "stride") {
+    // A whole-image reconstruction (the lfnet architecture) has no patches, so no stride.
+    return r.value("whole_image", false) ? "whole image" : std::to_string(r.value("stride", 0));
+  }
   if (key == "mode") return r.value("mode", "");
   if (key == "noise") return fmt("%g", number(r, "noise_sigma", 0.0));
   if (key == "light_field") return r.value("light_field", "");
   if (key == "scale") return r.value("scale", "");
   if (key == "variant") return r.value("variant", "");
   return "";
+}
+
+// A numeric setting's text as a number; text that is none ("whole image") sorts last.
+double as_number(const std::string& text) {
+  char* end = nullptr;
+  const double v = std::strtod(text.c_str(), &end);
+  return end == text.c_str() ? INFINITY : v;
 }
 
 const std::vector<std::string> kSettings = {"light_field", "variant", "phi",  "n",
@@ -174,7 +185,7 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
       if (k == "method") continue;
       const auto va = setting(a, k), vb = setting(b, k);
       if (va != vb) {
-        if (k == "n" || k == "stride" || k == "noise") return std::stod(va) < std::stod(vb);
+        if (k == "n" || k == "stride" || k == "noise") return as_number(va) < as_number(vb);
         return va < vb;
       }
     }
@@ -299,6 +310,7 @@ nlohmann::json sweep_spec(const Section& s, const nlohmann::json& sweep) {
   for (const auto& r : rows) {
     const double y = number(r, "psnr_db");
     if (!std::isfinite(y)) continue;
+    if (key == "stride" && r.value("whole_image", false)) continue;  // no stride to plot at
     const std::string method = r.value("method", "");
     std::string label = method;
     if (!r.value("variant", "").empty()) label += " (" + r.value("variant", "") + ")";
@@ -463,9 +475,15 @@ void write_results_report(const std::string& results_dir, const std::string& out
       for (const auto& r : s.records) {
         if (number(r, "noise_sigma", 0) != 0 || !std::isfinite(number(r, "psnr_db", NAN))) continue;
         if (r.value("mode", "") != "sensor") continue;
-        points.push_back({r.value("method", ""), r.value("variant", ""),
-                          r.value("measurements", int64_t{0}), r.value("stride", int64_t{0}),
-                          number(r, "seconds"), number(r, "psnr_db")});
+        ParetoPoint p;
+        p.method = r.value("method", "");
+        p.variant = r.value("variant", "");
+        p.n = r.value("measurements", int64_t{0});
+        p.stride = r.value("stride", int64_t{0});
+        p.whole_image = r.value("whole_image", false);
+        p.seconds = number(r, "seconds");
+        p.psnr_db = number(r, "psnr_db");
+        points.push_back(p);
       }
     }
     // Per-view PSNR of the records named in "heatmaps" (first sensor-mode record of each): a
@@ -544,7 +562,9 @@ void write_results_report(const std::string& results_dir, const std::string& out
     std::sort(front.begin(), front.end(),
               [](const auto& x, const auto& y) { return x.seconds < y.seconds; });
     for (const auto& p : front) {
-      md << "| " << p.method << " | " << p.stride << " | " << p.n << " | " << fmt("%.2f", p.psnr_db)
+      const std::string method = p.variant.empty() ? p.method : p.method + " (" + p.variant + ")";
+      const std::string stride = p.whole_image ? "whole image" : std::to_string(p.stride);
+      md << "| " << method << " | " << stride << " | " << p.n << " | " << fmt("%.2f", p.psnr_db)
          << " | " << fmt("%.2f", p.seconds) << " |\n";
     }
     md << "\n";

@@ -153,6 +153,7 @@ void write_run_report(const std::string& run_dir, std::string out, std::string f
         p.variant = r.value("variant", "");
         p.n = r.value("measurements", int64_t{0});
         p.stride = r.value("stride", int64_t{0});
+        p.whole_image = r.value("whole_image", false);
         p.seconds = r.value("seconds", 0.0);
         p.psnr_db = r["psnr_db"].get<double>();
         points.push_back(p);

@@ -15,10 +15,11 @@ namespace lfnet::pipeline {
 
 // One result on the accuracy-against-time plot.
 struct ParetoPoint {
-  std::string method;   // colours the point
-  std::string variant;  // names a second model of one method (e.g. "net (paper-scale)")
-  int64_t n = 0;        // the camera: measurements per pixel; sets the marker
-  int64_t stride = 0;   // a runtime setting, written beside the point
+  std::string method;        // colours the point
+  std::string variant;       // names a second model of one method (e.g. "net (paper-scale)")
+  int64_t n = 0;             // the camera: measurements per pixel; sets the marker
+  int64_t stride = 0;        // a runtime setting, written beside the point
+  bool whole_image = false;  // reconstructed without patches (the lfnet architecture): no stride
   double seconds = 0;
   double psnr_db = 0;
   bool front = false;  // on the Pareto front (no other point is both faster and better)
