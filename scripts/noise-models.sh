@@ -1,11 +1,16 @@
 #!/usr/bin/env bash
-# The noise models of lfnet's architecture (docs/architectures.md, "Noise"), each finetuned
-# from models/lfnet-asp-n2.ckpt for the same number of steps (configs/models/lfnet-asp-n2.json
-# at the paper scale, 8 epochs, lr 3e-4):
-#   noise-aware  configs/models/lfnet-asp-n2-noise.json: sigma uniform in [0, 0.25], each
-#                crop weighted by s / (s + sigma) (loss.noise_scale)  -> models/lfnet-asp-n2-noise.ckpt
-#   sigma-0.1    one noise level alone                               -> models/lfnet-noise/sigma-0.1.ckpt
-#   sigma-0.2                                                         -> models/lfnet-noise/sigma-0.2.ckpt
+# The noise models of lfnet's architecture (docs/architectures.md, "Noise"), finetuned from
+# models/lfnet-asp-n2.ckpt (configs/models/lfnet-asp-n2.json at the paper scale, 8 epochs of
+# 8,000 crops, lr 3e-4, for each model below but the last):
+#   aware-s0.025  configs/models/lfnet-asp-n2-noise.json: sigma uniform in [0, 0.25], each
+#                 crop weighted by s / (s + sigma) with s = 0.025 (loss.noise_scale)
+#                                                   -> models/lfnet-noise/aware-s0.025.ckpt
+#   sigma-0.1     one noise level alone             -> models/lfnet-noise/sigma-0.1.ckpt
+#   sigma-0.2                                       -> models/lfnet-noise/sigma-0.2.ckpt
+#   noise-aware   aware-s0.025 finetuned 8 more epochs (lr 2e-4) with the gentler weight
+#                 s = 0.1 (a crop at sigma 0.2 weighs 1/3 of a noiseless one, not 1/9): the
+#                 shipped noise-aware model         -> models/lfnet-asp-n2-noise.ckpt
+#                 (its training log holds both finetunings, one after the other)
 # Resumable: a model that exists is skipped, an interrupted run continues from its folder.
 # Then `scripts/results.sh noise-sweep report`. Usage: scripts/noise-models.sh [NAME...];
 # LFNET_THREADS (default 1: it runs beside other work) sets --threads.
@@ -17,11 +22,12 @@ init=models/lfnet-asp-n2.ckpt
 finetune=(--scale paper --init "$init" --set training.epochs=8 --set training.lr=0.0003)
 
 declare -A models=(
-  [noise-aware]=models/lfnet-asp-n2-noise.ckpt
+  [aware-s0.025]=models/lfnet-noise/aware-s0.025.ckpt
   [sigma-0.1]=models/lfnet-noise/sigma-0.1.ckpt
   [sigma-0.2]=models/lfnet-noise/sigma-0.2.ckpt
+  [noise-aware]=models/lfnet-asp-n2-noise.ckpt
 )
-order=(noise-aware sigma-0.1 sigma-0.2)
+order=(aware-s0.025 sigma-0.1 sigma-0.2 noise-aware)
 names=("$@")
 [[ ${#names[@]} -eq 0 ]] && names=("${order[@]}")
 for name in "${names[@]}"; do
@@ -36,6 +42,11 @@ for name in "${names[@]}"; do
   if [[ -f $out/config.json ]]; then
     "$lfnet" --threads "$threads" train --resume "$out"
   elif [[ $name == noise-aware ]]; then
+    "$0" aware-s0.025
+    "$lfnet" --threads "$threads" train configs/models/lfnet-asp-n2-noise.json --scale paper \
+      --init models/lfnet-noise/aware-s0.025.ckpt --set training.epochs=8 \
+      --set training.lr=0.0002 --set training.loss.noise_scale=0.1 --out "$out"
+  elif [[ $name == aware-s0.025 ]]; then
     "$lfnet" --threads "$threads" train configs/models/lfnet-asp-n2-noise.json "${finetune[@]}" \
       --out "$out"
   else
@@ -45,6 +56,13 @@ for name in "${names[@]}"; do
   mkdir -p "$(dirname "$model")"
   cp "$(ls -t "$out"/models/*.ckpt | head -n1)" "$model.tmp"
   mv "$model.tmp" "$model"
-  cp "$out/training.jsonl" "${model%.ckpt}.training.jsonl"
+  if [[ $name == noise-aware ]]; then
+    # The second finetuning is named a stage of its own, so its curves follow the first's.
+    { cat models/lfnet-noise/aware-s0.025.training.jsonl
+      sed 's/"stage":"joint_scratch"/"stage":"joint_scratch, s = 0.1"/' "$out/training.jsonl"
+    } > "${model%.ckpt}.training.jsonl"
+  else
+    cp "$out/training.jsonl" "${model%.ckpt}.training.jsonl"
+  fi
   echo "== $name: done ($(date -u +%H:%M))"
 done

@@ -102,12 +102,14 @@ noise-sweep() {
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
     # lfnet's architecture (scripts/noise-models.sh): without noise, noise-aware, one sigma.
     local name model
-    for name in lfnet-asp-n2 lfnet-asp-n2-noise lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
+    for name in lfnet-asp-n2 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 lfnet-noise/sigma-0.1 \
+      lfnet-noise/sigma-0.2; do
       model=models/$name.ckpt
       [[ -f $model ]] || continue
       case $name in
         lfnet-asp-n2) variant="lfnet-asp-n2, trained without noise" ;;
         lfnet-asp-n2-noise) variant="lfnet-asp-n2-noise, noise-aware" ;;
+        lfnet-noise/aware-s0.025) variant="lfnet, noise-aware, its first 8 epochs (s = 0.025)" ;;
         *) variant="lfnet, trained at sigma ${name#lfnet-noise/sigma-}" ;;
       esac
       VARIANT=$variant record "$tmp" --model "$model" --lf ../shared/data/hci_antinous \
@@ -130,6 +132,9 @@ stride-sweep() {
         --method "$method" --mode sensor --stride "$stride"
     done
   done
+  # lfnet's architecture reconstructs the whole sensor image at once: one point, no stride.
+  VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt \
+    --lf ../shared/data/hci_antinous --method net --mode sensor
   mv "$tmp" results/stride-sweep/records.jsonl
 }
 
@@ -203,6 +208,10 @@ paper-scale-asp-n2() {
   mv "$tmp" results/paper-scale-asp-n2/records.jsonl
 }
 
+# The light fields of the cross-scene benchmark, as pairs of lfnet evaluate arguments.
+heldout=(--lf ../shared/data/hci_antinous --lf ../shared/data/lytro_Begonia
+         --scene configs/scenes/heldout_window.json --scene configs/scenes/heldout_wide.json)
+
 # The cross-scene benchmark (docs/models.md): ASP N = 2, stride 5, sensor mode, on light fields
 # that no model of configs/models/ trained on, from two cameras and a renderer: HCI
 # hci_antinous, Lytro Illum lytro_Begonia, the rendered heldout_window (disparities up to
@@ -213,12 +222,9 @@ cross-scene() {
   local tmp models
   read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
   tmp=$(mktemp)
-  local sources=(--lf ../shared/data/hci_antinous --lf ../shared/data/lytro_Begonia
-                 --scene configs/scenes/heldout_window.json --scene configs/scenes/heldout_wide.json)
-  local i=0
-  while [[ $i -lt ${#sources[@]} ]]; do
-    local src=("${sources[$i]}" "${sources[$((i + 1))]}")
-    i=$((i + 2))
+  local i
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}")
     for method in no-parallax pinv dict; do
       record "$tmp" --model "${models[0]}" --dictionary models/dictionary.ckpt "${src[@]}" \
         --method "$method" --mode sensor --stride 5
@@ -232,6 +238,29 @@ cross-scene() {
     done
   done
   mv "$tmp" results/cross-scene/records.jsonl
+}
+
+# lfnet's architecture for other cameras (scripts/lfnet-models.sh): ASP N = 15 and the coded
+# mask N = 2, each against the paper architecture's model of the same Phi, pinv and
+# no-parallax, on the light fields of the cross-scene benchmark (stride 5, sensor mode).
+other-phi() {
+  local tmp
+  tmp=$(mktemp)
+  local i
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}")
+    for phi in asp-n15 mask-n2; do
+      for method in no-parallax pinv net; do
+        local variant=
+        [[ $method == net ]] && variant="paper architecture ($phi)"
+        VARIANT=$variant record "$tmp" --model "models/$phi.ckpt" "${src[@]}" --method "$method" \
+          --mode sensor --stride 5
+      done
+      VARIANT="lfnet-$phi" TRAINING=models/lfnet-$phi.training.jsonl record "$tmp" \
+        --model "models/lfnet-$phi.ckpt" "${src[@]}" --method net --mode sensor --stride 5
+    done
+  done
+  mv "$tmp" results/other-phi/records.jsonl
 }
 
 # Only the reconstructions behind the pictures of heldout-asp-n2 and lytro (and their viewers,
@@ -254,8 +283,8 @@ pictures() {
 
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
-  sections=(cross-scene heldout-asp-n2 phi-comparison compression-sweep noise-sweep stride-sweep
-            branch-ablation loss-ablation lytro phi-switching)
+  sections=(cross-scene other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
+            stride-sweep branch-ablation loss-ablation lytro phi-switching)
 fi
 for s in "${sections[@]}"; do
   echo "== $s"
