@@ -605,6 +605,7 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
   }
   // Modules are handles: attaching a child before or after it is filled makes no difference.
   std::vector<std::string> paths;
+  paths.reserve(children.size());
   for (const auto& entry : children) paths.push_back(entry.first);
   for (size_t i = 0; i < paths.size(); ++i) {
     const auto parent = split(paths[i]).first;

@@ -41,6 +41,18 @@ std::string run_script(const std::string& args) {
 
 }  // namespace
 
+ParetoPoint pareto_point(const nlohmann::json& record) {
+  ParetoPoint p;
+  p.method = record.value("method", "");
+  p.variant = record.value("variant", "");
+  p.n = record.value("measurements", int64_t{0});
+  p.stride = record.value("stride", int64_t{0});
+  p.whole_image = record.value("whole_image", false);
+  p.seconds = record.value("seconds", 0.0);
+  p.psnr_db = record.at("psnr_db").get<double>();
+  return p;
+}
+
 void mark_pareto_front(std::vector<ParetoPoint>& points) {
   std::vector<size_t> order(points.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;

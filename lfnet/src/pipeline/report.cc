@@ -475,15 +475,7 @@ void write_results_report(const std::string& results_dir, const std::string& out
       for (const auto& r : s.records) {
         if (number(r, "noise_sigma", 0) != 0 || !std::isfinite(number(r, "psnr_db", NAN))) continue;
         if (r.value("mode", "") != "sensor") continue;
-        ParetoPoint p;
-        p.method = r.value("method", "");
-        p.variant = r.value("variant", "");
-        p.n = r.value("measurements", int64_t{0});
-        p.stride = r.value("stride", int64_t{0});
-        p.whole_image = r.value("whole_image", false);
-        p.seconds = number(r, "seconds");
-        p.psnr_db = number(r, "psnr_db");
-        points.push_back(p);
+        points.push_back(pareto_point(r));
       }
     }
     // Per-view PSNR of the records named in "heatmaps" (first sensor-mode record of each): a

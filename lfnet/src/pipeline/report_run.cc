@@ -148,15 +148,7 @@ void write_run_report(const std::string& run_dir, std::string out, std::string f
          << number(r.value("ssim", nlohmann::json()), "%.4f") << " | "
          << number(r.value("seconds", nlohmann::json()), "%.2f") << " |\n";
       if (r["psnr_db"].is_number() && r.value("method", "") != "no-parallax") {
-        ParetoPoint p;
-        p.method = r.value("method", "");
-        p.variant = r.value("variant", "");
-        p.n = r.value("measurements", int64_t{0});
-        p.stride = r.value("stride", int64_t{0});
-        p.whole_image = r.value("whole_image", false);
-        p.seconds = r.value("seconds", 0.0);
-        p.psnr_db = r["psnr_db"].get<double>();
-        points.push_back(p);
+        points.push_back(pareto_point(r));
       }
     }
     md << "\nSimulation mode per row as given; the margin is over the `no-parallax` baseline of "

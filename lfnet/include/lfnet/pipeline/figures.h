@@ -25,6 +25,10 @@ struct ParetoPoint {
   bool front = false;  // on the Pareto front (no other point is both faster and better)
 };
 
+// The point of an evaluation record (docs/reconstruction.md, "lfnet evaluate"): its method,
+// variant, measurements, stride, whole_image, seconds (0 when missing) and psnr_db.
+ParetoPoint pareto_point(const nlohmann::json& record);
+
 // Marks the Pareto front: a point is on it when every faster point has a lower PSNR.
 void mark_pareto_front(std::vector<ParetoPoint>& points);
 
