@@ -20,67 +20,77 @@ enum class ShotNoiseModel { kPoisson, kGaussian };
 std::string to_string(ShotNoiseModel value);
 ShotNoiseModel from_string(const std::string& name, ShotNoiseModel);
 
+// The effects of SensorOptions, each applied when present. (They live outside SensorOptions,
+// which names them by aliases, so that std::optional sees complete types.)
+
+// Additive Gaussian noise in relative units: the paper's "std 0.1 / 0.2".
+struct GaussianNoise {
+  double sigma = 0.01;  // standard deviation, relative to a white scene's mean signal
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("sigma", sigma);
+  }
+};
+// Photon shot noise: electrons ~ Poisson(photons_at_white * y).
+struct ShotNoise {
+  ShotNoiseModel model = ShotNoiseModel::kPoisson;  // poisson, or gaussian (its approximation)
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("model", model);
+  }
+};
+// Read noise of the pixel's electronics, in electrons.
+struct ReadNoise {
+  double electrons = 3.0;  // standard deviation in electrons
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("electrons", electrons);
+  }
+};
+// Full-well saturation: electrons are clipped at the well's capacity.
+struct WellSaturation {
+  double full_well = 2000.0;  // electrons (twice a white scene's mean at the default scale)
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("full_well", full_well);
+  }
+};
+// Analogue-to-digital conversion: clip to [0, full_scale] and quantise to 2^bits levels.
+struct AdcConversion {
+  int bits = 12;            // 1 .. 24
+  double full_scale = 2.0;  // relative signal at the top code (white's mean is 1)
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("bits", bits);
+    f("full_scale", full_scale);
+  }
+};
+// Fixed-pattern photo-response non-uniformity: each sensor pixel's gain ~ N(1, spread).
+struct PixelGain {
+  double spread = 0.01;  // standard deviation of the per-pixel gain
+  uint64_t seed = 0;     // the sensor's pattern: fixed across captures, unlike the noise seed
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("spread", spread);
+    f("seed", seed);
+  }
+};
+
 // Which effects a simulation applies; each is applied only when present. Applied in the
 // order of a real pixel: gain, shot, saturation, read, gaussian, adc.
 struct SensorOptions {
-  // Additive Gaussian noise in relative units: the paper's "std 0.1 / 0.2".
-  struct Gaussian {
-    double sigma = 0.01;  // standard deviation, relative to a white scene's mean signal
-
-    template <typename Fields>
-    void fields(Fields& f) {
-      f("sigma", sigma);
-    }
-  };
-  // Photon shot noise: electrons ~ Poisson(photons_at_white * y).
-  struct Shot {
-    ShotNoiseModel model = ShotNoiseModel::kPoisson;  // poisson, or gaussian (its approximation)
-
-    template <typename Fields>
-    void fields(Fields& f) {
-      f("model", model);
-    }
-  };
-  // Read noise of the pixel's electronics, in electrons.
-  struct Read {
-    double electrons = 3.0;  // standard deviation in electrons
-
-    template <typename Fields>
-    void fields(Fields& f) {
-      f("electrons", electrons);
-    }
-  };
-  // Full-well saturation: electrons are clipped at the well's capacity.
-  struct Saturation {
-    double full_well = 2000.0;  // electrons (twice a white scene's mean at the default scale)
-
-    template <typename Fields>
-    void fields(Fields& f) {
-      f("full_well", full_well);
-    }
-  };
-  // Analogue-to-digital conversion: clip to [0, full_scale] and quantise to 2^bits levels.
-  struct Adc {
-    int bits = 12;            // 1 .. 24
-    double full_scale = 2.0;  // relative signal at the top code (white's mean is 1)
-
-    template <typename Fields>
-    void fields(Fields& f) {
-      f("bits", bits);
-      f("full_scale", full_scale);
-    }
-  };
-  // Fixed-pattern photo-response non-uniformity: each sensor pixel's gain ~ N(1, spread).
-  struct Gain {
-    double spread = 0.01;  // standard deviation of the per-pixel gain
-    uint64_t seed = 0;     // the sensor's pattern: fixed across captures, unlike the noise seed
-
-    template <typename Fields>
-    void fields(Fields& f) {
-      f("spread", spread);
-      f("seed", seed);
-    }
-  };
+  using Gaussian = GaussianNoise;
+  using Shot = ShotNoise;
+  using Read = ReadNoise;
+  using Saturation = WellSaturation;
+  using Adc = AdcConversion;
+  using Gain = PixelGain;
 
   // Electrons a pixel collects when its noiseless measurement is 1 (a white scene's mean):
   // converts relative measurements to electrons for shot, read and saturation.
