@@ -194,18 +194,23 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   return c;
 }
 
+namespace {
+// The trainer's stage of a network stage: joint_scratch trains as joint does, from random weights.
+train::Stage trainer_stage(const StageConfig& stage) {
+  return train::from_string(stage.name == "joint_scratch" ? "joint" : stage.name, train::Stage{});
+}
+}  // namespace
+
 train::TrainerOptions ExperimentConfig::stage_options(const StageConfig& stage) const {
   nlohmann::json merged = training;
   if (stage.training.is_object()) merged.merge_patch(stage.training);
-  merged["stage"] = stage.name == "joint_scratch" ? "joint" : stage.name;
+  merged["stage"] = train::to_string(trainer_stage(stage));
   return train::TrainerOptions::from_json(merged, "$.stages[" + stage.name + "].training");
 }
 
 nn::NetworkOptions ExperimentConfig::stage_network(const StageConfig& stage) const {
   nn::NetworkOptions o = network;
-  o.branches = stage.name == "ae"    ? nn::Branches::kAe
-               : stage.name == "cnn" ? nn::Branches::kCnn
-                                     : nn::Branches::kNet;
+  o.branches = train::branches_of_stage(trainer_stage(stage));
   o.validate();
   return o;
 }
