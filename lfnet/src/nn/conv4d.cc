@@ -64,6 +64,11 @@ torch::Tensor conv3d(const torch::Tensor& x, const torch::Tensor& w, const torch
   return torch::conv3d(x, w, b, /*stride=*/1, /*padding=*/pad);
 }
 
+// The batch extent of a reshape: -1 (inferred) for a nonempty batch, so that a traced graph
+// (nn/script.cc exports the branches that way) serves every batch size; 0 for an empty batch,
+// which -1 cannot express.
+int64_t batch_extent(int64_t b) { return b > 0 ? -1 : 0; }
+
 // out[:, u] += y[:, u + s] wherever both exist (y's u range is the full U).
 void add_shifted(torch::Tensor& out, const torch::Tensor& y, int64_t s) {
   const int64_t n = out.size(1) - std::abs(s);
@@ -73,24 +78,19 @@ void add_shifted(torch::Tensor& out, const torch::Tensor& y, int64_t s) {
 
 torch::Tensor stacked(const torch::Tensor& x, const torch::Tensor& weight,
                       const torch::Tensor& bias) {
-  const int64_t b = x.size(0), u = x.size(1), cin = x.size(2);
+  const int64_t b = batch_extent(x.size(0)), u = x.size(1);
   const int64_t cout = weight.size(0), k = weight.size(2), p = k / 2;
   auto tail = x.sizes().slice(3).vec();
-  auto shape_in = [&](int64_t n) {
-    std::vector<int64_t> s{b * n, cin};
-    s.insert(s.end(), tail.begin(), tail.end());
-    return s;
-  };
   auto shape_out = [&](int64_t n) {
     std::vector<int64_t> s{b, n, cout};
     s.insert(s.end(), tail.begin(), tail.end());
     return s;
   };
-  auto out = conv3d(x.reshape(shape_in(u)), weight.select(2, p), bias, p).view(shape_out(u));
+  auto out = conv3d(x.flatten(0, 1), weight.select(2, p), bias, p).view(shape_out(u));
   for (int64_t i = 0; i < k; ++i) {
     const int64_t s = i - p, n = u - std::abs(s);
     if (s == 0 || n <= 0) continue;
-    auto src = x.narrow(1, std::max<int64_t>(0, s), n).reshape(shape_in(n));
+    auto src = x.narrow(1, std::max<int64_t>(0, s), n).flatten(0, 1);
     auto y = conv3d(src, weight.select(2, i), {}, p).view(shape_out(n));
     out.narrow(1, std::max<int64_t>(0, -s), n).add_(y);
   }
@@ -99,15 +99,14 @@ torch::Tensor stacked(const torch::Tensor& x, const torch::Tensor& weight,
 
 torch::Tensor fused_output(const torch::Tensor& x, const torch::Tensor& weight,
                            const torch::Tensor& bias) {
-  const int64_t b = x.size(0), u = x.size(1), cin = x.size(2);
+  const int64_t b = batch_extent(x.size(0)), u = x.size(1), cin = x.size(2);
   const int64_t cout = weight.size(0), k = weight.size(2), p = k / 2;
   auto tail = x.sizes().slice(3).vec();
-  std::vector<int64_t> in_shape{b * u, cin}, y_shape{b, u, k, cout};
-  in_shape.insert(in_shape.end(), tail.begin(), tail.end());
+  std::vector<int64_t> y_shape{b, u, k, cout};
   y_shape.insert(y_shape.end(), tail.begin(), tail.end());
   // (Cout, Cin, Ku, ...) -> (Ku * Cout, Cin, Kv, Kh, Kw): output block i is offset i along u.
   auto wk = weight.permute({2, 0, 1, 3, 4, 5}).reshape({k * cout, cin, k, k, k});
-  auto y = conv3d(x.reshape(in_shape), wk, {}, p).view(y_shape);
+  auto y = conv3d(x.flatten(0, 1), wk, {}, p).view(y_shape);
   auto out =
       bias.defined() ? y.select(2, p) + bias.view({1, 1, cout, 1, 1, 1}) : y.select(2, p).clone();
   for (int64_t i = 0; i < k; ++i) {
@@ -118,7 +117,7 @@ torch::Tensor fused_output(const torch::Tensor& x, const torch::Tensor& weight,
 
 torch::Tensor fused_input(const torch::Tensor& x, const torch::Tensor& weight,
                           const torch::Tensor& bias) {
-  const int64_t b = x.size(0), u = x.size(1), cin = x.size(2);
+  const int64_t b = batch_extent(x.size(0)), u = x.size(1), cin = x.size(2);
   const int64_t cout = weight.size(0), k = weight.size(2), p = k / 2;
   // Zero-pad u, then stack the K u-shifted windows as channel blocks (im2col along u only).
   auto xp = torch::constant_pad_nd(x, {0, 0, 0, 0, 0, 0, 0, 0, p, p});
@@ -126,10 +125,10 @@ torch::Tensor fused_input(const torch::Tensor& x, const torch::Tensor& weight,
   shifted.reserve(k);
   for (int64_t i = 0; i < k; ++i) shifted.push_back(xp.narrow(1, i, u));
   auto tail = x.sizes().slice(3).vec();
-  std::vector<int64_t> in_shape{b * u, k * cin}, out_shape{b, u, cout};
-  in_shape.insert(in_shape.end(), tail.begin(), tail.end());
+  std::vector<int64_t> out_shape{b, u, cout};
   out_shape.insert(out_shape.end(), tail.begin(), tail.end());
-  auto cols = torch::stack(shifted, 2).view(in_shape);
+  // (B, U, K, Cin, ...) -> (B U, K Cin, ...)
+  auto cols = torch::stack(shifted, 2).flatten(0, 1).flatten(1, 2);
   auto wk = weight.permute({0, 2, 1, 3, 4, 5}).reshape({cout, k * cin, k, k, k});
   return conv3d(cols, wk, bias, p).view(out_shape);
 }

@@ -120,7 +120,8 @@ torch::Tensor AutoencoderBranchImpl::forward(const torch::Tensor& input) {
     x = fc[i]->forward(x);
     if (i + 1 < fc.size()) x = torch::relu(x);
   }
-  x = x.view({input.size(0), 1, patch_.rows, patch_.cols, patch_.height, patch_.width});
+  // (B, R C h w) -> (B, 1, R, C, h, w), with no batch size a trace would keep (nn/script.cc)
+  x = x.unsqueeze(1).unflatten(2, {patch_.rows, patch_.cols, patch_.height, patch_.width});
   return conv->forward(x);
 }
 

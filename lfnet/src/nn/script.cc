@@ -3,6 +3,7 @@
 #include <torch/csrc/jit/frontend/resolver.h>
 #include <torch/csrc/jit/frontend/sugared_value.h>
 #include <torch/csrc/jit/frontend/tracer.h>
+#include <torch/csrc/jit/passes/fuse_linear.h>
 #include <torch/csrc/jit/passes/shape_analysis.h>
 #include <torch/csrc/jit/serialization/import.h>
 #include <torch/torch.h>
@@ -12,6 +13,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <sstream>
 #include <vector>
@@ -27,72 +29,12 @@ namespace {
 
 namespace jit = torch::jit;
 
-// The methods every exported net shares. They repeat conv4d.cc, network.cc, patches.cc and
-// reconstruct.cc op for op (same ATen calls on the same shapes), so the results agree with
-// the C++ net to float rounding; keep them in step when those change.
+// The methods every exported net of the paper architecture shares. The branches are the
+// submodules `ae` and `cnn`, traced from the C++ modules themselves (trace_forward); these
+// methods repeat only the Phi stacks' products of network.cc and the patches and stitching of
+// patches.cc and reconstruct.cc, op for op (same ATen calls on the same shapes), so the results
+// agree with the C++ net to float rounding; keep them in step when those change.
 constexpr const char* kCommonSource = R"TS(
-def _conv4d_stacked(self, x: Tensor, weight: Tensor, bias: Optional[Tensor]) -> Tensor:
-    b = x.size(0)
-    u = x.size(1)
-    cin = x.size(2)
-    v = x.size(3)
-    h = x.size(4)
-    w = x.size(5)
-    cout = weight.size(0)
-    k = weight.size(2)
-    p = k // 2
-    out = torch.conv3d(x.reshape([b * u, cin, v, h, w]), weight.select(2, p), bias, [1], [p]).view([b, u, cout, v, h, w])
-    for i in range(k):
-        s = i - p
-        n = u - abs(s)
-        if s != 0 and n > 0:
-            src = x.narrow(1, max(0, s), n).reshape([b * n, cin, v, h, w])
-            y = torch.conv3d(src, weight.select(2, i), None, [1], [p]).view([b, n, cout, v, h, w])
-            out.narrow(1, max(0, -s), n).add_(y)
-    return out
-
-def _conv4d_fused_output(self, x: Tensor, weight: Tensor, bias: Optional[Tensor]) -> Tensor:
-    b = x.size(0)
-    u = x.size(1)
-    cin = x.size(2)
-    v = x.size(3)
-    h = x.size(4)
-    w = x.size(5)
-    cout = weight.size(0)
-    k = weight.size(2)
-    p = k // 2
-    wk = weight.permute([2, 0, 1, 3, 4, 5]).reshape([k * cout, cin, k, k, k])
-    y = torch.conv3d(x.reshape([b * u, cin, v, h, w]), wk, None, [1], [p]).view([b, u, k, cout, v, h, w])
-    if bias is not None:
-        out = y.select(2, p) + bias.view([1, 1, cout, 1, 1, 1])
-    else:
-        out = y.select(2, p).clone()
-    for i in range(k):
-        if i != p:
-            s = i - p
-            n = u - abs(s)
-            if n > 0:
-                out.narrow(1, max(0, -s), n).add_(y.select(2, i).narrow(1, max(0, s), n))
-    return out
-
-def _conv4d_fused_input(self, x: Tensor, weight: Tensor, bias: Optional[Tensor]) -> Tensor:
-    b = x.size(0)
-    u = x.size(1)
-    cin = x.size(2)
-    v = x.size(3)
-    h = x.size(4)
-    w = x.size(5)
-    cout = weight.size(0)
-    k = weight.size(2)
-    p = k // 2
-    xp = torch.constant_pad_nd(x, [0, 0, 0, 0, 0, 0, 0, 0, p, p])
-    shifted: List[Tensor] = []
-    for i in range(k):
-        shifted.append(xp.narrow(1, i, u))
-    cols = torch.stack(shifted, 2).view([b * u, k * cin, v, h, w])
-    wk = weight.permute([0, 2, 1, 3, 4, 5]).reshape([cout, k * cin, k, k, k])
-    return torch.conv3d(cols, wk, bias, [1], [p]).view([b, u, cout, v, h, w])
-
 def _apply_stack(self, y: Tensor, phase: Optional[Tensor], stack: Tensor) -> Tensor:
     p = stack.size(0)
     if p == 1:
@@ -372,42 +314,10 @@ std::string literal(double v) {
   return s;
 }
 
-std::string conv_call(Conv4dAlgorithm algorithm, const std::string& x, const std::string& layer) {
-  return "self._conv4d_" + to_string(algorithm) + "(" + x + ", " + layer + ".weight, " + layer +
-         ".bias)";
-}
-
-// The net-specific methods: the branches with their layers unrolled and each Conv4d's
-// algorithm resolved as the C++ layer resolves it, and _parts (forward_all).
+// The net-specific method _parts (forward_all): the traced branches' outputs combined as the
+// C++ net combines them.
 std::string network_source(const NetworkOptions& o) {
-  const auto algorithm = o.conv_algorithm;
   std::ostringstream s;
-  if (o.has_ae()) {
-    s << "def _ae(self, x: Tensor) -> Tensor:\n    b = x.size(0)\n";
-    for (int i = 1; i <= 6; ++i) {
-      const std::string fc = "self.ae.fc" + std::to_string(i);
-      s << "    x = torch.linear(x, " << fc << ".weight, " << fc << ".bias)\n";
-      if (i < 6) s << "    x = torch.relu(x)\n";
-    }
-    s << "    s = self.patch_shape\n"
-      << "    x = x.view([b, 1, s[0], s[1], s[2], s[3]])\n"
-      << "    z = "
-      << conv_call(resolve_conv4d_algorithm(algorithm, 1, 1), "x.transpose(1, 2)", "self.ae.conv")
-      << "\n    return z.transpose(1, 2).contiguous()\n\n";
-  }
-  if (o.has_cnn()) {
-    s << "def _cnn(self, x: Tensor) -> Tensor:\n    z = x.transpose(1, 2)\n";
-    for (int64_t i = 0; i < o.cnn.depth; ++i) {
-      const int64_t cin = i == 0 ? 1 : o.cnn.channels;
-      const int64_t cout = i + 1 == o.cnn.depth ? 1 : o.cnn.channels;
-      s << "    z = "
-        << conv_call(resolve_conv4d_algorithm(algorithm, cin, cout), "z",
-                     "self.cnn.conv" + std::to_string(i + 1))
-        << "\n";
-      if (i + 1 < o.cnn.depth) s << "    z = torch.relu_(z)\n";
-    }
-    s << "    return z.transpose(1, 2).contiguous()\n\n";
-  }
   const bool need_adjoint =
       o.has_cnn() || o.ae.input == AeInput::kAdjoint || o.residual == Residual::kAdjoint;
   s << "def _parts(self, y: Tensor, phase: Optional[Tensor]) -> Dict[str, Tensor]:\n"
@@ -417,9 +327,9 @@ std::string network_source(const NetworkOptions& o) {
     << "    parts: Dict[str, Tensor] = {}\n";
   if (need_adjoint) s << "    x0 = self._adjoint(y, ph)\n";
   if (o.has_ae())
-    s << "    ae = self._ae(" << (o.ae.input == AeInput::kAdjoint ? "x0" : "y")
+    s << "    ae = self.ae.forward(" << (o.ae.input == AeInput::kAdjoint ? "x0" : "y")
       << ")\n    parts[\"ae\"] = ae\n";
-  if (o.has_cnn()) s << "    cnn = self._cnn(x0.view(shape))\n    parts[\"cnn\"] = cnn\n";
+  if (o.has_cnn()) s << "    cnn = self.cnn.forward(x0.view(shape))\n    parts[\"cnn\"] = cnn\n";
   if (o.has_ae() && o.has_cnn()) {
     const double a = o.head_weights[0], b = o.head_weights[1];
     if (a + b == 1.0) {
@@ -514,25 +424,28 @@ std::string class_name(const std::string& path) {
 
 std::string metadata_text(const jit::Module& m) { return m.attr("metadata").toStringRef(); }
 
-// Gives `image` a `forward` traced from the C++ U-Net `unet`, whose parameters `image` holds
-// as the very same tensors, so the trace reads them as the module's attributes. The U-Net has
-// no size-dependent operations, so the trace serves images of every size (multiples of the
-// U-Net's multiple); shapes are erased from the traced graph.
-void trace_image_net(ImageNet unet, jit::Module& image, int64_t channels) {
+// Gives `target` a `forward` traced from the C++ module `run` calls on one input, whose
+// parameters `target` holds as the very same tensors, so the trace reads them as the module's
+// attributes. Shapes are erased from the traced graph, and the modules traced here have no
+// batch- or size-dependent operations (nn/conv4d.cc reshapes with an inferred batch; the
+// U-Net has convolutions only), so the trace serves every batch and, for the U-Net, every
+// image size (multiples of its multiple).
+void trace_forward(const std::function<torch::Tensor(const torch::Tensor&)>& run,
+                   const torch::Tensor& example, jit::Module& target) {
   torch::NoGradGuard no_grad;
-  const int64_t m = unet->options().multiple();
-  const jit::Stack example{torch::rand({1, channels, 2 * m, 2 * m})};
-  auto run = [&](jit::Stack inputs) -> jit::Stack {
-    return {unet->forward(inputs.at(0).toTensor())};
-  };
   auto traced = jit::tracer::trace(
-      example, run, [](const torch::autograd::Variable&) { return std::string(); },
-      /*strict=*/true, /*force_outplace=*/false, &image);
+      jit::Stack{example},
+      [&](jit::Stack inputs) -> jit::Stack { return {run(inputs.at(0).toTensor())}; },
+      [](const torch::autograd::Variable&) { return std::string(); },
+      /*strict=*/true, /*force_outplace=*/false, &target);
   auto graph = traced.first->graph;
   jit::EraseShapeInformation(graph);
-  auto* fn = image._ivalue()->compilation_unit()->create_function(
-      c10::QualifiedName(*image.type()->name(), "forward"), graph);
-  image.type()->addMethod(fn);
+  // The trace records a Linear layer as t + addmm, which the graph executor would decompose
+  // into mm + add (rounding differently from the C++ layer); as aten::linear it runs as here.
+  jit::FuseLinear(graph);
+  auto* fn = target._ivalue()->compilation_unit()->create_function(
+      c10::QualifiedName(*target.type()->name(), "forward"), graph);
+  target.type()->addMethod(fn);
 }
 
 }  // namespace
@@ -585,12 +498,12 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
     }
     return it->second;
   };
-  // The lfnet architecture's U-Net is traced with the net's own tensors (see trace_image_net)
-  // and gets copies afterwards.
+  // The learned modules (the paper net's branches, the lfnet architecture's U-Net) are traced
+  // with the net's own tensors (see trace_forward) and get copies afterwards.
   const bool image = o.is_image();
   for (const auto& p : net->named_parameters()) {
     const auto [path, leaf] = split(p.key());
-    module_at(path).register_parameter(leaf, image ? p.value() : p.value().detach().clone(), false);
+    module_at(path).register_parameter(leaf, p.value(), false);
   }
   std::string accessors;
   for (const auto& b : net->named_buffers()) {
@@ -619,16 +532,37 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
     module_at(parent).register_module(leaf, children.at(path));
   }
 
+  const auto& ps = o.patch;
   if (image) {
     LFNET_CHECK_AS(ConfigError, net->pixel_pinv.size(0) == meta.period,
                    "export: the net's Phi has period ", net->pixel_pinv.size(0), ", not ",
                    meta.period);
     auto unet = module_at("image");
-    trace_image_net(net->image, unet, o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0));
-    for (const auto& p : net->named_parameters()) {
-      const auto [path, leaf] = split(p.key());
-      module_at(path).register_parameter(leaf, p.value().detach().clone(), false);
+    const int64_t channels = ps.rows * ps.cols + (o.image.noise_input ? 1 : 0);
+    const int64_t m = o.image.multiple();
+    auto module = net->image;  // a handle: the same module, callable
+    trace_forward([&](const torch::Tensor& x) { return module->forward(x); },
+                  torch::rand({1, channels, 2 * m, 2 * m}), unet);
+  } else {
+    // Two patches: the traced graph keeps no batch size (trace_forward).
+    if (o.has_ae()) {
+      auto ae = module_at("ae");
+      auto module = net->ae;
+      trace_forward([&](const torch::Tensor& x) { return module->forward(x); },
+                    torch::rand({2, o.ae_input_size()}), ae);
     }
+    if (o.has_cnn()) {
+      auto cnn = module_at("cnn");
+      auto module = net->cnn;
+      trace_forward([&](const torch::Tensor& x) { return module->forward(x); },
+                    torch::rand({2, 1, ps.rows, ps.cols, ps.height, ps.width}), cnn);
+    }
+  }
+  for (const auto& p : net->named_parameters()) {
+    const auto [path, leaf] = split(p.key());
+    module_at(path).register_parameter(leaf, p.value().detach().clone(), false);
+  }
+  if (image) {
     root.register_attribute("multiple", c10::IntType::get(), o.image.multiple());
     root.register_attribute("receptive_radius", c10::IntType::get(), o.image.receptive_radius());
     root.register_attribute("noise_input", c10::BoolType::get(), o.image.noise_input);
