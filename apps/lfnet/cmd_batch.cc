@@ -59,8 +59,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option(
       "--phi", o.phi,
       "Phi for evaluation without --model: NAME[:N], a spec or a calibrated-Phi folder");
-  cmd->add_option("--mode", o.mode, "simulation mode of evaluations: sensor or per_patch")
-      ->check(CLI::IsMember({"sensor", "per_patch"}));
+  add_enum_option(cmd, "--mode", o.mode, "simulation mode of evaluations: sensor or per_patch");
   cmd->add_option("--noise", o.noise, "Gaussian noise sigma of evaluations")
       ->check(kFiniteNonNegative);
   cmd->add_option("--seed", o.seed, "noise seed of evaluations");

@@ -33,7 +33,7 @@ void run_evaluate(EvaluateArgs& a) {
   const double psnr = record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>();
   std::printf("%s on %s (%s, %s, stride %lld, noise %.3g): PSNR %.2f dB, SSIM %.4f, %.2f s\n",
               record["method"].get<std::string>().c_str(), r.light_field.c_str(), r.phi.c_str(),
-              q.mode.c_str(), static_cast<long long>(q.stride), q.noise, psnr,
+              optics::to_string(q.mode).c_str(), static_cast<long long>(q.stride), q.noise, psnr,
               record["ssim"].get<double>(), record["seconds"].get<double>());
   if (!a.json.empty()) write_json_file(a.json, record);
   if (!a.out.empty()) {
@@ -74,8 +74,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--noise", q.noise, "Gaussian noise sigma, relative to a white scene's mean")
       ->check(kFiniteNonNegative);
   cmd->add_option("--stride", q.stride, "patch stride (default 5)")->check(kStride);
-  cmd->add_option("--mode", q.mode, "simulation mode: sensor or per_patch")
-      ->check(CLI::IsMember({"sensor", "per_patch"}));
+  add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
   cmd->add_option("--method", q.method,
                   "net, ae, cnn, dict, pinv, adjoint or no-parallax (default net with --model, "
                   "pinv without)");
@@ -89,8 +88,8 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--batch", q.batch, "patches per forward pass")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_option("--device", q.device, "cpu or cuda[:K] for the network (default cpu)");
-  cmd->add_option("--precision", q.precision, "float32 (default) or bfloat16 for the CNN branch")
-      ->check(CLI::IsMember({"float32", "bfloat16"}));
+  add_enum_option(cmd, "--precision", q.precision,
+                  "float32 (default) or bfloat16 for the CNN branch");
   cmd->callback([a] { run_evaluate(*a); });
 }
 

@@ -74,10 +74,9 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                 "scale real measurements to the training data's mean (the paper's step)");
   cmd->add_flag("--force", a->force, "replace an existing output folder");
   cmd->add_option("--device", q.device, "cpu or cuda[:K] (default cpu)");
-  cmd->add_option("--cnn-mode", q.cnn_mode,
+  add_enum_option(cmd, "--cnn-mode", q.cnn_mode,
                   "CNN branch per patch ('patches', default) or once over the light field in "
-                  "tiles ('full'; docs/performance.md)")
-      ->check(CLI::IsMember({"patches", "full"}));
+                  "tiles ('full'; docs/performance.md)");
   cmd->add_option("--tile", q.tile,
                   "tile size of --cnn-mode full (default 128) and of lfnet models (default 256)")
       ->check(CLI::PositiveNumber);
@@ -85,8 +84,8 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "the sensor's noise sigma (relative to white) for noise-aware models (default: "
                   "what the acquisition's sensor.json records, else 0)")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_option("--precision", q.precision, "float32 (default) or bfloat16 for the CNN branch")
-      ->check(CLI::IsMember({"float32", "bfloat16"}));
+  add_enum_option(cmd, "--precision", q.precision,
+                  "float32 (default) or bfloat16 for the CNN branch");
   cmd->callback([a] { run_reconstruct(*a); });
 }
 

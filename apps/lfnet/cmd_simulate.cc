@@ -20,7 +20,7 @@ namespace {
 struct SimulateArgs {
   pipeline::SimulateSource source;  // the light field (or scene), window, orientation, colour
   std::string phi = "asp:2";        // NAME[:N] or PHI.json
-  std::string mode = "sensor";
+  optics::SimulationMode mode = optics::SimulationMode::kSensor;
   double noise = -1;  // < 0: not given
   uint64_t seed = 0;
   std::string out;
@@ -34,7 +34,7 @@ struct SimulateArgs {
 
 void run_simulate(const SimulateArgs& args) {
   const auto& source = args.source;
-  const auto mode = optics::parse_simulation_mode(args.mode);
+  const auto mode = args.mode;
   LFNET_CHECK_AS(ConfigError, args.patch >= 1 && args.stride >= 1,
                  "--patch and --stride must be >= 1");
   const bool simulate = !source.lf.empty() || !source.scene.empty() || !args.out.empty();
@@ -97,11 +97,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                   "Phi model NAME[:N] (asp, mask, aperture, random, lenslet), a PHI.json spec, a "
                   "calibrated-Phi folder or a model file")
       ->capture_default_str();
-  cmd->add_option("--mode", args->mode,
-                  "sensor: one sensor image; per_patch: every patch measured alone (the paper's "
-                  "protocol)")
-      ->check(CLI::IsMember({"sensor", "per_patch"}))
-      ->capture_default_str();
+  add_enum_option(cmd, "--mode", args->mode,
+                  "sensor (the default): one sensor image; per_patch: every patch measured alone "
+                  "(the paper's protocol)");
   cmd->add_option("--noise", args->noise,
                   "Gaussian noise sigma, relative to a white scene's mean measurement (1)")
       ->check(kFiniteNonNegative);

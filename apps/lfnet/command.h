@@ -7,7 +7,9 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
+#include "lfnet/core/error.h"
 #include "lfnet/core/version.h"
 
 namespace lfnet::app {
@@ -43,6 +45,36 @@ inline const CLI::Validator kStride(
       return "";
     },
     "1..PATCH");
+
+// An option whose value names one of an enum's values, read by the enum's `from_string` (its
+// one name table, core/enum_names.h): a bad name is a usage error naming the option and the
+// known names. Repeatable when `value` is a vector; given values then replace the default.
+template <typename E>
+E parse_enum_option(const std::string& flag, const std::string& text) {
+  try {
+    return from_string(text, E{});
+  } catch (const ConfigError& e) {
+    throw CLI::ValidationError(flag, e.what());
+  }
+}
+template <typename E>
+CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, E& value,
+                             const std::string& help) {
+  return cmd->add_option_function<std::string>(
+      flag, [&value, flag](const std::string& text) { value = parse_enum_option<E>(flag, text); },
+      help);
+}
+template <typename E>
+CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, std::vector<E>& values,
+                             const std::string& help) {
+  return cmd->add_option_function<std::vector<std::string>>(
+      flag,
+      [&values, flag](const std::vector<std::string>& texts) {
+        values.clear();
+        for (const auto& text : texts) values.push_back(parse_enum_option<E>(flag, text));
+      },
+      help);
+}
 
 // --dict-method and --dict-options: how the dict method codes (pipeline::dict_coding).
 inline void add_dict_coding_options(CLI::App* cmd, std::string& method, std::string& options) {

@@ -70,4 +70,8 @@ TEST_CASE("lfnet bench refuses a device it does not have", "[app]") {
   CHECK(run_command(lfnet_binary() + " bench --device tpu --methods pinv", out) != 0);
   CHECK(out.find("unknown device 'tpu'") != std::string::npos);
   CHECK(run_command(lfnet_binary() + " bench --methods pinv --cnn-mode tiles", out) != 0);
+  // Enum options name themselves and the known values (one name table per enum).
+  CHECK(out.find("--cnn-mode: 'tiles' is unknown (known: patches, full)") != std::string::npos);
+  CHECK(run_command(lfnet_binary() + " bench --methods net --architecture unet", out) != 0);
+  CHECK(out.find("--architecture: 'unet' is unknown (known: paper, lfnet)") != std::string::npos);
 }

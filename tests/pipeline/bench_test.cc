@@ -3,6 +3,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -65,13 +66,14 @@ TEST_CASE("bench_report times the network methods once per architecture, lfnet a
   o.reps = 1;
   o.methods = {"net", "pinv"};
   o.strides = {9, 5};
-  o.architectures = {"paper", "lfnet"};
+  o.architectures = {nn::Architecture::kPaper, nn::Architecture::kLfnet};
   std::vector<std::string> asked;
   pipeline::bench_report(
       o,
       [&](const pipeline::BenchOptions& n, const std::string& method, int64_t stride, double) {
         CHECK(n.architectures.size() == 1);
-        asked.push_back(method + "/" + n.architectures.front() + ":" + std::to_string(stride));
+        asked.push_back(method + "/" + nn::to_string(n.architectures.front()) + ":" +
+                        std::to_string(stride));
         return nlohmann::json{{"method", method}, {"stride", stride}, {"error", "not run"}};
       },
       [](const std::string&) {});
@@ -83,7 +85,7 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
   pipeline::BenchOptions o;
   o.height = 40;
   o.width = 52;
-  o.architectures = {"lfnet"};
+  o.architectures = {nn::Architecture::kLfnet};
   const auto r = pipeline::bench_case(o, "net", 5, 1e9);
   CHECK(r["architecture"] == "lfnet");
   CHECK(r["tile"] == 256);
@@ -91,4 +93,31 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
   // Untrained, the U-Net adds nothing: the result is the pseudo-inverse's.
   const auto pinv = pipeline::bench_case(o, "pinv", 5, 1e9);
   CHECK(r["psnr_db"].get<double>() == Approx(pinv["psnr_db"].get<double>()).margin(0.01));
+}
+
+TEST_CASE("bench_table prints a line per case, its architecture and its error",
+          "[pipeline][bench]") {
+  nlohmann::json report;
+  report["cases"] = nlohmann::json::array(
+      {{{"method", "net"},
+        {"architecture", "lfnet"},
+        {"stride", 5},
+        {"patches", 0},
+        {"seconds", 1.5},
+        {"patches_per_second", 0.0},
+        {"peak_rss_mb", 812.0},
+        {"gflops", 40.5},
+        {"gemm_fraction", 0.2},
+        {"cpu_utilisation", 0.97},
+        {"psnr_db", 36.5}},
+       {{"method", "dict"}, {"stride", 2}, {"error", "the child process failed (status 9)"}}});
+  const auto table = pipeline::bench_table(report);
+  const auto first = table.find('\n');
+  REQUIRE(first != std::string::npos);
+  CHECK(table.substr(0, first).find("PSNR dB") != std::string::npos);
+  CHECK(table.find("net/lfnet      5             0       1.50          0.0       812     40.5"
+                   "     20.0%   0.97    36.50\n") != std::string::npos);
+  CHECK(table.find("dict           2       the child process failed (status 9)\n") !=
+        std::string::npos);
+  CHECK(std::count(table.begin(), table.end(), '\n') == 3);
 }

@@ -120,7 +120,8 @@ TEST_CASE("evaluate_method scores the registry's methods and the no-parallax bas
   pipeline::NamedLightField truth{"noise", LightField(torch::rand({1, 5, 5, 18, 18}))};
   pipeline::MethodContext context;
   context.phi = phi.get();
-  const auto o = pipeline::make_eval_options("sensor", 0.0, 0, 5, 256, false, std::nullopt);
+  const auto o = pipeline::make_eval_options(optics::SimulationMode::kSensor, 0.0, 0, 5, 256, false,
+                                             std::nullopt);
   const auto pinv = pipeline::evaluate_method(truth, "pinv", context, o, nullptr, false);
   const auto adjoint = pipeline::evaluate_method(truth, "adjoint", context, o, nullptr, false);
   const auto baseline = pipeline::evaluate_method(truth, "no-parallax", context, o, nullptr, false);

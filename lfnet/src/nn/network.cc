@@ -194,15 +194,14 @@ torch::Tensor map_measurement_weights(const torch::Tensor& weight, const torch::
   return mapped.to(weight.scalar_type());
 }
 
-Precision parse_precision(const std::string& name) {
-  if (name == "float32") return Precision::kFloat32;
-  if (name == "bfloat16") return Precision::kBFloat16;
-  throw ConfigError("unknown precision '" + name + "' (known: float32, bfloat16)");
-}
+namespace {
+constexpr EnumName<Precision> kPrecisions[] = {{Precision::kFloat32, "float32"},
+                                               {Precision::kBFloat16, "bfloat16"}};
+}  // namespace
 
-std::string to_string(Precision precision) {
-  return precision == Precision::kBFloat16 ? "bfloat16" : "float32";
-}
+Precision parse_precision(const std::string& name) { return value_of(name, kPrecisions); }
+
+std::string to_string(Precision precision) { return name_of(precision, kPrecisions); }
 
 void set_cnn_precision(LightFieldNet& net, Precision precision) {
   if (!net->options().has_cnn()) return;

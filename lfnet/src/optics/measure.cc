@@ -2,19 +2,21 @@
 
 #include <torch/torch.h>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 
 namespace lfnet::optics {
 
+namespace {
+constexpr EnumName<SimulationMode> kSimulationModes[] = {{SimulationMode::kSensor, "sensor"},
+                                                         {SimulationMode::kPerPatch, "per_patch"}};
+}  // namespace
+
 SimulationMode parse_simulation_mode(const std::string& text) {
-  if (text == "sensor") return SimulationMode::kSensor;
-  if (text == "per_patch") return SimulationMode::kPerPatch;
-  throw ConfigError("unknown simulation mode '" + text + "' (known: sensor, per_patch)");
+  return value_of(text, kSimulationModes);
 }
 
-std::string to_string(SimulationMode mode) {
-  return mode == SimulationMode::kSensor ? "sensor" : "per_patch";
-}
+std::string to_string(SimulationMode mode) { return name_of(mode, kSimulationModes); }
 
 torch::Tensor simulate_sensor(const Phi& phi, const torch::Tensor& lf, const SensorOptions& effects,
                               uint64_t seed) {

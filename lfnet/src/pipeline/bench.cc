@@ -8,6 +8,8 @@
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/metrics.h"
@@ -140,12 +142,7 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   if (recon::needs_network(method)) {
     const std::string model = a.models.empty() ? "" : a.models.front();
     auto architecture = nn::Architecture::kPaper;
-    try {
-      if (!a.architectures.empty())
-        architecture = nn::from_string(a.architectures.front(), architecture);
-    } catch (const ConfigError& e) {
-      throw ConfigError(std::string("--architecture: ") + e.what());
-    }
+    if (!a.architectures.empty()) architecture = a.architectures.front();
     if (!model.empty()) {
       const auto ckpt = train::load_checkpoint(model);
       spec = optics::PhiSpec::from_json(ckpt.phi, model + ":phi");
@@ -176,8 +173,7 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const LightField truth = bench_light_field(a);
   const auto sensor = optics::simulate_sensor(*phi, truth.data()[0]);
 
-  const auto cnn_mode = recon::parse_cnn_mode(a.cnn_mode);
-  const bool full = cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn");
+  const bool full = a.cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn");
   const int64_t cnn_tile = a.tile > 0 ? a.tile : recon::kDefaultCnnTile;
   const int64_t image_tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
   nlohmann::json extra = nlohmann::json::object();
@@ -187,12 +183,12 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   dict::Dictionary dictionary;
   if (net) {
     net->to(device);
-    nn::set_cnn_precision(net, nn::parse_precision(a.precision));
+    nn::set_cnn_precision(net, a.precision);
     resources.net = net;
     extra["model"] = model_info;
     extra["architecture"] = nn::to_string(net->options().architecture);
     extra["cnn_mode"] = full ? "full" : "patches";
-    extra["precision"] = a.precision;
+    extra["precision"] = nn::to_string(a.precision);
     if (full) extra["tile"] = cnn_tile;
   } else if (recon::find_method(method).needs() == recon::MethodNeeds::kDictionary) {
     dictionary = bench_dictionary(a, patch);
@@ -360,8 +356,8 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
       BenchOptions n = a;
       n.models = model.empty() ? std::vector<std::string>{} : std::vector<std::string>{model};
       n.architectures = {architecture};
-      const bool image =
-          model.empty() ? architecture == "lfnet" : load_model(model, false).network.is_image();
+      const bool image = model.empty() ? architecture == nn::Architecture::kLfnet
+                                       : load_model(model, false).network.is_image();
       nets.emplace_back(n, image);
       if (!model.empty()) break;  // a checkpoint has its own architecture
     }
@@ -376,7 +372,7 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
         const std::string label =
             !network ? method
                      : method + " [" +
-                           (narrowed.models.empty() ? narrowed.architectures.front()
+                           (narrowed.models.empty() ? nn::to_string(narrowed.architectures.front())
                                                     : narrowed.models.front()) +
                            "]";
         if (!r.contains("error")) {
@@ -396,6 +392,116 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
   report["machine"]["load_average_1min_end"] = load_average();
   report["paper_seconds"] = {{"net", kPaperNetSeconds}, {"dict", kPaperDictSeconds}};
   return report;
+}
+
+// ---- the child-process protocol of `lfnet bench` and its table ----
+
+namespace {
+
+std::string shell_quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) {
+    if (c == '\'')
+      out += "'\\''";
+    else
+      out += c;
+  }
+  return out + "'";
+}
+
+std::string join(const std::vector<std::string>& items, const std::string& sep) {
+  std::string out;
+  for (size_t i = 0; i < items.size(); ++i) out += (i ? sep : "") + items[i];
+  return out;
+}
+
+}  // namespace
+
+nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& method, int64_t stride,
+                                   double gemm) {
+  char exe[4096];
+  const ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
+  LFNET_CHECK_AS(IoError, n > 0, "bench: cannot find this program's path (/proc/self/exe)");
+  exe[n] = '\0';
+  std::vector<std::string> args = {shell_quote(exe),
+                                   "--threads",
+                                   std::to_string(thread_count()),
+                                   "--log-level",
+                                   "warn",
+                                   "bench",
+                                   "--case",
+                                   shell_quote(method + ":" + std::to_string(stride)),
+                                   "--gemm",
+                                   std::to_string(gemm),
+                                   "--height",
+                                   std::to_string(a.height),
+                                   "--width",
+                                   std::to_string(a.width),
+                                   "--phi",
+                                   shell_quote(a.phi),
+                                   "--batch",
+                                   std::to_string(a.batch),
+                                   "--seed",
+                                   std::to_string(a.seed),
+                                   "--dict-atoms",
+                                   std::to_string(a.dict_atoms),
+                                   "--device",
+                                   shell_quote(a.device),
+                                   "--cnn-mode",
+                                   recon::to_string(a.cnn_mode),
+                                   "--precision",
+                                   nn::to_string(a.precision)};
+  if (a.tile > 0) args.insert(args.end(), {"--tile", std::to_string(a.tile)});
+  for (const auto& arch : a.architectures) {
+    args.insert(args.end(), {"--architecture", nn::to_string(arch)});
+  }
+  for (const auto& model : a.models) args.insert(args.end(), {"--model", shell_quote(model)});
+  if (!a.dictionary.empty()) args.insert(args.end(), {"--dictionary", shell_quote(a.dictionary)});
+  if (!a.save_dictionary.empty()) {
+    args.insert(args.end(), {"--save-dictionary", shell_quote(a.save_dictionary)});
+  }
+  if (!a.scene.empty()) args.insert(args.end(), {"--scene", shell_quote(a.scene)});
+  FILE* pipe = popen(join(args, " ").c_str(), "r");
+  LFNET_CHECK_AS(IoError, pipe, "bench: cannot start a child process");
+  std::string output;
+  char buffer[4096];
+  while (size_t got = std::fread(buffer, 1, sizeof(buffer), pipe)) output.append(buffer, got);
+  const int status = pclose(pipe);
+  const auto at = output.find(kBenchCaseTag);
+  if (status != 0 || at == std::string::npos) {
+    return {{"method", method},
+            {"stride", stride},
+            {"error", "the child process failed (status " + std::to_string(status) + ")"}};
+  }
+  const auto end = output.find('\n', at);
+  return nlohmann::json::parse(
+      output.substr(at + std::string(kBenchCaseTag).size(),
+                    end == std::string::npos ? end : end - at - std::string(kBenchCaseTag).size()));
+}
+
+std::string bench_table(const nlohmann::json& report) {
+  std::string out =
+      format_text("%-14s %-6s %8s %10s %12s %9s %8s %9s %6s %8s\n", "method", "stride", "patches",
+                  "seconds", "patches/s", "peak MB", "GFLOP/s", "% GEMM", "util", "PSNR dB");
+  for (const auto& r : report["cases"]) {
+    // Network cases name their architecture: both may share a run.
+    std::string method = r["method"].get<std::string>();
+    if (r.contains("architecture")) method += "/" + r["architecture"].get<std::string>();
+    if (r.contains("error")) {
+      out += format_text("%-14s %-6lld  %s\n", method.c_str(),
+                         static_cast<long long>(r["stride"].get<int64_t>()),
+                         r["error"].get<std::string>().c_str());
+      continue;
+    }
+    out +=
+        format_text("%-14s %-6lld %8lld %10.2f %12.1f %9.0f %8.1f %8.1f%% %6.2f %8.2f\n",
+                    method.c_str(), static_cast<long long>(r["stride"].get<int64_t>()),
+                    static_cast<long long>(r["patches"].get<int64_t>()), r["seconds"].get<double>(),
+                    r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
+                    r["gflops"].get<double>(), 100 * r["gemm_fraction"].get<double>(),
+                    r["cpu_utilisation"].get<double>(), r["psnr_db"].get<double>());
+  }
+  return out;
 }
 
 }  // namespace lfnet::pipeline

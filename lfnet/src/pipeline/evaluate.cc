@@ -16,11 +16,11 @@ namespace fs = std::filesystem;
 
 namespace lfnet::pipeline {
 
-eval::EvalOptions make_eval_options(const std::string& mode, double noise, uint64_t seed,
+eval::EvalOptions make_eval_options(optics::SimulationMode mode, double noise, uint64_t seed,
                                     int64_t stride, int64_t batch, bool window,
                                     const std::optional<nn::PatchShape>& patch) {
   eval::EvalOptions o;
-  o.mode = optics::parse_simulation_mode(mode);
+  o.mode = mode;
   if (noise > 0) o.effects.gaussian = optics::SensorOptions::Gaussian{noise};
   o.seed = seed;
   o.reconstruct.stride = stride;
@@ -119,9 +119,9 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
       network_patch = model.network.patch_grid();
       if (context.net) {
         context.net->to(parse_device(a.device));
-        nn::set_cnn_precision(context.net, nn::parse_precision(a.precision));
+        nn::set_cnn_precision(context.net, a.precision);
       } else {
-        LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == "float32",
+        LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == nn::Precision::kFloat32,
                        "--device and --precision apply to checkpoints; ", a.model,
                        " is an exported TorchScript file");
       }
@@ -161,7 +161,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);
   if (!a.model.empty()) result.record["model"] = a.model;
   result.record["device"] = a.device;
-  if (recon::needs_network(method)) result.record["precision"] = a.precision;
+  if (recon::needs_network(method)) result.record["precision"] = nn::to_string(a.precision);
   result.light_field = truths[0].name;
   if (a.keep_estimate) result.truth = truths[0].lf.data();
   result.phi = spec.label();

@@ -100,7 +100,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   recon::PatchSolver solver;
   recon::ImageSolver image;
   double train_mean = 0;
-  const bool full = recon::parse_cnn_mode(a.cnn_mode) == recon::CnnMode::kFull;
+  const bool full = a.cnn_mode == recon::CnnMode::kFull;
   LFNET_CHECK_AS(ConfigError, !full || method == "net" || method == "cnn",
                  "--cnn-mode full needs --method net or cnn, not '", method, "'");
   if (model) {
@@ -111,9 +111,10 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
     if (model->net) {
       model->net->to(parse_device(a.device));
-      nn::set_cnn_precision(model->net, nn::parse_precision(a.precision));
+      nn::set_cnn_precision(model->net, a.precision);
     } else {
-      LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == "float32" && !full,
+      LFNET_CHECK_AS(ConfigError,
+                     a.device == "cpu" && a.precision == nn::Precision::kFloat32 && !full,
                      "--device, --precision and --cnn-mode full apply to checkpoints; ", a.model,
                      " is an exported TorchScript file");
     }
@@ -216,8 +217,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"post_filter", a.post_filter},
               {"window", o.window},
               {"device", a.device},
-              {"cnn_mode", a.cnn_mode},
-              {"precision", a.precision},
+              {"cnn_mode", recon::to_string(a.cnn_mode)},
+              {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
   return r;
 }

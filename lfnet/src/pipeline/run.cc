@@ -210,7 +210,7 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
             spdlog::info(
                 "{:<12} {:<14} stride {} {:<9} noise {:.2f}: PSNR {:.2f} dB, SSIM {:.4f}, "
                 "{:.2f} s",
-                method, truth.name, stride, mode, noise,
+                method, truth.name, stride, optics::to_string(mode), noise,
                 record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>(),
                 record["ssim"].get<double>(), record["seconds"].get<double>());
           }

@@ -4,18 +4,20 @@
 
 #include <algorithm>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/recon/methods.h"
 
 namespace lfnet::recon {
 
-CnnMode parse_cnn_mode(const std::string& name) {
-  if (name == "patches") return CnnMode::kPatches;
-  if (name == "full") return CnnMode::kFull;
-  throw ConfigError("unknown CNN mode '" + name + "' (known: patches, full)");
-}
+namespace {
+constexpr EnumName<CnnMode> kCnnModes[] = {{CnnMode::kPatches, "patches"},
+                                           {CnnMode::kFull, "full"}};
+}  // namespace
 
-std::string to_string(CnnMode mode) { return mode == CnnMode::kFull ? "full" : "patches"; }
+CnnMode parse_cnn_mode(const std::string& name) { return value_of(name, kCnnModes); }
+
+std::string to_string(CnnMode mode) { return name_of(mode, kCnnModes); }
 
 torch::Tensor cnn_over_light_field(nn::CnnBranch cnn, const torch::Tensor& x, int64_t tile) {
   LFNET_CHECK_AS(ConfigError, tile >= 1, "the CNN tile must be at least 1 pixel, got ", tile);

@@ -288,6 +288,7 @@ enum class Precision {
 // "float32" or "bfloat16"; anything else is a ConfigError.
 Precision parse_precision(const std::string& name);
 std::string to_string(Precision precision);
+inline Precision from_string(const std::string& name, Precision) { return parse_precision(name); }
 
 // Converts the CNN branch's weights to `precision` (for inference: a net in bfloat16 is not
 // for training or saving). The branch casts its input to its weights' type and its output back

@@ -24,6 +24,9 @@ enum class SimulationMode { kSensor, kPerPatch };
 // "sensor" or "per_patch"; anything else is a ConfigError.
 SimulationMode parse_simulation_mode(const std::string& text);
 std::string to_string(SimulationMode mode);
+inline SimulationMode from_string(const std::string& name, SimulationMode) {
+  return parse_simulation_mode(name);
+}
 
 // The sensor image (..., N, H, W) of a light field (..., U, V, H, W) with the named effects.
 // Noise and gain are addressed by the flat index into the sensor image, so a pixel's draws do

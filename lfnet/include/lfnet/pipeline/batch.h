@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "lfnet/dist/communicator.h"
+#include "lfnet/optics/measure.h"
 #include "lfnet/pipeline/models.h"
 
 namespace lfnet::pipeline {
@@ -20,21 +21,21 @@ struct BatchOptions {
   std::string in;   // folder searched recursively for items
   std::string out;  // output folder: reconstructions, records/, summary.*
   std::vector<std::string>
-      methods;                  // methods run on every item (empty: net with a model, else pinv)
-  std::string model;            // checkpoint or exported model for net, ae, cnn
-  std::string dictionary;       // dictionary file for dict
-  std::string dict_method;      // omp or admm for dict ("" = the dictionary's)
-  std::string dict_options;     // SparseCodingOptions JSON or file for dict
-  std::string phi;              // Phi of evaluations without a model
-  std::string mode = "sensor";  // simulation mode of evaluations: sensor or per_patch
-  int64_t stride = 5;           // patch stride
-  int64_t batch = 1024;         // patches per solver call
-  double noise = 0;             // Gaussian noise sigma of evaluations
-  uint64_t seed = 0;            // noise seed of evaluations
-  bool window = false;          // weight patch estimates by a smooth window when stitching
-  bool post_filter = false;     // suppress artefacts with the stride's period
-  bool match_mean = false;      // scale real measurements to the training mean
-  bool force = false;           // write into an existing non-empty output folder
+      methods;               // methods run on every item (empty: net with a model, else pinv)
+  std::string model;         // checkpoint or exported model for net, ae, cnn
+  std::string dictionary;    // dictionary file for dict
+  std::string dict_method;   // omp or admm for dict ("" = the dictionary's)
+  std::string dict_options;  // SparseCodingOptions JSON or file for dict
+  std::string phi;           // Phi of evaluations without a model
+  optics::SimulationMode mode = optics::SimulationMode::kSensor;  // of evaluations
+  int64_t stride = 5;                                             // patch stride
+  int64_t batch = 1024;                                           // patches per solver call
+  double noise = 0;          // Gaussian noise sigma of evaluations
+  uint64_t seed = 0;         // noise seed of evaluations
+  bool window = false;       // weight patch estimates by a smooth window when stitching
+  bool post_filter = false;  // suppress artefacts with the stride's period
+  bool match_mean = false;   // scale real measurements to the training mean
+  bool force = false;        // write into an existing non-empty output folder
 };
 
 // One thing to process: an acquisition folder (reconstruct) or a light-field folder (evaluate).

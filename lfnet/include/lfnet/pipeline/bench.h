@@ -39,11 +39,11 @@ struct BenchOptions {
   int reps = 3;              // repetitions of the kernel timings (the best is kept)
   bool skip_kernels = false;
   std::string device = "cpu";
-  std::string cnn_mode = "patches";  // patches or full (recon::CnnMode)
-  std::vector<std::string> architectures = {
-      "paper"};                       // untrained nets without models: paper, lfnet
-  int64_t tile = 0;                   // tile of cnn_mode full and of lfnet models (0: 128 and 256)
-  std::string precision = "float32";  // float32 or bfloat16 (the CNN branch's convolutions)
+  recon::CnnMode cnn_mode = recon::CnnMode::kPatches;
+  // Untrained nets without models.
+  std::vector<nn::Architecture> architectures = {nn::Architecture::kPaper};
+  int64_t tile = 0;  // tile of cnn_mode full and of lfnet models (0: 128 and 256)
+  nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch's convolutions
 };
 
 // FLOP/s of a 2048^3 single-precision matrix product, the best of `reps` after a warm-up.
@@ -76,5 +76,18 @@ using BenchCaseRunner = std::function<nlohmann::json(
     const BenchOptions& narrowed, const std::string& method, int64_t stride, double gemm)>;
 nlohmann::json bench_report(const BenchOptions& options, const BenchCaseRunner& run_case,
                             const std::function<void(const std::string&)>& print);
+
+// One case in a child process of this program (`lfnet bench --case METHOD:STRIDE` with the
+// options as flags), so that its peak resident memory is its own and not the high-water mark
+// of the cases before it. The child prints kBenchCaseTag and its record's JSON on one line; a
+// child that fails gives a record with "error".
+inline constexpr const char* kBenchCaseTag = "LFNET_BENCH_CASE ";
+nlohmann::json bench_case_in_child(const BenchOptions& options, const std::string& method,
+                                   int64_t stride, double gemm);
+
+// The report's cases as a table: a header line, then one line per case (method and
+// architecture, stride, patches, seconds, patches/s, peak MB, GFLOP/s, share of GEMM, CPU use,
+// PSNR), or its error.
+std::string bench_table(const nlohmann::json& report);
 
 }  // namespace lfnet::pipeline

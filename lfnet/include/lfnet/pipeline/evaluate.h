@@ -33,7 +33,7 @@ struct MethodContext {
 // The evaluation options of the command line: simulation mode, Gaussian noise sigma (0: none),
 // noise seed, patch stride, solver batch, window stitching, and the model's patch size when
 // there is a model (else the default 9 x 9).
-eval::EvalOptions make_eval_options(const std::string& mode, double noise, uint64_t seed,
+eval::EvalOptions make_eval_options(optics::SimulationMode mode, double noise, uint64_t seed,
                                     int64_t stride, int64_t batch, bool window,
                                     const std::optional<nn::PatchShape>& patch);
 
@@ -45,26 +45,26 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
 
 // What `lfnet evaluate` does with one light field (a folder or a procedural scene).
 struct EvaluateRequest {
-  std::string lf;               // light-field folder with the truth
-  std::string scene;            // or a procedural scene spec (exactly one of lf and scene)
-  std::string views;            // angular window R0:R1,C0:C1 (1-based; "" = central)
-  std::string orient;           // flip-u, flip-v, transpose (comma-separated)
-  std::string layout;           // file-naming pattern of lf (docs/conventions.md)
-  std::string model;            // checkpoint or exported model ("" for models-free methods)
-  std::string phi;              // NAME[:N], a spec or a calibrated-Phi folder; must match model
-  std::string method;           // "" = net with a model, pinv without
-  std::string dictionary;       // dictionary file for dict
-  std::string dict_method;      // omp or admm for dict ("" = the dictionary's)
-  std::string dict_options;     // SparseCodingOptions JSON or file for dict
-  std::string mode = "sensor";  // simulation mode: sensor or per_patch
-  double noise = 0;             // Gaussian noise sigma, relative to a white scene's mean
-  uint64_t seed = 0;            // noise seed
-  int64_t stride = 5;           // patch stride
-  int64_t batch = 1024;         // patches per forward pass
-  bool window = false;          // weight patch estimates by a smooth window when stitching
-  std::string device = "cpu";   // cpu or cuda[:K] for a checkpoint's network
-  std::string precision = "float32";  // float32 or bfloat16 for the CNN branch
-  bool keep_estimate = false;         // return the reconstruction too
+  std::string lf;            // light-field folder with the truth
+  std::string scene;         // or a procedural scene spec (exactly one of lf and scene)
+  std::string views;         // angular window R0:R1,C0:C1 (1-based; "" = central)
+  std::string orient;        // flip-u, flip-v, transpose (comma-separated)
+  std::string layout;        // file-naming pattern of lf (docs/conventions.md)
+  std::string model;         // checkpoint or exported model ("" for models-free methods)
+  std::string phi;           // NAME[:N], a spec or a calibrated-Phi folder; must match model
+  std::string method;        // "" = net with a model, pinv without
+  std::string dictionary;    // dictionary file for dict
+  std::string dict_method;   // omp or admm for dict ("" = the dictionary's)
+  std::string dict_options;  // SparseCodingOptions JSON or file for dict
+  optics::SimulationMode mode = optics::SimulationMode::kSensor;
+  double noise = 0;            // Gaussian noise sigma, relative to a white scene's mean
+  uint64_t seed = 0;           // noise seed
+  int64_t stride = 5;          // patch stride
+  int64_t batch = 1024;        // patches per forward pass
+  bool window = false;         // weight patch estimates by a smooth window when stitching
+  std::string device = "cpu";  // cpu or cuda[:K] for a checkpoint's network
+  nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch
+  bool keep_estimate = false;                         // return the reconstruction too
 };
 
 // One evaluation's outcome.

@@ -13,6 +13,7 @@
 #include "lfnet/dict/patch_sampling.h"
 #include "lfnet/dict/sparse_coding.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/train/trainer.h"
@@ -30,7 +31,7 @@ struct EvaluationConfig {
   LightFieldSources data;  // held-out light fields
   std::vector<std::string> methods = {"net", "no-parallax"};
   std::vector<int64_t> strides = {5};
-  std::vector<std::string> modes = {"sensor"};
+  std::vector<optics::SimulationMode> modes = {optics::SimulationMode::kSensor};
   std::vector<double> noise = {0.0};
   std::string model_stage;  // stage whose model net/ae/cnn use ("" = the last)
 

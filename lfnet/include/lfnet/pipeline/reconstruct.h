@@ -8,7 +8,9 @@
 
 #include "lfnet/core/light_field.h"
 #include "lfnet/core/output.h"
+#include "lfnet/nn/network.h"
 #include "lfnet/pipeline/models.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/reconstruct.h"
 
 namespace lfnet::pipeline {
@@ -28,9 +30,9 @@ struct ReconstructRequest {
   bool match_mean = false;            // scale the measurements to the training mean
   bool post_filter = false;           // suppress artefacts with the stride's period
   std::string device = "cpu";         // cpu or cuda[:K], for checkpoints' networks
-  std::string cnn_mode = "patches";   // patches, or full (the CNN branch once, in tiles)
-  int64_t tile = 0;                   // tile of cnn_mode full and of lfnet models (0: 128, 256)
-  std::string precision = "float32";  // float32 or bfloat16 for the CNN branch
+  recon::CnnMode cnn_mode = recon::CnnMode::kPatches;  // or kFull: the CNN branch in tiles
+  int64_t tile = 0;  // tile of cnn_mode full and of lfnet models (0: 128, 256)
+  nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch
   // The sensor's Gaussian noise sigma (relative to white) for noise-aware models; negative:
   // the noise_sigma that the acquisition's sensor.json records, else 0.
   double noise_sigma = -1;

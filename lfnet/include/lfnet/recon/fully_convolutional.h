@@ -32,6 +32,7 @@ enum class CnnMode {
 // "patches" or "full"; anything else is a ConfigError.
 CnnMode parse_cnn_mode(const std::string& name);
 std::string to_string(CnnMode mode);
+inline CnnMode from_string(const std::string& name, CnnMode) { return parse_cnn_mode(name); }
 
 // Spatial tile of the fully convolutional pass, without its halo of depth * (K - 1) / 2
 // pixels on every side (the halo is recomputed, so larger tiles waste less).
