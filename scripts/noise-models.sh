@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The noise models of lfnet's architecture (docs/architectures.md, "Noise"), finetuned from
-# models/lfnet-asp-n2.ckpt (configs/models/lfnet-asp-n2.json at the paper scale, 8 epochs of
+# models/lfnet-asp-n2-first20.ckpt (configs/models/lfnet-asp-n2.json at the paper scale, 20
+# epochs; docs/models.md), 8 epochs of
 # 8,000 crops, lr 3e-4, for each model below but the last):
 #   aware-s0.025  configs/models/lfnet-asp-n2-noise.json: sigma uniform in [0, 0.25], each
 #                 crop weighted by s / (s + sigma) with s = 0.025 (loss.noise_scale)
@@ -18,7 +19,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 lfnet=${LFNET:-build/apps/lfnet}
 threads=${LFNET_THREADS:-1}
-init=models/lfnet-asp-n2.ckpt
+# The first 20 epochs of lfnet-asp-n2 (docs/models.md), which these models were finetuned from.
+init=models/lfnet-asp-n2-first20.ckpt
 finetune=(--scale paper --init "$init" --set training.epochs=8 --set training.lr=0.0003)
 
 declare -A models=(

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Trains the quick scale of the configs/paper/ experiments that the shipped models do not
-# already cover, and keeps each final model with its training log in models/paper-quick/.
+# Trains the quick scale of the configs/paper/ experiments and keeps each final model with its
+# training log in models/paper-quick/: the paper's experiments compare these models, trained on
+# one data set (which includes lytro_Begonia) with one schedule.
 # Usage: scripts/paper-quick.sh [--collect] [NAME...]   (default: every NAME below)
 #   --collect   only copy the models of runs already in out/paper-quick/ (no training)
 # Each run goes to out/paper-quick/NAME (lfnet experiment: its own evaluations land in
@@ -14,6 +15,11 @@ if [[ ${1:-} == --collect ]]; then collect_only=1; shift; fi
 
 # NAME -> config and extra arguments.
 declare -A config=(
+  [asp-n2]=configs/paper/compression-sweep/asp-n2.json
+  [asp-n15]=configs/paper/compression-sweep/asp-n15.json
+  [asp-n25]=configs/paper/compression-sweep/asp-n25.json
+  [mask-n2]=configs/paper/phi-comparison/mask.json
+  [random-n2]=configs/paper/phi-comparison/random.json
   [mask-from-asp]=configs/paper/phi-switching/mask-from-asp.json
   [mask-from-scratch]=configs/paper/phi-switching/mask-from-scratch.json
   [joint-from-scratch]=configs/paper/branch-ablation/joint-from-scratch.json
@@ -22,10 +28,10 @@ declare -A config=(
   [noise-trained]=configs/paper/noise-sweep/asp-n2-noise-trained.json
   [noise-trained-0.2]=configs/paper/noise-sweep/asp-n2-noise-trained-0.2.json
 )
-declare -A extra=([mask-from-asp]="--init models/asp-n2.ckpt")
+declare -A extra=([mask-from-asp]="--init models/paper-quick/asp-n2.ckpt")
 names=("$@")
 if [[ ${#names[@]} -eq 0 ]]; then
-  names=(mask-from-asp mask-from-scratch joint-from-scratch l2 lytro noise-trained noise-trained-0.2)
+  names=(asp-n2 asp-n15 asp-n25 mask-n2 random-n2 mask-from-asp mask-from-scratch joint-from-scratch l2 lytro noise-trained noise-trained-0.2)
 fi
 mkdir -p models/paper-quick
 for name in "${names[@]}"; do

@@ -23,6 +23,10 @@ open(out, "a").write(json.dumps(r) + "\n")
 PY
 }
 
+# The paper's experiments (configs/paper/) compare quick-scale models of one schedule and one
+# data set; they sit in models/paper-quick/ (docs/models.md), most with their training logs.
+pq=models/paper-quick
+
 heldout-asp-n2() {
   local dir=results/heldout-asp-n2 pics=out/results/heldout-asp-n2 tmp
   tmp=$(mktemp -d)
@@ -53,10 +57,6 @@ record() {
   rm -f "$tmp"
 }
 
-# The experiments of configs/paper/ whose models are not the shipped ones sit in
-# models/paper-quick/ (quick scale), each with its training log.
-pq=models/paper-quick
-
 # The paper's Fig. 5: ASP, mask and random projections at N = 2, stride 5. Random projections
 # are measured per patch (their 9-pixel blocks do not tile a sensor at stride 5).
 phi-comparison() {
@@ -64,7 +64,7 @@ phi-comparison() {
   tmp=$(mktemp)
   for phi in asp mask random; do
     for method in net pinv no-parallax; do
-      record "$tmp" --model "models/$phi-n2.ckpt" --lf ../shared/data/hci_antinous \
+      record "$tmp" --model "$pq/$phi-n2.ckpt" --lf ../shared/data/hci_antinous \
         --method "$method" --mode per_patch --stride 5
     done
   done
@@ -77,7 +77,7 @@ compression-sweep() {
   tmp=$(mktemp)
   for n in 2 15 25; do
     for method in net dict pinv no-parallax; do
-      record "$tmp" --model "models/asp-n$n.ckpt" --dictionary models/dictionary.ckpt \
+      record "$tmp" --model "$pq/asp-n$n.ckpt" --dictionary models/dictionary.ckpt \
         --lf ../shared/data/hci_antinous --method "$method" --mode sensor --stride 9
     done
   done
@@ -92,7 +92,7 @@ noise-sweep() {
     for method in net dict pinv pinv-nlm no-parallax; do
       local variant=""
       [[ $method == net || $method == dict ]] && variant="trained without noise"
-      VARIANT=$variant record "$tmp" --model models/asp-n2.ckpt \
+      VARIANT=$variant record "$tmp" --model $pq/asp-n2.ckpt \
         --dictionary models/dictionary.ckpt --lf ../shared/data/hci_antinous --method "$method" \
         --mode sensor --stride 5 --noise "$sigma"
     done
@@ -102,12 +102,13 @@ noise-sweep() {
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
     # lfnet's architecture (scripts/noise-models.sh): without noise, noise-aware, one sigma.
     local name model
-    for name in lfnet-asp-n2 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 lfnet-noise/sigma-0.1 \
-      lfnet-noise/sigma-0.2; do
+    for name in lfnet-asp-n2 lfnet-asp-n2-first20 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 \
+      lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
       model=models/$name.ckpt
       [[ -f $model ]] || continue
       case $name in
         lfnet-asp-n2) variant="lfnet-asp-n2, trained without noise" ;;
+        lfnet-asp-n2-first20) variant="lfnet-asp-n2-first20, without noise: the noise models' start" ;;
         lfnet-asp-n2-noise) variant="lfnet-asp-n2-noise, noise-aware" ;;
         lfnet-noise/aware-s0.025) variant="lfnet, noise-aware, its first 8 epochs (s = 0.025)" ;;
         *) variant="lfnet, trained at sigma ${name#lfnet-noise/sigma-}" ;;
@@ -145,7 +146,7 @@ branch-ablation() {
   local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor --stride 5)
   tmp=$(mktemp)
   for method in net ae cnn pinv no-parallax; do
-    VARIANT="each branch, then joint" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --method "$method"
+    VARIANT="each branch, then joint" record "$tmp" --model $pq/asp-n2.ckpt "${lf[@]}" --method "$method"
   done
   VARIANT="joint from scratch" record "$tmp" --model $pq/joint-from-scratch.ckpt "${lf[@]}" \
     --method net
@@ -157,9 +158,9 @@ branch-ablation() {
 loss-ablation() {
   local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor --stride 5)
   tmp=$(mktemp)
-  VARIANT="weighted L2" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --method net
+  VARIANT="weighted L2" record "$tmp" --model $pq/asp-n2.ckpt "${lf[@]}" --method net
   VARIANT="L2" record "$tmp" --model $pq/l2.ckpt "${lf[@]}" --method net
-  VARIANT="" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --method no-parallax
+  VARIANT="" record "$tmp" --model $pq/asp-n2.ckpt "${lf[@]}" --method no-parallax
   mv "$tmp" results/loss-ablation/records.jsonl
 }
 
@@ -185,8 +186,8 @@ phi-switching() {
   VARIANT="from scratch, as long" TRAINING=$pq/mask-from-scratch.training.jsonl \
     record "$tmp" --model $pq/mask-from-scratch.ckpt "${lf[@]}" --method net
   VARIANT="from scratch, ae + cnn + joint" \
-    record "$tmp" --model models/mask-n2.ckpt "${lf[@]}" --method net
-  VARIANT="" record "$tmp" --model models/mask-n2.ckpt "${lf[@]}" --method no-parallax
+    record "$tmp" --model $pq/mask-n2.ckpt "${lf[@]}" --method net
+  VARIANT="" record "$tmp" --model $pq/mask-n2.ckpt "${lf[@]}" --method no-parallax
   mv "$tmp" results/phi-switching/records.jsonl
 }
 
@@ -202,7 +203,7 @@ paper-scale-asp-n2() {
       VARIANT="paper scale" TRAINING=$training record "$tmp" --model models/asp-n2-paper.ckpt \
         "${lf[@]}" --stride "$stride" --method "$method"
     done
-    VARIANT="quick scale" record "$tmp" --model models/asp-n2.ckpt "${lf[@]}" --stride "$stride" \
+    VARIANT="quick scale" record "$tmp" --model $pq/asp-n2.ckpt "${lf[@]}" --stride "$stride" \
       --method net
   done
   mv "$tmp" results/paper-scale-asp-n2/records.jsonl
@@ -216,11 +217,13 @@ heldout=(--lf ../shared/data/hci_antinous --lf ../shared/data/lytro_Begonia
 # that no model of configs/models/ trained on, from two cameras and a renderer: HCI
 # hci_antinous, Lytro Illum lytro_Begonia, the rendered heldout_window (disparities up to
 # 2.9 px) and heldout_wide (up to 4 px). Every network of $CROSS_SCENE_MODELS (default: the
-# ASP N = 2 models in models/) against no-parallax, pinv and the dictionary; then the bar
+# ASP N = 2 models in models/ and the quick-scale paper-quick/asp-n2), each named by its path
+# under models/, against no-parallax, pinv and the dictionary; then the bar
 # chart of margins over pinv (the section's "margins" figure, drawn by lfnet report).
 cross-scene() {
   local tmp models
-  read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
+  read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt \
+    $pq/asp-n2.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
   tmp=$(mktemp)
   local i
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -231,7 +234,8 @@ cross-scene() {
     done
     for model in "${models[@]}"; do
       local name training=
-      name=$(basename "$model" .ckpt)
+      name=${model#models/}
+      name=${name%.ckpt}
       [[ -f models/$name.training.jsonl ]] && training=models/$name.training.jsonl
       VARIANT=$name TRAINING=$training record "$tmp" --model "$model" "${src[@]}" --method net \
         --mode sensor --stride 5
@@ -240,22 +244,29 @@ cross-scene() {
   mv "$tmp" results/cross-scene/records.jsonl
 }
 
-# lfnet's architecture for other cameras (scripts/lfnet-models.sh): ASP N = 15 and the coded
-# mask N = 2, each against the paper architecture's model of the same Phi, pinv and
-# no-parallax, on the light fields of the cross-scene benchmark (stride 5, sensor mode).
+# The shipped models for other cameras on the light fields of the cross-scene benchmark, each
+# against pinv and no-parallax of its Phi (stride 5): ASP N = 15 and 25, the coded mask and
+# random projections N = 2 of the paper's architecture (configs/models/, quick scale), and
+# lfnet's architecture where it has a model (scripts/lfnet-models.sh: ASP N = 15, the mask).
+# Random projections are measured per patch (their 9-pixel blocks do not tile a sensor image
+# at stride 5), the others in sensor mode.
 other-phi() {
   local tmp
   tmp=$(mktemp)
   local i
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}")
-    for phi in asp-n15 mask-n2; do
+    for phi in asp-n15 asp-n25 mask-n2 random-n2; do
+      local mode=sensor
+      [[ $phi == random-n2 ]] && mode=per_patch
       for method in no-parallax pinv net; do
         local variant=
         [[ $method == net ]] && variant="paper architecture ($phi)"
-        VARIANT=$variant record "$tmp" --model "models/$phi.ckpt" "${src[@]}" --method "$method" \
-          --mode sensor --stride 5
+        VARIANT=$variant TRAINING=$([[ $method == net ]] && echo "models/$phi.training.jsonl") \
+          record "$tmp" --model "models/$phi.ckpt" "${src[@]}" --method "$method" \
+          --mode "$mode" --stride 5
       done
+      [[ -f models/lfnet-$phi.ckpt ]] || continue
       VARIANT="lfnet-$phi" TRAINING=models/lfnet-$phi.training.jsonl record "$tmp" \
         --model "models/lfnet-$phi.ckpt" "${src[@]}" --method net --mode sensor --stride 5
     done
