@@ -16,6 +16,7 @@
 # work) sets --threads.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 threads=${LFNET_THREADS:-1}
 init=models/lfnet-asp-n2-first20.ckpt
@@ -33,11 +34,7 @@ for name in "${names[@]}"; do
   [[ -f $config ]] || { echo "unknown model '$name' (known: ${order[*]})" >&2; exit 2; }
   model=models/$name.ckpt
   out=out/lfnet-models/$name
-  if [[ -f $model ]]; then
-    echo "== $name: $model exists, skipped"
-    continue
-  fi
-  echo "== $name: training ($(date -u +%H:%M))"
+  model_exists "$name" "$model" && continue
   if [[ -f $out/config.json ]]; then
     "$lfnet" --threads "$threads" train --resume "$out"
   else
@@ -45,8 +42,7 @@ for name in "${names[@]}"; do
     "$lfnet" --threads "$threads" train "$config" --scale paper --init "$init" \
       ${finetune[$name]} --out "$out"
   fi
-  cp "$(ls -t "$out"/models/*.ckpt | head -n1)" "$model.tmp"
-  mv "$model.tmp" "$model"
+  keep_model "$out" "$model"
   if [[ $name == lfnet-asp-n2 ]]; then  # its log holds all 50 epochs
     cat "${init%.ckpt}.training.jsonl" "$out/training.jsonl" > "${model%.ckpt}.training.jsonl"
   else

@@ -17,6 +17,7 @@
 # LFNET_THREADS (default 1: it runs beside other work) sets --threads.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 threads=${LFNET_THREADS:-1}
 # The first 20 epochs of lfnet-asp-n2 (docs/models.md), which these models were finetuned from.
@@ -36,11 +37,7 @@ for name in "${names[@]}"; do
   [[ -n ${models[$name]+x} ]] || { echo "unknown model '$name' (known: ${order[*]})" >&2; exit 2; }
   model=${models[$name]}
   out=out/noise/lfnet-$name
-  if [[ -f $model ]]; then
-    echo "== $name: $model exists, skipped"
-    continue
-  fi
-  echo "== $name: training ($(date -u +%H:%M))"
+  model_exists "$name" "$model" && continue
   if [[ -f $out/config.json ]]; then
     "$lfnet" --threads "$threads" train --resume "$out"
   elif [[ $name == noise-aware ]]; then
@@ -55,9 +52,7 @@ for name in "${names[@]}"; do
     "$lfnet" --threads "$threads" train configs/models/lfnet-asp-n2.json "${finetune[@]}" \
       --set "dataset.noise_range=[${name#sigma-},${name#sigma-}]" --out "$out"
   fi
-  mkdir -p "$(dirname "$model")"
-  cp "$(ls -t "$out"/models/*.ckpt | head -n1)" "$model.tmp"
-  mv "$model.tmp" "$model"
+  keep_model "$out" "$model"
   if [[ $name == noise-aware ]]; then
     # The second finetuning is named a stage of its own, so its curves follow the first's.
     { cat models/lfnet-noise/aware-s0.025.training.jsonl

@@ -13,6 +13,7 @@
 # it; `scripts/run-snapshot.sh save OUT SNAPSHOT` refreshes it before a session ends.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 config=${CONFIG:-configs/paper/phi-comparison/asp.json}
 scale=${SCALE:-paper}
@@ -30,8 +31,6 @@ else
   # shellcheck disable=SC2086
   "$lfnet" ${LFNET_OPTS:-} train "$config" --scale "$scale" --out "$out" "$@"
 fi
-last=$(ls -t "$out"/models/*.ckpt | head -n1)
-cp "$last" "$model.tmp"
-mv "$model.tmp" "$model"
+keep_model "$out" "$model"
 cp "$out/training.jsonl" "${model%.ckpt}.training.jsonl"
 ls -l "$model"
