@@ -89,7 +89,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_option("--device", q.device, "cpu or cuda[:K] for the network (default cpu)");
   add_enum_option(cmd, "--precision", q.precision,
-                  "float32 (default) or bfloat16 for the CNN branch");
+                  "float32 (default) or bfloat16 for the CNN branch, or lfnet's U-Net");
   cmd->callback([a] { run_evaluate(*a); });
 }
 

@@ -85,7 +85,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "what the acquisition's sensor.json records, else 0)")
       ->check(CLI::NonNegativeNumber);
   add_enum_option(cmd, "--precision", q.precision,
-                  "float32 (default) or bfloat16 for the CNN branch");
+                  "float32 (default) or bfloat16 for the CNN branch, or lfnet's U-Net");
   cmd->callback([a] { run_reconstruct(*a); });
 }
 

@@ -185,3 +185,30 @@ TEST_CASE("a noise-aware lfnet net reads the noise sigma, tiled or whole", "[rec
   CHECK(torch::allclose(net->forward(crop.flatten(1), phase, torch::full({1}, 0.2)).squeeze(1),
                         net->forward_image(crop, 0, 0.2), 1e-5, 1e-5));
 }
+
+TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 outside",
+          "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto net = image_net(*phi);
+  randomise(net, 8);
+  const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 32, 24, 9));
+  torch::NoGradGuard no_grad;
+  const auto want = net->forward_image(sensor.unsqueeze(0));
+  nn::set_cnn_precision(net, nn::Precision::kBFloat16);
+  // All but the transposed convolutions (ImageNetImpl::set_precision).
+  int64_t bf16 = 0, fp32 = 0;
+  for (const auto& p : net->image->parameters()) (p.scalar_type() == torch::kBFloat16 ? bf16 : fp32)++;
+  CHECK(bf16 > 2 * fp32);
+  CHECK(fp32 == 2 * 2);  // two levels up, each a weight and a bias
+  CHECK(net->pixel_pinv.scalar_type() == torch::kFloat32);
+  const auto got = net->forward_image(sensor.unsqueeze(0));
+  REQUIRE(got.scalar_type() == torch::kFloat32);
+  // The pseudo-inverse stays float32: only the U-Net's correction is rounded, to about 2^-8 of
+  // its size per layer.
+  const double err = (want - got).abs().max().item<double>();
+  CHECK(err > 0.0);
+  const auto correction = want - net->pixel_pinv_image(sensor.unsqueeze(0), {}).view(want.sizes());
+  CHECK(err < 0.05 * correction.abs().max().item<double>());
+  nn::set_cnn_precision(net, nn::Precision::kFloat32);
+  for (const auto& p : net->image->parameters()) CHECK(p.scalar_type() == torch::kFloat32);
+}

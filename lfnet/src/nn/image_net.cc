@@ -99,11 +99,17 @@ ImageNetImpl::ImageNetImpl(const ImageNetOptions& options, int64_t in, int64_t o
   output_->bias.zero_();
 }
 
+void ImageNetImpl::set_precision(torch::Dtype dtype) {
+  to(dtype);
+  for (auto& up : up_) up->to(torch::kFloat32);
+}
+
 torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
   const int64_t m = options_.multiple();
   LFNET_CHECK(x.dim() == 4 && x.size(2) % m == 0 && x.size(3) % m == 0,
               "ImageNet: expected (B, C, H, W) with H and W multiples of ", m, ", got ", x.sizes());
-  auto h = torch::relu(input_->forward(x));
+  // In the weights' type (bfloat16 after set_cnn_precision), the output in the input's.
+  auto h = torch::relu(input_->forward(x.to(input_->weight.scalar_type())));
   std::vector<torch::Tensor> skips;
   const int64_t levels = options_.levels;
   for (int64_t l = 0; l < levels; ++l) {
@@ -114,10 +120,11 @@ torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
     }
   }
   for (int64_t l = levels - 2; l >= 0; --l) {
-    h = torch::relu(up_[l]->forward(h)) + skips[l];
+    const auto type = h.scalar_type();
+    h = torch::relu(up_[l]->forward(h.to(up_[l]->weight.scalar_type())).to(type)) + skips[l];
     for (auto& conv : decoder_[l]) h = torch::relu(conv->forward(h));
   }
-  return output_->forward(h);
+  return output_->forward(h).to(x.scalar_type());
 }
 
 }  // namespace lfnet::nn

@@ -204,8 +204,12 @@ Precision parse_precision(const std::string& name) { return value_of(name, kPrec
 std::string to_string(Precision precision) { return name_of(precision, kPrecisions); }
 
 void set_cnn_precision(LightFieldNet& net, Precision precision) {
-  if (!net->options().has_cnn()) return;
-  net->cnn->to(precision == Precision::kBFloat16 ? torch::kBFloat16 : torch::kFloat32);
+  const auto dtype = precision == Precision::kBFloat16 ? torch::kBFloat16 : torch::kFloat32;
+  if (net->options().is_image()) {
+    net->image->set_precision(dtype);
+  } else if (net->options().has_cnn()) {
+    net->cnn->to(dtype);
+  }
 }
 
 int64_t parameter_count(const torch::nn::Module& module) {

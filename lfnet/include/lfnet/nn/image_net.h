@@ -68,6 +68,10 @@ class ImageNetImpl : public torch::nn::Module {
  public:
   ImageNetImpl(const ImageNetOptions& options, int64_t in, int64_t out);
   torch::Tensor forward(const torch::Tensor& x);
+  // Converts the convolutions to `dtype` for inference (bfloat16, or float32 back), all but the
+  // transposed ones: LibTorch 1.13's oneDNN path runs a bfloat16 transposed convolution as a
+  // plain one, so those stay float32 and convert their input and output.
+  void set_precision(torch::Dtype dtype);
 
   const ImageNetOptions& options() const { return options_; }
 

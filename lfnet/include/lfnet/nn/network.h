@@ -290,9 +290,10 @@ Precision parse_precision(const std::string& name);
 std::string to_string(Precision precision);
 inline Precision from_string(const std::string& name, Precision) { return parse_precision(name); }
 
-// Converts the CNN branch's weights to `precision` (for inference: a net in bfloat16 is not
-// for training or saving). The branch casts its input to its weights' type and its output back
-// to the input's type, so the rest of the net is unchanged. No-op without a CNN branch.
+// Converts the CNN branch's weights, or the lfnet architecture's U-Net, to `precision` (for
+// inference: a net in bfloat16 is not for training or saving). The branch casts its input to
+// its weights' type and its output back to the input's type, so the rest of the net (the
+// pseudo-inverse, the residual sum) stays float32. No-op for a net without either.
 void set_cnn_precision(LightFieldNet& net, Precision precision);
 
 // The FLOP model (lfnet bench), from the same options that build the modules: nominal

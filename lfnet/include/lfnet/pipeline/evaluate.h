@@ -63,7 +63,7 @@ struct EvaluateRequest {
   int64_t batch = 1024;        // patches per forward pass
   bool window = false;         // weight patch estimates by a smooth window when stitching
   std::string device = "cpu";  // cpu or cuda[:K] for a checkpoint's network
-  nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch
+  nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   bool keep_estimate = false;                         // return the reconstruction too
 };
 
