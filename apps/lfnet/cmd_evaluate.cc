@@ -24,16 +24,18 @@ void run_evaluate(EvaluateArgs& a) {
   auto& q = a.request;
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = {q.lf, q.scene, q.model, q.dictionary};
+  policy.inputs = {q.lf, q.scene, q.model, q.dictionary, q.effects};
   if (!a.out.empty()) check_output_folder(a.out, policy);
   if (!a.json.empty()) check_output_apart(a.json, policy.inputs, "--json");
   q.keep_estimate = !a.out.empty();
   const auto r = pipeline::evaluate_request(q);
   const auto& record = r.record;
   const double psnr = record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>();
+  // Shot and read noise are named by the Gaussian sigma of the same variance.
+  const double noise = record.value("equivalent_sigma", q.noise);
   std::printf("%s on %s (%s, %s, stride %lld, noise %.3g): PSNR %.2f dB, SSIM %.4f, %.2f s\n",
               record["method"].get<std::string>().c_str(), r.light_field.c_str(), r.phi.c_str(),
-              optics::to_string(q.mode).c_str(), static_cast<long long>(q.stride), q.noise, psnr,
+              optics::to_string(q.mode).c_str(), static_cast<long long>(q.stride), noise, psnr,
               record["ssim"].get<double>(), record["seconds"].get<double>());
   if (!a.json.empty()) write_json_file(a.json, record);
   if (!a.out.empty()) {
@@ -73,6 +75,10 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
   cmd->add_option("--noise", q.noise, "Gaussian noise sigma, relative to a white scene's mean")
       ->check(kFiniteNonNegative);
+  cmd->add_option("--effects", q.effects,
+                  "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
+                  "--noise sets its Gaussian sigma")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--stride", q.stride, "patch stride (default 5)")->check(kStride);
   add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
   cmd->add_option("--method", q.method,

@@ -251,3 +251,55 @@ TEST_CASE("noise-aware patches carry their sigma and measurements noisy by it", 
   o.noise_range = {0.2, 0.1};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("noise_range"));
 }
+
+TEST_CASE("shot and read noise patches carry their equivalent sigma", "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.augment = false;
+  auto batch = [&](std::vector<double> range, double fraction) {
+    o.noise_range = std::move(range);
+    o.shot_read_fraction = fraction;
+    o.shot_photons_range = {20, 200};
+    o.read_electrons_range = {2, 5};
+    o.train_patches = 400;
+    data::PatchDataset ds(fields(), *phi, o, 64);
+    ds.start_epoch(0, 400);
+    return ds.next_train();
+  };
+  const auto clean = batch({}, 0), gaussian = batch({0.05, 0.2}, 0);
+  const auto all = batch({0.05, 0.2}, 1), mixed = batch({0.05, 0.2}, 0.5);
+  REQUIRE(torch::equal(all.target, clean.target));
+  // Every patch's sigma is the noise of photons_at_white in [20, 200] with read noise of 2 to
+  // 5 electrons at the patch's mean signal, and its measurement errors have that variance on
+  // average (their signal-dependent variances average to the mean signal's).
+  const auto mean = clean.y.mean(1);
+  const auto lo = (mean / 200 + std::pow(2.0 / 200, 2)).sqrt();
+  const auto hi = (mean / 20 + std::pow(5.0 / 20, 2)).sqrt();
+  CHECK((all.noise >= lo - 1e-6).all().item<bool>());
+  CHECK((all.noise <= hi + 1e-6).all().item<bool>());
+  CHECK(all.noise.std().item<double>() > 0.01);  // drawn per patch
+  const auto err = all.y - clean.y;
+  const auto ratio = err.square().mean(1) / all.noise.square();
+  CHECK(ratio.mean().item<double>() == Approx(1.0).epsilon(0.05));
+  // Brighter measurements are noisier: shot noise, not a patch-wide sigma.
+  const auto bright = clean.y > clean.y.median();
+  const double bright_var = err.square().masked_select(bright).mean().item<double>();
+  const double dark_var = err.square().masked_select(~bright).mean().item<double>();
+  CHECK(bright_var > 1.1 * dark_var);
+  // Mixed: a patch is either the Gaussian one or the shot-and-read one, about half each.
+  const auto same = mixed.noise == gaussian.noise;
+  const double share = same.to(torch::kFloat64).mean().item<double>();
+  CHECK(share > 0.35);
+  CHECK(share < 0.65);
+  CHECK(torch::equal(mixed.noise.masked_select(~same), all.noise.masked_select(~same)));
+  const auto rows = (~same).nonzero().squeeze(1);
+  CHECK(torch::equal(mixed.y.index_select(0, rows), all.y.index_select(0, rows)));
+  const auto kept = same.nonzero().squeeze(1);
+  CHECK(torch::equal(mixed.y.index_select(0, kept), gaussian.y.index_select(0, kept)));
+  o.noise_range.clear();
+  o.shot_read_fraction = 0.5;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("needs a noise_range"));
+  o.noise_range = {0, 0.1};
+  o.shot_photons_range = {0, 10};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("shot_photons_range"));
+}

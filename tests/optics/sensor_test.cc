@@ -125,6 +125,19 @@ TEST_CASE("read noise is Gaussian in electrons", "[optics][sensor]") {
   CHECK(std == Approx(5.0 / 500).epsilon(0.02));
 }
 
+TEST_CASE("the equivalent sigma has the variance of every named noise", "[optics][sensor]") {
+  CHECK(parse("{}").equivalent_sigma(0.5) == 0.0);
+  CHECK(parse(R"({"gaussian": {"sigma": 0.1}})").equivalent_sigma(0.7) == Approx(0.1));
+  // Measured: shot, read and Gaussian noise together at a constant signal.
+  const auto o = parse(R"({"photons_at_white": 50, "shot": {"model": "gaussian"},
+                           "read": {"electrons": 4}, "gaussian": {"sigma": 0.03}})");
+  const double expected = std::sqrt(0.4 / 50 + std::pow(4.0 / 50, 2) + 0.03 * 0.03);
+  CHECK(o.equivalent_sigma(0.4) == Approx(expected));
+  const double spread = moments(apply_sensor_effects(torch::full({kSamples}, 0.4), o, 6)).second;
+  CHECK(spread == Approx(o.equivalent_sigma(0.4)).epsilon(0.02));
+  CHECK(o.equivalent_sigma(-1.0) == Approx(std::sqrt(std::pow(4.0 / 50, 2) + 0.03 * 0.03)));
+}
+
 TEST_CASE("saturation clips at the full well", "[optics][sensor]") {
   auto y = torch::linspace(0, 3, 301, torch::kFloat64);
   auto out = apply_sensor_effects(y, parse(R"({"photons_at_white": 1000,

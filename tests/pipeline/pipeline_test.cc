@@ -2,6 +2,7 @@
 // reconstructing and evaluating without the program.
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 
@@ -131,6 +132,40 @@ TEST_CASE("evaluate_method scores the registry's methods and the no-parallax bas
   CHECK(baseline["method"] == "no-parallax");
   CHECK_THROWS_WITH(pipeline::evaluate_method(truth, "net", context, o, nullptr, false),
                     Catch::Contains("--model"));
+  CHECK_FALSE(pinv.contains("equivalent_sigma"));
+}
+
+TEST_CASE("shot and read noise are recorded as their equivalent Gaussian sigma",
+          "[pipeline][simulate]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  const LightField lf(torch::rand({1, 5, 5, 20, 20}) * 0.5 + 0.25);
+  auto effects = optics::SensorOptions::from_json(
+      {{"photons_at_white", 40}, {"shot", {{"model", "gaussian"}}}, {"read", {{"electrons", 4}}}});
+  const double mean = optics::simulate_sensor(*phi, lf.data()).mean().item<double>();
+  const double want = std::sqrt(mean / 40 + std::pow(4.0 / 40, 2));
+  // What a noise-aware net reads from an acquisition, and what an evaluation records.
+  test::TempDir tmp;
+  pipeline::SimulateRequest r;
+  r.lf = lf;
+  r.phi = phi.get();
+  r.effects = effects;
+  fs::create_directories(tmp / "sensor");
+  CHECK(pipeline::write_acquisition(r, tmp / "sensor")["noise_sigma"].get<double>() ==
+        Approx(want).epsilon(0.02));
+  pipeline::MethodContext context;
+  context.phi = phi.get();
+  for (auto mode : {optics::SimulationMode::kSensor, optics::SimulationMode::kPerPatch}) {
+    auto o = pipeline::make_eval_options(mode, 0.0, 0, 5, 256, false, std::nullopt);
+    o.effects = effects;
+    for (const std::string method : {"pinv", "pinv-nlm", "no-parallax"}) {
+      if (method == "pinv-nlm" && mode == optics::SimulationMode::kPerPatch) continue;
+      INFO(method << " " << optics::to_string(mode));
+      const pipeline::NamedLightField truth{"lf", lf};
+      const auto record = pipeline::evaluate_method(truth, method, context, o, nullptr, false);
+      CHECK(record.at("equivalent_sigma").get<double>() == Approx(want).epsilon(0.05));
+      CHECK(record.at("noise_sigma") == 0.0);
+    }
+  }
 }
 
 TEST_CASE("the dict method codes as its dictionary recommends, unless told otherwise",

@@ -61,6 +61,22 @@ void DatasetOptions::validate() const {
                                     std::isfinite(noise_range[1])))) {
     throw ConfigError("noise_range must be [lo, hi] with 0 <= lo <= hi, or empty");
   }
+  if (!(shot_read_fraction >= 0 && shot_read_fraction <= 1)) {
+    throw ConfigError("shot_read_fraction must lie in [0, 1]");
+  }
+  if (shot_read_fraction > 0 && noise_range.empty()) {
+    throw ConfigError("shot_read_fraction needs a noise_range: a noise-aware net reads a sigma");
+  }
+  if (shot_photons_range.size() != 2 ||
+      !(shot_photons_range[0] > 0 && shot_photons_range[1] >= shot_photons_range[0] &&
+        std::isfinite(shot_photons_range[1]))) {
+    throw ConfigError("shot_photons_range must be [lo, hi] with 0 < lo <= hi");
+  }
+  if (read_electrons_range.size() != 2 ||
+      !(read_electrons_range[0] >= 0 && read_electrons_range[1] >= read_electrons_range[0] &&
+        std::isfinite(read_electrons_range[1]))) {
+    throw ConfigError("read_electrons_range must be [lo, hi] with 0 <= lo <= hi");
+  }
   if (angular_steps.empty()) throw ConfigError("angular_steps must list at least one step");
   for (int64_t step : angular_steps) {
     if (step < 1 || step > 8) throw ConfigError("angular_steps must lie in 1..8");
@@ -145,10 +161,11 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
 PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
   auto part = [&](const auto& v) {
     using V = std::decay_t<decltype(v)>;
-    return v.empty() ? V() : V(v.begin() + begin, v.begin() + end);  // sigma may be empty
+    return v.empty() ? V() : V(v.begin() + begin, v.begin() + end);  // sigma, photons may be empty
   };
   return {part(lf),    part(y0),       part(x0),         part(aug),  part(window),
-          part(gamma), part(contrast), part(brightness), part(sigma)};
+          part(gamma), part(contrast), part(brightness), part(sigma),
+          part(photons), part(read_electrons)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
@@ -204,6 +221,18 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
     for (int64_t i = 0; i < count; ++i) {
       d.sigma.push_back(static_cast<float>(lo + (hi - lo) * 0.5 * (unit(rng) + 1.0)));
     }
+    if (options_.shot_read_fraction > 0) {
+      const double log_lo = std::log(options_.shot_photons_range[0]);
+      const double log_hi = std::log(options_.shot_photons_range[1]);
+      const double e_lo = options_.read_electrons_range[0], e_hi = options_.read_electrons_range[1];
+      for (int64_t i = 0; i < count; ++i) {
+        const bool shot = 0.5 * (unit(rng) + 1.0) < options_.shot_read_fraction;
+        const double photons = std::exp(log_lo + (log_hi - log_lo) * 0.5 * (unit(rng) + 1.0));
+        const double electrons = e_lo + (e_hi - e_lo) * 0.5 * (unit(rng) + 1.0);
+        d.photons.push_back(shot ? static_cast<float>(photons) : 0.0f);
+        d.read_electrons.push_back(static_cast<float>(electrons));
+      }
+    }
   }
   return d;
 }
@@ -247,7 +276,20 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
   if (!d.sigma.empty()) {
     noise = torch::tensor(d.sigma, torch::kFloat32);
     auto gen = torch::make_generator<at::CPUGeneratorImpl>(noise_seed ^ 0x6e6f697365ULL);
-    y = y + torch::randn(y.sizes(), gen, y.options()) * noise.unsqueeze(1);
+    auto spread = noise.unsqueeze(1).expand_as(y);
+    if (!d.photons.empty()) {
+      // Shot and read noise: each measurement's own sigma, and the patch's equivalent sigma
+      // for the net.
+      auto photons = torch::tensor(d.photons, torch::kFloat32);
+      const auto shot = photons > 0;
+      photons = photons.clamp_min(1e-3);
+      const auto read = (torch::tensor(d.read_electrons, torch::kFloat32) / photons).square();
+      const auto signal = y.clamp_min(0.0);
+      const auto pixel = (signal / photons.unsqueeze(1) + read.unsqueeze(1)).sqrt();
+      spread = torch::where(shot.unsqueeze(1), pixel, spread);
+      noise = torch::where(shot, (signal.mean(1) / photons + read).sqrt(), noise);
+    }
+    y = y + torch::randn(y.sizes(), gen, y.options()) * spread;
   }
   return {y.contiguous(), phase, target.unsqueeze(1), noise};
 }

@@ -30,6 +30,11 @@ nlohmann::json base_record(const optics::Phi& phi, const std::string& method, co
           {"threads", thread_count()},
           {"device", "cpu"}};
 }
+// Shot and read noise are named in records by the Gaussian sigma of the same variance at the
+// measurements' mean `signal` (docs/acquisition.md), which is what a noise-aware net reads.
+void add_equivalent_sigma(nlohmann::json& record, const EvalOptions& o, double signal) {
+  if (o.effects.shot || o.effects.read) record["equivalent_sigma"] = o.effects.equivalent_sigma(signal);
+}
 }  // namespace
 
 nlohmann::json score(const LightField& estimate, const LightField& truth) {
@@ -53,12 +58,16 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   ro.validate();
   PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);
   torch::Tensor estimate;
+  double signal = 0;  // the measurements' mean
   Stopwatch clock;
   if (options.mode == optics::SimulationMode::kSensor) {
     auto sensor = optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed);
+    signal = sensor.mean().item<double>();
     clock.reset();  // time the reconstruction, not the simulation
     if (image) {
-      estimate = image(sensor, options.effects.gaussian ? options.effects.gaussian->sigma : 0.0);
+      // Shot and read noise reach a noise-aware method as the Gaussian sigma of the same
+      // variance at the sensor image's mean signal.
+      estimate = image(sensor, options.effects.equivalent_sigma(signal));
       if (progress) progress(grid.size(), grid.size());
     } else {
       estimate = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
@@ -73,6 +82,12 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
                                               optics::SimulationMode::kPerPatch, options.effects,
                                               options.seed, r0, std::min(grid.rows(), r0 + band)));
     }
+    double sum = 0, count = 0;
+    for (const auto& b : bands) {
+      sum += b.values.sum().item<double>();
+      count += static_cast<double>(b.values.numel());
+    }
+    signal = count > 0 ? sum / count : 0.0;
     auto source = [&](int64_t r0, int64_t) { return bands[r0 / band]; };
     clock.reset();
     estimate = recon::reconstruct_patches(phi, grid, source, solver, ro, progress);
@@ -84,6 +99,7 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   const bool whole_image = image && options.mode == optics::SimulationMode::kSensor;
   auto record = base_record(phi, method, options, whole_image ? 0 : grid.size(), seconds);
   if (whole_image) record["whole_image"] = true;
+  add_equivalent_sigma(record, options, signal);
   record.update(score(est, truth));
   return {estimate, record};
 }
@@ -94,6 +110,8 @@ EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
   auto est = truth.angular_mean();
   const double seconds = clock.seconds();
   auto record = base_record(phi, "no-parallax", options, 0, seconds);
+  // A white light field measures 1 on average: the light field's mean stands for the signal.
+  add_equivalent_sigma(record, options, truth.data().mean().item<double>());
   record.update(score(est, truth));
   return {est.data(), record};
 }

@@ -3,6 +3,7 @@
 #include <ATen/Parallel.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "lfnet/core/enum_names.h"
@@ -24,6 +25,15 @@ ShotNoiseModel from_string(const std::string& name, ShotNoiseModel) {
 
 bool SensorOptions::empty() const {
   return !gaussian && !shot && !read && !saturation && !adc && !gain;
+}
+
+double SensorOptions::equivalent_sigma(double mean_signal) const {
+  if (!shot && !read) return gaussian ? gaussian->sigma : 0.0;  // exact, not via its square
+  double variance = 0;
+  if (gaussian) variance += gaussian->sigma * gaussian->sigma;
+  if (shot) variance += std::max(mean_signal, 0.0) / photons_at_white;
+  if (read) variance += std::pow(read->electrons / photons_at_white, 2);
+  return std::sqrt(variance);
 }
 
 void SensorOptions::validate() const {

@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
@@ -97,6 +98,12 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   LFNET_CHECK_AS(ConfigError, a.lf.empty() != a.scene.empty(),
                  "give exactly one of --lf DIR and --scene SCENE.json");
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
+  std::optional<optics::SensorOptions> effects;  // read before any work
+  if (!a.effects.empty()) {
+    effects = optics::SensorOptions::from_json(read_json_file(a.effects), a.effects + ":$");
+    if (a.noise > 0) effects->gaussian = optics::SensorOptions::Gaussian{a.noise};
+    effects->validate();
+  }
   const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
   LFNET_CHECK_AS(ConfigError, method == "dict" || (a.dict_method.empty() && a.dict_options.empty()),
                  "--dict-method and --dict-options apply to --method dict, not '", method, "'");
@@ -154,8 +161,8 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   context.dict_options = a.dict_options;
   const auto truths = load_sources(sources, phi->rows(), phi->cols());
 
-  const auto o =
-      make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
+  auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
+  if (effects) o.effects = *effects;
   EvaluateResult result;
   result.record =
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);

@@ -68,7 +68,8 @@ std::string setting(const nlohmann::json& r, const std::string& key) {
     return r.value("whole_image", false) ? "whole image" : std::to_string(r.value("stride", 0));
   }
   if (key == "mode") return r.value("mode", "");
-  if (key == "noise") return fmt("%g", number(r, "noise_sigma", 0.0));
+  // Shot and read noise: the Gaussian sigma of the same variance (docs/acquisition.md).
+  if (key == "noise") return fmt("%.3g", number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0)));
   if (key == "light_field") return r.value("light_field", "");
   if (key == "scale") return r.value("scale", "");
   if (key == "variant") return r.value("variant", "");
@@ -275,7 +276,7 @@ std::string margins(const Section& s) {
 
 // The value of a sweep's setting in a record, as a number.
 double sweep_value(const nlohmann::json& r, const std::string& key) {
-  if (key == "noise") return number(r, "noise_sigma", 0.0);
+  if (key == "noise") return number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0));
   if (key == "n") return number(r, "measurements", 0.0);
   return number(r, key.c_str(), 0.0);
 }

@@ -55,6 +55,8 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
   if (r.mode == optics::SimulationMode::kSensor) {
     auto sensor = optics::simulate_sensor(phi, lf.data(), r.effects, r.seed);  // (C, N, H, W)
     meta["seconds"] = clock.seconds();
+    // Shot and read noise included: what a noise-aware net reads (optics/sensor.h).
+    meta["noise_sigma"] = r.effects.equivalent_sigma(sensor.mean().item<double>());
     io::write_sensor_images(dir, sensor);
     meta["sensor"] = {{"files", io::sensor_file_names(lf.channels())},
                       {"channels_per_file", n},

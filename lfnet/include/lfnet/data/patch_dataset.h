@@ -51,6 +51,15 @@ struct DatasetOptions {
   // [lo, hi] and its measurements get Gaussian noise of that sigma (relative to white, on top
   // of `effects`); the batch carries the sigmas (train::Batch::noise). Empty: off.
   std::vector<double> noise_range;
+  // With noise_range, the share of patches whose noise is a real pixel's instead: photon shot
+  // noise (its Gaussian approximation) at photons_at_white drawn log-uniformly in
+  // `shot_photons_range`, plus read noise of electrons drawn uniformly in
+  // `read_electrons_range`. The sigma the net reads is then the Gaussian sigma of the same
+  // variance at the patch's mean measurement (optics::SensorOptions::equivalent_sigma), as at
+  // reconstruction. 0: Gaussian noise only.
+  double shot_read_fraction = 0.0;
+  std::vector<double> shot_photons_range = {20, 2000};
+  std::vector<double> read_electrons_range = {0, 10};
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
 
@@ -75,6 +84,9 @@ struct DatasetOptions {
     f("jitter_contrast", jitter_contrast);
     f("jitter_brightness", jitter_brightness);
     f("noise_range", noise_range);
+    f("shot_read_fraction", shot_read_fraction);
+    f("shot_photons_range", shot_photons_range);
+    f("read_electrons_range", read_electrons_range);
     f("seed", seed);
     f("effects", effects);
   }
@@ -114,6 +126,9 @@ class PatchDataset : public train::BatchSource {
     std::vector<int64_t> window;  // index into windows_[lf]
     std::vector<float> gamma, contrast, brightness;
     std::vector<float> sigma;  // per patch with noise_range, else empty
+    // Per patch with shot_read_fraction: photons at white (0: Gaussian noise) and read
+    // electrons; else empty.
+    std::vector<float> photons, read_electrons;
     Draw slice(int64_t begin, int64_t end) const;
   };
   // An angular window: views u0, u0 + step, ... (U of them), and likewise v.

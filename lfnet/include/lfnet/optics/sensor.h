@@ -114,6 +114,11 @@ struct SensorOptions {
   }
   // True when no effect is named: the measurement is the noiseless forward model.
   bool empty() const;
+  // The sigma of Gaussian noise (relative to white) whose variance equals that of the named
+  // noises at the relative signal `mean_signal`: gaussian sigma^2, plus the shot noise's
+  // mean_signal / photons_at_white, plus the read noise's (electrons / photons_at_white)^2.
+  // A noise-aware network reads it as its one noise level (docs/acquisition.md).
+  double equivalent_sigma(double mean_signal) const;
   // Throws ConfigError naming the bad field.
   void validate() const;
   // Strict: unknown keys are ConfigErrors naming the JSON path (e.g. "$.shot.modle").

@@ -58,6 +58,7 @@ struct EvaluateRequest {
   std::string dict_options;  // SparseCodingOptions JSON or file for dict
   optics::SimulationMode mode = optics::SimulationMode::kSensor;
   double noise = 0;            // Gaussian noise sigma, relative to a white scene's mean
+  std::string effects;         // sensor effects JSON file (shot, read, ...); noise on top
   uint64_t seed = 0;           // noise seed
   int64_t stride = 5;          // patch stride
   int64_t batch = 1024;        // patches per forward pass
