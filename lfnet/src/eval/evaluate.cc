@@ -110,8 +110,23 @@ EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
   auto est = truth.angular_mean();
   const double seconds = clock.seconds();
   auto record = base_record(phi, "no-parallax", options, 0, seconds);
-  // A white light field measures 1 on average: the light field's mean stands for the signal.
-  add_equivalent_sigma(record, options, truth.data().mean().item<double>());
+  if (options.effects.shot || options.effects.read) {
+    // The measurements' mean as the other methods see it, so that their records agree.
+    double signal = 0;
+    if (options.mode == optics::SimulationMode::kSensor) {
+      signal = optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed)
+                   .mean()
+                   .item<double>();
+    } else {
+      const auto& ro = options.reconstruct;
+      const PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);
+      signal = optics::measure_patches(phi, truth.data(), grid, options.mode, options.effects,
+                                       options.seed, 0, grid.rows())
+                   .values.mean()
+                   .item<double>();
+    }
+    add_equivalent_sigma(record, options, signal);
+  }
   record.update(score(est, truth));
   return {est.data(), record};
 }
