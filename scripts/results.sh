@@ -103,7 +103,7 @@ noise-sweep() {
     # lfnet's architecture (scripts/noise-models.sh): without noise, noise-aware, one sigma.
     local name model
     for name in lfnet-asp-n2 lfnet-asp-n2-first20 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 \
-      lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
+      lfnet-noise/aware-s0.1 lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
       model=models/$name.ckpt
       [[ -f $model ]] || continue
       case $name in
@@ -111,6 +111,7 @@ noise-sweep() {
         lfnet-asp-n2-first20) variant="lfnet-asp-n2-first20, without noise: the noise models' start" ;;
         lfnet-asp-n2-noise) variant="lfnet-asp-n2-noise, noise-aware" ;;
         lfnet-noise/aware-s0.025) variant="lfnet, noise-aware, its first 8 epochs (s = 0.025)" ;;
+        lfnet-noise/aware-s0.1) variant="lfnet, noise-aware, its first 16 epochs (then s = 0.1)" ;;
         *) variant="lfnet, trained at sigma ${name#lfnet-noise/sigma-}" ;;
       esac
       VARIANT=$variant record "$tmp" --model "$model" --lf ../shared/data/hci_antinous \
@@ -118,6 +119,26 @@ noise-sweep() {
     done
   done
   mv "$tmp" results/noise-sweep/records.jsonl
+}
+
+# Shot and read noise (configs/sensors/): the noise-aware lfnet models against one-sigma ones,
+# the noiseless one and the baselines, on hci_antinous.
+sensor-noise() {
+  local tmp sensor method name model
+  tmp=$(mktemp)
+  for sensor in daylight indoor dim; do
+    local src=(--lf ../shared/data/hci_antinous --mode sensor --effects configs/sensors/$sensor.json)
+    for method in pinv pinv-nlm no-parallax; do
+      record "$tmp" --phi asp:2 "${src[@]}" --method "$method"
+    done
+    for name in lfnet-asp-n2 lfnet-noise/aware-s0.1 lfnet-asp-n2-noise lfnet-noise/sigma-0.1 \
+      lfnet-noise/sigma-0.2; do
+      model=models/$name.ckpt
+      [[ -f $model ]] || continue
+      VARIANT=$name record "$tmp" --model "$model" "${src[@]}" --method net
+    done
+  done
+  mv "$tmp" results/sensor-noise/records.jsonl
 }
 
 # Seconds against PSNR over the stride: non-overlapping (9), 5, 2 and 1.
@@ -240,6 +261,9 @@ cross-scene() {
       VARIANT=$name TRAINING=$training record "$tmp" --model "$model" "${src[@]}" --method net \
         --mode sensor --stride 5
     done
+    # The shipped paper-architecture model at stride 2 as well: lfnet's bar.
+    VARIANT="asp-n2, stride 2" TRAINING=models/asp-n2.training.jsonl record "$tmp" \
+      --model models/asp-n2.ckpt "${src[@]}" --method net --mode sensor --stride 2
   done
   mv "$tmp" results/cross-scene/records.jsonl
 }
@@ -295,7 +319,7 @@ pictures() {
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
   sections=(cross-scene other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
-            stride-sweep branch-ablation loss-ablation lytro phi-switching)
+            sensor-noise stride-sweep branch-ablation loss-ablation lytro phi-switching)
 fi
 for s in "${sections[@]}"; do
   echo "== $s"
