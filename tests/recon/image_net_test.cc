@@ -197,7 +197,8 @@ TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 ou
   nn::set_cnn_precision(net, nn::Precision::kBFloat16);
   // All but the transposed convolutions (ImageNetImpl::set_precision).
   int64_t bf16 = 0, fp32 = 0;
-  for (const auto& p : net->image->parameters()) (p.scalar_type() == torch::kBFloat16 ? bf16 : fp32)++;
+  for (const auto& p : net->image->parameters())
+    (p.scalar_type() == torch::kBFloat16 ? bf16 : fp32)++;
   CHECK(bf16 > 2 * fp32);
   CHECK(fp32 == 2 * 2);  // two levels up, each a weight and a bias
   CHECK(net->pixel_pinv.scalar_type() == torch::kFloat32);

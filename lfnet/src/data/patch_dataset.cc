@@ -163,9 +163,17 @@ PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
     using V = std::decay_t<decltype(v)>;
     return v.empty() ? V() : V(v.begin() + begin, v.begin() + end);  // sigma, photons may be empty
   };
-  return {part(lf),    part(y0),       part(x0),         part(aug),  part(window),
-          part(gamma), part(contrast), part(brightness), part(sigma),
-          part(photons), part(read_electrons)};
+  return {part(lf),
+          part(y0),
+          part(x0),
+          part(aug),
+          part(window),
+          part(gamma),
+          part(contrast),
+          part(brightness),
+          part(sigma),
+          part(photons),
+          part(read_electrons)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {

@@ -33,7 +33,8 @@ nlohmann::json base_record(const optics::Phi& phi, const std::string& method, co
 // Shot and read noise are named in records by the Gaussian sigma of the same variance at the
 // measurements' mean `signal` (docs/acquisition.md), which is what a noise-aware net reads.
 void add_equivalent_sigma(nlohmann::json& record, const EvalOptions& o, double signal) {
-  if (o.effects.shot || o.effects.read) record["equivalent_sigma"] = o.effects.equivalent_sigma(signal);
+  if (o.effects.shot || o.effects.read)
+    record["equivalent_sigma"] = o.effects.equivalent_sigma(signal);
 }
 }  // namespace
 

@@ -69,7 +69,8 @@ std::string setting(const nlohmann::json& r, const std::string& key) {
   }
   if (key == "mode") return r.value("mode", "");
   // Shot and read noise: the Gaussian sigma of the same variance (docs/acquisition.md).
-  if (key == "noise") return fmt("%.3g", number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0)));
+  if (key == "noise")
+    return fmt("%.3g", number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0)));
   if (key == "light_field") return r.value("light_field", "");
   if (key == "scale") return r.value("scale", "");
   if (key == "variant") return r.value("variant", "");
