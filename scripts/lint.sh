@@ -54,7 +54,11 @@ json.dump(out, open(sys.argv[2], "w"))
 PY
 warnings=0
 for f in "${changed[@]}"; do
-  n=$(clang-tidy -p "$db" --quiet "$f" 2>/dev/null | tee /dev/stderr | grep -c ': warning:' || true)
+  # Printed to stderr through the descriptor: `tee /dev/stderr` would reopen a log file that
+  # stderr is redirected to, and truncate it.
+  out=$(clang-tidy -p "$db" --quiet "$f" 2>/dev/null || true)
+  [[ -n $out ]] && printf '%s\n' "$out" >&2
+  n=$(grep -c ': warning:' <<< "$out" || true)
   warnings=$((warnings + n))
 done
 echo "lint: clang-tidy: ${#changed[@]} changed source(s) since $base, $warnings warning(s)"
