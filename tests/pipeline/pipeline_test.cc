@@ -173,6 +173,34 @@ TEST_CASE("shot and read noise are recorded as their equivalent Gaussian sigma",
   }
 }
 
+TEST_CASE("evaluate --effects reads the file as simulate does, --noise as its Gaussian sigma",
+          "[pipeline]") {
+  test::TempDir tmp;
+  io::write_light_field(LightField(torch::rand({1, 5, 5, 18, 18}) * 0.5 + 0.25), tmp / "lf");
+  write_json_file(tmp / "sensor.json", {{"photons_at_white", 40},
+                                        {"shot", {{"model", "gaussian"}}},
+                                        {"read", {{"electrons", 4}}},
+                                        {"gaussian", {{"sigma", 0.05}}}});
+  pipeline::EvaluateRequest q;
+  q.lf = tmp / "lf";
+  q.phi = "asp:2";
+  q.method = "pinv";
+  q.effects = tmp / "sensor.json";
+  auto effects = pipeline::simulation_effects(q.effects, -1, {}, "");
+  const auto with_file = pipeline::evaluate_request(q).record;
+  CHECK(with_file.at("effects") == effects.to_json());
+  const double sigma = with_file.at("equivalent_sigma").get<double>();
+  CHECK(sigma > 0.05);
+  q.noise = 0.2;
+  const auto with_noise = pipeline::evaluate_request(q).record;
+  effects.gaussian->sigma = 0.2;
+  CHECK(with_noise.at("effects") == effects.to_json());
+  CHECK(with_noise.at("equivalent_sigma").get<double>() > sigma);
+  write_json_file(tmp / "bad.json", {{"shot", {{"modle", "gaussian"}}}});
+  q.effects = tmp / "bad.json";
+  CHECK_THROWS_WITH(pipeline::evaluate_request(q), Catch::Contains("bad.json:$.shot.modle"));
+}
+
 TEST_CASE("the dict method codes as its dictionary recommends, unless told otherwise",
           "[pipeline][dict]") {
   dict::Dictionary d;

@@ -30,6 +30,30 @@ nlohmann::json base_record(const optics::Phi& phi, const std::string& method, co
           {"threads", thread_count()},
           {"device", "cpu"}};
 }
+// Every patch of `grid` measured on its own (per_patch mode), in bands of `band` grid rows:
+// memory is N h w floats per patch.
+std::vector<optics::PatchMeasurements> measure_bands(const LightField& truth,
+                                                     const optics::Phi& phi, const PatchGrid& grid,
+                                                     const EvalOptions& options, int64_t band) {
+  std::vector<optics::PatchMeasurements> bands;
+  for (int64_t r0 = 0; r0 < grid.rows(); r0 += band) {
+    bands.push_back(optics::measure_patches(phi, truth.data(), grid,
+                                            optics::SimulationMode::kPerPatch, options.effects,
+                                            options.seed, r0, std::min(grid.rows(), r0 + band)));
+  }
+  return bands;
+}
+
+// The mean of every measurement of `bands`.
+double mean_of(const std::vector<optics::PatchMeasurements>& bands) {
+  double sum = 0, count = 0;
+  for (const auto& b : bands) {
+    sum += b.values.sum().item<double>();
+    count += static_cast<double>(b.values.numel());
+  }
+  return count > 0 ? sum / count : 0.0;
+}
+
 // Shot and read noise are named in records by the Gaussian sigma of the same variance at the
 // measurements' mean `signal` (docs/acquisition.md), which is what a noise-aware net reads.
 void add_equivalent_sigma(nlohmann::json& record, const EvalOptions& o, double signal) {
@@ -74,21 +98,10 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
       estimate = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
     }
   } else {
-    // Simulate every band up front so only the reconstruction is timed; memory is N h w
-    // floats per patch.
-    std::vector<optics::PatchMeasurements> bands;
+    // Simulate every band up front so only the reconstruction is timed.
     const int64_t band = recon::band_rows(grid, ro);
-    for (int64_t r0 = 0; r0 < grid.rows(); r0 += band) {
-      bands.push_back(optics::measure_patches(phi, truth.data(), grid,
-                                              optics::SimulationMode::kPerPatch, options.effects,
-                                              options.seed, r0, std::min(grid.rows(), r0 + band)));
-    }
-    double sum = 0, count = 0;
-    for (const auto& b : bands) {
-      sum += b.values.sum().item<double>();
-      count += static_cast<double>(b.values.numel());
-    }
-    signal = count > 0 ? sum / count : 0.0;
+    const auto bands = measure_bands(truth, phi, grid, options, band);
+    signal = mean_of(bands);
     auto source = [&](int64_t r0, int64_t) { return bands[r0 / band]; };
     clock.reset();
     estimate = recon::reconstruct_patches(phi, grid, source, solver, ro, progress);
@@ -121,10 +134,7 @@ EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
     } else {
       const auto& ro = options.reconstruct;
       const PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);
-      signal = optics::measure_patches(phi, truth.data(), grid, options.mode, options.effects,
-                                       options.seed, 0, grid.rows())
-                   .values.mean()
-                   .item<double>();
+      signal = mean_of(measure_bands(truth, phi, grid, options, recon::band_rows(grid, ro)));
     }
     add_equivalent_sigma(record, options, signal);
   }

@@ -5,12 +5,12 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
-#include "lfnet/core/json.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
@@ -100,9 +100,8 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
   std::optional<optics::SensorOptions> effects;  // read before any work
   if (!a.effects.empty()) {
-    effects = optics::SensorOptions::from_json(read_json_file(a.effects), a.effects + ":$");
-    if (a.noise > 0) effects->gaussian = optics::SensorOptions::Gaussian{a.noise};
-    effects->validate();
+    // As lfnet simulate reads them: the file, then --noise as its Gaussian sigma.
+    effects = simulation_effects(a.effects, a.noise > 0 ? a.noise : -1, SimulateInput{}, "");
   }
   const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
   LFNET_CHECK_AS(ConfigError, method == "dict" || (a.dict_method.empty() && a.dict_options.empty()),

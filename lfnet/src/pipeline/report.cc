@@ -57,6 +57,12 @@ std::string phi_name(const nlohmann::json& r) {
   return r.contains("phi") && r["phi"].is_object() ? r["phi"].value("name", "?") : "?";
 }
 
+// A record's noise: its Gaussian sigma, or with shot and read noise the Gaussian sigma of the
+// same variance (docs/acquisition.md).
+double noise_level(const nlohmann::json& r) {
+  return number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0));
+}
+
 // The value of a setting of a record, as text: method, phi, n, stride, mode, noise,
 // light_field, scale.
 std::string setting(const nlohmann::json& r, const std::string& key) {
@@ -68,9 +74,7 @@ std::string setting(const nlohmann::json& r, const std::string& key) {
     return r.value("whole_image", false) ? "whole image" : std::to_string(r.value("stride", 0));
   }
   if (key == "mode") return r.value("mode", "");
-  // Shot and read noise: the Gaussian sigma of the same variance (docs/acquisition.md).
-  if (key == "noise")
-    return fmt("%.3g", number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0)));
+  if (key == "noise") return fmt("%.3g", noise_level(r));
   if (key == "light_field") return r.value("light_field", "");
   if (key == "scale") return r.value("scale", "");
   if (key == "variant") return r.value("variant", "");
@@ -277,7 +281,7 @@ std::string margins(const Section& s) {
 
 // The value of a sweep's setting in a record, as a number.
 double sweep_value(const nlohmann::json& r, const std::string& key) {
-  if (key == "noise") return number(r, "equivalent_sigma", number(r, "noise_sigma", 0.0));
+  if (key == "noise") return noise_level(r);
   if (key == "n") return number(r, "measurements", 0.0);
   return number(r, key.c_str(), 0.0);
 }
