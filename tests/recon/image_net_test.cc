@@ -213,3 +213,43 @@ TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 ou
   nn::set_cnn_precision(net, nn::Precision::kFloat32);
   for (const auto& p : net->image->parameters()) CHECK(p.scalar_type() == torch::kFloat32);
 }
+
+TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one did",
+          "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto narrow_options = image_options(*phi);
+  narrow_options.image.blocks = 2;
+  nn::LightFieldNet narrow(narrow_options);
+  narrow->set_phi(phi->pixel_weights(0, 0, 1, 1));
+  randomise(narrow, 12);
+  auto wide_options = narrow_options;
+  wide_options.image.channels = 10;
+  wide_options.image.noise_input = true;  // the input convolution gains an input channel too
+  nn::LightFieldNet wide(wide_options);
+  wide->set_phi(phi->pixel_weights(0, 0, 1, 1));
+  randomise(wide, 13);
+  const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 14));
+  torch::NoGradGuard no_grad;
+  const auto want = narrow->forward_image(sensor.unsqueeze(0));
+  CHECK((wide->forward_image(sensor.unsqueeze(0), 0, 0.1) - want).abs().max().item<double>() >
+        1e-2);
+  int64_t widened = 0;
+  for (const auto& p : narrow->image->named_parameters()) {
+    auto dst = wide->image->named_parameters()[p.key()];
+    INFO(p.key());
+    REQUIRE(nn::embed_narrow_parameter(p.key(), p.value(), dst));
+    widened += dst.sizes() != p.value().sizes() ? 1 : 0;
+  }
+  // All but the output's bias, one per view either way.
+  CHECK(widened == static_cast<int64_t>(narrow->image->parameters().size()) - 1);
+  // Whatever the new channels hold and whatever the noise input says.
+  for (double sigma : {0.0, 0.3}) {
+    lfnet::test::require_close(wide->forward_image(sensor.unsqueeze(0), 0, sigma), want, 1e-5);
+  }
+  // A wider parameter does not fit in a narrower one, which stays as it was.
+  auto w = narrow->image->named_parameters()["enc0_0.weight"];
+  const auto before = w.clone();
+  CHECK_FALSE(nn::embed_narrow_parameter("enc0_0.weight",
+                                         wide->image->named_parameters()["enc0_0.weight"], w));
+  CHECK(torch::equal(w, before));
+}

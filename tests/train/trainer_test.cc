@@ -3,6 +3,7 @@
 #include <torch/torch.h>
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <tuple>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "lfnet/core/error.h"
+#include "lfnet/train/checkpoint.h"
 #include "support/test_support.h"
 #include "synthetic.h"
 
@@ -443,6 +445,55 @@ TEST_CASE("Phi switching carries the autoencoder's first layer to the new Phi",
                  run_info(lfnet::test::synthetic_phi_spec("random", 3, 30)));
   CHECK_THROWS_WITH(fourth.init_from(lfnet::train::last_checkpoint_path(dir.path().string())),
                     Catch::Contains("ae.fc3.weight"));
+}
+
+TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it computed",
+          "[train][trainer]") {
+  lfnet::test::TempDir dir;
+  // Two measurements per pixel of 3 x 3 views, weights positive like a camera's.
+  torch::manual_seed(49);
+  const auto weights = torch::rand({2, 3, 3, 1, 1}) + 0.1;
+  lfnet::nn::NetworkOptions o;
+  o.architecture = lfnet::nn::Architecture::kLfnet;
+  o.measurements = 2;
+  o.patch = {3, 3, 16, 16};
+  o.image.channels = 4;
+  o.image.levels = 2;
+  o.image.blocks = 1;
+  auto narrow = make_net(o, weights, 50);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : narrow->image->parameters()) p.copy_(torch::randn_like(p) * 0.3);
+  }
+  lfnet::train::Checkpoint ck;
+  ck.network = o.to_json();
+  ck.phi = {{"name", "asp"}, {"n", 2}};
+  ck.model = lfnet::train::module_state(*narrow);
+  const auto path = dir / "narrow.ckpt";
+  lfnet::train::save_checkpoint(ck, path);
+
+  auto wide_options = o;
+  wide_options.image.channels = 6;
+  auto wide = make_net(wide_options, weights, 51);
+  Trainer t(wide, quick_options("joint", "", 1), run_info(ck.phi));
+  auto report = t.init_from(path);
+  // All but the output's bias (one per view either way), which is copied.
+  CHECK(report.widened.size() == narrow->image->parameters().size() - 1);
+  CHECK(std::find(report.copied.begin(), report.copied.end(), "image.output.bias") !=
+        report.copied.end());
+  CHECK(report.reinitialised.empty());
+  CHECK(t.state().origin["all"]["report"]["widened"].size() == report.widened.size());
+  auto sensor = torch::rand({1, 2, 16, 24});
+  torch::NoGradGuard no_grad;
+  lfnet::test::require_close(wide->forward_image(sensor), narrow->forward_image(sensor), 1e-5);
+
+  // Narrowing is not finetuning.
+  Trainer back(make_net(o, weights, 52), quick_options("joint", "", 1), run_info(ck.phi));
+  auto wide_ck = ck;
+  wide_ck.network = wide_options.to_json();
+  wide_ck.model = lfnet::train::module_state(*wide);
+  lfnet::train::save_checkpoint(wide_ck, dir / "wide.ckpt");
+  CHECK_THROWS_WITH(back.init_from(dir / "wide.ckpt"), Catch::Contains("image.input.weight"));
 }
 
 // Not run by default: train_tests "[experiment]" prints the validation PSNR of each residual

@@ -63,6 +63,27 @@ std::vector<ImageTile> image_tiles(const ImageNetOptions& options, int64_t heigh
   return tiles;
 }
 
+bool embed_narrow_parameter(const std::string& name, const torch::Tensor& src, torch::Tensor& dst) {
+  if (src.dim() != dst.dim()) return false;
+  for (int64_t d = 0; d < src.dim(); ++d) {
+    if (src.size(d) > dst.size(d)) return false;
+  }
+  torch::NoGradGuard no_grad;
+  auto lead = dst;
+  for (int64_t d = 0; d < src.dim(); ++d) lead = lead.narrow(d, 0, src.size(d));
+  lead.copy_(src);
+  if (src.dim() == 4) {
+    // Convolutions hold (out, in, kh, kw); transposed ones ("up") hold (in, out, kh, kw).
+    const bool transposed = name.rfind("up", 0) == 0;
+    const int64_t out_dim = transposed ? 1 : 0, in_dim = transposed ? 0 : 1;
+    const int64_t old_in = src.size(in_dim);
+    dst.narrow(out_dim, 0, src.size(out_dim))
+        .narrow(in_dim, old_in, dst.size(in_dim) - old_in)
+        .zero_();
+  }
+  return true;
+}
+
 namespace {
 torch::nn::Conv2d conv3(int64_t in, int64_t out) {
   return torch::nn::Conv2d(torch::nn::Conv2dOptions(in, out, 3).padding(1));

@@ -183,7 +183,10 @@ EpochRecord EpochRecord::from_json(const nlohmann::json& j) {
 }
 
 nlohmann::json InitReport::to_json() const {
-  return {{"copied", copied.size()}, {"mapped", mapped}, {"reinitialised", reinitialised}};
+  return {{"copied", copied.size()},
+          {"mapped", mapped},
+          {"widened", widened},
+          {"reinitialised", reinitialised}};
 }
 
 std::string last_checkpoint_path(const std::string& dir) {
@@ -440,6 +443,12 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
         }
         continue;
       }
+      const std::string image_prefix = "image.";
+      if (src.sizes() != p.value().sizes() && name.rfind(image_prefix, 0) == 0 &&
+          nn::embed_narrow_parameter(name.substr(image_prefix.size()), src, p.value())) {
+        report.widened.push_back(name);
+        continue;
+      }
       if (src.sizes() != p.value().sizes()) {
         std::ostringstream m;
         m << what << ": " << name << " is " << src.sizes() << " there but " << p.value().sizes()
@@ -451,7 +460,7 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
       report.copied.push_back(name);
     }
   }
-  if (report.copied.empty() && report.mapped.empty()) {
+  if (report.copied.empty() && report.mapped.empty() && report.widened.empty()) {
     throw CheckpointError(what + " shares no parameters" +
                           (prefix.empty() ? "" : " named " + prefix + "*") + " with this network");
   }

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "lfnet/core/json.h"
@@ -61,6 +62,15 @@ struct ImageTile {
 // row by row; `step` receives the rounded tile side.
 std::vector<ImageTile> image_tiles(const ImageNetOptions& options, int64_t height, int64_t width,
                                    int64_t tile, int64_t* step = nullptr);
+
+// Finetuning a wider U-Net from a narrower one of the same depth (train --init): copies the
+// narrow parameter `src` of the layer `name` (relative to the U-Net, e.g. "enc0_1.weight") into
+// the leading channels of `dst`, and zeroes the weights by which those channels would read the
+// new ones. Embedding every parameter so makes the wide net compute exactly what the narrow one
+// did; the new channels keep their fresh initialisation and learn from there. An input
+// convolution that gains input channels (noise_input switched on) is embedded the same way.
+// Returns false, leaving `dst` alone, when `src` does not fit in `dst`.
+bool embed_narrow_parameter(const std::string& name, const torch::Tensor& src, torch::Tensor& dst);
 
 // The U-Net: (B, in, H, W) -> (B, out, H, W) with H and W multiples of options.multiple().
 // Its last convolution starts at zero, so an untrained net adds nothing to its input's estimate.
