@@ -33,6 +33,7 @@ struct Outer {
   std::vector<int64_t> steps = {1, 2};
   bool on = false;
   Colour colour = Colour::kRed;
+  std::vector<Colour> palette = {Colour::kGreen};
   Inner inner;
   std::optional<Inner> extra;
   template <typename Fields>
@@ -42,6 +43,7 @@ struct Outer {
     f("steps", steps);
     f("on", on);
     f("colour", colour);
+    f("palette", palette);
     f("inner", inner);
     f("extra", extra);
   }
@@ -61,10 +63,12 @@ TEST_CASE("a field list writes every field and reads back what it wrote", "[core
   const sample::Outer defaults;
   const auto j = lfnet::fields_to_json(defaults);
   CHECK(j == nlohmann::json::parse(R"({"rate": 0.5, "name": "a", "steps": [1, 2], "on": false,
-                                      "colour": "red", "inner": {"size": 3}})"));
+                                      "colour": "red", "palette": ["green"],
+                                      "inner": {"size": 3}})"));
   sample::Outer changed;
   changed.rate = 2.25;
   changed.colour = sample::Colour::kGreen;
+  changed.palette = {sample::Colour::kRed, sample::Colour::kGreen, sample::Colour::kRed};
   changed.inner.size = 7;
   changed.extra = sample::Inner{9};
   const auto written = lfnet::fields_to_json(changed);
@@ -72,6 +76,8 @@ TEST_CASE("a field list writes every field and reads back what it wrote", "[core
   const auto back = sample::read(written);
   CHECK(back.rate == 2.25);
   CHECK(back.colour == sample::Colour::kGreen);
+  CHECK(written["palette"] == nlohmann::json{"red", "green", "red"});
+  CHECK((back.palette == changed.palette));
   CHECK(back.inner.size == 7);
   REQUIRE(back.extra.has_value());
   CHECK(back.extra->size == 9);
@@ -96,6 +102,13 @@ TEST_CASE("reading a field list keeps defaults and refuses what is wrong with it
                     Catch::Contains("$.x.on") && Catch::Contains("true or false"));
   CHECK_THROWS_WITH(sample::read(nlohmann::json::parse(R"({"colour": "blue"})")),
                     Catch::Contains("$.x.colour") && Catch::Contains("red, green"));
+  CHECK(sample::read(nlohmann::json::parse(R"({"palette": []})")).palette.empty());
+  CHECK_THROWS_WITH(sample::read(nlohmann::json::parse(R"({"palette": ["red", "blue"]})")),
+                    Catch::Contains("$.x.palette[1]") && Catch::Contains("red, green"));
+  CHECK_THROWS_WITH(sample::read(nlohmann::json::parse(R"({"palette": "red"})")),
+                    Catch::Contains("$.x.palette") && Catch::Contains("list"));
+  CHECK_THROWS_WITH(sample::read(nlohmann::json::parse(R"({"palette": ["red", 2]})")),
+                    Catch::Contains("$.x.palette[1]") && Catch::Contains("string"));
   CHECK_THROWS_WITH(sample::read(nlohmann::json::parse(R"({"colour": 1})")),
                     Catch::Contains("$.x.colour") && Catch::Contains("string"));
   CHECK_THROWS_WITH(sample::read(nlohmann::json::parse(R"({"inner": 3})")),

@@ -253,3 +253,28 @@ TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one d
                                          wide->image->named_parameters()["enc0_0.weight"], w));
   CHECK(torch::equal(w, before));
 }
+
+TEST_CASE("a shallow U-Net's weights start a deeper one that computes what the shallow one did",
+          "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto shallow = image_net(*phi, 2);
+  randomise(shallow, 15);
+  auto deep = image_net(*phi, 3);
+  randomise(deep, 16);
+  const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 17));
+  torch::NoGradGuard no_grad;
+  const auto want = shallow->forward_image(sensor.unsqueeze(0));
+  auto deep_params = deep->image->named_parameters();
+  for (const auto& p : shallow->image->named_parameters()) {
+    INFO(p.key());
+    REQUIRE(deep_params.contains(p.key()));
+    deep_params[p.key()].copy_(p.value());
+  }
+  // The shallow net's parameters alone: its bottom level now has a decoder and a level below.
+  CHECK((deep->forward_image(sensor.unsqueeze(0)) - want).abs().max().item<double>() > 1e-2);
+  const auto names = deep->image->start_new_levels(2);
+  CHECK(names ==
+        std::vector<std::string>{"up1.weight", "up1.bias", "dec1_0.weight", "dec1_0.bias"});
+  lfnet::test::require_close(deep->forward_image(sensor.unsqueeze(0)), want, 1e-5);
+  CHECK_THROWS(deep->image->start_new_levels(3));
+}

@@ -487,6 +487,21 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
   torch::NoGradGuard no_grad;
   lfnet::test::require_close(wide->forward_image(sensor), narrow->forward_image(sensor), 1e-5);
 
+  // A deeper U-Net starts from the shallow one's weights and computes what it did.
+  auto deep_options = o;
+  deep_options.image.levels = 3;
+  auto deep = make_net(deep_options, weights, 53);
+  Trainer d(deep, quick_options("joint", "", 1), run_info(ck.phi));
+  auto deep_report = d.init_from(path);
+  CHECK(deep_report.deepened == std::vector<std::string>{"image.up1.weight", "image.up1.bias",
+                                                         "image.dec1_0.weight",
+                                                         "image.dec1_0.bias"});
+  // The new bottom level and the down-sampling to it keep their fresh initialisation.
+  CHECK(deep_report.reinitialised ==
+        std::vector<std::string>{"image.down1.weight", "image.down1.bias", "image.enc2_0.weight",
+                                 "image.enc2_0.bias"});
+  lfnet::test::require_close(deep->forward_image(sensor), narrow->forward_image(sensor), 1e-5);
+
   // Narrowing is not finetuning.
   Trainer back(make_net(o, weights, 52), quick_options("joint", "", 1), run_info(ck.phi));
   auto wide_ck = ck;

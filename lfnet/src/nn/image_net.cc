@@ -125,6 +125,28 @@ void ImageNetImpl::set_precision(torch::Dtype dtype) {
   for (auto& up : up_) up->to(torch::kFloat32);
 }
 
+std::vector<std::string> ImageNetImpl::start_new_levels(int64_t from_levels) {
+  LFNET_CHECK(from_levels >= 1 && from_levels < options_.levels, "start_new_levels: ", from_levels,
+              " levels is not fewer than this U-Net's ", options_.levels);
+  torch::NoGradGuard no_grad;
+  const int64_t l = from_levels - 1;  // the shallow net's bottom level
+  const std::string up = "up" + std::to_string(l);
+  up_[l]->weight.zero_();
+  up_[l]->bias.zero_();
+  std::vector<std::string> names = {up + ".weight", up + ".bias"};
+  for (size_t b = 0; b < decoder_[l].size(); ++b) {
+    auto& conv = decoder_[l][b];
+    conv->weight.zero_();
+    const int64_t centre = conv->weight.size(2) / 2;
+    for (int64_t c = 0; c < conv->weight.size(0); ++c) conv->weight[c][c][centre][centre] = 1;
+    conv->bias.zero_();
+    const std::string name = "dec" + std::to_string(l) + "_" + std::to_string(b);
+    names.push_back(name + ".weight");
+    names.push_back(name + ".bias");
+  }
+  return names;
+}
+
 torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
   const int64_t m = options_.multiple();
   LFNET_CHECK(x.dim() == 4 && x.size(2) % m == 0 && x.size(3) % m == 0,

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/stages.h"
@@ -18,27 +19,20 @@ void EvaluationConfig::read(JsonReader& r) {
   }
   r.get("methods", methods);
   r.get("strides", strides);
-  std::vector<std::string> mode_names;
-  if (r.get("modes", mode_names)) {
-    modes.clear();
-    for (size_t i = 0; i < mode_names.size(); ++i) {
-      try {
-        modes.push_back(optics::parse_simulation_mode(mode_names[i]));
-      } catch (const ConfigError& e) {
-        throw ConfigError(r.path_of("modes") + "[" + std::to_string(i) + "]: " + e.what());
-      }
-    }
-  }
+  FieldReader{r}("modes", modes);
   r.get("noise", noise);
   r.get("model_stage", model_stage);
   r.finish();
 }
 
 nlohmann::json EvaluationConfig::to_json() const {
-  std::vector<std::string> mode_names;
-  for (const auto mode : modes) mode_names.push_back(optics::to_string(mode));
-  return {{"data", data.to_json()}, {"methods", methods}, {"strides", strides},
-          {"modes", mode_names},    {"noise", noise},     {"model_stage", model_stage}};
+  nlohmann::json out = {{"data", data.to_json()},
+                        {"methods", methods},
+                        {"strides", strides},
+                        {"noise", noise},
+                        {"model_stage", model_stage}};
+  FieldWriter{out}("modes", modes);
+  return out;
 }
 
 void apply_override(nlohmann::json& config, const std::string& text) {

@@ -67,9 +67,10 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
     trainer.resume(resume);
   } else if (!init.empty()) {
     auto report = trainer.init_from(init);
-    spdlog::info("initialised from {}: {} copied, {} mapped, {} widened, {} re-initialised", init,
-                 report.copied.size(), report.mapped.size(), report.widened.size(),
-                 report.reinitialised.size());
+    spdlog::info(
+        "initialised from {}: {} copied, {} mapped, {} widened, {} deepened, {} re-initialised",
+        init, report.copied.size(), report.mapped.size(), report.widened.size(),
+        report.deepened.size(), report.reinitialised.size());
   } else if (stage.name == "joint") {
     const std::string ae = (fs::path(models) / "ae.ckpt").string();
     const std::string cnn = (fs::path(models) / "cnn.ckpt").string();

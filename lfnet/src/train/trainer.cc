@@ -3,6 +3,7 @@
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <optional>
@@ -186,6 +187,7 @@ nlohmann::json InitReport::to_json() const {
   return {{"copied", copied.size()},
           {"mapped", mapped},
           {"widened", widened},
+          {"deepened", deepened},
           {"reinitialised", reinitialised}};
 }
 
@@ -458,6 +460,17 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
       }
       p.value().copy_(src);
       report.copied.push_back(name);
+    }
+  }
+  if (!net_->image.is_empty() && ck.network.contains("image")) {
+    const int64_t from_levels = ck.network["image"].value("levels", int64_t{0});
+    if (from_levels >= 1 && from_levels < net_->options().image.levels) {
+      for (const auto& name : net_->image->start_new_levels(from_levels)) {
+        const std::string full = "image." + name;
+        auto& re = report.reinitialised;
+        re.erase(std::remove(re.begin(), re.end(), full), re.end());
+        report.deepened.push_back(full);
+      }
     }
   }
   if (report.copied.empty() && report.mapped.empty() && report.widened.empty()) {

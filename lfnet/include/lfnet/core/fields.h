@@ -14,7 +14,8 @@
 // is present, however empty its object, and written only when set. An enum field (a closed set) is
 // written by its name: its namespace provides `std::string to_string(E)` and `E from_string(const
 // std::string&, E)` (found by argument-dependent lookup; the second argument only picks the
-// overload), which throws ConfigError naming the known values.
+// overload), which throws ConfigError naming the known values. A list of enums is a list of
+// names, and an unknown one is refused with its index, e.g. "$.evaluation.modes[1]: ...".
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -23,6 +24,7 @@
 #include <string>
 #include <type_traits>
 #include <utility>
+#include <vector>
 
 #include "lfnet/core/json.h"
 
@@ -46,6 +48,12 @@ template <typename T>
 struct IsOptional : std::false_type {};
 template <typename T>
 struct IsOptional<std::optional<T>> : std::true_type {};
+
+// True for lists of enums, read and written as lists of names.
+template <typename T>
+struct IsEnumVector : std::false_type {};
+template <typename T, typename A>
+struct IsEnumVector<std::vector<T, A>> : std::is_enum<T> {};
 
 }  // namespace detail
 
@@ -76,6 +84,18 @@ struct FieldReader {
       } catch (const ConfigError& e) {
         throw ConfigError(reader.path_of(key) + ": " + e.what());
       }
+    } else if constexpr (detail::IsEnumVector<T>::value) {
+      std::vector<std::string> names;
+      if (!reader.get(key, names)) return;
+      T values;
+      for (size_t i = 0; i < names.size(); ++i) {
+        try {
+          values.push_back(from_string(names[i], typename T::value_type{}));
+        } catch (const ConfigError& e) {
+          throw ConfigError(reader.path_of(key) + "[" + std::to_string(i) + "]: " + e.what());
+        }
+      }
+      value = std::move(values);
     } else {
       reader.get(key, value);
     }
@@ -104,6 +124,10 @@ struct FieldWriter {
       if (value) out[key] = fields_to_json(*value);
     } else if constexpr (std::is_enum_v<T>) {
       out[key] = to_string(value);
+    } else if constexpr (detail::IsEnumVector<T>::value) {
+      auto names = nlohmann::json::array();
+      for (const auto v : value) names.push_back(to_string(v));
+      out[key] = std::move(names);
     } else {
       out[key] = value;
     }

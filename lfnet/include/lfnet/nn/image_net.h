@@ -82,6 +82,12 @@ class ImageNetImpl : public torch::nn::Module {
   // transposed ones: LibTorch 1.13's oneDNN path runs a bfloat16 transposed convolution as a
   // plain one, so those stay float32 and convert their input and output.
   void set_precision(torch::Dtype dtype);
+  // Finetuning a deeper U-Net from a shallower one of `from_levels` levels (train --init), once
+  // the shallow net's parameters are in place: the up-sampling from the shallow net's bottom
+  // level starts at zero and that level's decoder blocks as the identity, so the deeper net
+  // computes what the shallow one did (its encoder output, through ReLU, is not negative) and
+  // the new levels below learn from there. Returns the names of the parameters it set.
+  std::vector<std::string> start_new_levels(int64_t from_levels);
 
   const ImageNetOptions& options() const { return options_; }
 

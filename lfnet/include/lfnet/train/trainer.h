@@ -179,6 +179,7 @@ struct InitReport {
   std::vector<std::string> copied;         // taken as they were
   std::vector<std::string> mapped;         // carried over to the new Phi (ae.fc1.weight)
   std::vector<std::string> widened;        // a narrower U-Net's layer in a wider one's
+  std::vector<std::string> deepened;       // set so a deeper U-Net's new levels add nothing
   std::vector<std::string> reinitialised;  // left at their fresh initialisation
   nlohmann::json to_json() const;
 };
@@ -200,7 +201,8 @@ class Trainer {
   // differs, ae.fc1.weight (which reads measurements) is mapped to the new Phi when both Phis
   // have one phase, and re-initialised otherwise (docs/training.md). A narrower lfnet U-Net of
   // the same depth is embedded in a wider one (nn::embed_narrow_parameter), so the wider net
-  // starts from what the narrow one computed. Other shape mismatches are a CheckpointError.
+  // starts from what the narrow one computed; a shallower one starts a deeper one the same way
+  // (ImageNetImpl::start_new_levels). Other shape mismatches are a CheckpointError.
   InitReport init_from(const std::string& path, const std::string& prefix = "");
 
   // The joint stage's start: the autoencoder from one checkpoint, the CNN from another.
