@@ -229,13 +229,7 @@ TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[tra
   lfnet::test::TempDir dir;
   for (int64_t period : {1, 3}) {
     INFO("period " << period);
-    NetworkOptions o;
-    o.architecture = lfnet::nn::Architecture::kLfnet;
-    o.measurements = 2;
-    o.patch = {3, 3, 8, 8};
-    o.image.channels = 4;
-    o.image.levels = 2;
-    o.image.blocks = 1;
+    auto o = lfnet::test::small_image_options(8, 4);
     o.image.noise_input = period > 1;
     torch::manual_seed(period);
     LightFieldNet net(o);
@@ -247,7 +241,7 @@ TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[tra
     const auto path = dir / ("lfnet" + std::to_string(period) + ".ckpt");
     lfnet::train::save_checkpoint(checkpoint_of(net, {{"name", "mask"}}), path);
     auto loaded = lfnet::train::build_net(lfnet::train::load_checkpoint(path));
-    auto y = torch::rand({4, 2 * 64});
+    auto y = torch::rand({4, o.measurements * o.patch.height * o.patch.width});
     auto phase = torch::arange(4, torch::kInt64).remainder(period * period);
     auto noise = torch::full({4}, 0.1);
     CHECK(torch::equal(loaded->forward(y, phase, noise), net->forward(y, phase, noise)));

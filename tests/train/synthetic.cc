@@ -76,6 +76,17 @@ nn::NetworkOptions small_net_options(const std::string& branches) {
   return o;
 }
 
+nn::NetworkOptions small_image_options(int64_t side, int64_t channels) {
+  nn::NetworkOptions o;
+  o.architecture = nn::Architecture::kLfnet;
+  o.measurements = 2;
+  o.patch = {3, 3, side, side};
+  o.image.channels = channels;
+  o.image.levels = 2;
+  o.image.blocks = 1;
+  return o;
+}
+
 nlohmann::json synthetic_phi_spec(const std::string& name, int64_t n, uint64_t seed) {
   return {{"name", name}, {"n", n},       {"rows", 3},
           {"cols", 3},    {"seed", seed}, {"params", nlohmann::json::object()}};

@@ -30,6 +30,10 @@ std::unique_ptr<train::InMemoryBatchSource> make_source(const torch::Tensor& pat
 // The small geometry of most train tests: 3 x 3 views of 5 x 5 pixels, N = 2, a small net.
 nn::NetworkOptions small_net_options(const std::string& branches = "net");
 
+// A small net of the lfnet architecture: 2 measurements of 3 x 3 views, crops of side x side,
+// a U-Net of two levels of one block with `channels` features.
+nn::NetworkOptions small_image_options(int64_t side, int64_t channels);
+
 // A Phi spec JSON naming the synthetic Phi.
 nlohmann::json synthetic_phi_spec(const std::string& name, int64_t n, uint64_t seed);
 

@@ -453,13 +453,7 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
   // Two measurements per pixel of 3 x 3 views, weights positive like a camera's.
   torch::manual_seed(49);
   const auto weights = torch::rand({2, 3, 3, 1, 1}) + 0.1;
-  lfnet::nn::NetworkOptions o;
-  o.architecture = lfnet::nn::Architecture::kLfnet;
-  o.measurements = 2;
-  o.patch = {3, 3, 16, 16};
-  o.image.channels = 4;
-  o.image.levels = 2;
-  o.image.blocks = 1;
+  auto o = lfnet::test::small_image_options(16, 4);
   auto narrow = make_net(o, weights, 50);
   {
     torch::NoGradGuard no_grad;
@@ -546,13 +540,7 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
 
 TEST_CASE("the lfnet architecture trains on crops, from its pseudo-inverse upward", "[train]") {
   lfnet::test::TempDir dir;
-  lfnet::nn::NetworkOptions o;
-  o.architecture = lfnet::nn::Architecture::kLfnet;
-  o.measurements = 2;
-  o.patch = {3, 3, 8, 8};
-  o.image.channels = 8;
-  o.image.levels = 2;
-  o.image.blocks = 1;
+  auto o = lfnet::test::small_image_options(8, 8);
   const int64_t n = 384;
   auto patches = lfnet::test::smooth_patches(n, o.patch, 4);  // (n, 1, 3, 3, 8, 8)
   auto gen = torch::make_generator<at::CPUGeneratorImpl>(5);
