@@ -1,13 +1,16 @@
 #!/usr/bin/env bash
-# The shipped models of lfnet's architecture (docs/models.md), each a finetuning of
+# The shipped models of lfnet's architecture (docs/models.md). All but the last step finetune
 # models/lfnet-asp-n2-first20.ckpt (the paper scale of configs/models/lfnet-asp-n2.json, 20
-# epochs; `lfnet train --init`) at the paper scale of its config:
-#   lfnet-asp-n2   configs/models/lfnet-asp-n2.json   -> models/lfnet-asp-n2.ckpt: 30 more epochs
-#                  at lr 4e-4 on new random scenes and crops (seeds 9000 and 11)
-#   lfnet-asp-n15  configs/models/lfnet-asp-n15.json  -> models/lfnet-asp-n15.ckpt: across Phi
-#   lfnet-mask-n2  configs/models/lfnet-mask-n2.json  -> models/lfnet-mask-n2.ckpt  (10 epochs at
-#                  lr 5e-4; the U-Net reads the per-pixel pseudo-inverse, so its weights fit
-#                  every Phi of the same view grid)
+# epochs; `lfnet train --init`) at the paper scale of their config:
+#   lfnet-asp-n2-c32  configs/models/lfnet-asp-n2.json -> models/lfnet-asp-n2-c32.ckpt: 30 more
+#                     epochs at lr 4e-4 on new random scenes and crops (seeds 9000 and 11)
+#   lfnet-asp-n2      the same config -> models/lfnet-asp-n2.ckpt: lfnet-asp-n2-c32 widened from
+#                     32 to 48 channels (train --init embeds the narrow U-Net in the wide one)
+#                     and trained 14 more epochs at lr 3e-4 on new scenes and crops (15000, 15)
+#   lfnet-asp-n15     configs/models/lfnet-asp-n15.json -> models/lfnet-asp-n15.ckpt: across Phi
+#   lfnet-mask-n2     configs/models/lfnet-mask-n2.json -> models/lfnet-mask-n2.ckpt  (10 epochs
+#                     at lr 5e-4; the U-Net reads the per-pixel pseudo-inverse, so its weights
+#                     fit every Phi of the same view grid)
 # models/lfnet-asp-n2-first20.ckpt itself: `CONFIG=configs/models/lfnet-asp-n2.json
 # MODEL=models/lfnet-asp-n2-first20.ckpt scripts/paper-scale.sh` (20 epochs of 8,000 crops).
 # Resumable: a model that exists is skipped, an interrupted run continues from its folder
@@ -19,19 +22,32 @@ cd "$(dirname "$0")/.."
 source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 threads=${LFNET_THREADS:-1}
-init=models/lfnet-asp-n2-first20.ckpt
-order=(lfnet-asp-n2 lfnet-asp-n15 lfnet-mask-n2)
+first20=models/lfnet-asp-n2-first20.ckpt
+order=(lfnet-asp-n2-c32 lfnet-asp-n2 lfnet-asp-n15 lfnet-mask-n2)
+declare -A config=(
+  [lfnet-asp-n2-c32]=configs/models/lfnet-asp-n2.json
+  [lfnet-asp-n2]=configs/models/lfnet-asp-n2.json
+  [lfnet-asp-n15]=configs/models/lfnet-asp-n15.json
+  [lfnet-mask-n2]=configs/models/lfnet-mask-n2.json
+)
+declare -A init=(
+  [lfnet-asp-n2-c32]=$first20
+  [lfnet-asp-n2]=models/lfnet-asp-n2-c32.ckpt
+  [lfnet-asp-n15]=$first20
+  [lfnet-mask-n2]=$first20
+)
 declare -A finetune=(
-  [lfnet-asp-n2]="--set training.epochs=30 --set training.lr=0.0004 --set data.random_seed=9000
-                  --set dataset.seed=11"
+  [lfnet-asp-n2-c32]="--set training.epochs=30 --set training.lr=0.0004
+                      --set data.random_seed=9000 --set dataset.seed=11"
+  [lfnet-asp-n2]="--set network.image.channels=48 --set training.epochs=14
+                  --set training.lr=0.0003 --set data.random_seed=15000 --set dataset.seed=15"
   [lfnet-asp-n15]="--set training.epochs=10 --set training.lr=0.0005"
   [lfnet-mask-n2]="--set training.epochs=10 --set training.lr=0.0005"
 )
 names=("$@")
 [[ ${#names[@]} -eq 0 ]] && names=("${order[@]}")
 for name in "${names[@]}"; do
-  config=configs/models/$name.json
-  [[ -f $config ]] || { echo "unknown model '$name' (known: ${order[*]})" >&2; exit 2; }
+  [[ -n ${config[$name]:-} ]] || { echo "unknown model '$name' (known: ${order[*]})" >&2; exit 2; }
   model=models/$name.ckpt
   out=out/lfnet-models/$name
   model_exists "$name" "$model" && continue
@@ -39,12 +55,13 @@ for name in "${names[@]}"; do
     "$lfnet" --threads "$threads" train --resume "$out"
   else
     # shellcheck disable=SC2086
-    "$lfnet" --threads "$threads" train "$config" --scale paper --init "$init" \
+    "$lfnet" --threads "$threads" train "${config[$name]}" --scale paper --init "${init[$name]}" \
       ${finetune[$name]} --out "$out"
   fi
   keep_model "$out" "$model"
-  if [[ $name == lfnet-asp-n2 ]]; then  # its log holds all 50 epochs
-    cat "${init%.ckpt}.training.jsonl" "$out/training.jsonl" > "${model%.ckpt}.training.jsonl"
+  if [[ $name == lfnet-asp-n2* ]]; then  # the log holds every epoch since the first
+    cat "${init[$name]%.ckpt}.training.jsonl" "$out/training.jsonl" \
+      > "${model%.ckpt}.training.jsonl"
   else
     cp "$out/training.jsonl" "${model%.ckpt}.training.jsonl"
   fi
