@@ -3,6 +3,7 @@
 
 #include <catch2/catch.hpp>
 
+#include <cmath>
 #include <map>
 #include <set>
 
@@ -128,6 +129,72 @@ TEST_CASE("random scene options are validated and parsed strictly", "[scene][ran
   CHECK(spec.defocus);
   CHECK(spec.layers[0].slanted());
   CHECK(spec.layers.back().name.rfind("occluder", 0) == 0);
+}
+
+TEST_CASE("random scenes draw man-made frames in front when asked", "[scene][random]") {
+  RandomSceneOptions plain;
+  plain.height = 96;
+  plain.width = 128;
+  plain.color = false;
+  RandomSceneOptions framed = plain;
+  framed.frame_probability = 1.0;
+  auto starts = [](const std::string& name, const char* prefix) {
+    return name.rfind(prefix, 0) == 0;
+  };
+  const int scenes = 40;
+  int flat = 0, walls = 0, visible = 0;
+  for (int seed = 0; seed < scenes; ++seed) {
+    INFO("seed " << seed);
+    const SceneSpec spec = random_scene(static_cast<uint64_t>(seed), framed);
+    const lfnet::scene::LayerSpec* posts = nullptr;
+    const lfnet::scene::LayerSpec* rails = nullptr;
+    std::vector<nlohmann::json> others;
+    for (size_t i = 0; i < spec.layers.size(); ++i) {
+      const auto& layer = spec.layers[i];
+      if (i > 0) CHECK(layer.disparity >= spec.layers[i - 1].disparity - 1e-9);
+      if (starts(layer.name, "frame-posts")) {
+        posts = &layer;
+      } else if (starts(layer.name, "frame-rails")) {
+        rails = &layer;
+      } else if (starts(layer.name, "wall")) {
+        ++walls;
+        CHECK(layer.shape.invert);
+        CHECK(layer.disparity >= spec.layers[0].disparity);
+      } else {
+        others.push_back({layer.shape.to_json(), layer.disparity});
+      }
+    }
+    REQUIRE(posts != nullptr);
+    REQUIRE(rails != nullptr);
+    // One frame: the same depth, texture and crossing point, bars at right angles.
+    CHECK(posts->disparity == rails->disparity);
+    CHECK(posts->disparity >= spec.layers[0].disparity);
+    CHECK(posts->disparity <= framed.max_disparity);
+    CHECK(posts->texture.to_json() == rails->texture.to_json());
+    CHECK(rails->shape.angle - posts->shape.angle == Approx(90.0).margin(0.01));  // specs keep 5 digits
+    CHECK(posts->shape.center->x == rails->shape.center->x);
+    if (posts->texture.kind == lfnet::scene::TextureKind::kConstant) ++flat;
+    // The frame is drawn after everything else: the rest of the scene is the plain one.
+    std::vector<nlohmann::json> plain_layers;
+    for (const auto& layer : random_scene(static_cast<uint64_t>(seed), plain).layers) {
+      plain_layers.push_back({layer.shape.to_json(), layer.disparity});
+    }
+    CHECK(others == plain_layers);
+    // Where the bars cross, the frame is seen unless something nearer hides it.
+    const auto rendered = lfnet::scene::render_scene(spec);
+    const auto c = *posts->shape.center;
+    const double d = rendered.disparity[static_cast<int64_t>(std::lround(c.y))]
+                                       [static_cast<int64_t>(std::lround(c.x))]
+                                           .item<double>();
+    if (std::abs(d - posts->disparity) < 1e-3) ++visible;
+  }
+  CHECK(flat > scenes / 4);
+  CHECK(flat < scenes);
+  CHECK(walls > scenes / 4);
+  CHECK(walls < scenes);
+  CHECK(visible > scenes / 2);
+  framed.frame_probability = 1.5;
+  CHECK_THROWS_WITH(framed.validate("$"), Catch::StartsWith("$.frame_probability"));
 }
 
 TEST_CASE("random scenes take regions of natural images as textures when asked",

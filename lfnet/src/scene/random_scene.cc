@@ -231,6 +231,56 @@ ShapeSpec random_object(Rng& rng, const RandomSceneOptions& o) {
   return s;
 }
 
+// A frame at a disparity in [front_from, hi]: two layers of bars at right angles sharing one
+// texture (flat with probability 0.6) and one crossing point, and with probability 0.5 a wall
+// just behind them with a rectangular opening around that point.
+std::vector<LayerSpec> random_frame(Rng& rng, const RandomSceneOptions& o, double front_from,
+                                    double hi, const std::vector<std::string>& images) {
+  const double w = static_cast<double>(o.width);
+  const double h = static_cast<double>(o.height);
+  const double disparity = rng.uniform(front_from, hi);
+  TextureSpec texture;
+  if (rng.bernoulli(0.6)) {
+    texture = TextureSpec::defaults(TextureKind::kConstant);
+    texture.colors = random_palette(rng);
+    texture.colors.resize(1);
+  } else {
+    texture = random_texture(rng, o, false, images);
+  }
+  const Point center{rng.uniform(0.2, 0.8) * w, rng.uniform(0.2, 0.8) * h};
+  const double angle = rng.bernoulli(0.8) ? rng.uniform(-5.0, 5.0) : rng.uniform(0.0, 180.0);
+  std::vector<LayerSpec> layers;
+  if (rng.bernoulli(0.5)) {
+    LayerSpec wall;
+    wall.name = "wall";
+    wall.texture = random_texture(rng, o, false, images);
+    wall.shape = ShapeSpec::defaults(ShapeKind::kRectangle);
+    wall.shape.center = center;
+    wall.shape.width = rng.uniform(0.3, 0.9) * w;
+    wall.shape.height = rng.uniform(0.3, 0.9) * h;
+    wall.shape.angle = angle;
+    wall.shape.invert = true;
+    wall.shape.softness = rng.uniform(0.6, 1.2);
+    wall.disparity = std::max(front_from, disparity - rng.uniform(0.0, 0.3));
+    layers.push_back(wall);
+  }
+  for (int k = 0; k < 2; ++k) {
+    LayerSpec bars;
+    bars.name = k == 0 ? "frame-posts" : "frame-rails";
+    bars.texture = texture;
+    bars.shape = ShapeSpec::defaults(ShapeKind::kBars);
+    bars.shape.center = center;
+    bars.shape.width = rng.log_uniform(2.0, 14.0);
+    bars.shape.period = bars.shape.width + rng.log_uniform(30.0, 200.0);
+    bars.shape.count = rng.bernoulli(0.3) ? 0 : rng.integer(1, 4);
+    bars.shape.angle = angle + 90.0 * k;
+    bars.shape.softness = rng.uniform(0.6, 1.2);
+    bars.disparity = disparity;
+    layers.push_back(bars);
+  }
+  return layers;
+}
+
 // Rounds every number of a JSON document to 5 significant digits: readable specs.
 nlohmann::json rounded(const nlohmann::json& j) {
   if (j.is_number_float()) {
@@ -289,6 +339,7 @@ void RandomSceneOptions::validate(const std::string& p) const {
       {"specular_probability", specular_probability},
       {"vignetting_probability", vignetting_probability},
       {"defocus_probability", defocus_probability},
+      {"frame_probability", frame_probability},
       {"image_probability", image_probability}};
   for (const auto& [key, value] : probabilities) {
     if (!(value >= 0.0 && value <= 1.0)) fail(p + "." + key, "a probability must lie in [0, 1]");
@@ -385,6 +436,10 @@ SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& o) {
       layer.shape = random_object(rng, o);
     }
     front.push_back(layer);
+  }
+  // Drawn only when asked for, so that scenes without frames stay as they were.
+  if (o.frame_probability > 0.0 && rng.bernoulli(o.frame_probability)) {
+    for (auto& layer : random_frame(rng, o, front_from, hi, images)) front.push_back(layer);
   }
   // Back to front: nearer (larger disparity) layers are composited later and occlude.
   std::stable_sort(front.begin(), front.end(), [](const LayerSpec& a, const LayerSpec& b) {

@@ -29,6 +29,11 @@ struct RandomSceneOptions {
   double specular_probability = 0.15;       // effects
   double vignetting_probability = 0.15;
   double defocus_probability = 0.1;
+  // A man-made frame in front: crossed bars (a window's mullions and transoms, a fence's posts
+  // and rails), mostly of one flat colour, half the time in a wall's rectangular opening. A flat
+  // bar's edges along one view axis show its parallax only along the other: the crossing bars
+  // and the wall are where its depth can be read. 0 (default) leaves scenes as they were.
+  double frame_probability = 0.0;
   // Natural-image textures: image files, or folders whose png/jpg/tif files all count (relative
   // paths from the working folder). Each layer takes a random region of a random one of them
   // (zoom 1..4) with this probability; 0 keeps the procedural textures only.
@@ -51,6 +56,7 @@ struct RandomSceneOptions {
     f("specular_probability", specular_probability);
     f("vignetting_probability", vignetting_probability);
     f("defocus_probability", defocus_probability);
+    f("frame_probability", frame_probability);
     f("texture_images", texture_images);
     f("image_probability", image_probability);
   }
