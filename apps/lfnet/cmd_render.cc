@@ -76,7 +76,8 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
                   "render the random training scene of this seed")
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--random-options", args->request.random_options,
-                  "RandomSceneOptions as JSON (with --random)");
+                  "with --random: the random scene's options (docs/scenes.md), a JSON object "
+                  "or file, e.g. '{\"frame_probability\": 1}'");
   cmd->add_option("--size", args->size, "HxW of a random scene (default 256x256)");
   cmd->add_option("--views", args->views, "RxC angular grid of a random scene (default 5x5)");
   cmd->add_option("--disparity-range", args->disparity_range,

@@ -107,3 +107,35 @@ TEST_CASE("lfnet render reports bad scenes with their path", "[app][scene]") {
                     out) != 0);
   CHECK(out.find("--size") != std::string::npos);
 }
+
+TEST_CASE("lfnet render takes a random scene's options inline or from a file", "[app][scene]") {
+  lfnet::test::TempDir tmp;
+  lfnet::scene::RandomSceneOptions options;
+  options.height = 24;
+  options.width = 32;
+  options.frame_probability = 1.0;
+  const auto expected = lfnet::scene::random_scene(2, options).to_json();
+  lfnet::write_json_file(tmp / "options.json", options.to_json());
+  const std::string base = lfnet_binary() + " --threads 1 render --random 2 --out ";
+  std::string out;
+  REQUIRE(run_command(base + (tmp / "a") + " --random-options " + (tmp / "options.json"), out) ==
+          0);
+  REQUIRE(run_command(base + (tmp / "b") +
+                          R"( --random-options '{"height": 24, "width": 32, "frame_probability": 1}')",
+                      out) == 0);
+  for (const char* name : {"a", "b"}) {
+    INFO(name);
+    const auto record = lfnet::read_json_file(tmp / (std::string(name) + "/scene.json"));
+    CHECK(lfnet::scene::SceneSpec::from_json(record).to_json() == expected);
+  }
+  // Bad options: one error line naming the option and the key, nothing written.
+  CHECK(run_command(base + (tmp / "c") + R"( --random-options '{"frames": 1}')", out) != 0);
+  CHECK(out.rfind("lfnet: error: ", 0) == 0);
+  CHECK(std::count(out.begin(), out.end(), '\n') == 1);
+  CHECK(out.find("--random-options:$.frames") != std::string::npos);
+  CHECK(run_command(base + (tmp / "c") + R"( --random-options '{"height": ')", out) != 0);
+  CHECK(out.find("--random-options: malformed JSON") != std::string::npos);
+  CHECK(run_command(base + (tmp / "c") + " --random-options " + (tmp / "none.json"), out) != 0);
+  CHECK(out.find("--random-options " + (tmp / "none.json")) != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "c"));
+}

@@ -2,6 +2,8 @@
 
 #include <catch2/catch.hpp>
 
+#include <fstream>
+
 #include "support/test_support.h"
 
 TEST_CASE("the JSON reader rejects unknown keys and names the path", "[core][json]") {
@@ -77,6 +79,23 @@ TEST_CASE("JSON files are written atomically and read back", "[core][json]") {
   lfnet::write_json_file(tmp / "x.json", j);
   CHECK(lfnet::read_json_file(tmp / "x.json") == j);
   CHECK_THROWS_AS(lfnet::read_json_file(tmp / "missing.json"), lfnet::IoError);
+}
+
+TEST_CASE("an option's JSON is inline text or a file, and errors name the option",
+          "[core][json]") {
+  lfnet::test::TempDir tmp;
+  const nlohmann::json j = {{"a", 1}};
+  lfnet::write_json_file(tmp / "x.json", j);
+  CHECK(lfnet::read_json_argument(R"({"a": 1})", "--opt") == j);
+  CHECK(lfnet::read_json_argument(tmp / "x.json", "--opt") == j);
+  CHECK_THROWS_WITH(lfnet::read_json_argument(R"({"a": )", "--opt"),
+                    Catch::StartsWith("--opt: malformed JSON"));
+  CHECK_THROWS_WITH(lfnet::read_json_argument(tmp / "missing.json", "--opt"),
+                    Catch::StartsWith("--opt " + (tmp / "missing.json") + ": cannot read"));
+  { std::ofstream(tmp / "bad.json") << "[1,"; }
+  CHECK_THROWS_AS(lfnet::read_json_argument(tmp / "bad.json", "--opt"), lfnet::ConfigError);
+  CHECK_THROWS_WITH(lfnet::read_json_argument(tmp / "bad.json", "--opt"),
+                    Catch::StartsWith("--opt " + (tmp / "bad.json") + ": malformed JSON"));
 }
 
 TEST_CASE("json_differences names only the fields that differ, briefly", "[core][json]") {

@@ -80,6 +80,23 @@ nlohmann::json read_json_file(const std::string& path) {
   return parse_json(buffer.str(), path);
 }
 
+bool is_inline_json(const std::string& text) { return text.find('{') != std::string::npos; }
+
+std::string json_argument_source(const std::string& text, const std::string& option) {
+  return is_inline_json(text) ? option : option + " " + text;
+}
+
+nlohmann::json read_json_argument(const std::string& text, const std::string& option) {
+  if (is_inline_json(text)) return parse_json(text, option);
+  try {
+    return read_json_file(text);
+  } catch (const IoError& e) {
+    throw ConfigError(option + " " + text + ": " + e.what());
+  } catch (const ConfigError& e) {
+    throw ConfigError(option + " " + e.what());
+  }
+}
+
 void write_json_file(const std::string& path, const nlohmann::json& value) {
   write_file_atomically(path, [&](const std::string& tmp) {
     std::ofstream out(tmp);

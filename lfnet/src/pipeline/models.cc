@@ -120,14 +120,8 @@ dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
     coding = merge(dictionary.training["coding"], "the dictionary's coding");
   }
   if (!options.empty()) {
-    const bool inline_json = options.find('{') != std::string::npos;
-    nlohmann::json patch;
-    try {
-      patch = inline_json ? parse_json(options, option) : read_json_file(options);
-    } catch (const IoError& e) {
-      throw ConfigError(option + " " + options + ": " + e.what());
-    }
-    coding = merge(patch, option + (inline_json ? "" : " " + options) + ":$");
+    coding = merge(read_json_argument(options, option),
+                   json_argument_source(options, option) + ":$");
   }
   if (!method.empty()) {
     try {

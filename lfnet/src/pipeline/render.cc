@@ -78,8 +78,8 @@ RenderSummary render_to_folder(const RenderRequest& args) {
   scene::RandomSceneOptions options;
   if (random) {
     if (!args.random_options.empty()) {
-      const auto doc = read_json_file(args.random_options);
-      JsonReader reader(doc, args.random_options + ":$");
+      const auto doc = read_json_argument(args.random_options, "--random-options");
+      JsonReader reader(doc, json_argument_source(args.random_options, "--random-options") + ":$");
       options = scene::RandomSceneOptions::from_json(reader);
     }
     if (args.size) std::tie(options.height, options.width) = *args.size;
@@ -104,7 +104,7 @@ RenderSummary render_to_folder(const RenderRequest& args) {
   }
   OutputFolderPolicy policy;
   policy.force = args.force;
-  policy.inputs = {args.scene, args.random_options};
+  policy.inputs = {args.scene, is_inline_json(args.random_options) ? "" : args.random_options};
   check_output_folder(args.out, policy);
 
   const scene::RenderOptions render_options = scene_render_options(random ? "" : args.scene);

@@ -101,6 +101,13 @@ nlohmann::json parse_json(const std::string& text, const std::string& source);
 // Reads and parses a JSON file.
 nlohmann::json read_json_file(const std::string& path);
 
+// A command-line option's JSON: the text itself when it holds a '{' (an inline object), else the
+// file it names. Errors are ConfigErrors that start with `option`.
+bool is_inline_json(const std::string& text);
+nlohmann::json read_json_argument(const std::string& text, const std::string& option);
+// Where that JSON came from, for a JsonReader's path: "--opt" or "--opt FILE".
+std::string json_argument_source(const std::string& text, const std::string& option);
+
 // Writes `value` to `path` atomically (temporary file, then rename), pretty-printed.
 void write_json_file(const std::string& path, const nlohmann::json& value);
 
