@@ -58,6 +58,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       std::ifstream in(g / f, std::ios::binary);
       files[f] = std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
     }
+    std::error_code removed;
+    fs::remove_all(g, removed);
     return files;
   }();
   auto put = [](const fs::path& path, const std::string& bytes) {
@@ -106,5 +108,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                  e.what());
     std::abort();
   }
+  fs::remove_all(dir, ec);  // nothing left behind in the temporary folder
   return 0;
 }

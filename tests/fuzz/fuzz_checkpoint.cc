@@ -43,5 +43,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
                  e.what());
     std::abort();
   }
+  std::error_code ec;
+  fs::remove(path, ec);  // nothing left behind in the temporary folder
   return 0;
 }

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <optional>
 #include <sstream>
+#include <string_view>
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
@@ -17,6 +18,9 @@
 namespace lfnet::train {
 
 namespace {
+
+// The prefix of the U-Net's parameter names: the network's submodule "image".
+constexpr std::string_view kImagePrefix = "image.";
 
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 double number_or(const nlohmann::json& j, double fallback) {
@@ -445,9 +449,8 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
         }
         continue;
       }
-      const std::string image_prefix = "image.";
-      if (src.sizes() != p.value().sizes() && name.rfind(image_prefix, 0) == 0 &&
-          nn::embed_narrow_parameter(name.substr(image_prefix.size()), src, p.value())) {
+      if (src.sizes() != p.value().sizes() && name.rfind(kImagePrefix, 0) == 0 &&
+          nn::embed_narrow_parameter(name.substr(kImagePrefix.size()), src, p.value())) {
         report.widened.push_back(name);
         continue;
       }
@@ -466,7 +469,7 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
     const int64_t from_levels = ck.network["image"].value("levels", int64_t{0});
     if (from_levels >= 1 && from_levels < net_->options().image.levels) {
       for (const auto& name : net_->image->start_new_levels(from_levels)) {
-        const std::string full = "image." + name;
+        const std::string full = std::string(kImagePrefix) + name;
         auto& re = report.reinitialised;
         re.erase(std::remove(re.begin(), re.end(), full), re.end());
         report.deepened.push_back(full);
