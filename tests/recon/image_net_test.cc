@@ -278,3 +278,70 @@ TEST_CASE("a shallow U-Net's weights start a deeper one that computes what the s
   lfnet::test::require_close(deep->forward_image(sensor.unsqueeze(0)), want, 1e-5);
   CHECK_THROWS(deep->image->start_new_levels(3));
 }
+
+TEST_CASE("asp:2's mirror images are measured as mirrored sensor images", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto net = image_net(*phi);
+  const auto mirrors = recon::phi_mirrors(net->phi);
+  // The pair's response is odd in the vertical view angle and constant along the horizontal
+  // one: reversing u swaps the pair, reversing v changes nothing.
+  REQUIRE(mirrors.size() == 4);
+  CHECK((!mirrors[0].flip_x && !mirrors[0].flip_y));
+  CHECK(mirrors[0].measurements == std::vector<int64_t>{0, 1});
+  CHECK((mirrors[1].flip_x && !mirrors[1].flip_y));
+  CHECK(mirrors[1].measurements == std::vector<int64_t>{0, 1});
+  CHECK((!mirrors[2].flip_x && mirrors[2].flip_y));
+  CHECK(mirrors[2].measurements == std::vector<int64_t>{1, 0});
+  CHECK((mirrors[3].flip_x && mirrors[3].flip_y));
+  CHECK(mirrors[3].measurements == std::vector<int64_t>{1, 0});
+  // What the simulator says: the mirrored light field's sensor image is the mirrored one.
+  const auto lf = random_light_field(*phi, 23, 31, 4);  // (U, V, H, W)
+  const auto sensor = optics::simulate_sensor(*phi, lf);
+  for (const auto& m : mirrors) {
+    INFO("flip x " << m.flip_x << ", flip y " << m.flip_y);
+    auto mirrored_lf = lf;
+    if (m.flip_y) mirrored_lf = mirrored_lf.flip({0, 2});
+    if (m.flip_x) mirrored_lf = mirrored_lf.flip({1, 3});
+    auto want = sensor.index_select(0, torch::tensor(m.measurements, torch::kInt64));
+    if (m.flip_y) want = want.flip({1});
+    if (m.flip_x) want = want.flip({2});
+    CHECK(torch::allclose(optics::simulate_sensor(*phi, mirrored_lf), want, 1e-5, 1e-6));
+  }
+  // A periodic mask has no mirror that keeps its pattern.
+  const auto mask = optics::make_phi(optics::PhiSpec::parse("mask:2"));
+  CHECK(recon::phi_mirrors(image_net(*mask)->phi).size() == 1);
+}
+
+TEST_CASE("the self-ensemble averages the mirror passes and is equivariant", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  // Untrained, the net is the per-pixel pseudo-inverse, which every mirror reproduces.
+  auto net = image_net(*phi);
+  const auto lf = random_light_field(*phi, 40, 48, 8);  // sides: multiples of the U-Net's 4
+  const auto sensor = optics::simulate_sensor(*phi, lf);
+  CHECK(torch::allclose(recon::reconstruct_sensor_mirrored(net, sensor, 16, false),
+                        recon::reconstruct_sensor_tiled(net, sensor, 16, false), 1e-5, 1e-5));
+  randomise(net, 21);
+  const auto single = recon::reconstruct_sensor_tiled(net, sensor, 16, false);
+  const auto ensemble = recon::reconstruct_sensor_mirrored(net, sensor, 16, false);
+  CHECK_FALSE(torch::allclose(single, ensemble, 1e-3, 1e-3));
+  // The mean of the four passes, each mirrored back.
+  auto sum = torch::zeros_like(single);
+  for (const auto& m : recon::phi_mirrors(net->phi)) {
+    auto s = sensor.index_select(0, torch::tensor(m.measurements, torch::kInt64));
+    if (m.flip_y) s = s.flip({1});
+    if (m.flip_x) s = s.flip({2});
+    auto est = recon::reconstruct_sensor_tiled(net, s, 48, false);
+    if (m.flip_y) est = est.flip({1, 3});
+    if (m.flip_x) est = est.flip({2, 4});
+    sum += est;
+  }
+  CHECK(torch::allclose(ensemble, sum / 4, 1e-4, 1e-4));
+  // Mirroring the light field mirrors its reconstruction (a single pass does not).
+  const auto lf_x = lf.flip({1, 3});
+  const auto ensemble_x =
+      recon::reconstruct_sensor_mirrored(net, optics::simulate_sensor(*phi, lf_x), 16, false);
+  CHECK(torch::allclose(ensemble_x, ensemble.flip({2, 4}), 1e-4, 1e-4));
+  const auto single_x =
+      recon::reconstruct_sensor_tiled(net, optics::simulate_sensor(*phi, lf_x), 16, false);
+  CHECK_FALSE(torch::allclose(single_x, single.flip({2, 4}), 1e-3, 1e-3));
+}

@@ -53,6 +53,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     resources.patch_w = options.reconstruct.patch_w;
     resources.net = context.net;
     resources.script = context.script.get();
+    resources.self_ensemble = context.self_ensemble;
     ModelCache local;
     if (needs == recon::MethodNeeds::kDictionary && !context.dictionary.empty()) {
       resources.dictionary =
@@ -83,6 +84,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
         image);
   }
   result.record["light_field"] = truth.name;
+  if (context.self_ensemble) result.record["self_ensemble"] = true;
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
     if (report->unconverged > 0) {
@@ -153,6 +155,12 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
       spec.cols = rv.size();
     }
   }
+  LFNET_CHECK_AS(ConfigError,
+                 !a.self_ensemble || (method == "net" && !context.net.is_empty() &&
+                                      context.net->options().is_image()),
+                 "--self-ensemble applies to --method net with a checkpoint of the lfnet "
+                 "architecture");
+  context.self_ensemble = a.self_ensemble;
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;

@@ -130,6 +130,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
       resources.script = model->script.get();
     }
     resources.tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
+    resources.self_ensemble = a.self_ensemble;
+    LFNET_CHECK_AS(ConfigError,
+                   !a.self_ensemble || (method == "net" && model && !model->net.is_empty() &&
+                                        model->net->options().is_image()),
+                   "--self-ensemble applies to --method net with a checkpoint of the lfnet "
+                   "architecture");
     if (needs == recon::MethodNeeds::kDictionary) {
       resources.dictionary = &files.dictionary(a.dictionary);
       resources.coding = dict_coding(*resources.dictionary, a.dict_options, a.dict_method);

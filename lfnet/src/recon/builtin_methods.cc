@@ -59,12 +59,20 @@ class NetworkMethod : public Method {
     check_image_branch();
     const int64_t tile = r.tile;
     if (r.script) {
+      LFNET_CHECK_AS(ConfigError, !r.self_ensemble,
+                     "the self-ensemble runs a checkpoint's network; an exported model has none: "
+                     "pass the checkpoint as --model");
       const auto* script = r.script;
       return [script, tile](const torch::Tensor& sensor, double noise_sigma) {
         return script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0);
       };
     }
     auto net = r.net;
+    if (r.self_ensemble) {
+      return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
+        return reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma);
+      };
+    }
     return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
       return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma);
     };

@@ -141,4 +141,67 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   return out;
 }
 
+std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights) {
+  LFNET_CHECK(pixel_weights.dim() == 5, "phi_mirrors: pixel weights must be (N, U, V, T, T), got ",
+              pixel_weights.sizes());
+  std::vector<SensorMirror> mirrors;
+  const int64_t n = pixel_weights.size(0);
+  SensorMirror identity;
+  for (int64_t k = 0; k < n; ++k) identity.measurements.push_back(k);
+  mirrors.push_back(identity);
+  if (pixel_weights.size(3) != 1 || pixel_weights.size(4) != 1) return mirrors;
+  const auto w = pixel_weights.detach().to(torch::kCPU, torch::kFloat64);
+  const double tolerance = 1e-5 * std::max(w.abs().max().item<double>(), 1e-30);
+  for (const auto& [flip_x, flip_y] : {std::pair{true, false}, {false, true}, {true, true}}) {
+    std::vector<int64_t> dims;
+    if (flip_y) dims.push_back(1);  // u
+    if (flip_x) dims.push_back(2);  // v
+    const auto flipped = w.flip(dims);
+    SensorMirror m{flip_x, flip_y, {}};
+    std::vector<bool> used(static_cast<size_t>(n), false);
+    for (int64_t k = 0; k < n; ++k) {
+      for (int64_t j = 0; j < n; ++j) {
+        if (used[static_cast<size_t>(j)]) continue;
+        if ((flipped[k] - w[j]).abs().max().item<double>() <= tolerance) {
+          used[static_cast<size_t>(j)] = true;
+          m.measurements.push_back(j);
+          break;
+        }
+      }
+    }
+    if (static_cast<int64_t>(m.measurements.size()) == n) mirrors.push_back(m);
+  }
+  return mirrors;
+}
+
+torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
+                                          int64_t tile, bool clamp, double noise_sigma,
+                                          const ProgressCallback& progress) {
+  LFNET_CHECK_AS(ConfigError, net->options().is_image(),
+                 "the self-ensemble needs a model of the lfnet architecture");
+  const auto mirrors = phi_mirrors(net->phi);
+  const auto count = static_cast<int64_t>(mirrors.size());
+  torch::Tensor sum;
+  for (int64_t i = 0; i < count; ++i) {
+    const auto& m = mirrors[static_cast<size_t>(i)];
+    // Sensor (N, H, W); light field (1, U, V, H, W).
+    auto mirrored = sensor.index_select(0, torch::tensor(m.measurements, torch::kInt64));
+    if (m.flip_y) mirrored = mirrored.flip({1});
+    if (m.flip_x) mirrored = mirrored.flip({2});
+    ProgressCallback part;
+    if (progress) {
+      part = [&progress, i, count](int64_t done, int64_t total) {
+        progress(i * total + done, count * total);
+      };
+    }
+    auto est = reconstruct_sensor_tiled(net, mirrored, tile, false, noise_sigma, part);
+    if (m.flip_y) est = est.flip({1, 3});
+    if (m.flip_x) est = est.flip({2, 4});
+    sum = sum.defined() ? sum.add_(est) : est;
+  }
+  sum.div_(static_cast<double>(count));
+  if (clamp) sum.clamp_(0.0, 1.0);
+  return sum;
+}
+
 }  // namespace lfnet::recon

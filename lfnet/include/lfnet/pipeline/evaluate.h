@@ -28,6 +28,7 @@ struct MethodContext {
       nullptr;  // where to read it (and keep it) for many calls; none: read it each call
   std::string dict_method;   // for dict: omp or admm ("": dict_options', else the dictionary's)
   std::string dict_options;  // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
+  bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirrors
 };
 
 // The evaluation options of the command line: simulation mode, Gaussian noise sigma (0: none),
@@ -66,6 +67,7 @@ struct EvaluateRequest {
   std::string device = "cpu";  // cpu or cuda[:K] for a checkpoint's network
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   bool keep_estimate = false;                         // return the reconstruction too
+  bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirror images
 };
 
 // One evaluation's outcome.

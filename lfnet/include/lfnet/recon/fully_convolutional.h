@@ -1,5 +1,5 @@
 // Reconstruction with the CNN branch run once over the whole light field (in tiles) rather
-// than once per patch (docs/performance.md; docs/performance.md).
+// than once per patch (docs/performance.md).
 //
 // Patch stitching runs the CNN on every patch separately, zero-padded at the patch border, and
 // averages the overlapping estimates: at stride s every pixel is computed about (9 / s)^2 times.
@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/phi.h"
@@ -69,5 +70,31 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
                                        int64_t tile = kDefaultImageTile, bool clamp = true,
                                        double noise_sigma = 0.0,
                                        const ProgressCallback& progress = {});
+
+// A mirror image under which a Phi is symmetric: it measures the mirrored light field (x and
+// v reversed with `flip_x`, y and u with `flip_y`) as the mirrored sensor image with its
+// measurements permuted: measurement k of the mirrored image is measurement `measurements[k]`
+// of the sensor image, mirrored.
+struct SensorMirror {
+  bool flip_x = false;
+  bool flip_y = false;
+  std::vector<int64_t> measurements;
+};
+
+// The mirrors of a Phi, the identity first, from the per-pixel weights (N, U, V, T, T) that an
+// lfnet net holds (its `phi` buffer): those of the four (none, x, y, both) that map every
+// weight image onto one of the weight images, all of them once (to 1e-5 of the largest
+// weight). `asp:2` has all four. A Phi of period T > 1 keeps the identity alone (its mirror
+// images would depend on the image's size).
+std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
+
+// The self-ensemble of reconstruct_sensor_tiled: the sensor image and its mirror images under
+// the Phi's mirrors (phi_mirrors of the net's Phi) are reconstructed, mirrored back and
+// averaged, up to 4 passes. Equivariant: the mirror image of a light field reconstructs as the
+// mirror image of its reconstruction.
+torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
+                                          int64_t tile = kDefaultImageTile, bool clamp = true,
+                                          double noise_sigma = 0.0,
+                                          const ProgressCallback& progress = {});
 
 }  // namespace lfnet::recon

@@ -36,6 +36,7 @@ struct MethodResources {
   dict::SparseCodingOptions coding;              // kDictionary: OMP or ADMM
   std::shared_ptr<SolverReport> report;          // iterative methods: non-convergence counts
   int64_t tile = 256;                            // whole-image methods: spatial tile
+  bool self_ensemble = false;  // whole-image methods: average over the Phi's mirrors
 };
 
 class Method {
