@@ -93,6 +93,14 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
   // Untrained, the U-Net adds nothing: the result is the pseudo-inverse's.
   const auto pinv = pipeline::bench_case(o, "pinv", 5, 1e9);
   CHECK(r["psnr_db"].get<double>() == Approx(pinv["psnr_db"].get<double>()).margin(0.01));
+  CHECK_FALSE(r.contains("self_ensemble_passes"));
+  // The self-ensemble: four passes for asp:2, four times the work, the same pseudo-inverse.
+  o.self_ensemble = true;
+  const auto ensemble = pipeline::bench_case(o, "net", 5, 1e9);
+  CHECK(ensemble["self_ensemble_passes"] == 4);
+  CHECK(ensemble["gflops"].get<double>() * ensemble["seconds"].get<double>() ==
+        Approx(4 * r["gflops"].get<double>() * r["seconds"].get<double>()).epsilon(1e-6));
+  CHECK(ensemble["psnr_db"].get<double>() == Approx(r["psnr_db"].get<double>()).margin(0.01));
 }
 
 TEST_CASE("bench_table prints a line per case, its architecture and its error",

@@ -198,6 +198,12 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     extra["omp_atoms"] = resources.coding.omp.max_atoms;
   }
   resources.tile = image_tile;
+  int64_t passes = 1;  // of the lfnet architecture's whole-image pass
+  if (a.self_ensemble && net && net->options().is_image()) {
+    resources.self_ensemble = true;
+    passes = static_cast<int64_t>(recon::phi_mirrors(net->phi).size());
+    extra["self_ensemble_passes"] = passes;
+  }
   const recon::PatchSolver solver = recon::make_solver(method, resources);
   const recon::ImageSolver image = recon::make_image_solver(method, resources);
   if (image) extra["tile"] = image_tile;
@@ -221,7 +227,8 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   // Patch stitching computes flops_per_patch for every patch; the fully convolutional pass
   // computes the CNN once per tile position instead.
   double flops =
-      image ? nn::image_full_flops(net->options(), truth.height(), truth.width(), image_tile)
+      image ? static_cast<double>(passes) *
+                  nn::image_full_flops(net->options(), truth.height(), truth.width(), image_tile)
             : flops_per_patch * static_cast<double>(grid.size());
   if (full && !image) {
     flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), cnn_tile) -
@@ -452,6 +459,7 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
                                    "--precision",
                                    nn::to_string(a.precision)};
   if (a.tile > 0) args.insert(args.end(), {"--tile", std::to_string(a.tile)});
+  if (a.self_ensemble) args.emplace_back("--self-ensemble");
   for (const auto& arch : a.architectures) {
     args.insert(args.end(), {"--architecture", nn::to_string(arch)});
   }
