@@ -268,6 +268,25 @@ cross-scene() {
   mv "$tmp" results/cross-scene/records.jsonl
 }
 
+# lfnet's shipped ASP model in one pass and as its self-ensemble (--self-ensemble: the four
+# mirror images that asp:2 measures as mirrored sensor images, docs/architectures.md), on the
+# light fields of the cross-scene benchmark, beside pinv and no-parallax.
+self-ensemble() {
+  local tmp i
+  tmp=$(mktemp)
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}")
+    for method in no-parallax pinv; do
+      record "$tmp" --phi asp:2 "${src[@]}" --method "$method" --mode sensor
+    done
+    VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt "${src[@]}" \
+      --method net --mode sensor
+    VARIANT="lfnet-asp-n2, self-ensemble" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+      "${src[@]}" --method net --mode sensor --self-ensemble
+  done
+  mv "$tmp" results/self-ensemble/records.jsonl
+}
+
 # The shipped models for other cameras on the light fields of the cross-scene benchmark, each
 # against pinv and no-parallax of its Phi (stride 5): ASP N = 15 and 25, the coded mask and
 # random projections N = 2 of the paper's architecture (configs/models/, quick scale), and
@@ -318,7 +337,7 @@ pictures() {
 
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
-  sections=(cross-scene other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
+  sections=(cross-scene self-ensemble other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
             sensor-noise stride-sweep branch-ablation loss-ablation lytro phi-switching)
 fi
 for s in "${sections[@]}"; do
