@@ -120,9 +120,10 @@ TEST_CASE("lfnet render takes a random scene's options inline or from a file", "
   std::string out;
   REQUIRE(run_command(base + (tmp / "a") + " --random-options " + (tmp / "options.json"), out) ==
           0);
-  REQUIRE(run_command(base + (tmp / "b") +
-                          R"( --random-options '{"height": 24, "width": 32, "frame_probability": 1}')",
-                      out) == 0);
+  REQUIRE(
+      run_command(base + (tmp / "b") +
+                      R"( --random-options '{"height": 24, "width": 32, "frame_probability": 1}')",
+                  out) == 0);
   for (const char* name : {"a", "b"}) {
     INFO(name);
     const auto record = lfnet::read_json_file(tmp / (std::string(name) + "/scene.json"));

@@ -81,8 +81,7 @@ TEST_CASE("JSON files are written atomically and read back", "[core][json]") {
   CHECK_THROWS_AS(lfnet::read_json_file(tmp / "missing.json"), lfnet::IoError);
 }
 
-TEST_CASE("an option's JSON is inline text or a file, and errors name the option",
-          "[core][json]") {
+TEST_CASE("an option's JSON is inline text or a file, and errors name the option", "[core][json]") {
   lfnet::test::TempDir tmp;
   const nlohmann::json j = {{"a", 1}};
   lfnet::write_json_file(tmp / "x.json", j);

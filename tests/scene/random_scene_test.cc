@@ -171,7 +171,8 @@ TEST_CASE("random scenes draw man-made frames in front when asked", "[scene][ran
     CHECK(posts->disparity >= spec.layers[0].disparity);
     CHECK(posts->disparity <= framed.max_disparity);
     CHECK(posts->texture.to_json() == rails->texture.to_json());
-    CHECK(rails->shape.angle - posts->shape.angle == Approx(90.0).margin(0.01));  // specs keep 5 digits
+    CHECK(rails->shape.angle - posts->shape.angle ==
+          Approx(90.0).margin(0.01));  // specs keep 5 digits
     CHECK(posts->shape.center->x == rails->shape.center->x);
     if (posts->texture.kind == lfnet::scene::TextureKind::kConstant) ++flat;
     // The frame is drawn after everything else: the rest of the scene is the plain one.
@@ -183,9 +184,10 @@ TEST_CASE("random scenes draw man-made frames in front when asked", "[scene][ran
     // Where the bars cross, the frame is seen unless something nearer hides it.
     const auto rendered = lfnet::scene::render_scene(spec);
     const auto c = *posts->shape.center;
-    const double d = rendered.disparity[static_cast<int64_t>(std::lround(c.y))]
-                                       [static_cast<int64_t>(std::lround(c.x))]
-                                           .item<double>();
+    const double d = rendered
+                         .disparity[static_cast<int64_t>(std::lround(c.y))]
+                                   [static_cast<int64_t>(std::lround(c.x))]
+                         .item<double>();
     if (std::abs(d - posts->disparity) < 1e-3) ++visible;
   }
   CHECK(flat > scenes / 4);

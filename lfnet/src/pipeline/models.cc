@@ -120,8 +120,8 @@ dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
     coding = merge(dictionary.training["coding"], "the dictionary's coding");
   }
   if (!options.empty()) {
-    coding = merge(read_json_argument(options, option),
-                   json_argument_source(options, option) + ":$");
+    coding =
+        merge(read_json_argument(options, option), json_argument_source(options, option) + ":$");
   }
   if (!method.empty()) {
     try {

@@ -26,8 +26,8 @@ struct MethodContext {
   std::string dictionary;                       // for dict: a dictionary file
   ModelCache* cache =
       nullptr;  // where to read it (and keep it) for many calls; none: read it each call
-  std::string dict_method;   // for dict: omp or admm ("": dict_options', else the dictionary's)
-  std::string dict_options;  // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
+  std::string dict_method;     // for dict: omp or admm ("": dict_options', else the dictionary's)
+  std::string dict_options;    // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
   bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirrors
 };
 
