@@ -86,7 +86,7 @@ TEST_CASE("random scenes cover the disparity range and vary in content", "[scene
   // Pixels spread over the whole range: no seventh of it is left nearly empty.
   for (int b = 0; b < bins; ++b) {
     INFO("bin " << b << " holds " << histogram[b] << " of " << pixels << " pixels");
-    CHECK(histogram[b] > pixels / (bins * 4));
+    CHECK(histogram[b] > pixels / (int64_t{bins} * 4));
   }
   CHECK(occluded > scenes * 3 / 4);
   CHECK(slanted > 0);

@@ -107,6 +107,16 @@ void write_json_file(const std::string& path, const nlohmann::json& value) {
 }
 
 namespace {
+// "WHERE (A_NAME A_VALUE, B_NAME B_VALUE)": one field that differs.
+std::string difference_line(const std::string& where, const std::string& a_name,
+                            const std::string& a_value, const std::string& b_name,
+                            const std::string& b_value) {
+  std::string line = where;
+  line.append(" (").append(a_name).append(" ").append(a_value);
+  line.append(", ").append(b_name).append(" ").append(b_value).append(")");
+  return line;
+}
+
 void collect_differences(const nlohmann::json& a, const nlohmann::json& b, const std::string& path,
                          const std::string& a_name, const std::string& b_name,
                          std::vector<std::string>& out) {
@@ -115,11 +125,11 @@ void collect_differences(const nlohmann::json& a, const nlohmann::json& b, const
     for (const auto& [k, v] : a.items()) keys.insert(k);
     for (const auto& [k, v] : b.items()) keys.insert(k);
     for (const auto& k : keys) {
-      const std::string sub = path.empty() ? k : path + "." + k;
+      const std::string sub = path.empty() ? k : std::string(path).append(".").append(k);
       if (!a.contains(k)) {
-        out.push_back(sub + " (" + a_name + " none, " + b_name + " " + b[k].dump() + ")");
+        out.push_back(difference_line(sub, a_name, "none", b_name, b[k].dump()));
       } else if (!b.contains(k)) {
-        out.push_back(sub + " (" + a_name + " " + a[k].dump() + ", " + b_name + " none)");
+        out.push_back(difference_line(sub, a_name, a[k].dump(), b_name, "none"));
       } else {
         collect_differences(a[k], b[k], sub, a_name, b_name, out);
       }
@@ -135,7 +145,7 @@ void collect_differences(const nlohmann::json& a, const nlohmann::json& b, const
     return v.is_array() ? "a list of " + std::to_string(v.size()) + " values"
                         : text.substr(0, 37) + "...";
   };
-  out.push_back(where + " (" + a_name + " " + shown(a) + ", " + b_name + " " + shown(b) + ")");
+  out.push_back(difference_line(where, a_name, shown(a), b_name, shown(b)));
 }
 
 // Model names that differ make every parameter differ: say only that.
