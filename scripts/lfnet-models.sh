@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# The shipped models of lfnet's architecture (docs/models.md). All but the last step finetune
-# models/lfnet-asp-n2-first20.ckpt (the paper scale of configs/models/lfnet-asp-n2.json, 20
-# epochs; `lfnet train --init`) at the paper scale of their config:
+# The shipped models of lfnet's architecture (docs/models.md). Each step finetunes a model
+# (`lfnet train --init`) at the paper scale of its config: lfnet-asp-n2-c32, lfnet-asp-n15 and
+# lfnet-mask-n2 start from models/lfnet-asp-n2-first20.ckpt (the paper scale of
+# configs/models/lfnet-asp-n2.json, 20 epochs), lfnet-asp-n2-c48 and lfnet-asp-n2 from the
+# step before them:
 #   lfnet-asp-n2-c32  configs/models/lfnet-asp-n2.json -> models/lfnet-asp-n2-c32.ckpt: 30 more
 #                     epochs at lr 4e-4 on new random scenes and crops (seeds 9000 and 11)
 #   lfnet-asp-n2-c48  the same config -> models/lfnet-asp-n2-c48.ckpt: lfnet-asp-n2-c32 widened

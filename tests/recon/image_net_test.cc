@@ -345,3 +345,16 @@ TEST_CASE("the self-ensemble averages the mirror passes and is equivariant", "[r
       recon::reconstruct_sensor_tiled(net, optics::simulate_sensor(*phi, lf_x), 16, false);
   CHECK_FALSE(torch::allclose(single_x, single.flip({2, 4}), 1e-3, 1e-3));
 }
+
+TEST_CASE("the self-ensemble applies to the net method of an lfnet checkpoint only",
+          "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  const auto net = image_net(*phi);
+  CHECK_NOTHROW(recon::check_self_ensemble("net", net));
+  CHECK_THROWS_WITH(recon::check_self_ensemble("pinv", net),
+                    Catch::Contains("--self-ensemble applies to --method net"));
+  CHECK_THROWS_AS(recon::check_self_ensemble("net", nn::LightFieldNet{nullptr}), ConfigError);
+  nn::NetworkOptions paper;
+  paper.measurements = phi->measurements();
+  CHECK_THROWS_AS(recon::check_self_ensemble("net", nn::LightFieldNet(paper)), ConfigError);
+}

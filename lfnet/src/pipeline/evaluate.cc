@@ -11,6 +11,7 @@
 #include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/simulate.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
@@ -155,11 +156,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
       spec.cols = rv.size();
     }
   }
-  LFNET_CHECK_AS(ConfigError,
-                 !a.self_ensemble || (method == "net" && !context.net.is_empty() &&
-                                      context.net->options().is_image()),
-                 "--self-ensemble applies to --method net with a checkpoint of the lfnet "
-                 "architecture");
+  if (a.self_ensemble) recon::check_self_ensemble(method, context.net);
   context.self_ensemble = a.self_ensemble;
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();

@@ -131,11 +131,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
     resources.tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
     resources.self_ensemble = a.self_ensemble;
-    LFNET_CHECK_AS(ConfigError,
-                   !a.self_ensemble || (method == "net" && model && !model->net.is_empty() &&
-                                        model->net->options().is_image()),
-                   "--self-ensemble applies to --method net with a checkpoint of the lfnet "
-                   "architecture");
+    if (a.self_ensemble)
+      recon::check_self_ensemble(method, model ? model->net : nn::LightFieldNet{nullptr});
     if (needs == recon::MethodNeeds::kDictionary) {
       resources.dictionary = &files.dictionary(a.dictionary);
       resources.coding = dict_coding(*resources.dictionary, a.dict_options, a.dict_method);

@@ -174,6 +174,12 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights) {
   return mirrors;
 }
 
+void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net) {
+  LFNET_CHECK_AS(ConfigError, method == "net" && !net.is_empty() && net->options().is_image(),
+                 "--self-ensemble applies to --method net with a checkpoint of the lfnet "
+                 "architecture");
+}
+
 torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
                                           int64_t tile, bool clamp, double noise_sigma,
                                           const ProgressCallback& progress) {

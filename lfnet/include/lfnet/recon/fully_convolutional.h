@@ -88,6 +88,10 @@ struct SensorMirror {
 // images would depend on the image's size).
 std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
 
+// Throws a ConfigError unless the self-ensemble applies: `method` "net" with a checkpoint's
+// network (`net`, empty without one) of the lfnet architecture.
+void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net);
+
 // The self-ensemble of reconstruct_sensor_tiled: the sensor image and its mirror images under
 // the Phi's mirrors (phi_mirrors of the net's Phi) are reconstructed, mirrored back and
 // averaged, up to 4 passes. Equivariant: the mirror image of a light field reconstructs as the
