@@ -8,7 +8,9 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/batch.h"
+#include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/simulate.h"
+#include "lfnet/train/checkpoint.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -79,4 +81,66 @@ TEST_CASE("run_batch writes one record per item and method and counts the failur
   o.force = true;
   CHECK_THROWS_WITH(pipeline::run_batch(o), Catch::Contains("--methods"));
   CHECK(read_json_file(tmp / "out/summary.json").size() == 4);
+}
+
+TEST_CASE("run_batch --self-ensemble averages the mirror passes of an lfnet checkpoint",
+          "[pipeline][batch]") {
+  test::TempDir tmp;
+  write_inputs(tmp / "in");
+  // A small lfnet net with random U-Net weights: its single pass is not mirror-equivariant.
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  nn::NetworkOptions no;
+  no.architecture = nn::Architecture::kLfnet;
+  no.measurements = phi->measurements();
+  no.patch = {phi->rows(), phi->cols(), 16, 16};
+  no.image.channels = 6;
+  no.image.blocks = 1;
+  nn::LightFieldNet net(no);
+  net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
+  torch::manual_seed(5);
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
+  }
+  train::Checkpoint ck;
+  ck.network = no.to_json();
+  ck.phi = phi->spec().to_json();
+  ck.config = {{"measurement_mean", 0.3}};
+  ck.model = train::module_state(*net);
+  ck.training.stage = "joint";
+  train::save_checkpoint(ck, tmp / "m.ckpt");
+
+  pipeline::BatchOptions o;
+  o.in = tmp / "in";
+  o.model = tmp / "m.ckpt";
+  o.out = tmp / "single";
+  const auto single = pipeline::run_batch(o);
+  o.self_ensemble = true;
+  o.out = tmp / "ensemble";
+  const auto ensemble = pipeline::run_batch(o);
+  REQUIRE(ensemble.failures == 0);
+  REQUIRE(ensemble.records.size() == 2);
+  CHECK(fs::exists(tmp.path() / "ensemble/acq/net/reconstruction.json"));
+  const auto& scored = ensemble.records[1];
+  CHECK(scored["item"] == "b");
+  CHECK(scored["self_ensemble"] == true);
+  CHECK_FALSE(single.records[1].contains("self_ensemble"));
+  CHECK(scored["psnr_db"].get<double>() !=
+        Approx(single.records[1]["psnr_db"].get<double>()).margin(1e-3));
+  // The same number as lfnet evaluate --self-ensemble on the folder.
+  pipeline::EvaluateRequest q;
+  q.lf = tmp / "in/b";
+  q.model = tmp / "m.ckpt";
+  q.self_ensemble = true;
+  CHECK(pipeline::evaluate_request(q).record["psnr_db"].get<double>() ==
+        Approx(scored["psnr_db"].get<double>()).margin(1e-6));
+  // Another method, or no model, is refused before any output exists.
+  o.out = tmp / "refused";
+  o.methods = {"net", "pinv"};
+  CHECK_THROWS_WITH(pipeline::run_batch(o), Catch::Contains("--self-ensemble applies to"));
+  o.methods = {};
+  o.model.clear();
+  o.phi = "asp:2";
+  CHECK_THROWS_WITH(pipeline::run_batch(o), Catch::Contains("pass --model"));
+  CHECK_FALSE(fs::exists(tmp.path() / "refused"));
 }

@@ -20,6 +20,7 @@
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
@@ -142,6 +143,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.options.window = a.window;
         q.post_filter = a.post_filter;
         q.match_mean = a.match_mean;
+        q.self_ensemble = a.self_ensemble;
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
@@ -184,6 +186,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.cache = &cache;
     context.dict_method = a.dict_method;
     context.dict_options = a.dict_options;
+    context.self_ensemble = a.self_ensemble;
     LightFieldSources sources;
     sources.light_fields = {item.path};
     truths = load_sources(sources, phi->rows(), phi->cols());
@@ -257,6 +260,13 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
                      (a.dict_method.empty() && a.dict_options.empty()),
                  "--dict-method and --dict-options apply to the dict method, which --methods does "
                  "not name");
+  ModelCache cache;  // every item shares one read of the model and the dictionary
+  if (a.self_ensemble) {
+    LFNET_CHECK_AS(ConfigError, !a.model.empty(),
+                   "--self-ensemble applies to --method net with a checkpoint of the lfnet "
+                   "architecture: pass --model");
+    for (const auto& m : methods) recon::check_self_ensemble(m, cache.model(a.model).net);
+  }
   std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
   if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy);
   // The other ranks write only once rank 0 has checked and made the folder (when it is shared).
@@ -282,7 +292,6 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   BatchSummary summary;
   std::vector<size_t> record_item;  // the item index of every record, for the gather
   ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
-  ModelCache cache;  // every item shares one read of the model and the dictionary
   for (size_t index : mine) {
     const auto& item = items[index];
     bar.set_note(item.name);
