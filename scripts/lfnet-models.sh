@@ -2,17 +2,20 @@
 # The shipped models of lfnet's architecture (docs/models.md). Each step finetunes a model
 # (`lfnet train --init`) at the paper scale of its config: lfnet-asp-n2-c32, lfnet-asp-n15 and
 # lfnet-mask-n2 start from models/lfnet-asp-n2-first20.ckpt (the paper scale of
-# configs/models/lfnet-asp-n2.json, 20 epochs), lfnet-asp-n2-c48 and lfnet-asp-n2 from the
-# step before them:
+# configs/models/lfnet-asp-n2.json, 20 epochs), lfnet-asp-n2-c48, lfnet-asp-n2-f10 and
+# lfnet-asp-n2 from the step before them:
 #   lfnet-asp-n2-c32  configs/models/lfnet-asp-n2.json -> models/lfnet-asp-n2-c32.ckpt: 30 more
 #                     epochs at lr 4e-4 on new random scenes and crops (seeds 9000 and 11)
 #   lfnet-asp-n2-c48  the same config -> models/lfnet-asp-n2-c48.ckpt: lfnet-asp-n2-c32 widened
 #                     from 32 to 48 channels (train --init embeds the narrow U-Net in the wide
 #                     one) and trained 14 more epochs at lr 3e-4 on new scenes and crops (15000, 15)
-#   lfnet-asp-n2      the same config -> models/lfnet-asp-n2.ckpt: lfnet-asp-n2-c48 trained 10
-#                     more epochs at lr 3e-4 on crops of 64 x 64 (4,500 per epoch) of new scenes,
-#                     half of whose random scenes hold a man-made frame (frame_probability 0.5:
-#                     docs/scenes.md; seeds 17000 and 17)
+#   lfnet-asp-n2-f10  the same config -> models/lfnet-asp-n2-f10.ckpt: lfnet-asp-n2-c48 trained
+#                     10 more epochs at lr 3e-4 on crops of 64 x 64 (4,500 per epoch) of new
+#                     scenes, half of whose random scenes hold a man-made frame
+#                     (frame_probability 0.5: docs/scenes.md; seeds 17000 and 17)
+#   lfnet-asp-n2      the same config -> models/lfnet-asp-n2.ckpt: lfnet-asp-n2-f10 trained 14
+#                     more epochs at lr 1e-4 on the same kind of crops of new scenes, 70 % of
+#                     whose random scenes hold a frame (seeds 18000 and 18)
 #   lfnet-asp-n15     configs/models/lfnet-asp-n15.json -> models/lfnet-asp-n15.ckpt: across Phi
 #   lfnet-mask-n2     configs/models/lfnet-mask-n2.json -> models/lfnet-mask-n2.ckpt  (10 epochs
 #                     at lr 5e-4; the U-Net reads the per-pixel pseudo-inverse, so its weights
@@ -29,10 +32,11 @@ source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 threads=${LFNET_THREADS:-1}
 first20=models/lfnet-asp-n2-first20.ckpt
-order=(lfnet-asp-n2-c32 lfnet-asp-n2-c48 lfnet-asp-n2 lfnet-asp-n15 lfnet-mask-n2)
+order=(lfnet-asp-n2-c32 lfnet-asp-n2-c48 lfnet-asp-n2-f10 lfnet-asp-n2 lfnet-asp-n15 lfnet-mask-n2)
 declare -A config=(
   [lfnet-asp-n2-c32]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n2-c48]=configs/models/lfnet-asp-n2.json
+  [lfnet-asp-n2-f10]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n2]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n15]=configs/models/lfnet-asp-n15.json
   [lfnet-mask-n2]=configs/models/lfnet-mask-n2.json
@@ -40,7 +44,8 @@ declare -A config=(
 declare -A init=(
   [lfnet-asp-n2-c32]=$first20
   [lfnet-asp-n2-c48]=models/lfnet-asp-n2-c32.ckpt
-  [lfnet-asp-n2]=models/lfnet-asp-n2-c48.ckpt
+  [lfnet-asp-n2-f10]=models/lfnet-asp-n2-c48.ckpt
+  [lfnet-asp-n2]=models/lfnet-asp-n2-f10.ckpt
   [lfnet-asp-n15]=$first20
   [lfnet-mask-n2]=$first20
 )
@@ -49,11 +54,16 @@ declare -A finetune=(
                       --set data.random_seed=9000 --set dataset.seed=11"
   [lfnet-asp-n2-c48]="--set network.image.channels=48 --set training.epochs=14
                       --set training.lr=0.0003 --set data.random_seed=15000 --set dataset.seed=15"
-  [lfnet-asp-n2]="--set network.image.channels=48 --set data.random_options.frame_probability=0.5
+  [lfnet-asp-n2-f10]="--set network.image.channels=48 --set data.random_options.frame_probability=0.5
+                      --set dataset.patch_h=64 --set dataset.patch_w=64 --set network.patch.height=64
+                      --set network.patch.width=64 --set dataset.train_patches=4500
+                      --set training.epochs=10 --set training.lr=0.0003 --set data.random_seed=17000
+                      --set dataset.seed=17"
+  [lfnet-asp-n2]="--set network.image.channels=48 --set data.random_options.frame_probability=0.7
                   --set dataset.patch_h=64 --set dataset.patch_w=64 --set network.patch.height=64
                   --set network.patch.width=64 --set dataset.train_patches=4500
-                  --set training.epochs=10 --set training.lr=0.0003 --set data.random_seed=17000
-                  --set dataset.seed=17"
+                  --set training.epochs=14 --set training.lr=0.0001 --set data.random_seed=18000
+                  --set dataset.seed=18"
   [lfnet-asp-n15]="--set training.epochs=10 --set training.lr=0.0005"
   [lfnet-mask-n2]="--set training.epochs=10 --set training.lr=0.0005"
 )
