@@ -49,19 +49,19 @@ declare -A init=(
   [lfnet-asp-n15]=$first20
   [lfnet-mask-n2]=$first20
 )
+# The 48-channel net on 4,500 crops of 64 x 64 per epoch: the steps that add frames.
+frames_crops="--set network.image.channels=48 --set dataset.patch_h=64 --set dataset.patch_w=64
+              --set network.patch.height=64 --set network.patch.width=64
+              --set dataset.train_patches=4500"
 declare -A finetune=(
   [lfnet-asp-n2-c32]="--set training.epochs=30 --set training.lr=0.0004
                       --set data.random_seed=9000 --set dataset.seed=11"
   [lfnet-asp-n2-c48]="--set network.image.channels=48 --set training.epochs=14
                       --set training.lr=0.0003 --set data.random_seed=15000 --set dataset.seed=15"
-  [lfnet-asp-n2-f10]="--set network.image.channels=48 --set data.random_options.frame_probability=0.5
-                      --set dataset.patch_h=64 --set dataset.patch_w=64 --set network.patch.height=64
-                      --set network.patch.width=64 --set dataset.train_patches=4500
+  [lfnet-asp-n2-f10]="$frames_crops --set data.random_options.frame_probability=0.5
                       --set training.epochs=10 --set training.lr=0.0003 --set data.random_seed=17000
                       --set dataset.seed=17"
-  [lfnet-asp-n2]="--set network.image.channels=48 --set data.random_options.frame_probability=0.7
-                  --set dataset.patch_h=64 --set dataset.patch_w=64 --set network.patch.height=64
-                  --set network.patch.width=64 --set dataset.train_patches=4500
+  [lfnet-asp-n2]="$frames_crops --set data.random_options.frame_probability=0.7
                   --set training.epochs=14 --set training.lr=0.0001 --set data.random_seed=18000
                   --set dataset.seed=18"
   [lfnet-asp-n15]="--set training.epochs=10 --set training.lr=0.0005"
