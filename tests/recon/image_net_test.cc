@@ -142,6 +142,34 @@ TEST_CASE("the U-Net's FLOP count matches its layers", "[recon][image]") {
   const double two = 2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c +
                      (2 * 9 * 2 * c * 2 * c + 2 * 2 * 4 * c * 2 * c) / 4;
   CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + two).epsilon(1e-12));
+  // Widths {c, 12}: the second level's block and the 2 x 2 convolutions use 12 channels.
+  o.image.widths = {8, 12};
+  const double narrow =
+      2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c + (2 * 9 * 12 * 12 + 2 * 2 * 4 * c * 12) / 4;
+  CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + narrow).epsilon(1e-12));
+}
+
+TEST_CASE("image.widths sets the channels of every level and is checked", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = image_options(*phi, 3);
+  o.image.widths = {6, 12, 8};
+  nn::LightFieldNet net(o);
+  auto params = net->image->named_parameters();
+  CHECK(params["enc1_0.weight"].sizes() == torch::IntArrayRef{12, 12, 3, 3});
+  CHECK(params["down1.weight"].sizes() == torch::IntArrayRef{8, 12, 2, 2});
+  CHECK(params["up1.weight"].sizes() == torch::IntArrayRef{8, 12, 2, 2});
+  CHECK(params["enc2_0.weight"].sizes() == torch::IntArrayRef{8, 8, 3, 3});
+  const auto back = nn::NetworkOptions::from_json(o.to_json());
+  CHECK(back.image.widths == std::vector<int64_t>{6, 12, 8});
+  // Doubled widths spelled out build the default net.
+  o.image.widths = {6, 12, 24};
+  CHECK(nn::LightFieldNet(o)->image->named_parameters()["enc2_0.weight"].size(0) == 24);
+  o.image.widths = {6, 12};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.widths") && Catch::Contains("2 entries"));
+  o.image.widths = {8, 12, 8};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.widths") && Catch::Contains("channels 6"));
+  o.image.widths = {6, 0, 8};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("positive"));
 }
 
 TEST_CASE("the lfnet architecture's options and Phi are checked", "[recon][image]") {
@@ -277,6 +305,29 @@ TEST_CASE("a shallow U-Net's weights start a deeper one that computes what the s
         std::vector<std::string>{"up1.weight", "up1.bias", "dec1_0.weight", "dec1_0.bias"});
   lfnet::test::require_close(deep->forward_image(sensor.unsqueeze(0)), want, 1e-5);
   CHECK_THROWS(deep->image->start_new_levels(3));
+}
+
+TEST_CASE("a deeper U-Net with a narrower new level starts as the shallow one", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto shallow = image_net(*phi, 2);
+  randomise(shallow, 25);
+  auto o = image_options(*phi, 3);
+  o.image.widths = {6, 12, 4};
+  nn::LightFieldNet deep(o);
+  const int64_t t = phi->period();
+  deep->set_phi(phi->pixel_weights(0, 0, t, t));
+  randomise(deep, 26);
+  const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 27));
+  torch::NoGradGuard no_grad;
+  auto deep_params = deep->image->named_parameters();
+  for (const auto& p : shallow->image->named_parameters()) {
+    INFO(p.key());
+    REQUIRE(deep_params[p.key()].sizes() == p.value().sizes());
+    deep_params[p.key()].copy_(p.value());
+  }
+  deep->image->start_new_levels(2);
+  lfnet::test::require_close(deep->forward_image(sensor.unsqueeze(0)),
+                             shallow->forward_image(sensor.unsqueeze(0)), 1e-5);
 }
 
 TEST_CASE("asp:2's mirror images are measured as mirrored sensor images", "[recon][image]") {

@@ -17,6 +17,18 @@ void ImageNetOptions::validate() const {
   if (channels < 1) throw ConfigError("image.channels: must be positive");
   if (levels < 1 || levels > 6) throw ConfigError("image.levels: must be 1 to 6");
   if (blocks < 1) throw ConfigError("image.blocks: must be >= 1");
+  if (widths.empty()) return;
+  if (static_cast<int64_t>(widths.size()) != levels) {
+    throw ConfigError("image.widths: has " + std::to_string(widths.size()) +
+                      " entries for image.levels " + std::to_string(levels));
+  }
+  if (widths.front() != channels) {
+    throw ConfigError("image.widths: starts with " + std::to_string(widths.front()) +
+                      ", not image.channels " + std::to_string(channels));
+  }
+  for (const int64_t w : widths) {
+    if (w < 1) throw ConfigError("image.widths: every entry must be positive");
+  }
 }
 
 int64_t ImageNetOptions::receptive_radius() const {
@@ -35,12 +47,11 @@ double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
   double flops = conv(static_cast<double>(in + (noise_input ? 1 : 0)), channels, 3, 1) +
                  conv(channels, out, 3, 1);
   for (int64_t l = 0; l < levels; ++l) {
-    const double c = static_cast<double>(channels << l),
-                 share = 1.0 / static_cast<double>(1 << (2 * l));
+    const double c = static_cast<double>(width(l)), share = 1.0 / static_cast<double>(1 << (2 * l));
     const bool bottom = l + 1 == levels;
     flops += conv(c, c, 3, share) * static_cast<double>(blocks * (bottom ? 1 : 2));
     // down: 2 x 2 stride 2 onto the next level; up: the transposed one back.
-    if (!bottom) flops += 2 * conv(c, 2 * c, 2, share / 4);
+    if (!bottom) flops += 2 * conv(c, static_cast<double>(width(l + 1)), 2, share / 4);
   }
   return flops;
 }
@@ -95,7 +106,7 @@ ImageNetImpl::ImageNetImpl(const ImageNetOptions& options, int64_t in, int64_t o
   options_.validate();
   input_ = register_module("input", conv3(in, options_.channels));
   for (int64_t l = 0; l < options_.levels; ++l) {
-    const int64_t c = options_.channels << l;
+    const int64_t c = options_.width(l);
     const bool bottom = l + 1 == options_.levels;
     std::vector<torch::nn::Conv2d> enc, dec;
     for (int64_t b = 0; b < options_.blocks; ++b) {
@@ -106,12 +117,13 @@ ImageNetImpl::ImageNetImpl(const ImageNetOptions& options, int64_t in, int64_t o
     encoder_.push_back(std::move(enc));
     decoder_.push_back(std::move(dec));
     if (!bottom) {
+      const int64_t next = options_.width(l + 1);
       down_.push_back(
           register_module("down" + std::to_string(l),
-                          torch::nn::Conv2d(torch::nn::Conv2dOptions(c, 2 * c, 2).stride(2))));
+                          torch::nn::Conv2d(torch::nn::Conv2dOptions(c, next, 2).stride(2))));
       up_.push_back(register_module(
           "up" + std::to_string(l),
-          torch::nn::ConvTranspose2d(torch::nn::ConvTranspose2dOptions(2 * c, c, 2).stride(2))));
+          torch::nn::ConvTranspose2d(torch::nn::ConvTranspose2dOptions(next, c, 2).stride(2))));
     }
   }
   output_ = register_module("output", conv3(options_.channels, out));

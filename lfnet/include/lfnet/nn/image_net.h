@@ -24,6 +24,10 @@ struct ImageNetOptions {
   int64_t channels = 32;  // feature channels at full resolution, doubled at every level
   int64_t levels = 3;     // resolutions: full, 1/2, 1/4 ... (1 = no down-sampling)
   int64_t blocks = 2;     // 3 x 3 convolutions (with ReLU) per level, encoder and decoder alike
+  // Channels per level, top first, when not simply doubled: e.g. {48, 96, 192, 128} keeps a
+  // fourth level from costing more parameters than the three above it. Empty: channels << l.
+  // The first entry must be `channels`.
+  std::vector<int64_t> widths;
   // Noise-aware: one more input channel holds the sigma of the measurements' noise (relative
   // to white), so one model serves every noise level (train with dataset.noise_range).
   bool noise_input = false;
@@ -33,6 +37,7 @@ struct ImageNetOptions {
     f("channels", channels);
     f("levels", levels);
     f("blocks", blocks);
+    f("widths", widths);
     f("noise_input", noise_input);
   }
   void read(JsonReader& reader);
@@ -40,6 +45,10 @@ struct ImageNetOptions {
   // Throws ConfigError naming the bad field.
   void validate() const;
 
+  // Feature channels at `level` (0 = full resolution).
+  int64_t width(int64_t level) const {
+    return widths.empty() ? channels << level : widths[static_cast<size_t>(level)];
+  }
   // Image sides the net takes: multiples of 2^(levels - 1).
   int64_t multiple() const { return int64_t{1} << (levels - 1); }
   // Radius in full-resolution pixels beyond which an input pixel cannot change an output
