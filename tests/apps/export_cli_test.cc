@@ -17,25 +17,15 @@
 #include "lfnet/recon/methods.h"
 #include "lfnet/recon/reconstruct.h"
 #include "lfnet/train/checkpoint.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
 using lfnet::test::lfnet_binary;
 using lfnet::test::run_command;
+using lfnet::test::save_net;
 
 namespace {
-
-// `net`, trained for `phi` (as far as the file says) up to `stage`, saved as a checkpoint.
-void save_net(const lfnet::nn::LightFieldNet& net, const lfnet::optics::Phi& phi,
-              const std::string& stage, const std::string& path) {
-  lfnet::train::Checkpoint ck;
-  ck.network = net->options().to_json();
-  ck.phi = phi.spec().to_json();
-  ck.config = {{"measurement_mean", 0.3}};
-  ck.model = lfnet::train::module_state(*net);
-  ck.training.stage = stage;
-  lfnet::train::save_checkpoint(ck, path);
-}
 
 // A randomly initialised asp:2 net with a pinv residual, saved as a checkpoint.
 void write_checkpoint(const std::string& path) {
@@ -287,12 +277,7 @@ TEST_CASE(
     lfnet::nn::LightFieldNet net(o);
     const int64_t t = phi->period();
     net->set_phi(phi->pixel_weights(0, 0, t, t));
-    {
-      // Random weights everywhere, the last layer included, so the U-Net is not the identity.
-      torch::manual_seed(5);
-      torch::NoGradGuard no_grad;
-      for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
-    }
+    lfnet::test::randomise_image_net(net, 5);
     net->eval();
     const std::string ckpt = tmp / (name + ".ckpt"), pt = tmp / (name + ".pt");
     save_net(net, *phi, "joint_scratch", ckpt);

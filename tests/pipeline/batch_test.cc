@@ -11,6 +11,7 @@
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/train/checkpoint.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -97,18 +98,8 @@ TEST_CASE("run_batch --self-ensemble averages the mirror passes of an lfnet chec
   no.image.blocks = 1;
   nn::LightFieldNet net(no);
   net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
-  torch::manual_seed(5);
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
-  }
-  train::Checkpoint ck;
-  ck.network = no.to_json();
-  ck.phi = phi->spec().to_json();
-  ck.config = {{"measurement_mean", 0.3}};
-  ck.model = train::module_state(*net);
-  ck.training.stage = "joint";
-  train::save_checkpoint(ck, tmp / "m.ckpt");
+  test::randomise_image_net(net, 5);
+  test::save_net(net, *phi, "joint", tmp / "m.ckpt");
 
   pipeline::BatchOptions o;
   o.in = tmp / "in";

@@ -7,6 +7,7 @@
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/reconstruct.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 using namespace lfnet;
@@ -29,13 +30,6 @@ nn::LightFieldNet image_net(const optics::Phi& phi, int64_t levels = 3) {
   const int64_t t = phi.period();
   net->set_phi(phi.pixel_weights(0, 0, t, t));
   return net;
-}
-
-// Random weights everywhere, the last convolution included, so the U-Net is not the identity.
-void randomise(nn::LightFieldNet& net, uint64_t seed) {
-  torch::manual_seed(seed);
-  torch::NoGradGuard no_grad;
-  for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
 }
 
 torch::Tensor random_light_field(const optics::Phi& phi, int64_t h, int64_t w, uint64_t seed) {
@@ -92,7 +86,7 @@ TEST_CASE("tiled inference of the lfnet architecture equals one pass over the wh
       INFO(name << ", " << levels << " levels");
       const auto phi = optics::make_phi(optics::PhiSpec::parse(name + ":2"));
       auto net = image_net(*phi, levels);
-      randomise(net, 7 + levels);
+      test::randomise_image_net(net, 7 + levels);
       auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 70, 53, 9));
       torch::Tensor whole;
       {
@@ -114,7 +108,7 @@ TEST_CASE("tiled inference of the lfnet architecture equals one pass over the wh
 TEST_CASE("a crop through forward() is forward_image of that crop", "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));
   auto net = image_net(*phi);
-  randomise(net, 4);
+  test::randomise_image_net(net, 4);
   auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 40, 40, 2));
   const int64_t y0 = 5, x0 = 9;
   auto crop = sensor.slice(1, y0, y0 + 16).slice(2, x0, x0 + 16).unsqueeze(0).contiguous();
@@ -199,7 +193,7 @@ TEST_CASE("a noise-aware lfnet net reads the noise sigma, tiled or whole", "[rec
   o.image.noise_input = true;
   nn::LightFieldNet net(o);
   net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
-  randomise(net, 11);
+  test::randomise_image_net(net, 11);
   auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 44, 37, 6));
   torch::NoGradGuard no_grad;
   auto quiet = net->forward_image(sensor.unsqueeze(0), 0, 0.0);
@@ -218,7 +212,7 @@ TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 ou
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto net = image_net(*phi);
-  randomise(net, 8);
+  test::randomise_image_net(net, 8);
   const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 32, 24, 9));
   torch::NoGradGuard no_grad;
   const auto want = net->forward_image(sensor.unsqueeze(0));
@@ -249,13 +243,13 @@ TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one d
   narrow_options.image.blocks = 2;
   nn::LightFieldNet narrow(narrow_options);
   narrow->set_phi(phi->pixel_weights(0, 0, 1, 1));
-  randomise(narrow, 12);
+  test::randomise_image_net(narrow, 12);
   auto wide_options = narrow_options;
   wide_options.image.channels = 10;
   wide_options.image.noise_input = true;  // the input convolution gains an input channel too
   nn::LightFieldNet wide(wide_options);
   wide->set_phi(phi->pixel_weights(0, 0, 1, 1));
-  randomise(wide, 13);
+  test::randomise_image_net(wide, 13);
   const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 14));
   torch::NoGradGuard no_grad;
   const auto want = narrow->forward_image(sensor.unsqueeze(0));
@@ -286,9 +280,9 @@ TEST_CASE("a shallow U-Net's weights start a deeper one that computes what the s
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto shallow = image_net(*phi, 2);
-  randomise(shallow, 15);
+  test::randomise_image_net(shallow, 15);
   auto deep = image_net(*phi, 3);
-  randomise(deep, 16);
+  test::randomise_image_net(deep, 16);
   const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 17));
   torch::NoGradGuard no_grad;
   const auto want = shallow->forward_image(sensor.unsqueeze(0));
@@ -310,13 +304,13 @@ TEST_CASE("a shallow U-Net's weights start a deeper one that computes what the s
 TEST_CASE("a deeper U-Net with a narrower new level starts as the shallow one", "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto shallow = image_net(*phi, 2);
-  randomise(shallow, 25);
+  test::randomise_image_net(shallow, 25);
   auto o = image_options(*phi, 3);
   o.image.widths = {6, 12, 4};
   nn::LightFieldNet deep(o);
   const int64_t t = phi->period();
   deep->set_phi(phi->pixel_weights(0, 0, t, t));
-  randomise(deep, 26);
+  test::randomise_image_net(deep, 26);
   const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 27));
   torch::NoGradGuard no_grad;
   auto deep_params = deep->image->named_parameters();
@@ -371,7 +365,7 @@ TEST_CASE("the self-ensemble averages the mirror passes and is equivariant", "[r
   const auto sensor = optics::simulate_sensor(*phi, lf);
   CHECK(torch::allclose(recon::reconstruct_sensor_mirrored(net, sensor, 16, false),
                         recon::reconstruct_sensor_tiled(net, sensor, 16, false), 1e-5, 1e-5));
-  randomise(net, 21);
+  test::randomise_image_net(net, 21);
   const auto single = recon::reconstruct_sensor_tiled(net, sensor, 16, false);
   const auto ensemble = recon::reconstruct_sensor_mirrored(net, sensor, 16, false);
   CHECK_FALSE(torch::allclose(single, ensemble, 1e-3, 1e-3));

@@ -1,0 +1,26 @@
+#include "support/small_nets.h"
+
+#include <torch/torch.h>
+
+#include "lfnet/train/checkpoint.h"
+
+namespace lfnet::test {
+
+void randomise_image_net(nn::LightFieldNet& net, uint64_t seed) {
+  torch::manual_seed(seed);
+  torch::NoGradGuard no_grad;
+  for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
+}
+
+void save_net(const nn::LightFieldNet& net, const optics::Phi& phi, const std::string& stage,
+              const std::string& path) {
+  train::Checkpoint ck;
+  ck.network = net->options().to_json();
+  ck.phi = phi.spec().to_json();
+  ck.config = {{"measurement_mean", 0.3}};
+  ck.model = train::module_state(*net);
+  ck.training.stage = stage;
+  train::save_checkpoint(ck, path);
+}
+
+}  // namespace lfnet::test

@@ -1,0 +1,21 @@
+// Small networks for the tests that need a model: random weights and a checkpoint file.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
+
+namespace lfnet::test {
+
+// Random weights (N(0, 0.2^2)) everywhere in the U-Net of lfnet's architecture, its last
+// convolution included, so the net is not the identity on its pseudo-inverse.
+void randomise_image_net(nn::LightFieldNet& net, uint64_t seed);
+
+// `net`, trained for `phi` up to `stage` as far as the file says, saved as a checkpoint with a
+// measurement mean of 0.3.
+void save_net(const nn::LightFieldNet& net, const optics::Phi& phi, const std::string& stage,
+              const std::string& path);
+
+}  // namespace lfnet::test
