@@ -68,10 +68,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--window", o.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");
   cmd->add_flag("--match-mean", o.match_mean, "scale real measurements to the training mean");
-  cmd->add_flag("--self-ensemble", o.self_ensemble,
-                "lfnet models: reconstruct the sensor image's mirror images that the Phi allows "
-                "too (asp:2 all four) and average, at that many times the cost "
-                "(docs/architectures.md)");
+  add_self_ensemble_options(cmd, o.self_ensemble, o.self_ensemble_passes);
   cmd->add_flag("--force", o.force, "write into an existing non-empty output folder");
   add_dist_flags(cmd, a->dist);
   cmd->callback([a] { run(*a); });

@@ -114,9 +114,7 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                   "untrained networks timed without --model, repeatable: paper (default), lfnet");
   add_enum_option(cmd, "--precision", a->precision,
                   "float32 or bfloat16 for the CNN branch's convolutions, or lfnet's U-Net");
-  cmd->add_flag("--self-ensemble", a->self_ensemble,
-                "lfnet models: time the self-ensemble over the Phi's mirror images "
-                "(docs/architectures.md)");
+  add_self_ensemble_options(cmd, a->self_ensemble, a->self_ensemble_passes, "time");
   cmd->add_flag("--in-process", args->in_process,
                 "run every case in this process (peak memory is then a running maximum)");
   cmd->add_flag("--skip-kernels", a->skip_kernels, "skip the Conv4d timings");

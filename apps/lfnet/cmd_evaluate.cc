@@ -96,10 +96,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--device", q.device, "cpu or cuda[:K] for the network (default cpu)");
   add_enum_option(cmd, "--precision", q.precision,
                   "float32 (default) or bfloat16 for the CNN branch, or lfnet's U-Net");
-  cmd->add_flag("--self-ensemble", q.self_ensemble,
-                "lfnet models: reconstruct the sensor image's mirror images that the Phi allows "
-                "too (asp:2 all four) and average, at that many times the cost "
-                "(docs/architectures.md)");
+  add_self_ensemble_options(cmd, q.self_ensemble, q.self_ensemble_passes);
   cmd->callback([a] { run_evaluate(*a); });
 }
 

@@ -46,6 +46,17 @@ inline const CLI::Validator kStride(
     },
     "1..PATCH");
 
+// A count: a whole number >= 1.
+inline const CLI::Validator kCount(
+    [](std::string& text) -> std::string {
+      int64_t v = 0;
+      if (!CLI::detail::lexical_cast(text, v) || v < 1) {
+        return "must be a whole number >= 1, got " + text;
+      }
+      return "";
+    },
+    "N>=1");
+
 // An option whose value names one of an enum's values, read by the enum's `from_string` (its
 // one name table, core/enum_names.h): a bad name is a usage error naming the option and the
 // known names. Repeatable when `value` is a vector; given values then replace the default.
@@ -84,6 +95,23 @@ inline void add_dict_coding_options(CLI::App* cmd, std::string& method, std::str
   cmd->add_option("--dict-options", options,
                   "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
                   "{\"max_atoms\": 20}}' (docs/dictionary.md)");
+}
+
+// --self-ensemble and --ensemble-passes: lfnet models averaged over the Phi's mirror images
+// (recon::reconstruct_sensor_mirrored), all of them or the first `passes`. `what` opens the
+// flag's help ("reconstruct" or "time").
+inline void add_self_ensemble_options(CLI::App* cmd, bool& self_ensemble, int64_t& passes,
+                                      const std::string& what = "reconstruct") {
+  auto* flag = cmd->add_flag(
+      "--self-ensemble", self_ensemble,
+      "lfnet models: " + what +
+          " the sensor image's mirror images that the Phi allows too (asp:2 all four) and "
+          "average, at that many times the cost (docs/architectures.md)");
+  cmd->add_option("--ensemble-passes", passes,
+                  "with --self-ensemble: the first N of those passes only, the identity first, "
+                  "then left to right, top to bottom, both (default: all)")
+      ->check(kCount)
+      ->needs(flag);
 }
 
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.

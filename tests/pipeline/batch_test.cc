@@ -125,6 +125,23 @@ TEST_CASE("run_batch --self-ensemble averages the mirror passes of an lfnet chec
   q.self_ensemble = true;
   CHECK(pipeline::evaluate_request(q).record["psnr_db"].get<double>() ==
         Approx(scored["psnr_db"].get<double>()).margin(1e-6));
+  CHECK(scored["self_ensemble_passes"] == 4);
+  // The first two passes only: another number, the same as evaluate's with two passes.
+  o.self_ensemble_passes = 2;
+  o.out = tmp / "pair";
+  const auto pair = pipeline::run_batch(o);
+  REQUIRE(pair.records.size() == 2);
+  CHECK(pair.records[1]["self_ensemble_passes"] == 2);
+  CHECK(pair.records[1]["psnr_db"].get<double>() !=
+        Approx(scored["psnr_db"].get<double>()).margin(1e-6));
+  q.self_ensemble_passes = 2;
+  CHECK(pipeline::evaluate_request(q).record["psnr_db"].get<double>() ==
+        Approx(pair.records[1]["psnr_db"].get<double>()).margin(1e-6));
+  // Passes without the self-ensemble are refused.
+  q.self_ensemble = false;
+  CHECK_THROWS_WITH(pipeline::evaluate_request(q),
+                    Catch::Contains("--ensemble-passes applies to --self-ensemble"));
+  o.self_ensemble_passes = 0;
   // Another method, or no model, is refused before any output exists.
   o.out = tmp / "refused";
   o.methods = {"net", "pinv"};

@@ -101,6 +101,12 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
   CHECK(ensemble["gflops"].get<double>() * ensemble["seconds"].get<double>() ==
         Approx(4 * r["gflops"].get<double>() * r["seconds"].get<double>()).epsilon(1e-6));
   CHECK(ensemble["psnr_db"].get<double>() == Approx(r["psnr_db"].get<double>()).margin(0.01));
+  // Two of them: twice the work.
+  o.self_ensemble_passes = 2;
+  const auto pair = pipeline::bench_case(o, "net", 5, 1e9);
+  CHECK(pair["self_ensemble_passes"] == 2);
+  CHECK(pair["gflops"].get<double>() * pair["seconds"].get<double>() ==
+        Approx(2 * r["gflops"].get<double>() * r["seconds"].get<double>()).epsilon(1e-6));
 }
 
 TEST_CASE("bench_table prints a line per case, its architecture and its error",

@@ -391,6 +391,34 @@ TEST_CASE("the self-ensemble averages the mirror passes and is equivariant", "[r
   CHECK_FALSE(torch::allclose(single_x, single.flip({2, 4}), 1e-3, 1e-3));
 }
 
+TEST_CASE("a self-ensemble of fewer passes averages the first mirrors", "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto net = image_net(*phi);
+  test::randomise_image_net(net, 23);
+  const auto all = recon::ensemble_mirrors(net->phi);
+  REQUIRE(all.size() == 4);
+  const auto two = recon::ensemble_mirrors(net->phi, 2);
+  REQUIRE(two.size() == 2);
+  CHECK_FALSE((two[0].flip_x || two[0].flip_y));  // the identity first
+  CHECK((two[1].flip_x && !two[1].flip_y));       // then left to right
+  CHECK(recon::ensemble_mirrors(net->phi, 9).size() == 4);
+  CHECK(recon::ensemble_mirrors(net->phi, 0).size() == 4);
+  CHECK_THROWS_AS(recon::ensemble_mirrors(net->phi, -1), ConfigError);
+
+  const auto lf = random_light_field(*phi, 40, 48, 9);
+  const auto sensor = optics::simulate_sensor(*phi, lf);
+  const auto single = recon::reconstruct_sensor_tiled(net, sensor, 16, false);
+  // The left-to-right mirror image, reconstructed and mirrored back (x and v reversed).
+  const auto mirrored =
+      recon::reconstruct_sensor_tiled(net, sensor.flip({2}), 16, false).flip({2, 4});
+  const auto pair = recon::reconstruct_sensor_mirrored(net, sensor, 16, false, 0.0, {}, 2);
+  CHECK(torch::allclose(pair, (single + mirrored) / 2, 1e-4, 1e-4));
+  CHECK_FALSE(torch::allclose(pair, recon::reconstruct_sensor_mirrored(net, sensor, 16, false),
+                              1e-3, 1e-3));
+  CHECK(torch::allclose(recon::reconstruct_sensor_mirrored(net, sensor, 16, false, 0.0, {}, 1),
+                        single, 1e-5, 1e-5));
+}
+
 TEST_CASE("the self-ensemble applies to the net method of an lfnet checkpoint only",
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));

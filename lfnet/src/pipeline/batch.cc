@@ -144,6 +144,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.post_filter = a.post_filter;
         q.match_mean = a.match_mean;
         q.self_ensemble = a.self_ensemble;
+        q.self_ensemble_passes = a.self_ensemble_passes;
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
@@ -187,6 +188,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.dict_method = a.dict_method;
     context.dict_options = a.dict_options;
     context.self_ensemble = a.self_ensemble;
+    context.self_ensemble_passes = a.self_ensemble_passes;
     LightFieldSources sources;
     sources.light_fields = {item.path};
     truths = load_sources(sources, phi->rows(), phi->cols());
@@ -261,6 +263,8 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
                  "--dict-method and --dict-options apply to the dict method, which --methods does "
                  "not name");
   ModelCache cache;  // every item shares one read of the model and the dictionary
+  LFNET_CHECK_AS(ConfigError, a.self_ensemble || a.self_ensemble_passes == 0,
+                 "--ensemble-passes applies to --self-ensemble");
   if (a.self_ensemble) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(),
                    "--self-ensemble applies to --method net with a checkpoint of the lfnet "

@@ -201,7 +201,8 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   int64_t passes = 1;  // of the lfnet architecture's whole-image pass
   if (a.self_ensemble && net && net->options().is_image()) {
     resources.self_ensemble = true;
-    passes = static_cast<int64_t>(recon::phi_mirrors(net->phi).size());
+    resources.self_ensemble_passes = a.self_ensemble_passes;
+    passes = static_cast<int64_t>(recon::ensemble_mirrors(net->phi, a.self_ensemble_passes).size());
     extra["self_ensemble_passes"] = passes;
   }
   const recon::PatchSolver solver = recon::make_solver(method, resources);
@@ -460,6 +461,9 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
                                    nn::to_string(a.precision)};
   if (a.tile > 0) args.insert(args.end(), {"--tile", std::to_string(a.tile)});
   if (a.self_ensemble) args.emplace_back("--self-ensemble");
+  if (a.self_ensemble_passes > 0) {
+    args.insert(args.end(), {"--ensemble-passes", std::to_string(a.self_ensemble_passes)});
+  }
   for (const auto& arch : a.architectures) {
     args.insert(args.end(), {"--architecture", nn::to_string(arch)});
   }

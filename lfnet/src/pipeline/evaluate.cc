@@ -55,6 +55,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     resources.net = context.net;
     resources.script = context.script.get();
     resources.self_ensemble = context.self_ensemble;
+    resources.self_ensemble_passes = context.self_ensemble_passes;
     ModelCache local;
     if (needs == recon::MethodNeeds::kDictionary && !context.dictionary.empty()) {
       resources.dictionary =
@@ -85,7 +86,11 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
         image);
   }
   result.record["light_field"] = truth.name;
-  if (context.self_ensemble) result.record["self_ensemble"] = true;
+  if (context.self_ensemble) {
+    result.record["self_ensemble"] = true;
+    result.record["self_ensemble_passes"] =
+        recon::ensemble_mirrors(context.net->phi, context.self_ensemble_passes).size();
+  }
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
     if (report->unconverged > 0) {
@@ -157,7 +162,10 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     }
   }
   if (a.self_ensemble) recon::check_self_ensemble(method, context.net);
+  LFNET_CHECK_AS(ConfigError, a.self_ensemble || a.self_ensemble_passes == 0,
+                 "--ensemble-passes applies to --self-ensemble");
   context.self_ensemble = a.self_ensemble;
+  context.self_ensemble_passes = a.self_ensemble_passes;
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;

@@ -69,8 +69,9 @@ class NetworkMethod : public Method {
     }
     auto net = r.net;
     if (r.self_ensemble) {
-      return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
-        return reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma);
+      const int64_t passes = r.self_ensemble_passes;
+      return [net, tile, passes](const torch::Tensor& sensor, double noise_sigma) {
+        return reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes);
       };
     }
     return [net, tile](const torch::Tensor& sensor, double noise_sigma) {

@@ -180,12 +180,23 @@ void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net
                  "architecture");
 }
 
+std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights, int64_t max_passes) {
+  LFNET_CHECK_AS(ConfigError, max_passes >= 0,
+                 "the self-ensemble's passes must be positive (0: every mirror image), not " +
+                     std::to_string(max_passes));
+  auto mirrors = phi_mirrors(pixel_weights);
+  if (max_passes > 0 && static_cast<size_t>(max_passes) < mirrors.size()) {
+    mirrors.resize(static_cast<size_t>(max_passes));
+  }
+  return mirrors;
+}
+
 torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
                                           int64_t tile, bool clamp, double noise_sigma,
-                                          const ProgressCallback& progress) {
+                                          const ProgressCallback& progress, int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->options().is_image(),
                  "the self-ensemble needs a model of the lfnet architecture");
-  const auto mirrors = phi_mirrors(net->phi);
+  const auto mirrors = ensemble_mirrors(net->phi, max_passes);
   const auto count = static_cast<int64_t>(mirrors.size());
   torch::Tensor sum;
   for (int64_t i = 0; i < count; ++i) {

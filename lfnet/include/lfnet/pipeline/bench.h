@@ -44,7 +44,8 @@ struct BenchOptions {
   std::vector<nn::Architecture> architectures = {nn::Architecture::kPaper};
   int64_t tile = 0;  // tile of cnn_mode full and of lfnet models (0: 128 and 256)
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch's convolutions
-  bool self_ensemble = false;  // lfnet models: average over the Phi's mirror images
+  bool self_ensemble = false;        // lfnet models: average over the Phi's mirror images
+  int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
 };
 
 // FLOP/s of a 2048^3 single-precision matrix product, the best of `reps` after a warm-up.

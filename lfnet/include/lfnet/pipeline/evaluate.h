@@ -29,6 +29,7 @@ struct MethodContext {
   std::string dict_method;     // for dict: omp or admm ("": dict_options', else the dictionary's)
   std::string dict_options;    // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
   bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirrors
+  int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
 };
 
 // The evaluation options of the command line: simulation mode, Gaussian noise sigma (0: none),
@@ -67,7 +68,8 @@ struct EvaluateRequest {
   std::string device = "cpu";  // cpu or cuda[:K] for a checkpoint's network
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   bool keep_estimate = false;                         // return the reconstruction too
-  bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirror images
+  bool self_ensemble = false;        // lfnet architecture: average over the Phi's mirror images
+  int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
 };
 
 // One evaluation's outcome.

@@ -31,8 +31,9 @@ struct ReconstructRequest {
   bool post_filter = false;           // suppress artefacts with the stride's period
   std::string device = "cpu";         // cpu or cuda[:K], for checkpoints' networks
   recon::CnnMode cnn_mode = recon::CnnMode::kPatches;  // or kFull: the CNN branch in tiles
-  int64_t tile = 0;            // tile of cnn_mode full and of lfnet models (0: 128, 256)
-  bool self_ensemble = false;  // lfnet models: average over the Phi's mirror images
+  int64_t tile = 0;                  // tile of cnn_mode full and of lfnet models (0: 128, 256)
+  bool self_ensemble = false;        // lfnet models: average over the Phi's mirror images
+  int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   // The sensor's Gaussian noise sigma (relative to white) for noise-aware models; negative:
   // the noise_sigma that the acquisition's sensor.json records, else 0.

@@ -92,13 +92,21 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
 // network (`net`, empty without one) of the lfnet architecture.
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net);
 
+// The mirrors a self-ensemble of at most `max_passes` passes uses (0: all): the first of
+// phi_mirrors(pixel_weights), the identity first, then left to right, top to bottom, both.
+// A ConfigError when `max_passes` is negative.
+std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights,
+                                           int64_t max_passes = 0);
+
 // The self-ensemble of reconstruct_sensor_tiled: the sensor image and its mirror images under
-// the Phi's mirrors (phi_mirrors of the net's Phi) are reconstructed, mirrored back and
-// averaged, up to 4 passes. Equivariant: the mirror image of a light field reconstructs as the
-// mirror image of its reconstruction.
+// the Phi's mirrors (ensemble_mirrors of the net's Phi, at most `max_passes` of them; 0: all)
+// are reconstructed, mirrored back and averaged, up to 4 passes. With every mirror it is
+// equivariant: the mirror image of a light field reconstructs as the mirror image of its
+// reconstruction.
 torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
                                           int64_t tile = kDefaultImageTile, bool clamp = true,
                                           double noise_sigma = 0.0,
-                                          const ProgressCallback& progress = {});
+                                          const ProgressCallback& progress = {},
+                                          int64_t max_passes = 0);
 
 }  // namespace lfnet::recon

@@ -36,7 +36,8 @@ struct MethodResources {
   dict::SparseCodingOptions coding;              // kDictionary: OMP or ADMM
   std::shared_ptr<SolverReport> report;          // iterative methods: non-convergence counts
   int64_t tile = 256;                            // whole-image methods: spatial tile
-  bool self_ensemble = false;  // whole-image methods: average over the Phi's mirrors
+  bool self_ensemble = false;        // whole-image methods: average over the Phi's mirrors
+  int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
 };
 
 class Method {
