@@ -269,8 +269,9 @@ cross-scene() {
 }
 
 # lfnet's shipped ASP model in one pass and as its self-ensemble (--self-ensemble: the four
-# mirror images that asp:2 measures as mirrored sensor images, docs/architectures.md), on the
-# light fields of the cross-scene benchmark, beside pinv and no-parallax.
+# mirror images that asp:2 measures as mirrored sensor images, docs/architectures.md), and of
+# its first two passes (--ensemble-passes 2: the identity and the left-to-right mirror; also in
+# bfloat16), on the light fields of the cross-scene benchmark, beside pinv and no-parallax.
 self-ensemble() {
   local tmp i
   tmp=$(mktemp)
@@ -281,6 +282,12 @@ self-ensemble() {
     done
     VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt "${src[@]}" \
       --method net --mode sensor
+    VARIANT="lfnet-asp-n2, self-ensemble of 2 passes" record "$tmp" \
+      --model models/lfnet-asp-n2.ckpt "${src[@]}" --method net --mode sensor --self-ensemble \
+      --ensemble-passes 2
+    VARIANT="lfnet-asp-n2, self-ensemble of 2 passes, bfloat16" record "$tmp" \
+      --model models/lfnet-asp-n2.ckpt "${src[@]}" --method net --mode sensor --self-ensemble \
+      --ensemble-passes 2 --precision bfloat16
     VARIANT="lfnet-asp-n2, self-ensemble" record "$tmp" --model models/lfnet-asp-n2.ckpt \
       "${src[@]}" --method net --mode sensor --self-ensemble
   done
