@@ -427,6 +427,11 @@ TEST_CASE("the self-ensemble applies to the net method of an lfnet checkpoint on
   CHECK_THROWS_WITH(recon::check_self_ensemble("pinv", net),
                     Catch::Contains("--self-ensemble applies to --method net"));
   CHECK_THROWS_AS(recon::check_self_ensemble("net", nn::LightFieldNet{nullptr}), ConfigError);
+  // --ensemble-passes needs the self-ensemble.
+  CHECK_NOTHROW(recon::check_ensemble_passes(true, 2));
+  CHECK_NOTHROW(recon::check_ensemble_passes(false, 0));
+  CHECK_THROWS_WITH(recon::check_ensemble_passes(false, 2),
+                    Catch::Contains("--ensemble-passes applies to --self-ensemble"));
   nn::NetworkOptions paper;
   paper.measurements = phi->measurements();
   CHECK_THROWS_AS(recon::check_self_ensemble("net", nn::LightFieldNet(paper)), ConfigError);

@@ -263,8 +263,7 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
                  "--dict-method and --dict-options apply to the dict method, which --methods does "
                  "not name");
   ModelCache cache;  // every item shares one read of the model and the dictionary
-  LFNET_CHECK_AS(ConfigError, a.self_ensemble || a.self_ensemble_passes == 0,
-                 "--ensemble-passes applies to --self-ensemble");
+  recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
   if (a.self_ensemble) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(),
                    "--self-ensemble applies to --method net with a checkpoint of the lfnet "

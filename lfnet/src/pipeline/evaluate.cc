@@ -162,8 +162,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     }
   }
   if (a.self_ensemble) recon::check_self_ensemble(method, context.net);
-  LFNET_CHECK_AS(ConfigError, a.self_ensemble || a.self_ensemble_passes == 0,
-                 "--ensemble-passes applies to --self-ensemble");
+  recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
   context.self_ensemble = a.self_ensemble;
   context.self_ensemble_passes = a.self_ensemble_passes;
   const auto phi = optics::make_phi(spec);

@@ -134,8 +134,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     resources.self_ensemble_passes = a.self_ensemble_passes;
     if (a.self_ensemble)
       recon::check_self_ensemble(method, model ? model->net : nn::LightFieldNet{nullptr});
-    LFNET_CHECK_AS(ConfigError, a.self_ensemble || a.self_ensemble_passes == 0,
-                   "--ensemble-passes applies to --self-ensemble");
+    recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
     if (needs == recon::MethodNeeds::kDictionary) {
       resources.dictionary = &files.dictionary(a.dictionary);
       resources.coding = dict_coding(*resources.dictionary, a.dict_options, a.dict_method);

@@ -180,6 +180,11 @@ void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net
                  "architecture");
 }
 
+void check_ensemble_passes(bool self_ensemble, int64_t passes) {
+  LFNET_CHECK_AS(ConfigError, self_ensemble || passes == 0,
+                 "--ensemble-passes applies to --self-ensemble");
+}
+
 std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights, int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, max_passes >= 0,
                  "the self-ensemble's passes must be positive (0: every mirror image), not " +

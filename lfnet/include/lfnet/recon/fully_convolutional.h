@@ -92,6 +92,10 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
 // network (`net`, empty without one) of the lfnet architecture.
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net);
 
+// Throws a ConfigError when `passes` (--ensemble-passes; 0: not given) is set without the
+// self-ensemble.
+void check_ensemble_passes(bool self_ensemble, int64_t passes);
+
 // The mirrors a self-ensemble of at most `max_passes` passes uses (0: all): the first of
 // phi_mirrors(pixel_weights), the identity first, then left to right, top to bottom, both.
 // A ConfigError when `max_passes` is negative.
