@@ -111,3 +111,51 @@ TEST_CASE(
   CHECK(out.find("trained for Phi") != std::string::npos);
   CHECK_FALSE(fs::exists(tmp / "recm"));
 }
+
+TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks the teacher",
+          "[app][slow]") {
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "student.json") << R"({
+    "name": "student", "phi": "asp:2",
+    "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
+    "dataset": {"patch_h": 16, "patch_w": 16, "train_patches": 32, "validation_patches": 16,
+                "validation_fraction": 0.3, "seed": 2},
+    "network": {"architecture": "lfnet", "image": {"channels": 4, "levels": 2, "blocks": 1},
+                "patch": {"height": 16, "width": 16}},
+    "training": {"epochs": 1, "batch_size": 16, "progress": false},
+    "stages": ["joint_scratch"]
+  })";
+  const std::string lfnet = lfnet_binary() + " --threads 2 ";
+  const std::string models = std::string(LFNET_SOURCE_DIR) + "/models/";
+  const std::string train = lfnet + "train " + (tmp / "student.json");
+  std::string out;
+  REQUIRE(run_command(train + " --set distill.teacher=" + models + "lfnet-asp-n2.ckpt" +
+                          " --set distill.passes=2 --set distill.weight=0.5 --out " + (tmp / "run"),
+                      out) == 0);
+  CHECK(out.find("distillation: targets 0.5 x the self-ensemble of") != std::string::npos);
+  CHECK(out.find("(2 passes)") != std::string::npos);
+  // The checkpoint records what taught it.
+  const auto config = nlohmann::json::parse(std::ifstream(tmp / "run/config.json"));
+  CHECK(config["distill"]["passes"] == 2);
+
+  // Teachers that cannot teach, and bad values, are one error each before any training.
+  const std::pair<std::string, std::string> bad[] = {
+      {"distill.teacher=" + models + "asp-n2.ckpt", "must be of the lfnet architecture"},
+      {"distill.teacher=" + models + "lfnet-asp-n15.ckpt", "Phi"},
+      {"distill.teacher=" + (tmp / "missing.ckpt"), "missing.ckpt: no such file"},
+      {"distill.weight=1.5", "$.distill.weight: must lie in [0, 1]"},
+      {"distill.passes=-1", "$.distill.passes: must be >= 0"},
+      {"distill.precision=half", "half"},
+  };
+  for (const auto& [set, message] : bad) {
+    INFO(set);
+    std::string command = train + " --set " + set;
+    if (set.rfind("distill.teacher", 0) != 0) {
+      command += " --set distill.teacher=" + models + "lfnet-asp-n2.ckpt";
+    }
+    CHECK(run_command(command + " --out " + (tmp / "bad"), out) != 0);
+    CHECK(out.find(message) != std::string::npos);
+    CHECK(out.find("lfnet: error:") != std::string::npos);
+    CHECK_FALSE(fs::exists(tmp / "bad/models/joint_scratch.ckpt"));
+  }
+}

@@ -419,6 +419,57 @@ TEST_CASE("a self-ensemble of fewer passes averages the first mirrors", "[recon]
                         single, 1e-5, 1e-5));
 }
 
+TEST_CASE(
+    "the self-ensemble of crops equals that of the whole image and keeps each crop's "
+    "phase and noise",
+    "[recon][image]") {
+  const auto asp = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto net = image_net(*asp);
+  test::randomise_image_net(net, 25);
+  const auto sensor = optics::simulate_sensor(*asp, random_light_field(*asp, 40, 48, 10));
+  for (int64_t passes : {0, 2}) {
+    INFO(passes << " passes");
+    const auto crops = recon::reconstruct_crops_mirrored(net, sensor.unsqueeze(0), {}, {}, passes);
+    REQUIRE(crops.sizes() == torch::IntArrayRef({1, 1, asp->rows(), asp->cols(), 40, 48}));
+    CHECK(torch::allclose(
+        crops[0], recon::reconstruct_sensor_mirrored(net, sensor, 16, false, 0.0, {}, passes), 1e-4,
+        1e-4));
+  }
+
+  // A periodic mask has the identity alone: each crop is forward() at its own phase, and a
+  // noise-aware net reads each crop's own sigma.
+  const auto mask = optics::make_phi(optics::PhiSpec::parse("mask:2"));
+  auto o = image_options(*mask);
+  o.image.noise_input = true;
+  nn::LightFieldNet noisy(o);
+  noisy->set_phi(mask->pixel_weights(0, 0, mask->period(), mask->period()));
+  test::randomise_image_net(noisy, 26);
+  const auto image = optics::simulate_sensor(*mask, random_light_field(*mask, 40, 40, 11));
+  std::vector<torch::Tensor> parts;
+  std::vector<int64_t> phases;
+  for (const auto& [y0, x0] : {std::pair<int64_t, int64_t>{5, 9}, {0, 0}, {12, 3}}) {
+    parts.push_back(image.slice(1, y0, y0 + 16).slice(2, x0, x0 + 16));
+    phases.push_back(optics::patch_phase(*mask, y0, x0));
+  }
+  const auto batch = torch::stack(parts).contiguous();
+  const auto phase = torch::tensor(phases, torch::kInt64);
+  REQUIRE((phase != phase[0]).any().item<bool>());
+  const auto sigma = torch::tensor({0.0F, 0.2F, 0.1F});
+  torch::Tensor expected;
+  {
+    torch::NoGradGuard no_grad;
+    expected = noisy->forward(batch.flatten(1), phase, sigma);
+  }
+  CHECK(torch::allclose(recon::reconstruct_crops_mirrored(noisy, batch, phase, sigma), expected,
+                        1e-4, 1e-4));
+  CHECK_FALSE(torch::allclose(recon::reconstruct_crops_mirrored(noisy, batch, {}, sigma), expected,
+                              1e-3, 1e-3));
+  CHECK_THROWS(recon::reconstruct_crops_mirrored(noisy, batch, phase.narrow(0, 0, 2), sigma));
+  nn::NetworkOptions paper;
+  paper.measurements = asp->measurements();
+  CHECK_THROWS_AS(recon::reconstruct_crops_mirrored(nn::LightFieldNet(paper), batch), ConfigError);
+}
+
 TEST_CASE("the self-ensemble applies to the net method of an lfnet checkpoint only",
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));

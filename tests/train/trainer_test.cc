@@ -562,3 +562,44 @@ TEST_CASE("the lfnet architecture trains on crops, from its pseudo-inverse upwar
   torch::NoGradGuard no_grad;
   CHECK(torch::allclose(loaded->forward(y.slice(0, 0, 4)), net->forward(y.slice(0, 0, 4))));
 }
+
+TEST_CASE("a teacher's estimates replace or blend with the training targets, not validation's",
+          "[train][trainer]") {
+  auto patches = torch::rand({40, 1, 3, 3, 4, 4}, torch::make_generator<at::CPUGeneratorImpl>(3));
+  auto y = patches.flatten(1).narrow(1, 0, 32).contiguous();
+  lfnet::train::InMemoryBatchSource inner(y, {}, patches, 0.25, 1);
+  lfnet::train::InMemoryBatchSource plain(y, {}, patches, 0.25, 1);
+  // The teacher says 1 - truth, pushed past 1 where the truth is small (clamped back to 1).
+  int64_t calls = 0;
+  auto teacher = [&calls](const lfnet::train::Batch& b) {
+    ++calls;
+    return (1.0 - b.target) * 1.5;
+  };
+  for (double weight : {1.0, 0.25, 0.0}) {
+    INFO("weight " << weight);
+    lfnet::train::TeacherBatchSource taught(inner, teacher, weight);
+    taught.start_epoch(2, 8);
+    plain.start_epoch(2, 8);
+    REQUIRE(taught.train_batches_per_epoch() == plain.train_batches_per_epoch());
+    for (int64_t i = 0; i < taught.train_batches_per_epoch(); ++i) {
+      const auto b = taught.next_train();
+      const auto truth = plain.next_train();
+      REQUIRE(torch::equal(b.y, truth.y));  // the same batches in the same order
+      const auto expected =
+          ((1.0 - truth.target) * 1.5).clamp(0, 1) * weight + truth.target * (1 - weight);
+      CHECK(torch::allclose(b.target, expected, 1e-6, 1e-6));
+    }
+    // Validation keeps the truth.
+    REQUIRE(taught.validation().size() == plain.validation().size());
+    CHECK(torch::equal(taught.validation()[0].target, plain.validation()[0].target));
+  }
+  CHECK(calls == 2 * plain.train_batches_per_epoch());  // weight 0 never asks the teacher
+  CHECK_THROWS_AS(lfnet::train::TeacherBatchSource(inner, teacher, 1.5), lfnet::ConfigError);
+  CHECK_THROWS_AS(lfnet::train::TeacherBatchSource(inner, teacher, -0.1), lfnet::ConfigError);
+  CHECK_THROWS_AS(lfnet::train::TeacherBatchSource(inner, {}, 1.0), lfnet::ConfigError);
+  // A teacher of the wrong shape is an error, not a silent broadcast.
+  lfnet::train::TeacherBatchSource wrong(
+      inner, [](const lfnet::train::Batch& b) { return b.target.select(1, 0); }, 1.0);
+  wrong.start_epoch(0, 8);
+  CHECK_THROWS(wrong.next_train());
+}

@@ -112,6 +112,16 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
   return config;
 }
 
+void DistillConfig::read(JsonReader& r) {
+  read_fields(r, *this);
+  r.finish();
+  if (passes < 0) throw ConfigError(r.path_of("passes") + ": must be >= 0 (0: every mirror image)");
+  if (!(weight >= 0 && weight <= 1))
+    throw ConfigError(r.path_of("weight") + ": must lie in [0, 1]");
+}
+
+nlohmann::json DistillConfig::to_json() const { return fields_to_json(*this); }
+
 ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std::string& source) {
   ExperimentConfig c;
   c.raw = j;
@@ -135,6 +145,10 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
     r.get("network", network);
     c.network = nn::NetworkOptions::from_json(network, "$.network");
     r.get("training", c.training);
+    if (r.has("distill")) {
+      auto d = r.child("distill");
+      c.distill.read(d);
+    }
     // Parse once so errors in the common options surface before any work.
     (void)train::TrainerOptions::from_json(c.training, "$.training");
     nlohmann::json stages = nlohmann::json::array({"joint"});

@@ -90,6 +90,7 @@ TrainResult train_experiment(const TrainRequest& request,
     policy.force = request.force;
     policy.inputs = {request.config, request.init};
     for (const auto& lf : config.train_data.light_fields) policy.inputs.push_back(lf);
+    if (config.distill.enabled()) policy.inputs.push_back(config.distill.teacher);
     folder = std::make_unique<RunFolder>(out, policy, continue_in_place);
     fs::create_directories(fs::path(out) / "models");
   }
@@ -111,6 +112,8 @@ TrainResult train_experiment(const TrainRequest& request,
     return is_network_stage(s.name) && !(continue_folder && fs::exists(model_of(s)));
   });
   if (lead && !continue_folder) write_json_file((fs::path(out) / "config.json").string(), resolved);
+  // A teacher that cannot teach fails before the training data are made.
+  if (networks && config.distill.enabled()) (void)load_teacher(config);
   if (networks) dataset = make_dataset(config, *phi);
   if (dataset) {
     spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),

@@ -14,6 +14,7 @@
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/pipeline/models.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/train/checkpoint.h"
 #include "lfnet/train/trainer.h"
 
@@ -30,6 +31,27 @@ std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
   lfs.reserve(named.size());
   for (auto& n : named) lfs.push_back(n.lf);
   return std::make_unique<data::PatchDataset>(std::move(lfs), phi, config.dataset);
+}
+
+nn::LightFieldNet load_teacher(const ExperimentConfig& config, const std::string& device) {
+  const auto& d = config.distill;
+  const std::string what = "$.distill.teacher " + d.teacher;
+  LFNET_CHECK_AS(ConfigError, fs::is_regular_file(d.teacher), what, ": no such file");
+  LFNET_CHECK_AS(ConfigError, model_file_kind(d.teacher) == ModelFileKind::kCheckpoint, what,
+                 ": not an lfnet checkpoint (an exported model or a dictionary cannot teach)");
+  auto model = load_model(d.teacher, true);
+  LFNET_CHECK_AS(ConfigError, model.network.is_image(), what,
+                 ": the teacher must be of the lfnet architecture (its self-ensemble teaches)");
+  try {
+    model.check_phi(config.phi.to_json());
+  } catch (const Error& e) {
+    throw ConfigError(what + ": " + e.what());
+  }
+  auto net = model.net;
+  net->to(parse_device(device));
+  nn::set_cnn_precision(net, d.precision);
+  net->eval();
+  return net;
 }
 
 std::string train_stage(const ExperimentConfig& config, const StageConfig& stage,
@@ -91,7 +113,27 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
     append_jsonl((fs::path(run_dir) / "training.jsonl").string(),
                  nlohmann::json{{"stage", stage.name}, {"record", r.to_json()}});
   };
-  trainer.fit(dataset, hooks);
+  std::unique_ptr<train::TeacherBatchSource> taught;
+  nn::LightFieldNet teacher{nullptr};
+  if (config.distill.enabled()) {
+    teacher = load_teacher(config, options.device);
+    taught = std::make_unique<train::TeacherBatchSource>(
+        dataset,
+        [teacher, passes = config.distill.passes](const train::Batch& b) {
+          const auto& o = teacher->options();
+          const auto crops = b.y.reshape({b.size(), o.measurements, -1, b.target.size(-1)});
+          return recon::reconstruct_crops_mirrored(teacher, crops, b.phase, b.noise, passes);
+        },
+        config.distill.weight);
+    if (lead) {
+      spdlog::info(
+          "distillation: targets {:g} x the self-ensemble of {} ({} passes), {:g} x the truth",
+          config.distill.weight, config.distill.teacher,
+          recon::ensemble_mirrors(teacher->phi, config.distill.passes).size(),
+          1.0 - config.distill.weight);
+    }
+  }
+  trainer.fit(taught ? static_cast<train::BatchSource&>(*taught) : dataset, hooks);
   const std::string best = train::best_checkpoint_path(stage_dir);
   std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
   if (!lead) return target;

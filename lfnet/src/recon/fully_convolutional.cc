@@ -3,6 +3,7 @@
 #include <torch/torch.h>
 
 #include <algorithm>
+#include <vector>
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
@@ -224,6 +225,57 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
   sum.div_(static_cast<double>(count));
   if (clamp) sum.clamp_(0.0, 1.0);
   return sum;
+}
+
+torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
+                                         const torch::Tensor& phase, const torch::Tensor& noise,
+                                         int64_t max_passes) {
+  LFNET_CHECK_AS(ConfigError, net->options().is_image(),
+                 "the self-ensemble needs a model of the lfnet architecture");
+  LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == net->options().measurements,
+              "reconstruct_crops_mirrored: expected sensor crops (B, ", net->options().measurements,
+              ", h, w), got ", sensor.sizes());
+  const int64_t batch = sensor.size(0);
+  LFNET_CHECK(!phase.defined() || phase.numel() == batch,
+              "reconstruct_crops_mirrored: one phase per crop");
+  LFNET_CHECK(!noise.defined() || noise.numel() == batch,
+              "reconstruct_crops_mirrored: one noise sigma per crop");
+  torch::NoGradGuard no_grad;
+  net->eval();
+  const auto device = net->phi.device();
+  const auto phases = phase.defined() ? phase.to(torch::kCPU, torch::kInt64) : torch::Tensor();
+  const auto sigmas = noise.defined() ? noise.to(torch::kCPU, torch::kFloat64) : torch::Tensor();
+  // forward_image takes one phase and one sigma per call: crops that share both run together.
+  const bool uniform = (!phases.defined() || (phases == phases[0]).all().item<bool>()) &&
+                       (!sigmas.defined() || (sigmas == sigmas[0]).all().item<bool>());
+  auto run = [&](const torch::Tensor& crops) {
+    if (uniform) {
+      return net->forward_image(crops, phases.defined() ? phases[0].item<int64_t>() : 0,
+                                sigmas.defined() ? sigmas[0].item<double>() : 0.0);
+    }
+    std::vector<torch::Tensor> parts;
+    parts.reserve(static_cast<size_t>(batch));
+    for (int64_t b = 0; b < batch; ++b) {
+      parts.push_back(net->forward_image(crops.narrow(0, b, 1),
+                                         phases.defined() ? phases[b].item<int64_t>() : 0,
+                                         sigmas.defined() ? sigmas[b].item<double>() : 0.0));
+    }
+    return torch::cat(parts, 0);
+  };
+  const auto mirrors = ensemble_mirrors(net->phi, max_passes);
+  const auto input = sensor.to(device, torch::kFloat32);
+  torch::Tensor sum;
+  for (const auto& m : mirrors) {
+    // Crops (B, N, h, w); light fields (B, U, V, h, w).
+    auto mirrored = input.index_select(1, torch::tensor(m.measurements, torch::kInt64).to(device));
+    if (m.flip_y) mirrored = mirrored.flip({2});
+    if (m.flip_x) mirrored = mirrored.flip({3});
+    auto est = run(mirrored).to(torch::kFloat32);
+    if (m.flip_y) est = est.flip({1, 3});
+    if (m.flip_x) est = est.flip({2, 4});
+    sum = sum.defined() ? sum.add_(est) : est;
+  }
+  return sum.div_(static_cast<double>(mirrors.size())).unsqueeze(1);
 }
 
 }  // namespace lfnet::recon

@@ -3,6 +3,7 @@
 #include <torch/torch.h>
 
 #include <cmath>
+#include <utility>
 
 #include "lfnet/core/error.h"
 #include "lfnet/dist/communicator.h"
@@ -84,6 +85,35 @@ void InMemoryBatchSource::set_shard(int64_t rank, int64_t world) {
                  " of ", world);
   shard_rank_ = rank;
   shard_world_ = world;
+}
+
+TeacherBatchSource::TeacherBatchSource(BatchSource& inner, Teacher teacher, double weight)
+    : inner_(inner), teacher_(std::move(teacher)), weight_(weight) {
+  LFNET_CHECK_AS(ConfigError, teacher_ != nullptr, "distillation needs a teacher");
+  LFNET_CHECK_AS(ConfigError, weight >= 0 && weight <= 1,
+                 "the teacher's weight must lie in [0, 1], got ", weight);
+}
+
+void TeacherBatchSource::start_epoch(int64_t epoch, int64_t batch_size) {
+  inner_.start_epoch(epoch, batch_size);
+}
+
+int64_t TeacherBatchSource::train_batches_per_epoch() const {
+  return inner_.train_batches_per_epoch();
+}
+
+Batch TeacherBatchSource::next_train() {
+  Batch b = inner_.next_train();
+  if (b.size() == 0 || weight_ == 0) return b;
+  torch::Tensor taught;
+  {
+    torch::NoGradGuard no_grad;
+    taught = teacher_(b).to(b.target.device(), b.target.scalar_type()).clamp_(0.0, 1.0);
+  }
+  LFNET_CHECK(taught.sizes() == b.target.sizes(), "the teacher's estimates have shape ",
+              taught.sizes(), ", the targets ", b.target.sizes());
+  b.target = weight_ == 1 ? taught : taught.mul_(weight_).add_(b.target, 1.0 - weight_);
+  return b;
 }
 
 }  // namespace lfnet::train

@@ -39,6 +39,27 @@ struct EvaluationConfig {
   nlohmann::json to_json() const;
 };
 
+// Distillation ($.distill, docs/training.md "Distillation"): every training crop's target is
+// blended with a teacher's self-ensemble of the crop (recon::reconstruct_crops_mirrored), so
+// a net learns in one pass what the teacher gives in several. Off while `teacher` is "".
+struct DistillConfig {
+  std::string teacher;  // an lfnet checkpoint of the lfnet architecture, for the config's Phi
+  int64_t passes = 0;   // the teacher's mirror images (0: every one, as --self-ensemble)
+  double weight = 1.0;  // the teacher's share of each target, in [0, 1]
+  nn::Precision precision = nn::Precision::kFloat32;  // the teacher's U-Net arithmetic
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("teacher", teacher);
+    f("passes", passes);
+    f("weight", weight);
+    f("precision", precision);
+  }
+  bool enabled() const { return !teacher.empty(); }
+  void read(JsonReader& r);
+  nlohmann::json to_json() const;
+};
+
 // Sets one value of a JSON config from `KEY.PATH=VALUE` (--set): VALUE is read as JSON (a
 // number, true, a list, a quoted string...) and otherwise taken as a string; objects on the
 // path are created. A malformed override is a ConfigError naming it.
@@ -53,6 +74,7 @@ struct ExperimentConfig {
   data::DatasetOptions dataset;
   nn::NetworkOptions network;
   nlohmann::json training = nlohmann::json::object();  // common train::TrainerOptions
+  DistillConfig distill;                               // $.distill: off unless it names a teacher
   std::vector<StageConfig> stages;
   // The dict stage: training patches and K-SVD ($.dictionary.sampling, $.dictionary.ksvd).
   dict::PatchSamplingOptions dictionary_sampling;

@@ -35,6 +35,10 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
 // True for the stages that train a network (all but dict).
 inline bool is_network_stage(const std::string& name) { return name != "dict"; }
 
+// The teacher of $.distill (DistillConfig), on `device`, in its precision: a ConfigError unless
+// it is an lfnet checkpoint of the lfnet architecture for the config's Phi.
+nn::LightFieldNet load_teacher(const ExperimentConfig& config, const std::string& device = "cpu");
+
 // The dataset of a config.
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi);

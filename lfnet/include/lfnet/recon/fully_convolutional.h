@@ -113,4 +113,15 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
                                           const ProgressCallback& progress = {},
                                           int64_t max_passes = 0);
 
+// The self-ensemble of a batch of sensor crops (B, N, h, w), as training sees them: each
+// crop's pixel (0, 0) has phase `phase` (B) (undefined: 0) and its measurements noise `noise`
+// (B) (undefined: 0). The crops and their mirror images under ensemble_mirrors(net->phi,
+// max_passes) run through net->forward_image, are mirrored back and averaged: (B, 1, U, V, h,
+// w), not clamped, on the device of the net. For a whole image it equals
+// reconstruct_sensor_mirrored without the clamp. It is the teacher of distillation
+// (pipeline::DistillConfig).
+torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
+                                         const torch::Tensor& phase = {},
+                                         const torch::Tensor& noise = {}, int64_t max_passes = 0);
+
 }  // namespace lfnet::recon

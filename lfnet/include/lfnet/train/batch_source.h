@@ -5,6 +5,7 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace lfnet::train {
@@ -74,6 +75,30 @@ class InMemoryBatchSource : public BatchSource {
   uint64_t seed_;
   int64_t batch_size_ = 1, cursor_ = 0;
   int64_t shard_rank_ = 0, shard_world_ = 1;
+};
+
+// Distillation (docs/training.md, "Distillation"): the training batches of `inner` with their
+// targets blended with a teacher's estimates, weight * teacher(batch) + (1 - weight) * target,
+// the teacher's clamped to [0, 1]. `teacher` maps a batch to (B, 1, U, V, h, w) estimates of
+// its targets. Validation batches are the inner source's, true targets and all, so the
+// validation PSNR still measures the student against the truth. Deterministic when the inner
+// source and the teacher are, so resumed training stays exact.
+class TeacherBatchSource : public BatchSource {
+ public:
+  using Teacher = std::function<torch::Tensor(const Batch&)>;
+  // `weight` in [0, 1] (ConfigError otherwise); `inner` must outlive this source.
+  TeacherBatchSource(BatchSource& inner, Teacher teacher, double weight);
+
+  void start_epoch(int64_t epoch, int64_t batch_size) override;
+  int64_t train_batches_per_epoch() const override;
+  Batch next_train() override;
+  const std::vector<Batch>& validation() override { return inner_.validation(); }
+  void set_shard(int64_t rank, int64_t world) override { inner_.set_shard(rank, world); }
+
+ private:
+  BatchSource& inner_;
+  Teacher teacher_;
+  double weight_;
 };
 
 }  // namespace lfnet::train
