@@ -336,6 +336,23 @@ TEST_CASE(
       CHECK(r.value("whole_image", false));
       CHECK(r["patches"] == 0);
     }
+    // The self-ensemble too: the file's Phi weights give the checkpoint's mirrors.
+    CHECK(torch::equal(scripted.pixel_weights(), net->phi));
+    for (const auto& [model, json] : {std::pair{ckpt, "cks.json"}, std::pair{pt, "pts.json"}}) {
+      std::string command = lfnet;
+      for (const std::string& part :
+           {std::string("evaluate --self-ensemble --model "), std::string(model),
+            std::string(" --lf "), tmp / "lf", std::string(" --json "), tmp / json}) {
+        command += part;
+      }
+      REQUIRE(run_command(command, out) == 0);
+    }
+    const auto as = read_json(tmp / "cks.json"), bs = read_json(tmp / "pts.json");
+    CHECK(std::abs(as["psnr_db"].get<double>() - bs["psnr_db"].get<double>()) < 1e-4);
+    const int64_t passes = name == "asp" ? 4 : 1;  // a periodic mask has no mirror images
+    CHECK(bs["self_ensemble_passes"] == passes);
+    CHECK((std::abs(bs["psnr_db"].get<double>() - b["psnr_db"].get<double>()) > 1e-3) ==
+          (passes > 1));
 
     // Python: Debian's python3-torch runs the file with the same numbers.
     const std::string python = lfnet::test::python_with("torch");

@@ -470,8 +470,7 @@ TEST_CASE(
   CHECK_THROWS_AS(recon::reconstruct_crops_mirrored(nn::LightFieldNet(paper), batch), ConfigError);
 }
 
-TEST_CASE("the self-ensemble applies to the net method of an lfnet checkpoint only",
-          "[recon][image]") {
+TEST_CASE("the self-ensemble applies to the net method of an lfnet model only", "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   const auto net = image_net(*phi);
   CHECK_NOTHROW(recon::check_self_ensemble("net", net));

@@ -625,6 +625,12 @@ torch::Tensor ScriptedNetwork::reconstruct_image(const torch::Tensor& sensor, in
   return fn({sensor, tile, clamp, noise_sigma}).toTensor();
 }
 
+torch::Tensor ScriptedNetwork::pixel_weights() const {
+  LFNET_CHECK_AS(ConfigError, network.is_image(), "exported model ", path,
+                 " is of the paper's architecture, which holds patch matrices");
+  return module.attr("phi").toTensor();
+}
+
 ScriptedNetwork load_script(const std::string& path) {
   const std::string where = "exported model " + path;
   if (!is_script_file(path)) {

@@ -266,9 +266,10 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
   if (a.self_ensemble) {
     LFNET_CHECK_AS(ConfigError, !a.model.empty(),
-                   "--self-ensemble applies to --method net with a checkpoint of the lfnet "
+                   "--self-ensemble applies to --method net with a model of the lfnet "
                    "architecture: pass --model");
-    for (const auto& m : methods) recon::check_self_ensemble(m, cache.model(a.model).net);
+    const auto& model = cache.model(a.model);
+    for (const auto& m : methods) recon::check_self_ensemble(m, model.net, model.script.get());
   }
   std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
   if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy);

@@ -89,7 +89,9 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   if (context.self_ensemble) {
     result.record["self_ensemble"] = true;
     result.record["self_ensemble_passes"] =
-        recon::ensemble_mirrors(context.net->phi, context.self_ensemble_passes).size();
+        recon::ensemble_mirrors(context.net ? context.net->phi : context.script->pixel_weights(),
+                                context.self_ensemble_passes)
+            .size();
   }
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
@@ -161,7 +163,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
       spec.cols = rv.size();
     }
   }
-  if (a.self_ensemble) recon::check_self_ensemble(method, context.net);
+  if (a.self_ensemble) recon::check_self_ensemble(method, context.net, context.script.get());
   recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
   context.self_ensemble = a.self_ensemble;
   context.self_ensemble_passes = a.self_ensemble_passes;

@@ -133,7 +133,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     resources.self_ensemble = a.self_ensemble;
     resources.self_ensemble_passes = a.self_ensemble_passes;
     if (a.self_ensemble)
-      recon::check_self_ensemble(method, model ? model->net : nn::LightFieldNet{nullptr});
+      recon::check_self_ensemble(method, model ? model->net : nn::LightFieldNet{nullptr},
+                                 model ? model->script.get() : nullptr);
     recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
     if (needs == recon::MethodNeeds::kDictionary) {
       resources.dictionary = &files.dictionary(a.dictionary);

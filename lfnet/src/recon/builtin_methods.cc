@@ -59,10 +59,16 @@ class NetworkMethod : public Method {
     check_image_branch();
     const int64_t tile = r.tile;
     if (r.script) {
-      LFNET_CHECK_AS(ConfigError, !r.self_ensemble,
-                     "the self-ensemble runs a checkpoint's network; an exported model has none: "
-                     "pass the checkpoint as --model");
       const auto* script = r.script;
+      if (r.self_ensemble) {
+        const auto mirrors = ensemble_mirrors(script->pixel_weights(), r.self_ensemble_passes);
+        return [script, tile, mirrors](const torch::Tensor& sensor, double noise_sigma) {
+          return reconstruct_mirrored(
+              mirrors, sensor, [&](const torch::Tensor& mirrored, const ProgressCallback&) {
+                return script->reconstruct_image(mirrored, tile, false, noise_sigma).unsqueeze(0);
+              });
+        };
+      }
       return [script, tile](const torch::Tensor& sensor, double noise_sigma) {
         return script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0);
       };

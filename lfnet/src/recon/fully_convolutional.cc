@@ -175,9 +175,12 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights) {
   return mirrors;
 }
 
-void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net) {
-  LFNET_CHECK_AS(ConfigError, method == "net" && !net.is_empty() && net->options().is_image(),
-                 "--self-ensemble applies to --method net with a checkpoint of the lfnet "
+void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
+                         const nn::ScriptedNetwork* script) {
+  const bool image = (!net.is_empty() && net->options().is_image()) ||
+                     (script != nullptr && script->network.is_image());
+  LFNET_CHECK_AS(ConfigError, method == "net" && image,
+                 "--self-ensemble applies to --method net with a model of the lfnet "
                  "architecture");
 }
 
@@ -197,12 +200,10 @@ std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights, i
   return mirrors;
 }
 
-torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
-                                          int64_t tile, bool clamp, double noise_sigma,
-                                          const ProgressCallback& progress, int64_t max_passes) {
-  LFNET_CHECK_AS(ConfigError, net->options().is_image(),
-                 "the self-ensemble needs a model of the lfnet architecture");
-  const auto mirrors = ensemble_mirrors(net->phi, max_passes);
+torch::Tensor reconstruct_mirrored(const std::vector<SensorMirror>& mirrors,
+                                   const torch::Tensor& sensor, const SensorPass& pass, bool clamp,
+                                   const ProgressCallback& progress) {
+  LFNET_CHECK(!mirrors.empty(), "reconstruct_mirrored: no mirrors (the identity comes first)");
   const auto count = static_cast<int64_t>(mirrors.size());
   torch::Tensor sum;
   for (int64_t i = 0; i < count; ++i) {
@@ -217,7 +218,7 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
         progress(i * total + done, count * total);
       };
     }
-    auto est = reconstruct_sensor_tiled(net, mirrored, tile, false, noise_sigma, part);
+    auto est = pass(mirrored, part);
     if (m.flip_y) est = est.flip({1, 3});
     if (m.flip_x) est = est.flip({2, 4});
     sum = sum.defined() ? sum.add_(est) : est;
@@ -225,6 +226,19 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
   sum.div_(static_cast<double>(count));
   if (clamp) sum.clamp_(0.0, 1.0);
   return sum;
+}
+
+torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
+                                          int64_t tile, bool clamp, double noise_sigma,
+                                          const ProgressCallback& progress, int64_t max_passes) {
+  LFNET_CHECK_AS(ConfigError, net->options().is_image(),
+                 "the self-ensemble needs a model of the lfnet architecture");
+  return reconstruct_mirrored(
+      ensemble_mirrors(net->phi, max_passes), sensor,
+      [&](const torch::Tensor& mirrored, const ProgressCallback& part) {
+        return reconstruct_sensor_tiled(net, mirrored, tile, false, noise_sigma, part);
+      },
+      clamp, progress);
 }
 
 torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,

@@ -87,6 +87,9 @@ struct ScriptedNetwork {
   // without autograd: sensor (N, H, W) -> (U, V, H, W). ConfigError for the paper's.
   torch::Tensor reconstruct_image(const torch::Tensor& sensor, int64_t tile, bool clamp,
                                   double noise_sigma) const;
+  // The lfnet architecture: the per-pixel weights of one period of its Phi (its `phi`
+  // buffer, (N, U, V, T, T)), as LightFieldNetImpl::phi. ConfigError for the paper's.
+  torch::Tensor pixel_weights() const;
 };
 
 // Loads an exported file on the CPU. A missing file is an IoError; a TorchScript file without

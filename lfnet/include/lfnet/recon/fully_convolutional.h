@@ -15,10 +15,12 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/reconstruct.h"
 
@@ -88,9 +90,11 @@ struct SensorMirror {
 // images would depend on the image's size).
 std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
 
-// Throws a ConfigError unless the self-ensemble applies: `method` "net" with a checkpoint's
-// network (`net`, empty without one) of the lfnet architecture.
-void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net);
+// Throws a ConfigError unless the self-ensemble applies: `method` "net" with a model of the
+// lfnet architecture, a checkpoint's network (`net`, empty without one) or an exported one
+// (`script`, null without one).
+void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
+                         const nn::ScriptedNetwork* script = nullptr);
 
 // Throws a ConfigError when `passes` (--ensemble-passes; 0: not given) is set without the
 // self-ensemble.
@@ -101,6 +105,18 @@ void check_ensemble_passes(bool self_ensemble, int64_t passes);
 // A ConfigError when `max_passes` is negative.
 std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights,
                                            int64_t max_passes = 0);
+
+// A whole-image reconstruction, sensor (N, H, W) -> (1, U, V, H, W), given a progress
+// callback for its own part of the work.
+using SensorPass =
+    std::function<torch::Tensor(const torch::Tensor& sensor, const ProgressCallback& progress)>;
+
+// The self-ensemble of any whole-image reconstruction `pass`: the sensor image and its mirror
+// images under `mirrors` (ensemble_mirrors) are reconstructed, mirrored back and averaged;
+// clamped to [0, 1] when `clamp`. `progress` gets (done, total) over all passes.
+torch::Tensor reconstruct_mirrored(const std::vector<SensorMirror>& mirrors,
+                                   const torch::Tensor& sensor, const SensorPass& pass,
+                                   bool clamp = true, const ProgressCallback& progress = {});
 
 // The self-ensemble of reconstruct_sensor_tiled: the sensor image and its mirror images under
 // the Phi's mirrors (ensemble_mirrors of the net's Phi, at most `max_passes` of them; 0: all)
