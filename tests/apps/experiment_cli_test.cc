@@ -149,7 +149,8 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
   };
   for (const auto& [set, message] : bad) {
     INFO(set);
-    std::string command = train + " --set " + set;
+    std::string command = train;
+    command += " --set " + set;
     if (set.rfind("distill.teacher", 0) != 0) {
       command += " --set distill.teacher=" + models + "lfnet-asp-n2.ckpt";
     }

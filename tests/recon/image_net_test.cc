@@ -32,6 +32,16 @@ nn::LightFieldNet image_net(const optics::Phi& phi, int64_t levels = 3) {
   return net;
 }
 
+// A randomised net that reads the noise sigma, with phi's weights over one period.
+nn::LightFieldNet noise_aware_net(const optics::Phi& phi, uint64_t seed) {
+  auto o = image_options(phi);
+  o.image.noise_input = true;
+  nn::LightFieldNet net(o);
+  net->set_phi(phi.pixel_weights(0, 0, phi.period(), phi.period()));
+  test::randomise_image_net(net, seed);
+  return net;
+}
+
 torch::Tensor random_light_field(const optics::Phi& phi, int64_t h, int64_t w, uint64_t seed) {
   auto gen = torch::make_generator<at::CPUGeneratorImpl>(seed);
   return torch::rand({phi.rows(), phi.cols(), h, w}, gen);
@@ -189,11 +199,7 @@ TEST_CASE("the lfnet architecture's options and Phi are checked", "[recon][image
 
 TEST_CASE("a noise-aware lfnet net reads the noise sigma, tiled or whole", "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));
-  auto o = image_options(*phi);
-  o.image.noise_input = true;
-  nn::LightFieldNet net(o);
-  net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
-  test::randomise_image_net(net, 11);
+  auto net = noise_aware_net(*phi, 11);
   auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 44, 37, 6));
   torch::NoGradGuard no_grad;
   auto quiet = net->forward_image(sensor.unsqueeze(0), 0, 0.0);
@@ -439,11 +445,7 @@ TEST_CASE(
   // A periodic mask has the identity alone: each crop is forward() at its own phase, and a
   // noise-aware net reads each crop's own sigma.
   const auto mask = optics::make_phi(optics::PhiSpec::parse("mask:2"));
-  auto o = image_options(*mask);
-  o.image.noise_input = true;
-  nn::LightFieldNet noisy(o);
-  noisy->set_phi(mask->pixel_weights(0, 0, mask->period(), mask->period()));
-  test::randomise_image_net(noisy, 26);
+  auto noisy = noise_aware_net(*mask, 26);
   const auto image = optics::simulate_sensor(*mask, random_light_field(*mask, 40, 40, 11));
   std::vector<torch::Tensor> parts;
   std::vector<int64_t> phases;
