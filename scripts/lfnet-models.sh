@@ -3,7 +3,7 @@
 # (`lfnet train --init`) at the paper scale of its config: lfnet-asp-n2-c32, lfnet-asp-n15 and
 # lfnet-mask-n2 start from models/lfnet-asp-n2-first20.ckpt (the paper scale of
 # configs/models/lfnet-asp-n2.json, 20 epochs), lfnet-asp-n2-c48, lfnet-asp-n2-f10,
-# lfnet-asp-n2-l3 and lfnet-asp-n2 from the step before them:
+# lfnet-asp-n2-l3, lfnet-asp-n2-l4 and lfnet-asp-n2 from the step before them:
 #   lfnet-asp-n2-c32  configs/models/lfnet-asp-n2.json -> models/lfnet-asp-n2-c32.ckpt: 30 more
 #                     epochs at lr 4e-4 on new random scenes and crops (seeds 9000 and 11)
 #   lfnet-asp-n2-c48  the same config -> models/lfnet-asp-n2-c48.ckpt: lfnet-asp-n2-c32 widened
@@ -16,11 +16,15 @@
 #   lfnet-asp-n2-l3   the same config -> models/lfnet-asp-n2-l3.ckpt: lfnet-asp-n2-f10 trained 14
 #                     more epochs at lr 1e-4 on the same kind of crops of new scenes, 70 % of
 #                     whose random scenes hold a frame (seeds 18000 and 18)
-#   lfnet-asp-n2      the same config -> models/lfnet-asp-n2.ckpt: lfnet-asp-n2-l3 deepened to 4
+#   lfnet-asp-n2-l4   the same config -> models/lfnet-asp-n2-l4.ckpt: lfnet-asp-n2-l3 deepened to 4
 #                     levels of 48, 96, 192 and 128 channels (train --init starts the new level
 #                     as nothing) and trained 7 more epochs at lr 1e-4 on crops of 128 x 128
 #                     (1,125 per epoch, half of every scene's rows for validation) of new scenes
 #                     with frames in 70 % (seeds 21000 and 21)
+#   lfnet-asp-n2      the same config -> models/lfnet-asp-n2.ckpt: lfnet-asp-n2-l4 distilled from
+#                     its own self-ensemble (docs/training.md): 6 more epochs at lr 5e-5 on the
+#                     same kind of crops of new scenes (seeds 24000 and 24), every crop's target
+#                     the four-pass self-ensemble of lfnet-asp-n2-l4 in bfloat16
 #   lfnet-asp-n15     configs/models/lfnet-asp-n15.json -> models/lfnet-asp-n15.ckpt: across Phi
 #   lfnet-mask-n2     configs/models/lfnet-mask-n2.json -> models/lfnet-mask-n2.ckpt  (10 epochs
 #                     at lr 5e-4; the U-Net reads the per-pixel pseudo-inverse, so its weights
@@ -37,13 +41,14 @@ source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 threads=${LFNET_THREADS:-1}
 first20=models/lfnet-asp-n2-first20.ckpt
-order=(lfnet-asp-n2-c32 lfnet-asp-n2-c48 lfnet-asp-n2-f10 lfnet-asp-n2-l3 lfnet-asp-n2 lfnet-asp-n15
-       lfnet-mask-n2)
+order=(lfnet-asp-n2-c32 lfnet-asp-n2-c48 lfnet-asp-n2-f10 lfnet-asp-n2-l3 lfnet-asp-n2-l4
+       lfnet-asp-n2 lfnet-asp-n15 lfnet-mask-n2)
 declare -A config=(
   [lfnet-asp-n2-c32]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n2-c48]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n2-f10]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n2-l3]=configs/models/lfnet-asp-n2.json
+  [lfnet-asp-n2-l4]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n2]=configs/models/lfnet-asp-n2.json
   [lfnet-asp-n15]=configs/models/lfnet-asp-n15.json
   [lfnet-mask-n2]=configs/models/lfnet-mask-n2.json
@@ -53,7 +58,8 @@ declare -A init=(
   [lfnet-asp-n2-c48]=models/lfnet-asp-n2-c32.ckpt
   [lfnet-asp-n2-f10]=models/lfnet-asp-n2-c48.ckpt
   [lfnet-asp-n2-l3]=models/lfnet-asp-n2-f10.ckpt
-  [lfnet-asp-n2]=models/lfnet-asp-n2-l3.ckpt
+  [lfnet-asp-n2-l4]=models/lfnet-asp-n2-l3.ckpt
+  [lfnet-asp-n2]=models/lfnet-asp-n2-l4.ckpt
   [lfnet-asp-n15]=$first20
   [lfnet-mask-n2]=$first20
 )
@@ -61,6 +67,13 @@ declare -A init=(
 frames_crops="--set network.image.channels=48 --set dataset.patch_h=64 --set dataset.patch_w=64
               --set network.patch.height=64 --set network.patch.width=64
               --set dataset.train_patches=4500"
+# The 4-level net on 1,125 crops of 128 x 128 per epoch, frames in 70 % of the random scenes.
+deep_crops="--set network.image.channels=48 --set network.image.levels=4
+            --set network.image.widths=[48,96,192,128]
+            --set data.random_options.frame_probability=0.7 --set dataset.patch_h=128
+            --set dataset.patch_w=128 --set network.patch.height=128
+            --set network.patch.width=128 --set dataset.train_patches=1125
+            --set dataset.validation_fraction=0.5"
 declare -A finetune=(
   [lfnet-asp-n2-c32]="--set training.epochs=30 --set training.lr=0.0004
                       --set data.random_seed=9000 --set dataset.seed=11"
@@ -72,13 +85,12 @@ declare -A finetune=(
   [lfnet-asp-n2-l3]="$frames_crops --set data.random_options.frame_probability=0.7
                      --set training.epochs=14 --set training.lr=0.0001 --set data.random_seed=18000
                      --set dataset.seed=18"
-  [lfnet-asp-n2]="--set network.image.channels=48 --set network.image.levels=4
-                  --set network.image.widths=[48,96,192,128]
-                  --set data.random_options.frame_probability=0.7 --set dataset.patch_h=128
-                  --set dataset.patch_w=128 --set network.patch.height=128
-                  --set network.patch.width=128 --set dataset.train_patches=1125
-                  --set dataset.validation_fraction=0.5 --set training.epochs=7
-                  --set training.lr=0.0001 --set data.random_seed=21000 --set dataset.seed=21"
+  [lfnet-asp-n2-l4]="$deep_crops --set training.epochs=7 --set training.lr=0.0001
+                     --set data.random_seed=21000 --set dataset.seed=21"
+  [lfnet-asp-n2]="$deep_crops --set training.epochs=6 --set training.lr=0.00005
+                  --set data.random_seed=24000 --set dataset.seed=24
+                  --set distill.teacher=models/lfnet-asp-n2-l4.ckpt
+                  --set distill.precision=bfloat16"
   [lfnet-asp-n15]="--set training.epochs=10 --set training.lr=0.0005"
   [lfnet-mask-n2]="--set training.epochs=10 --set training.lr=0.0005"
 )
