@@ -33,14 +33,15 @@ int main(int argc, char** argv) {
   lfnet::configure_allocator();
   CLI::App app{"lfnet: compressive light field reconstruction from coded sensor images"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "lfnet 0.1.0");
+  // lfnet's own options (--threads, --log-level) may also follow the command's name.
+  app.fallthrough();
+  app.set_version_flag("--version", std::string("lfnet ") + lfnet::kVersion);
   GlobalOptions global;
   app.add_option("--threads", global.threads,
                  "CPU threads (default: OMP_NUM_THREADS, else every core)")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
-  app.preparse_callback([&](size_t) {});
   app.parse_complete_callback([&] {
     spdlog::set_level(spdlog::level::from_str(global.log_level));
     // Quiet means quiet: on failure the error line is then the only output.

@@ -228,8 +228,7 @@ TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[ap
     }
   }
   if (models.empty()) {
-    WARN("no models/*.ckpt in the source tree: nothing to export");
-    return;
+    LFNET_SKIP("no models/*.ckpt in the source tree: nothing to export");
   }
   std::sort(models.begin(), models.end());
   lfnet::test::TempDir tmp;

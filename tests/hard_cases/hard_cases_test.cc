@@ -163,8 +163,9 @@ std::vector<std::pair<std::string, recon::PatchSolver>> solvers(const optics::Ph
   std::vector<std::pair<std::string, recon::PatchSolver>> out;
   auto net = small_net(phi);
   for (const char* m : {"net", "ae", "cnn"}) out.emplace_back(m, recon::network_solver(net, m));
-  out.emplace_back("pinv", recon::linear_solver(phi, "pinv", kPatch, kPatch));
-  out.emplace_back("adjoint", recon::linear_solver(phi, "adjoint", kPatch, kPatch));
+  out.emplace_back("pinv", recon::pinv_solver(optics::pinv_matrix_stack(phi, kPatch, kPatch)));
+  out.emplace_back("adjoint",
+                   recon::adjoint_solver(optics::patch_matrix_stack(phi, kPatch, kPatch)));
   const auto d = small_dictionary();
   dict::SparseCodingOptions omp;
   omp.omp.max_atoms = 6;
@@ -311,8 +312,8 @@ TEST_CASE("N = 1, N = 25 and rank-deficient codes reconstruct finitely", "[hard_
   // The duplicated row adds nothing: pinv gives what asp with three distinct rows gives.
   auto dup = duplicated_asp();
   auto sensor = optics::simulate_sensor(*dup, lf[0]);
-  auto est = recon::reconstruct_sensor(*dup, sensor, recon::linear_solver(*dup, "pinv", 9, 9),
-                                       raw_options());
+  auto est = recon::reconstruct_sensor(
+      *dup, sensor, recon::pinv_solver(optics::pinv_matrix_stack(*dup, 9, 9)), raw_options());
   CHECK(finite(est));
   auto c = optics::conditioning(*dup);
   CHECK(c.rank[0].item<int64_t>() == 3);

@@ -95,8 +95,9 @@ TEST_CASE("reconstruct_acquisition with pinv equals the solver run directly", "[
   request.method = "pinv";
   const auto r = pipeline::reconstruct_acquisition(request);
   recon::ReconstructOptions o = request.options;
-  const auto direct = recon::reconstruct_sensor(*phi, io::read_acquisition(acq).sensor[0],
-                                                recon::linear_solver(*phi, "pinv", 9, 9), o);
+  const auto direct =
+      recon::reconstruct_sensor(*phi, io::read_acquisition(acq).sensor[0],
+                                recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9)), o);
   REQUIRE(r.lf.data().sizes() == direct.sizes());
   CHECK(torch::equal(r.lf.data(), direct));
   CHECK(r.record["method"] == "pinv");

@@ -59,7 +59,7 @@ TEST_CASE("make_solver names what a method is missing", "[recon]") {
   // The registry's pinv is the library's pinv solver.
   const auto y = torch::rand({6, phi->measurements() * 81});
   const auto phase = torch::zeros({6}, torch::kInt64);
-  const auto direct = recon::linear_solver(*phi, "pinv", 9, 9)(y, phase);
+  const auto direct = recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9))(y, phase);
   CHECK(torch::equal(recon::make_solver("pinv", r)(y, phase), direct));
   CHECK(recon::find_method("pinv").patch_flops(r) == 2.0 * (2 * 81) * (25 * 81));
 }

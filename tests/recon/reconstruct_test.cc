@@ -32,15 +32,16 @@ TEST_CASE("pinv with N = 25 recovers the light field from a sensor image", "[rec
   auto sensor = optics::simulate_sensor(*phi, lf[0]);
   recon::ReconstructOptions o;
   o.stride = 5;
-  auto solver = recon::linear_solver(*phi, "pinv", 9, 9);
+  auto solver = recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9));
   auto est = recon::reconstruct_sensor(*phi, sensor, solver, o);
   REQUIRE(est.sizes() == lf.sizes());
   // Full rank: only the Tikhonov bias remains; at N = 2 most of the parallax is lost.
   const double full = psnr(est, lf);
   CHECK(full > 30.0);
   auto phi2 = optics::make_phi(optics::PhiSpec::parse("asp:2"));
-  auto est2 = recon::reconstruct_sensor(*phi2, optics::simulate_sensor(*phi2, lf[0]),
-                                        recon::linear_solver(*phi2, "pinv", 9, 9), o);
+  auto est2 =
+      recon::reconstruct_sensor(*phi2, optics::simulate_sensor(*phi2, lf[0]),
+                                recon::pinv_solver(optics::pinv_matrix_stack(*phi2, 9, 9)), o);
   CHECK(psnr(est2, lf) < full - 5.0);
 }
 
@@ -48,7 +49,7 @@ TEST_CASE("streaming in small batches equals one big batch", "[recon]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));
   auto lf = smooth_lf(30, 26);
   auto sensor = optics::simulate_sensor(*phi, lf[0]);
-  auto solver = recon::linear_solver(*phi, "adjoint", 9, 9);
+  auto solver = recon::adjoint_solver(optics::patch_matrix_stack(*phi, 9, 9));
   recon::ReconstructOptions big, small;
   big.stride = small.stride = 3;
   big.batch = 100000;
@@ -62,7 +63,7 @@ TEST_CASE("per-patch and sensor modes agree for a local Phi without noise", "[re
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto lf = smooth_lf(20, 20);
   PatchGrid grid(20, 20, 9, 9, 5);
-  auto solver = recon::linear_solver(*phi, "pinv", 9, 9);
+  auto solver = recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9));
   recon::ReconstructOptions o;
   auto source = [&](int64_t r0, int64_t r1) {
     return optics::measure_patches(*phi, lf, grid, optics::SimulationMode::kPerPatch, {}, 0, r0,
@@ -77,7 +78,7 @@ TEST_CASE("random projections refuse patches off the block grid in sensor mode",
   auto phi = optics::make_phi(optics::PhiSpec::parse("random:2"));
   auto lf = smooth_lf(18, 18);
   auto sensor = optics::simulate_sensor(*phi, lf[0]);
-  auto solver = recon::linear_solver(*phi, "pinv", 9, 9);
+  auto solver = recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9));
   recon::ReconstructOptions o;
   o.stride = 5;
   CHECK_THROWS_AS(recon::reconstruct_sensor(*phi, sensor, solver, o), ConfigError);

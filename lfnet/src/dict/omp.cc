@@ -49,11 +49,6 @@ std::string to_string(OmpStop stop) {
   return "unknown";
 }
 
-bool omp_stop_is_normal(OmpStop stop) {
-  return stop == OmpStop::kMaxAtoms || stop == OmpStop::kTolerance ||
-         stop == OmpStop::kResidualOrthogonal || stop == OmpStop::kAllAtoms;
-}
-
 torch::Tensor OmpResult::dense() const {
   const int64_t b = signals();
   auto out = torch::zeros({atoms, b}, torch::kFloat64);

@@ -120,8 +120,6 @@ void register_phi(const std::string& name, PhiFactory factory) {
   add_factory(name, std::move(factory));
 }
 
-void register_builtin_phis() { ensure_builtins(); }
-
 std::vector<std::string> phi_names() {
   ensure_builtins();
   auto& reg = registry();

@@ -116,6 +116,4 @@ bool needs_network(const std::string& method) {
   return find_method(method).needs() == MethodNeeds::kNetwork;
 }
 
-std::vector<std::string> method_names() { return registered_methods(); }
-
 }  // namespace lfnet::recon

@@ -47,13 +47,6 @@ PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& met
   };
 }
 
-PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,
-                          int64_t patch_w) {
-  if (method == "adjoint") return adjoint_solver(optics::patch_matrix_stack(phi, patch_h, patch_w));
-  if (method == "pinv") return pinv_solver(optics::pinv_matrix_stack(phi, patch_h, patch_w));
-  throw ConfigError("method '" + method + "' is not a linear method (adjoint, pinv)");
-}
-
 PatchSolver dictionary_solver(const optics::Phi& phi, const dict::Dictionary& dictionary,
                               const dict::SparseCodingOptions& options, int64_t patch_h,
                               int64_t patch_w, std::shared_ptr<SolverReport> report) {

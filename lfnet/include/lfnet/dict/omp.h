@@ -43,8 +43,6 @@ enum class OmpStop : int8_t {
 
 // A short name for messages and JSON, e.g. "dependent_atom".
 std::string to_string(OmpStop stop);
-// Whether `stop` is a normal end (max atoms, tolerance, orthogonal residual, all atoms).
-bool omp_stop_is_normal(OmpStop stop);
 
 // Sparse codes of B signals, one row per signal, padded to the largest support.
 struct OmpResult {

@@ -118,10 +118,6 @@ using PhiFactory = std::function<std::unique_ptr<Phi>(const PhiSpec& spec)>;
 // Adds a model to the registry, replacing one of the same name (built-ins included).
 void register_phi(const std::string& name, PhiFactory factory);
 
-// Registers asp, mask, aperture, random and lenslet, once (later calls do nothing).
-// make_phi, phi_names and register_phi call it first, so nobody needs to.
-void register_builtin_phis();
-
 // Singular values of a Phi's self-contained pieces: how much each camera can recover.
 struct PhiConditioning {
   std::string piece;              // "pixel" (local models) or "block" (random)

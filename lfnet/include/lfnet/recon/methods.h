@@ -16,8 +16,6 @@
 
 namespace lfnet::recon {
 
-// Every registered method (method_registry.h), in registration order.
-std::vector<std::string> method_names();
 // True for the registered methods that need a trained network.
 bool needs_network(const std::string& method);
 
@@ -27,10 +25,6 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method);
 
 // The same for an exported network (nn::load_script): its forward_branch, without autograd.
 PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& method);
-
-// `adjoint` or `pinv` for `phi` at the given patch size.
-PatchSolver linear_solver(const optics::Phi& phi, const std::string& method, int64_t patch_h,
-                          int64_t patch_w);
 
 // What an iterative solver reports besides its patches: how many it coded and how many did
 // not converge (OMP stopped on degenerate input, ADMM hit max_iterations). Such patches are
