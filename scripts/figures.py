@@ -27,10 +27,23 @@ import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from PIL import Image  # noqa: E402
 
-# One colour per method in every figure; variants (a second model of one method) take the rest.
-METHOD_COLOURS = {"net": "C0", "cnn": "C1", "ae": "C2", "pinv": "C3", "dict": "C4",
-                  "adjoint": "C7", "no-parallax": "black"}
-SPARE_COLOURS = ["C5", "C6", "C8", "C9", "#1b9e77", "#d95f02", "#7570b3", "#e7298a"]
+# One colour per method in every figure, by the method's place in lfnet's method registry (the
+# spec's "methods": net, ae, cnn, dict, pinv, pinv-nlm, adjoint, no-parallax for the built-ins,
+# then any registered later); no-parallax, the truth's angular mean, is black. Variants (a
+# second model of one method) take the spare colours.
+REGISTRY_PALETTE = ["C0", "C2", "C1", "C4", "C3", "C5", "C7", "C6", "C8", "C9"]
+METHOD_COLOURS = {}
+SPARE_COLOURS = ["#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d"]
+
+
+def set_method_colours(methods):
+    """Colours for the registered methods, in registry order."""
+    METHOD_COLOURS.clear()
+    for i, m in enumerate(methods):
+        METHOD_COLOURS[m] = "black" if m == "no-parallax" else REGISTRY_PALETTE[i % len(REGISTRY_PALETTE)]
+
+
+set_method_colours(["net", "ae", "cnn", "dict", "pinv", "pinv-nlm", "adjoint", "no-parallax"])
 MARKERS = ["o", "s", "^", "D", "v", "P", "X", "*"]
 ERROR_MAX = 0.1  # |error| at the top of every error map's colour bar
 
@@ -338,6 +351,8 @@ def main(argv):
     if len(argv) == 2 and argv[1].endswith(".json"):
         with open(argv[1]) as f:
             spec = json.load(f)
+        if "methods" in spec:
+            set_method_colours(spec["methods"])
         for figure in spec["figures"]:
             if figure["kind"] not in KINDS:
                 sys.exit(f"figures.py: unknown figure kind '{figure['kind']}'")

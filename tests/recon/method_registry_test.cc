@@ -47,6 +47,15 @@ TEST_CASE("the built-in methods are registered in table order with what they nee
   CHECK_THROWS_WITH(recon::find_method("nosuch"),
                     Catch::Contains("unknown method 'nosuch'") && Catch::Contains("pinv"));
   CHECK(recon::method_list(recon::MethodNeeds::kTruth).find("no-parallax") == std::string::npos);
+  // The registry says which are baselines: the report and its figures ask it, not a list.
+  for (const auto& name : {"dict", "pinv", "pinv-nlm", "adjoint", "no-parallax"}) {
+    INFO(name);
+    CHECK(recon::is_baseline(name));
+  }
+  for (const auto& name : {"net", "ae", "cnn", "nosuch"}) {
+    INFO(name);
+    CHECK_FALSE(recon::is_baseline(name));
+  }
 }
 
 TEST_CASE("make_solver names what a method is missing", "[recon]") {

@@ -11,6 +11,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/weights_image.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
 
@@ -130,7 +131,8 @@ std::string FigureSet::draw(const std::string& spec_name) const {
   if (specs_.empty()) return "";
   fs::create_directories(folder_);
   const std::string spec = (fs::path(folder_) / spec_name).string();
-  write_json_file(spec, {{"figures", specs_}});
+  // The registered methods, in order, give every figure the same colour for a method.
+  write_json_file(spec, {{"figures", specs_}, {"methods", recon::registered_methods()}});
   return run_script(quote(spec));
 }
 

@@ -321,8 +321,8 @@ nlohmann::json sweep_spec(const Section& s, const nlohmann::json& sweep) {
     std::string label = method;
     if (!r.value("variant", "").empty()) label += " (" + r.value("variant", "") + ")";
     for (const auto& k : varying) label += ", " + k + " " + setting(r, k);
-    const bool baseline = method == "no-parallax" || method == "pinv" || method == "adjoint";
-    add_point(label, method, baseline ? "baseline" : "ours", sweep_value(r, key), y);
+    add_point(label, method, recon::is_baseline(method) ? "baseline" : "ours", sweep_value(r, key),
+              y);
   }
   if (s.meta.contains("paper")) {
     for (const auto& p : s.meta["paper"]) {

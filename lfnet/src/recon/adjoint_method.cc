@@ -10,6 +10,7 @@ class AdjointMethod : public Method {
  public:
   std::string name() const override { return "adjoint"; }
   std::string summary() const override { return "the adjoint A^T y (linear, a sanity baseline)"; }
+  bool baseline() const override { return true; }
   PatchSolver solver(const MethodResources& r) const override {
     return adjoint_solver(optics::patch_matrix_stack(*r.phi, r.patch_h, r.patch_w));
   }

@@ -114,6 +114,7 @@ class DictionaryMethod : public Method {
     return "sparse coding in a K-SVD dictionary (--dictionary; OMP or ADMM)";
   }
   MethodNeeds needs() const override { return MethodNeeds::kDictionary; }
+  bool baseline() const override { return true; }  // the paper's baseline
   PatchSolver solver(const MethodResources& r) const override {
     return dictionary_solver(*r.phi, *r.dictionary, r.coding, r.patch_h, r.patch_w, r.report);
   }
@@ -131,6 +132,7 @@ class PinvMethod : public Method {
  public:
   std::string name() const override { return "pinv"; }
   std::string summary() const override { return "the regularised pseudo-inverse (linear)"; }
+  bool baseline() const override { return true; }
   PatchSolver solver(const MethodResources& r) const override {
     return pinv_solver(optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w));
   }
@@ -145,6 +147,7 @@ class NoParallaxMethod : public Method {
     return "every view set to the angular mean of the truth (a baseline of lfnet evaluate)";
   }
   MethodNeeds needs() const override { return MethodNeeds::kTruth; }
+  bool baseline() const override { return true; }
   PatchSolver solver(const MethodResources&) const override {
     throw ConfigError("no-parallax needs the true light field: it is a method of lfnet evaluate");
   }

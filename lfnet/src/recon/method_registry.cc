@@ -68,6 +68,13 @@ std::vector<std::string> registered_methods() {
   return names;
 }
 
+bool is_baseline(const std::string& name) {
+  for (const auto& known : registered_methods()) {
+    if (known == name) return find_method(name).baseline();
+  }
+  return false;
+}
+
 std::string method_list(std::optional<MethodNeeds> excluded) {
   std::string out;
   for (const auto& name : registered_methods()) {

@@ -12,6 +12,7 @@ namespace {
 class PinvNlmMethod : public Method {
  public:
   std::string name() const override { return "pinv-nlm"; }
+  bool baseline() const override { return true; }
   std::string summary() const override {
     return "the pseudo-inverse, then non-local means over all views (sensor images; the noise "
            "sigma sets its strength)";

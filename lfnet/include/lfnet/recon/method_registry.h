@@ -46,6 +46,9 @@ class Method {
   virtual std::string name() const = 0;
   virtual std::string summary() const = 0;  // one line for help texts and docs
   virtual MethodNeeds needs() const { return MethodNeeds::kNothing; }
+  // A baseline to compare with (the linear, dictionary and evaluation baselines), not one of the
+  // learned reconstructions: the report's figures draw it as such.
+  virtual bool baseline() const { return false; }
   // The patch solver; a ConfigError when a needed resource is missing. kTruth methods have
   // none (the evaluation computes them from the truth).
   virtual PatchSolver solver(const MethodResources& resources) const = 0;
@@ -65,6 +68,9 @@ const Method& find_method(const std::string& name);
 // Every registered method's name, in registration order (net, ae, cnn, dict, pinv, pinv-nlm,
 // adjoint, no-parallax for the built-ins): the order of tables and legends.
 std::vector<std::string> registered_methods();
+
+// Whether `name` is a registered baseline (Method::baseline); false for an unknown name.
+bool is_baseline(const std::string& name);
 
 // "a, b, c": the registered methods, optionally without those needing `excluded`.
 std::string method_list(std::optional<MethodNeeds> excluded = std::nullopt);
