@@ -46,6 +46,15 @@ heldout-asp-n2() {
   rm -rf "$tmp"
 }
 
+# Stops the run unless model file $1 exists: a section never loses rows silently.
+need_model() {
+  if [[ ! -f $1 ]]; then
+    echo "results.sh: $1 is missing, so ${FUNCNAME[1]} would lose its rows; make it first" \
+      "(docs/models.md says how each model is made) or restore it from git" >&2
+    exit 1
+  fi
+}
+
 # One evaluation into $1 (records file): evaluate args follow. $VARIANT and $TRAINING (a
 # training.jsonl), when set, label the record (append_record).
 record() {
@@ -105,7 +114,7 @@ noise-sweep() {
     for name in lfnet-asp-n2 lfnet-asp-n2-first20 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 \
       lfnet-noise/aware-s0.1 lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
       model=models/$name.ckpt
-      [[ -f $model ]] || continue
+      need_model "$model"
       case $name in
         lfnet-asp-n2) variant="lfnet-asp-n2, trained without noise" ;;
         lfnet-asp-n2-first20) variant="lfnet-asp-n2-first20, without noise: the noise models' start" ;;
@@ -134,7 +143,7 @@ sensor-noise() {
     for name in lfnet-asp-n2 lfnet-noise/aware-s0.1 lfnet-asp-n2-noise lfnet-noise/sigma-0.1 \
       lfnet-noise/sigma-0.2; do
       model=models/$name.ckpt
-      [[ -f $model ]] || continue
+      need_model "$model"
       VARIANT=$name record "$tmp" --model "$model" "${src[@]}" --method net
     done
   done
@@ -316,7 +325,9 @@ other-phi() {
           record "$tmp" --model "models/$phi.ckpt" "${src[@]}" --method "$method" \
           --mode "$mode" --stride 5
       done
-      [[ -f models/lfnet-$phi.ckpt ]] || continue
+      # lfnet's architecture has models for these two cameras only.
+      [[ $phi == asp-n15 || $phi == mask-n2 ]] || continue
+      need_model "models/lfnet-$phi.ckpt"
       VARIANT="lfnet-$phi" TRAINING=models/lfnet-$phi.training.jsonl record "$tmp" \
         --model "models/lfnet-$phi.ckpt" "${src[@]}" --method net --mode sensor --stride 5
     done

@@ -57,6 +57,30 @@ TEST_CASE("a config's scale and --set overrides apply in order and are type-chec
                     Catch::Contains("not an object"));
 }
 
+TEST_CASE("network.patch and network.measurements are honoured when they agree, else refused",
+          "[pipeline]") {
+  lfnet::test::TempDir tmp;
+  write_json_file(tmp / "c.json", small_config());
+  // They follow from the Phi and the dataset's patches.
+  auto config = pipeline::ExperimentConfig::load(tmp / "c.json", "", {"dataset.patch_h=12"});
+  CHECK(config.network.patch.height == 12);
+  CHECK(config.network.measurements == 2);
+  // Given and agreeing: honoured.
+  config = pipeline::ExperimentConfig::load(
+      tmp / "c.json", "",
+      {"dataset.patch_w=12", "network.patch.width=12", "network.measurements=2"});
+  CHECK(config.network.patch.width == 12);
+  // Given and disagreeing: refused, naming where the value comes from, never silently replaced.
+  CHECK_THROWS_WITH(
+      pipeline::ExperimentConfig::load(tmp / "c.json", "", {"network.patch.height=64"}),
+      Catch::Contains("$.network.patch.height is 64") && Catch::Contains("$.dataset.patch_h"));
+  CHECK_THROWS_WITH(
+      pipeline::ExperimentConfig::load(tmp / "c.json", "", {"network.measurements=3"}),
+      Catch::Contains("$.network.measurements is 3") && Catch::Contains("$.phi"));
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "c.json", "", {"network.patch.rows=7"}),
+                    Catch::Contains("$.network.patch.rows is 7"));
+}
+
 TEST_CASE("a run folder's config.json reads back as the config it trained", "[pipeline]") {
   lfnet::test::TempDir tmp;
   write_json_file(tmp / "c.json", small_config());

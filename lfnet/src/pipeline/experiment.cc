@@ -206,11 +206,35 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   }
   // The resolved spec (every parameter filled in) is what models and results record.
   c.phi = optics::make_phi(c.phi)->spec();
+  // The net's measurements and patch follow from the Phi and the dataset's patches: a value
+  // given in $.network is honoured when it agrees, and refused when it does not.
+  const auto given = c.network;
   c.network.measurements = c.phi.n;
   c.network.patch.rows = c.phi.rows;
   c.network.patch.cols = c.phi.cols;
   c.network.patch.height = c.dataset.patch_h;
   c.network.patch.width = c.dataset.patch_w;
+  const nlohmann::json network_json = j.contains("network") ? j["network"] : nlohmann::json();
+  auto refuse_if_differs = [&](const std::string& key, int64_t given_value, int64_t value,
+                               const std::string& from) {
+    const bool set = key.rfind("patch.", 0) == 0 ? network_json.contains("patch") &&
+                                                       network_json["patch"].contains(key.substr(6))
+                                                 : network_json.contains(key);
+    if (set && given_value != value) {
+      throw ConfigError(source + ": $.network." + key + " is " + std::to_string(given_value) +
+                        " but " + from + " makes it " + std::to_string(value) + ": set " + from +
+                        " instead, or leave $.network." + key + " out");
+    }
+  };
+  refuse_if_differs("measurements", given.measurements, c.network.measurements,
+                    "the Phi's N ($.phi)");
+  refuse_if_differs("patch.rows", given.patch.rows, c.network.patch.rows,
+                    "the Phi's views ($.phi)");
+  refuse_if_differs("patch.cols", given.patch.cols, c.network.patch.cols,
+                    "the Phi's views ($.phi)");
+  refuse_if_differs("patch.height", given.patch.height, c.network.patch.height,
+                    "$.dataset.patch_h");
+  refuse_if_differs("patch.width", given.patch.width, c.network.patch.width, "$.dataset.patch_w");
   return c;
 }
 
