@@ -2,7 +2,9 @@
 #
 # The numerical core (core, optics, nn, recon) needs LibTorch and header-only nlohmann_json
 # alone, so it builds on any machine that has LibTorch (a CUDA one included). OpenImageIO,
-# OpenCV, CLI11 and spdlog are needed only by the I/O library and the program (LFNET_BUILD_APPS).
+# CLI11 and spdlog are needed only by the I/O library and the program (LFNET_BUILD_APPS).
+# OpenCV is linked by no target (figures are drawn by scripts/figures.py); a target that comes
+# to use it finds it here and links it alone.
 
 find_package(Torch REQUIRED)
 find_package(Threads REQUIRED)
@@ -30,8 +32,6 @@ if(LFNET_BUILD_APPS)
   find_package(OpenImageIO REQUIRED)
   find_package(spdlog REQUIRED)
   find_package(CLI11 REQUIRED)
-  # Drawing the figures of `lfnet report` (plots, heatmaps).
-  find_package(OpenCV REQUIRED COMPONENTS core imgproc imgcodecs)
 endif()
 
 if(LFNET_BUILD_TESTS)

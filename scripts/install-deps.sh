@@ -2,6 +2,7 @@
 # Installs every Debian package lfnet needs. Idempotent: does nothing when all are present.
 set -euo pipefail
 
+# libopencv-dev is linked by no lfnet target: scripts/nlm-opencv.cc (a measurement) uses it.
 packages=(
   build-essential cmake ninja-build pkg-config clang-format clang-tidy
   libtorch-dev libopenblas0-openmp libgloo-dev
