@@ -9,7 +9,9 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/nn/architecture.h"
 #include "lfnet/pipeline/bench.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -75,21 +77,20 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   auto args = std::make_shared<BenchArgs>();
   auto* a = &args->options;
   cmd->add_option("--json", args->json, "also write the report as JSON to this file ('-': stdout)");
-  cmd->add_option("--methods", a->methods, "methods to time (net, ae, cnn, dict, pinv, adjoint)")
+  cmd->add_option("--methods", a->methods,
+                  "methods to time: " + recon::method_list(recon::MethodNeeds::kTruth))
       ->delimiter(',');
-  cmd->add_option("--strides", a->strides, "patch strides (9: non-overlapping 9x9 patches)")
-      ->delimiter(',')
-      ->check(CLI::PositiveNumber);
+  ReconstructionFlags shared{
+      nullptr,  &a->models, &a->phi,     &a->device,        &a->precision,
+      &a->tile, nullptr,    &a->strides, &a->self_ensemble, &a->self_ensemble_passes,
+      "time"};
+  add_reconstruction_flags(cmd, shared);
   cmd->add_option("--height", a->height, "light-field height (default 593)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--width", a->width, "light-field width (default 840)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--phi", a->phi, "measurement model name[:N] (default asp:2)");
   cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--model", a->models,
-                  "trained checkpoint, repeatable: the network methods run with each (default: "
-                  "an untrained network of --architecture)");
   cmd->add_option("--dictionary", a->dictionary,
                   "dictionary file (default: a small K-SVD dictionary)");
   cmd->add_option("--save-dictionary", a->save_dictionary,
@@ -103,18 +104,23 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
       ->check(CLI::PositiveNumber);
   cmd->add_option("--reps", a->reps, "repetitions of the kernel timings (best is kept)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--device", a->device, "cpu or cuda (default cpu)");
   add_enum_option(
       cmd, "--cnn-mode", a->cnn_mode,
       "CNN branch per patch ('patches', the default) or once over the light field ('full')");
-  cmd->add_option("--tile", a->tile,
-                  "tile size of --cnn-mode full (default 128) and of lfnet models (default 256)")
-      ->check(CLI::PositiveNumber);
-  add_enum_option(cmd, "--architecture", a->architectures,
-                  "untrained networks timed without --model, repeatable: paper (default), lfnet");
-  add_enum_option(cmd, "--precision", a->precision,
-                  "float32 or bfloat16 for the CNN branch's convolutions, or lfnet's U-Net");
-  add_self_ensemble_options(cmd, a->self_ensemble, a->self_ensemble_passes, "time");
+  cmd->add_option_function<std::vector<std::string>>(
+      "--architecture",
+      [a](const std::vector<std::string>& names) {
+        for (const auto& name : names) {
+          try {
+            (void)nn::find_architecture(name);
+          } catch (const ConfigError& e) {
+            throw CLI::ValidationError("--architecture", e.what());
+          }
+        }
+        a->architectures = names;
+      },
+      "untrained networks timed without --model, repeatable: " + nn::architecture_list() +
+          " (default paper)");
   cmd->add_flag("--in-process", args->in_process,
                 "run every case in this process (peak memory is then a running maximum)");
   cmd->add_flag("--skip-kernels", a->skip_kernels, "skip the Conv4d timings");

@@ -6,11 +6,13 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/version.h"
+#include "lfnet/nn/network.h"
 
 namespace lfnet::app {
 
@@ -112,6 +114,72 @@ inline void add_self_ensemble_options(CLI::App* cmd, bool& self_ensemble, int64_
                   "then left to right, top to bottom, both (default: all)")
       ->check(kCount)
       ->needs(flag);
+}
+
+// The flags every command that reconstructs (evaluate, reconstruct, batch, bench) shares, bound
+// once here so that their names, checks and help are the same in all four (docs/reconstruction.md,
+// "Flags every command shares"). Each member points at the command's field, and every one must
+// be given. bench times several models and strides (`models`, `strides`; its --stride N is
+// --strides N), the others take one (`model`, `stride`). --threads is the program's option and
+// may also follow the command's name (main.cc).
+struct ReconstructionFlags {
+  std::string* model = nullptr;
+  std::vector<std::string>* models = nullptr;  // instead of `model`
+  std::string* phi = nullptr;
+  std::string* device = nullptr;
+  nn::Precision* precision = nullptr;
+  int64_t* tile = nullptr;
+  int64_t* stride = nullptr;
+  std::vector<int64_t>* strides = nullptr;  // instead of `stride`
+  bool* self_ensemble = nullptr;
+  int64_t* ensemble_passes = nullptr;
+  std::string ensemble_verb = "reconstruct";  // opens --self-ensemble's help
+};
+
+inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f) {
+  if ((f.model == nullptr) == (f.models == nullptr) ||
+      (f.stride == nullptr) == (f.strides == nullptr) || !f.phi || !f.device || !f.precision ||
+      !f.tile || !f.self_ensemble || !f.ensemble_passes) {
+    throw std::logic_error("add_reconstruction_flags: every shared flag needs one target");
+  }
+  const std::string model =
+      "trained model for net, ae and cnn: a checkpoint or a file lfnet "
+      "export wrote";
+  if (f.models) {
+    cmd->add_option("--model", *f.models,
+                    model +
+                        "; repeatable, the network methods run with each (default: an "
+                        "untrained network of --architecture)");
+  } else {
+    cmd->add_option("--model", *f.model, model);
+  }
+  cmd->add_option("--phi", *f.phi,
+                  "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "
+                  "what a model or acquisition does not say, and it must match the model");
+  cmd->add_option("--device", *f.device, "cpu or cuda[:K] for the network (default cpu)");
+  add_enum_option(cmd, "--precision", *f.precision,
+                  "float32 (default) or bfloat16 for the paper net's CNN branch or lfnet's U-Net");
+  cmd->add_option("--tile", *f.tile,
+                  "spatial tile of whole-image models (default 256) and of --cnn-mode full "
+                  "(default 128)")
+      ->check(CLI::PositiveNumber);
+  if (f.strides) {
+    cmd->add_option("--strides", *f.strides,
+                    "patch strides, comma-separated (default 9,5,2; 9: non-overlapping 9x9 "
+                    "patches)")
+        ->delimiter(',')
+        ->check(kStride);
+    auto* strides = f.strides;
+    cmd->add_option_function<int64_t>(
+           "--stride", [strides](const int64_t& v) { *strides = {v}; },
+           "patch stride of patch methods: one stride, as --strides N")
+        ->check(kStride);
+  } else {
+    cmd->add_option("--stride", *f.stride,
+                    "patch stride of patch methods (default 5; whole-image models have none)")
+        ->check(kStride);
+  }
+  add_self_ensemble_options(cmd, *f.self_ensemble, *f.ensemble_passes, f.ensemble_verb);
 }
 
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.

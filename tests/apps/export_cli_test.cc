@@ -244,7 +244,7 @@ TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[ap
                             model.string() + " --out " + pt,
                         out) == 0);
     std::printf("%s", out.c_str());
-    CHECK(out.find(network.is_image()
+    CHECK(out.find(network.arch().whole_image()
                        ? "max |exported - checkpoint| on a "
                        : "max |exported - checkpoint| on 256 patches") != std::string::npos);
     const auto loaded = lfnet::nn::load_script(pt);
@@ -266,7 +266,7 @@ TEST_CASE(
     INFO(name);
     auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(name + ":2"));
     lfnet::nn::NetworkOptions o;
-    o.architecture = lfnet::nn::Architecture::kLfnet;
+    o.architecture = lfnet::nn::kLfnetArchitecture;
     o.measurements = phi->measurements();
     o.patch = {phi->rows(), phi->cols(), 16, 16};
     o.image.channels = 4;
@@ -297,7 +297,7 @@ TEST_CASE(
 
     // LibTorch: whole images, tiles with halos (one tile, and many) and the simulation.
     const auto scripted = lfnet::nn::load_script(pt);
-    CHECK(scripted.network.is_image());
+    CHECK(scripted.network.arch().whole_image());
     auto sensor = lfnet::optics::simulate_sensor(*phi, lf);
     const double sigma = 0.1;
     torch::Tensor whole, tiled;

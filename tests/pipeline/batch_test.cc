@@ -29,6 +29,21 @@ void write_inputs(const std::string& in) {
   fs::create_directories(in + "/acq");
   pipeline::write_acquisition(s, in + "/acq");
 }
+// A small lfnet net for asp:2 with random U-Net weights (its single pass is not
+// mirror-equivariant), saved as a checkpoint.
+void save_small_lfnet(const std::string& path) {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  nn::NetworkOptions no;
+  no.architecture = nn::kLfnetArchitecture;
+  no.measurements = phi->measurements();
+  no.patch = {phi->rows(), phi->cols(), 16, 16};
+  no.image.channels = 6;
+  no.image.blocks = 1;
+  nn::LightFieldNet net(no);
+  net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
+  test::randomise_image_net(net, 5);
+  test::save_net(net, *phi, "joint", path);
+}
 }  // namespace
 
 TEST_CASE("discover_items finds acquisitions and light fields, and records what it cannot read",
@@ -88,18 +103,7 @@ TEST_CASE("run_batch --self-ensemble averages the mirror passes of an lfnet chec
           "[pipeline][batch]") {
   test::TempDir tmp;
   write_inputs(tmp / "in");
-  // A small lfnet net with random U-Net weights: its single pass is not mirror-equivariant.
-  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
-  nn::NetworkOptions no;
-  no.architecture = nn::Architecture::kLfnet;
-  no.measurements = phi->measurements();
-  no.patch = {phi->rows(), phi->cols(), 16, 16};
-  no.image.channels = 6;
-  no.image.blocks = 1;
-  nn::LightFieldNet net(no);
-  net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
-  test::randomise_image_net(net, 5);
-  test::save_net(net, *phi, "joint", tmp / "m.ckpt");
+  save_small_lfnet(tmp / "m.ckpt");
 
   pipeline::BatchOptions o;
   o.in = tmp / "in";

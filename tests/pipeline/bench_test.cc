@@ -66,14 +66,13 @@ TEST_CASE("bench_report times the network methods once per architecture, lfnet a
   o.reps = 1;
   o.methods = {"net", "pinv"};
   o.strides = {9, 5};
-  o.architectures = {nn::Architecture::kPaper, nn::Architecture::kLfnet};
+  o.architectures = {nn::kPaperArchitecture, nn::kLfnetArchitecture};
   std::vector<std::string> asked;
   pipeline::bench_report(
       o,
       [&](const pipeline::BenchOptions& n, const std::string& method, int64_t stride, double) {
         CHECK(n.architectures.size() == 1);
-        asked.push_back(method + "/" + nn::to_string(n.architectures.front()) + ":" +
-                        std::to_string(stride));
+        asked.push_back(method + "/" + n.architectures.front() + ":" + std::to_string(stride));
         return nlohmann::json{{"method", method}, {"stride", stride}, {"error", "not run"}};
       },
       [](const std::string&) {});
@@ -85,7 +84,7 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
   pipeline::BenchOptions o;
   o.height = 40;
   o.width = 52;
-  o.architectures = {nn::Architecture::kLfnet};
+  o.architectures = {nn::kLfnetArchitecture};
   const auto r = pipeline::bench_case(o, "net", 5, 1e9);
   CHECK(r["architecture"] == "lfnet");
   CHECK(r["tile"] == 256);

@@ -16,7 +16,7 @@ namespace {
 
 nn::NetworkOptions image_options(const optics::Phi& phi, int64_t levels = 3) {
   nn::NetworkOptions o;
-  o.architecture = lfnet::nn::Architecture::kLfnet;
+  o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
   o.image.channels = 6;
@@ -131,7 +131,7 @@ TEST_CASE("a crop through forward() is forward_image of that crop", "[recon][ima
 
 TEST_CASE("the U-Net's FLOP count matches its layers", "[recon][image]") {
   nn::NetworkOptions o;
-  o.architecture = lfnet::nn::Architecture::kLfnet;
+  o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = 2;
   o.image.channels = 8;
   o.image.levels = 1;
@@ -180,7 +180,7 @@ TEST_CASE("the lfnet architecture's options and Phi are checked", "[recon][image
   nn::NetworkOptions o;
   CHECK_THROWS_WITH(nn::NetworkOptions::from_json(nlohmann::json{{"architecture", "unet"}}),
                     Catch::Contains("$.architecture") && Catch::Contains("paper, lfnet"));
-  o.architecture = lfnet::nn::Architecture::kLfnet;
+  o.architecture = lfnet::nn::kLfnetArchitecture;
   o.patch = {5, 5, 18, 16};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("multiples of 4"));
   o.patch = {5, 5, 16, 16};

@@ -78,7 +78,7 @@ nn::NetworkOptions small_net_options(const std::string& branches) {
 
 nn::NetworkOptions small_image_options(int64_t side, int64_t channels) {
   nn::NetworkOptions o;
-  o.architecture = nn::Architecture::kLfnet;
+  o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {3, 3, side, side};
   o.image.channels = channels;

@@ -558,7 +558,7 @@ TEST_CASE("the lfnet architecture trains on crops, from its pseudo-inverse upwar
   CHECK(history.back().val_psnr_db > before + 1.0);
   // The checkpoint it wrote builds the same net.
   auto loaded = lfnet::train::build_net(lfnet::train::load_checkpoint(dir / "run/last.ckpt"));
-  CHECK(loaded->options().is_image());
+  CHECK(loaded->architecture().whole_image());
   torch::NoGradGuard no_grad;
   CHECK(torch::allclose(loaded->forward(y.slice(0, 0, 4)), net->forward(y.slice(0, 0, 4))));
 }

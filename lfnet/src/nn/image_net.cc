@@ -56,11 +56,11 @@ double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
   return flops;
 }
 
-std::vector<ImageTile> image_tiles(const ImageNetOptions& options, int64_t height, int64_t width,
+std::vector<ImageTile> image_tiles(const ImageTiling& tiling, int64_t height, int64_t width,
                                    int64_t tile, int64_t* step_out) {
-  const int64_t m = options.multiple();
+  const int64_t m = tiling.multiple;
   auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
-  const int64_t halo = round_up(options.receptive_radius());
+  const int64_t halo = round_up(tiling.receptive_radius);
   const int64_t step = round_up(std::max<int64_t>(1, tile));
   const int64_t hp = round_up(height), wp = round_up(width);
   if (step_out) *step_out = step;

@@ -137,11 +137,11 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const torch::Device device = parse_device(a.device);
   Stopwatch setup_clock;
   nn::LightFieldNet net{nullptr};
-  optics::PhiSpec spec = optics::PhiSpec::parse(a.phi);
+  optics::PhiSpec spec = phi_from_argument(a.phi);
   nlohmann::json model_info = "untrained default network";
   if (recon::needs_network(method)) {
     const std::string model = a.models.empty() ? "" : a.models.front();
-    auto architecture = nn::Architecture::kPaper;
+    std::string architecture = nn::kPaperArchitecture;
     if (!a.architectures.empty()) architecture = a.architectures.front();
     if (!model.empty()) {
       const auto ckpt = train::load_checkpoint(model);
@@ -151,10 +151,10 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     } else {
       nn::NetworkOptions no;
       no.measurements = spec.n;
-      if (architecture == nn::Architecture::kLfnet) {
-        model_info = "untrained lfnet network";
-        no.architecture = architecture;
-        no.patch.height = no.patch.width = 48;
+      no.architecture = architecture;
+      if (no.arch().whole_image()) {
+        model_info = "untrained " + architecture + " network";
+        no.patch.height = no.patch.width = 48;  // a training crop of any U-Net depth up to 5
       }
       torch::manual_seed(0);
       net = nn::LightFieldNet(no);
@@ -186,7 +186,7 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     nn::set_cnn_precision(net, a.precision);
     resources.net = net;
     extra["model"] = model_info;
-    extra["architecture"] = nn::to_string(net->options().architecture);
+    extra["architecture"] = net->options().architecture;
     extra["cnn_mode"] = full ? "full" : "patches";
     extra["precision"] = nn::to_string(a.precision);
     if (full) extra["tile"] = cnn_tile;
@@ -199,7 +199,7 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   }
   resources.tile = image_tile;
   int64_t passes = 1;  // of the lfnet architecture's whole-image pass
-  if (a.self_ensemble && net && net->options().is_image()) {
+  if (a.self_ensemble && net && net->architecture().whole_image()) {
     resources.self_ensemble = true;
     resources.self_ensemble_passes = a.self_ensemble_passes;
     passes = static_cast<int64_t>(recon::ensemble_mirrors(net->phi, a.self_ensemble_passes).size());
@@ -364,8 +364,8 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
       BenchOptions n = a;
       n.models = model.empty() ? std::vector<std::string>{} : std::vector<std::string>{model};
       n.architectures = {architecture};
-      const bool image = model.empty() ? architecture == nn::Architecture::kLfnet
-                                       : load_model(model, false).network.is_image();
+      const bool image = model.empty() ? nn::find_architecture(architecture).whole_image()
+                                       : load_model(model, false).network.arch().whole_image();
       nets.emplace_back(n, image);
       if (!model.empty()) break;  // a checkpoint has its own architecture
     }
@@ -380,7 +380,7 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
         const std::string label =
             !network ? method
                      : method + " [" +
-                           (narrowed.models.empty() ? nn::to_string(narrowed.architectures.front())
+                           (narrowed.models.empty() ? narrowed.architectures.front()
                                                     : narrowed.models.front()) +
                            "]";
         if (!r.contains("error")) {
@@ -465,7 +465,7 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
     args.insert(args.end(), {"--ensemble-passes", std::to_string(a.self_ensemble_passes)});
   }
   for (const auto& arch : a.architectures) {
-    args.insert(args.end(), {"--architecture", nn::to_string(arch)});
+    args.insert(args.end(), {"--architecture", arch});
   }
   for (const auto& model : a.models) args.insert(args.end(), {"--model", shell_quote(model)});
   if (!a.dictionary.empty()) args.insert(args.end(), {"--dictionary", shell_quote(a.dictionary)});

@@ -72,13 +72,14 @@ ExportResult export_model(const ExportRequest& a) {
   const auto loaded = nn::load_script(a.out);
   double diff = 0;
   ExportResult r;
-  if (a.check > 0 && o.is_image()) {
+  if (a.check > 0 && o.arch().whole_image()) {
     // A sensor image wider than two halos, with sides that are no multiples of the U-Net's, in
     // many tiles.
     auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
-    const int64_t m = o.image.multiple(), halo = o.image.receptive_radius();
+    const auto tiling = o.arch().image_tiling(o);
+    const int64_t m = tiling.multiple, halo = tiling.receptive_radius;
     auto sensor = torch::rand({o.measurements, 2 * halo + m + 3, 3 * halo + 1}, gen);
-    const double sigma = o.image.noise_input ? 0.05 : 0.0;
+    const double sigma = 0.05;  // read by noise-aware nets only
     const int64_t tile = 2 * m;
     auto want = recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
     auto got = loaded.reconstruct_image(sensor, tile, false, sigma);
@@ -98,7 +99,7 @@ ExportResult export_model(const ExportRequest& a) {
                    diff, " on ", a.check, " patches (more than 1e-5): please report this");
   }
   r.phi = spec.label();
-  r.branches = o.is_image() ? "lfnet" : nn::to_string(o.branches);
+  r.branches = o.arch().whole_image() ? o.architecture : nn::to_string(o.branches);
   r.phases = net->phases();
   r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
   r.max_difference = diff;

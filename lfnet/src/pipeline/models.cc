@@ -17,11 +17,12 @@ namespace fs = std::filesystem;
 namespace lfnet::pipeline {
 
 torch::Tensor phi_tensor(const optics::Phi& phi, const nn::NetworkOptions& options) {
-  if (!options.is_image()) {
+  if (options.arch().phi_input() == nn::PhiInput::kPatchMatrices) {
     return optics::patch_matrix_stack(phi, options.patch.height, options.patch.width);
   }
-  LFNET_CHECK_AS(ConfigError, phi.local(), "the lfnet architecture needs a Phi whose ",
-                 "measurements are per pixel; ", phi.spec().label(), " is not");
+  LFNET_CHECK_AS(ConfigError, phi.local(), "the ", options.architecture,
+                 " architecture needs a Phi whose measurements are per pixel; ", phi.spec().label(),
+                 " is not");
   const int64_t t = phi.period();
   return phi.pixel_weights(0, 0, t, t);
 }

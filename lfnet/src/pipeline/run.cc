@@ -193,7 +193,7 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
         for (const auto& mode : ev.modes) {
           for (double noise : ev.noise) {
             std::optional<nn::PatchShape> patch;  // lfnet reconstructs whole images
-            if (!config.network.is_image()) {
+            if (!config.network.arch().whole_image()) {
               patch = nn::PatchShape{};
               patch->height = config.dataset.patch_h;
               patch->width = config.dataset.patch_w;

@@ -40,8 +40,9 @@ nn::LightFieldNet load_teacher(const ExperimentConfig& config, const std::string
   LFNET_CHECK_AS(ConfigError, model_file_kind(d.teacher) == ModelFileKind::kCheckpoint, what,
                  ": not an lfnet checkpoint (an exported model or a dictionary cannot teach)");
   auto model = load_model(d.teacher, true);
-  LFNET_CHECK_AS(ConfigError, model.network.is_image(), what,
-                 ": the teacher must be of the lfnet architecture (its self-ensemble teaches)");
+  LFNET_CHECK_AS(ConfigError, model.network.arch().whole_image(), what,
+                 ": the teacher must be of a whole-image architecture such as lfnet (its "
+                 "self-ensemble teaches)");
   try {
     model.check_phi(config.phi.to_json());
   } catch (const Error& e) {

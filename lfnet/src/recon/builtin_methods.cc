@@ -46,10 +46,10 @@ class NetworkMethod : public Method {
   PatchSolver solver(const MethodResources& r) const override {
     if (is_image(r)) {
       check_image_branch();
-      // The U-Net needs a whole sensor image: image_solver() serves sensor images.
+      // A whole-image net needs a whole sensor image: image_solver() serves sensor images.
       return [](const torch::Tensor&, const torch::Tensor&) -> torch::Tensor {
         throw ConfigError(
-            "the lfnet architecture reconstructs sensor images, not per-patch measurements");
+            "a whole-image architecture reconstructs sensor images, not per-patch measurements");
       };
     }
     return r.script ? script_solver(*r.script, branch_) : network_solver(r.net, branch_);
@@ -93,15 +93,15 @@ class NetworkMethod : public Method {
   }
 
  private:
-  // Whether the model (a checkpoint's net or an exported one) is of the lfnet architecture.
+  // Whether the model (a checkpoint's net or an exported one) reconstructs whole images.
   static bool is_image(const MethodResources& r) {
-    if (r.script) return r.script->network.is_image();
-    return !r.net.is_empty() && r.net->options().is_image();
+    if (r.script) return r.script->network.arch().whole_image();
+    return !r.net.is_empty() && r.net->architecture().whole_image();
   }
   void check_image_branch() const {
     LFNET_CHECK_AS(ConfigError, branch_ == "net", "method '", branch_,
-                   "' names a branch of the paper's network; a model of the lfnet architecture "
-                   "has none: use --method net");
+                   "' names a branch of the paper's network; a model of a whole-image "
+                   "architecture has none: use --method net");
   }
   std::string branch_;
 };

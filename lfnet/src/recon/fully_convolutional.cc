@@ -112,20 +112,22 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
                                        int64_t tile, bool clamp, double noise_sigma,
                                        const ProgressCallback& progress) {
   const auto& o = net->options();
-  LFNET_CHECK_AS(ConfigError, o.is_image(),
-                 "whole-image reconstruction needs a model of the lfnet architecture");
+  const auto& arch = net->architecture();
+  LFNET_CHECK_AS(ConfigError, arch.whole_image(), "whole-image reconstruction needs a model of ",
+                 "a whole-image architecture, not ", arch.name());
   LFNET_CHECK_AS(ConfigError, sensor.dim() == 3 && sensor.size(0) == o.measurements,
                  "the sensor image must be (", o.measurements, ", H, W), got ", sensor.sizes());
   LFNET_CHECK_AS(ConfigError, tile >= 1, "the tile must be positive, got ", tile);
   torch::NoGradGuard no_grad;
   net->eval();
-  const int64_t m = o.image.multiple(), h = sensor.size(1), w = sensor.size(2);
-  const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->pixel_pinv.size(0);
-  const auto device = net->pixel_pinv.device();
+  const auto tiling = arch.image_tiling(o);
+  const int64_t m = tiling.multiple, h = sensor.size(1), w = sensor.size(2);
+  const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->period();
+  const auto device = net->phi.device();
   auto padded = torch::constant_pad_nd(sensor.to(torch::kFloat32), {0, wp - w, 0, hp - h});
   auto out = torch::empty({1, o.patch.rows, o.patch.cols, h, w}, torch::kFloat32);
   int64_t step = 0, done = 0;
-  const auto tiles = nn::image_tiles(o.image, h, w, tile, &step);
+  const auto tiles = nn::image_tiles(tiling, h, w, tile, &step);
   for (const auto& c : tiles) {
     auto crop = padded.slice(1, c.a0, c.a1).slice(2, c.b0, c.b1).unsqueeze(0).to(device);
     auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma).to(torch::kCPU);
@@ -177,11 +179,11 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights) {
 
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
                          const nn::ScriptedNetwork* script) {
-  const bool image = (!net.is_empty() && net->options().is_image()) ||
-                     (script != nullptr && script->network.is_image());
+  const bool image = (!net.is_empty() && net->architecture().whole_image()) ||
+                     (script != nullptr && script->network.arch().whole_image());
   LFNET_CHECK_AS(ConfigError, method == "net" && image,
-                 "--self-ensemble applies to --method net with a model of the lfnet "
-                 "architecture");
+                 "--self-ensemble applies to --method net with a model of a whole-image "
+                 "architecture (lfnet)");
 }
 
 void check_ensemble_passes(bool self_ensemble, int64_t passes) {
@@ -231,8 +233,8 @@ torch::Tensor reconstruct_mirrored(const std::vector<SensorMirror>& mirrors,
 torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
                                           int64_t tile, bool clamp, double noise_sigma,
                                           const ProgressCallback& progress, int64_t max_passes) {
-  LFNET_CHECK_AS(ConfigError, net->options().is_image(),
-                 "the self-ensemble needs a model of the lfnet architecture");
+  LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
+                 "the self-ensemble needs a model of a whole-image architecture (lfnet)");
   return reconstruct_mirrored(
       ensemble_mirrors(net->phi, max_passes), sensor,
       [&](const torch::Tensor& mirrored, const ProgressCallback& part) {
@@ -244,8 +246,8 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
 torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
                                          const torch::Tensor& phase, const torch::Tensor& noise,
                                          int64_t max_passes) {
-  LFNET_CHECK_AS(ConfigError, net->options().is_image(),
-                 "the self-ensemble needs a model of the lfnet architecture");
+  LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
+                 "the self-ensemble needs a model of a whole-image architecture (lfnet)");
   LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == net->options().measurements,
               "reconstruct_crops_mirrored: expected sensor crops (B, ", net->options().measurements,
               ", h, w), got ", sensor.sizes());

@@ -181,19 +181,6 @@ std::string shape_text(torch::IntArrayRef sizes) {
   return out.str();
 }
 
-bool is_phi_buffer(const std::string& name) {
-  return name == "phi" || name == "adjoint_scale" || name == "base" || name == "pixel_pinv";
-}
-
-// The axes of a Phi buffer that follow the Phi's phases or period: the first of the paper
-// network's stacks; the period axes of the lfnet architecture's pixel weights (N, U, V, T, T)
-// and pseudo-inverses (T, T, N, U V).
-std::vector<size_t> phase_axes(const std::string& name, size_t rank) {
-  if (name == "phi" && rank == 5) return {3, 4};
-  if (name == "pixel_pinv") return {0, 1};
-  return {0};
-}
-
 }  // namespace
 
 // ---- training state ------------------------------------------------------------------------
@@ -357,8 +344,8 @@ void check_architecture(const nn::LightFieldNet& net, const TensorMap& state,
     }
     auto want = t.sizes().vec(), got = it->second.sizes().vec();
     // The Phi buffers may hold another number of phases.
-    if (is_phi_buffer(name) && !want.empty() && want.size() == got.size()) {
-      for (size_t axis : phase_axes(name, want.size())) want[axis] = got[axis];
+    if (!want.empty() && want.size() == got.size()) {
+      for (size_t axis : net->architecture().phase_axes(name, want.size())) want[axis] = got[axis];
     }
     if (want != got) {
       problems.push_back(name + " is " + shape_text(it->second.sizes()) + " there but " +

@@ -19,9 +19,6 @@ namespace lfnet::train {
 
 namespace {
 
-// The prefix of the U-Net's parameter names: the network's submodule "image".
-constexpr std::string_view kImagePrefix = "image.";
-
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 double number_or(const nlohmann::json& j, double fallback) {
   return j.is_number() ? j.get<double>() : fallback;
@@ -421,10 +418,13 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   const std::string what = "checkpoint " + path;
   auto ck = load_checkpoint(path);
   const auto old_phi = ck.model.count("phi") ? ck.model.at("phi") : torch::Tensor();
-  const bool phi_changed = ck.phi != run_.phi || !old_phi.defined() ||
-                           old_phi.sizes() != net_->phi.sizes() ||
-                           !torch::equal(old_phi, net_->phi.to(torch::kCPU));
-  const bool fc1_reads_measurements = net_->options().ae.input == nn::AeInput::kMeasurements;
+  nn::WarmStartSource from;
+  from.network = ck.network;
+  from.phi = old_phi;
+  from.phi_changed = ck.phi != run_.phi || !old_phi.defined() ||
+                     old_phi.sizes() != net_->phi.sizes() ||
+                     !torch::equal(old_phi, net_->phi.to(torch::kCPU));
+  const auto& arch = net_->architecture();
   InitReport report;
   {
     torch::NoGradGuard no_grad;
@@ -437,44 +437,33 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
         continue;
       }
       const auto& src = it->second;
-      if (name == "ae.fc1.weight" && fc1_reads_measurements && phi_changed) {
-        // fc1 reads the measurements of the old Phi: carry it over, or start it afresh.
-        if (old_phi.defined() && old_phi.size(0) == 1 && net_->phases() == 1 && src.dim() == 2 &&
-            src.size(0) == p.value().size(0) && src.size(1) == old_phi.size(1)) {
-          p.value().copy_(nn::map_measurement_weights(src, old_phi[0], net_->phi[0].to(torch::kCPU),
-                                                      net_->options().pinv_lambda));
+      switch (arch.warm_start(*net_, name, src, p.value(), from)) {
+        case nn::WarmStart::kCopied:
+          report.copied.push_back(name);
+          break;
+        case nn::WarmStart::kMapped:
           report.mapped.push_back(name);
-        } else {
+          break;
+        case nn::WarmStart::kWidened:
+          report.widened.push_back(name);
+          break;
+        case nn::WarmStart::kReinitialised:
           report.reinitialised.push_back(name);
+          break;
+        case nn::WarmStart::kMismatch: {
+          std::ostringstream m;
+          m << what << ": " << name << " is " << src.sizes() << " there but " << p.value().sizes()
+            << " here; finetuning needs the same architecture apart from the autoencoder's "
+               "first layer";
+          throw CheckpointError(m.str());
         }
-        continue;
       }
-      if (src.sizes() != p.value().sizes() && name.rfind(kImagePrefix, 0) == 0 &&
-          nn::embed_narrow_parameter(name.substr(kImagePrefix.size()), src, p.value())) {
-        report.widened.push_back(name);
-        continue;
-      }
-      if (src.sizes() != p.value().sizes()) {
-        std::ostringstream m;
-        m << what << ": " << name << " is " << src.sizes() << " there but " << p.value().sizes()
-          << " here; finetuning needs the same architecture apart from the autoencoder's first "
-             "layer";
-        throw CheckpointError(m.str());
-      }
-      p.value().copy_(src);
-      report.copied.push_back(name);
     }
   }
-  if (!net_->image.is_empty() && ck.network.contains("image")) {
-    const int64_t from_levels = ck.network["image"].value("levels", int64_t{0});
-    if (from_levels >= 1 && from_levels < net_->options().image.levels) {
-      for (const auto& name : net_->image->start_new_levels(from_levels)) {
-        const std::string full = std::string(kImagePrefix) + name;
-        auto& re = report.reinitialised;
-        re.erase(std::remove(re.begin(), re.end(), full), re.end());
-        report.deepened.push_back(full);
-      }
-    }
+  for (const auto& name : arch.finish_warm_start(*net_, from)) {
+    auto& re = report.reinitialised;
+    re.erase(std::remove(re.begin(), re.end(), name), re.end());
+    report.deepened.push_back(name);
   }
   if (report.copied.empty() && report.mapped.empty() && report.widened.empty()) {
     throw CheckpointError(what + " shares no parameters" +

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "lfnet/core/json.h"
+#include "lfnet/nn/architecture.h"
 
 namespace lfnet::nn {
 
@@ -57,9 +58,11 @@ struct ImageNetOptions {
   // Nominal floating-point operations per full-resolution pixel for `in` input and `out`
   // output channels.
   double pixel_flops(int64_t in, int64_t out) const;
+  // How a net of this U-Net is tiled: its multiple and receptive radius.
+  ImageTiling tiling() const { return {multiple(), receptive_radius()}; }
 };
 
-// One tile of tiled inference over an H x W image padded to the U-Net's multiple: its core
+// One tile of tiled inference over an H x W image padded to the net's multiple: its core
 // [y0, y0 + step) x [x0, x0 + step) and the crop computed for it, [a0, a1) x [b0, b1), the core
 // with a halo of the receptive radius, both rounded to the multiple and clipped to the padded
 // image. Tiles start at multiples of the multiple, so every crop down-samples on the grid of
@@ -68,8 +71,9 @@ struct ImageTile {
   int64_t y0 = 0, x0 = 0, a0 = 0, a1 = 0, b0 = 0, b1 = 0;
 };
 // The tiles of `tile` x `tile` pixels (rounded up to the multiple) covering height x width,
-// row by row; `step` receives the rounded tile side.
-std::vector<ImageTile> image_tiles(const ImageNetOptions& options, int64_t height, int64_t width,
+// row by row, for a whole-image net tiled as `tiling` (NetworkArchitecture::image_tiling);
+// `step` receives the rounded tile side.
+std::vector<ImageTile> image_tiles(const ImageTiling& tiling, int64_t height, int64_t width,
                                    int64_t tile, int64_t* step = nullptr);
 
 // Finetuning a wider U-Net from a narrower one of the same depth (train --init): copies the

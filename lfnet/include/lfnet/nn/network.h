@@ -1,14 +1,19 @@
-// The two-branch reconstruction network of Gupta et al. 2017 (docs/training.md): an
-// autoencoder branch on the measurement vector and a 4D CNN branch on Phi^T y, averaged.
+// The reconstruction network: one module, LightFieldNet, that holds the layers and buffers of
+// its architecture (nn/architecture.h: "paper", the two-branch network of Gupta et al. 2017 on
+// patches, docs/training.md; "lfnet", lfnet's U-Net over whole sensor images,
+// docs/architectures.md), with the options of every architecture.
 //
-// The Phi^T step is part of the net: it holds the patch matrices of its Phi as the buffer
-// `phi`, so a saved or exported model is self-contained. Registered names are the checkpoint
-// schema:
+// The Phi is part of the net (the buffer `phi`), so a saved or exported model is
+// self-contained. Registered names are the checkpoint schema. The paper architecture:
 //   phi            (P, N h w, U V h w)  stacked patch matrices, one per phase (buffer)
 //   adjoint_scale  (P)                  scale of Phi^T y per phase (buffer, derived from phi)
 //   base           (P, N h w, U V h w)  Tikhonov pseudo-inverses (buffer, residual "pinv" only)
 //   ae.fc1 .. ae.fc6 (.weight, .bias), ae.conv (.weight, .bias)
 //   cnn.conv1 .. cnn.conv<depth> (.weight, .bias)
+// The lfnet architecture:
+//   phi            (N, U, V, T, T)      per-pixel weights of one period (buffer)
+//   pixel_pinv     (T, T, N, U V)       per-pixel pseudo-inverses (buffer, derived from phi)
+//   image.*                             the U-Net (nn/image_net.h)
 #pragma once
 
 #include <torch/nn/module.h>
@@ -24,6 +29,7 @@
 
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
+#include "lfnet/nn/architecture.h"
 #include "lfnet/nn/conv4d.h"
 #include "lfnet/nn/image_net.h"
 
@@ -52,16 +58,14 @@ struct PatchShape {
   }
 };
 
-// The closed sets of NetworkOptions, read and written by name (core/enum_names.h).
-enum class Architecture { kPaper, kLfnet };      // "paper", "lfnet"
+// The closed sets of NetworkOptions, read and written by name (core/enum_names.h). The
+// architecture is an open set: the registry's names (nn/architecture.h).
 enum class Branches { kNet, kAe, kCnn };         // "net", "ae", "cnn"
 enum class Residual { kNone, kPinv, kAdjoint };  // "none", "pinv", "adjoint"
 enum class AeInput { kMeasurements, kAdjoint };  // "measurements", "adjoint"
-std::string to_string(Architecture value);
 std::string to_string(Branches value);
 std::string to_string(Residual value);
 std::string to_string(AeInput value);
-Architecture from_string(const std::string& name, Architecture);
 Branches from_string(const std::string& name, Branches);
 Residual from_string(const std::string& name, Residual);
 AeInput from_string(const std::string& name, AeInput);
@@ -102,11 +106,11 @@ struct CnnOptions {
 
 // Everything that defines a LightFieldNet; stored in every checkpoint as "network".
 struct NetworkOptions {
-  // "paper": the two-branch network of Gupta et al. on patches (ae, cnn, branches, kernel,
-  // conv_algorithm, head_weights and residual apply). "lfnet": lfnet's own whole-image
-  // architecture (`image`): a U-Net over the per-pixel pseudo-inverse of the sensor image,
-  // trained on crops of `patch` (docs/architectures.md).
-  Architecture architecture = Architecture::kPaper;
+  // A registered architecture (nn/architecture.h). "paper": the two-branch network of Gupta et
+  // al. on patches (ae, cnn, branches, kernel, conv_algorithm, head_weights and residual
+  // apply). "lfnet": lfnet's own whole-image architecture (`image`): a U-Net over the per-pixel
+  // pseudo-inverse of the sensor image, trained on crops of `patch` (docs/architectures.md).
+  std::string architecture = kPaperArchitecture;
   PatchShape patch;                    // the patch the net reconstructs (lfnet: the training crop)
   int64_t measurements = 2;            // N: measurement channels per pixel
   Branches branches = Branches::kNet;  // net (both branches, averaged), ae or cnn (one branch)
@@ -143,18 +147,20 @@ struct NetworkOptions {
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
-  // Throws ConfigError naming the bad field.
+  // Throws ConfigError naming the bad field (the architecture checks its own).
   void validate() const;
 
-  bool is_image() const { return architecture == Architecture::kLfnet; }
-  // The patch grid that reconstruction with this network uses: its patch shape, or none for
-  // the lfnet architecture, which reconstructs whole images (its training crop is no patch).
+  // The registered class of `architecture`; a ConfigError when none is.
+  const NetworkArchitecture& arch() const { return find_architecture(architecture); }
+  // The patch grid that reconstruction with this network uses: its patch shape, or none for a
+  // whole-image architecture (its training crop is no patch).
   std::optional<PatchShape> patch_grid() const {
-    if (is_image()) return std::nullopt;
+    if (arch().whole_image()) return std::nullopt;
     return patch;
   }
-  bool has_ae() const { return !is_image() && branches != Branches::kCnn; }
-  bool has_cnn() const { return !is_image() && branches != Branches::kAe; }
+  // The paper architecture's branches.
+  bool has_ae() const { return architecture == kPaperArchitecture && branches != Branches::kCnn; }
+  bool has_cnn() const { return architecture == kPaperArchitecture && branches != Branches::kAe; }
   int64_t measurement_size() const { return measurements * patch.pixels(); }  // N h w
   // Width of the autoencoder's input: N h w or U V h w.
   int64_t ae_input_size() const;
@@ -203,16 +209,18 @@ struct BranchSelection {
   bool cnn = true;
 };
 
-// The reconstruction network. Construct, then set_phi() with the Phi's patch matrices
-// (until then `phi` is a zero matrix of one phase); for the lfnet architecture, with the
-// per-pixel weights of one period of the Phi (phi_tensor gives either).
+// The reconstruction network of any registered architecture. Construct, then set_phi() with
+// the tensor of the Phi the architecture takes (its phi_input: the patch matrices, or the
+// per-pixel weights of one period; pipeline::phi_tensor gives either); until then `phi` is
+// zero.
 class LightFieldNetImpl : public torch::nn::Module {
  public:
   explicit LightFieldNetImpl(NetworkOptions options);
 
-  // y: (B, N h w) measurement vectors; phase: (B) int64 indices into the phi stack, may be
-  // undefined when there is one phase; noise: (B) sigma of each patch's measurement noise,
-  // read by noise-aware nets only (undefined: 0). Returns (B, 1, U, V, h, w).
+  // y: (B, N h w) measurement vectors of patches (or training crops); phase: (B) int64 indices
+  // into the phi stack, may be undefined when there is one phase; noise: (B) sigma of each
+  // patch's measurement noise, read by noise-aware nets only (undefined: 0). Returns (B, 1, U,
+  // V, h, w).
   torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {},
                         const torch::Tensor& noise = {});
   NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase = {});
@@ -221,16 +229,17 @@ class LightFieldNetImpl : public torch::nn::Module {
   NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase,
                              BranchSelection run);
 
-  // Replaces the Phi: `stack` is (P, N h w, U V h w) for any P >= 1. Recomputes the derived
-  // buffers (adjoint_scale, base). Parameters are left alone (see remap_phi for fc1).
-  // The lfnet architecture takes the pixel weights of one period T of a local Phi instead,
-  // (N, U, V, T, T) (optics::Phi::pixel_weights at the origin), and derives `pixel_pinv`.
+  // Replaces the Phi. The paper architecture takes `stack` (P, N h w, U V h w) for any P >= 1
+  // and recomputes the derived buffers (adjoint_scale, base); parameters are left alone (train
+  // --init carries fc1 over). The lfnet architecture takes the pixel weights of one period T of
+  // a local Phi, (N, U, V, T, T) (optics::Phi::pixel_weights at the origin), and derives
+  // `pixel_pinv`.
   void set_phi(const torch::Tensor& stack);
 
-  // lfnet architecture: the whole-image reconstruction of sensor images (B, N, H, W) whose
-  // pixel (0, 0) has phase `phase` (0 for a whole image): (B, U, V, H, W). Pads H and W to the
-  // U-Net's multiple (zeros, cropped off again). Peak memory grows with H W:
-  // recon::reconstruct_sensor_tiled bounds it.
+  // Whole-image architectures: the reconstruction of sensor images (B, N, H, W) whose pixel
+  // (0, 0) has phase `phase` (0 for a whole image): (B, U, V, H, W). The lfnet architecture
+  // pads H and W to the U-Net's multiple (zeros, cropped off again). Peak memory grows with
+  // H W: recon::reconstruct_sensor_tiled bounds it.
   // `noise_sigma`: the sensor's noise for a noise-aware net (ignored by others).
   torch::Tensor forward_image(const torch::Tensor& sensor, int64_t phase = 0,
                               double noise_sigma = 0.0);
@@ -243,8 +252,12 @@ class LightFieldNetImpl : public torch::nn::Module {
   // Phi_p^T Phi_p 1 closest to 1 (so a flat grey patch comes back near its own level).
   torch::Tensor adjoint(const torch::Tensor& y, const torch::Tensor& phase = {}) const;
 
-  int64_t phases() const { return options_.is_image() ? phi.size(3) * phi.size(4) : phi.size(0); }
+  // Distinct phases of the net's Phi: T^2 for a code of period T.
+  int64_t phases() const { return arch_->phases(*this); }
+  // The Phi's period T: a patch or crop at (y0, x0) has phase (y0 mod T) T + (x0 mod T).
+  int64_t period() const;
   const NetworkOptions& options() const { return options_; }
+  const NetworkArchitecture& architecture() const { return *arch_; }
 
   AutoencoderBranch ae{nullptr};
   CnnBranch cnn{nullptr};
@@ -252,14 +265,12 @@ class LightFieldNetImpl : public torch::nn::Module {
   torch::Tensor phi, adjoint_scale, base;
   torch::Tensor pixel_pinv;  // lfnet architecture: (T, T, N, U V) per-pixel pseudo-inverses
 
- private:
-  // Checks y and phase; returns phase (undefined for one phase).
+  // Checks y (B, N h w) and phase; returns phase (undefined for one phase).
   torch::Tensor check_phase(const torch::Tensor& y, const torch::Tensor& phase) const;
-  torch::Tensor scaled_adjoint(const torch::Tensor& y, const torch::Tensor& phase) const;
-  // The lfnet architecture's pseudo-inverse plus U-Net on a base (B, U V, h, w), with a noise
-  // channel (B) when the net is noise-aware.
-  torch::Tensor refine(const torch::Tensor& base, const torch::Tensor& noise);
+
+ private:
   NetworkOptions options_;
+  const NetworkArchitecture* arch_ = nullptr;  // owned by the registry
 };
 TORCH_MODULE(LightFieldNet);
 
@@ -290,15 +301,16 @@ Precision parse_precision(const std::string& name);
 std::string to_string(Precision precision);
 inline Precision from_string(const std::string& name, Precision) { return parse_precision(name); }
 
-// Converts the CNN branch's weights, or the lfnet architecture's U-Net, to `precision` (for
-// inference: a net in bfloat16 is not for training or saving). The branch casts its input to
-// its weights' type and its output back to the input's type, so the rest of the net (the
-// pseudo-inverse, the residual sum) stays float32. No-op for a net without either.
+// Converts the layers that run in reduced precision (the architecture's set_precision: the
+// paper's CNN branch, lfnet's U-Net) to `precision` (for inference: a net in bfloat16 is not
+// for training or saving). Those layers cast their input to their weights' type and their
+// output back to the input's type, so the rest of the net (the pseudo-inverse, the residual
+// sum) stays float32.
 void set_cnn_precision(LightFieldNet& net, Precision precision);
 
 // The FLOP model (lfnet bench), from the same options that build the modules: nominal
-// floating-point operations of one patch through the parts `run` selects (linear layers,
-// Conv4d, the adjoint and residual products), of the CNN branch alone, and of the CNN branch
+// floating-point operations of one patch through the parts `run` selects (the architecture's
+// patch_flops), and for the paper architecture of the CNN branch alone and of the CNN branch
 // run fully convolutionally over an H x W light field in tiles of `tile` (halo included).
 double patch_flops(const NetworkOptions& o, const BranchSelection& run);
 double cnn_patch_flops(const NetworkOptions& o);
@@ -306,8 +318,8 @@ double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, in
 // lfnet architecture: nominal floating-point operations per light-field pixel (pseudo-inverse
 // and U-Net).
 double image_pixel_flops(const NetworkOptions& o);
-// lfnet architecture: the operations of a whole H x W light field in tiles of `tile` (halo
-// included, as recon::reconstruct_sensor_tiled computes them).
+// Whole-image architectures: the operations of a whole H x W light field in tiles of `tile`
+// (halo included, as recon::reconstruct_sensor_tiled computes them).
 double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile);
 
 // Number of trainable parameters.

@@ -3,9 +3,10 @@
 //
 // The module is built in C++ (torch::nn modules cannot be scripted): the net's parameters and
 // buffers become parameters and buffers of nested script modules under their registered names
-// (ae.fc1.weight, cnn.conv3.bias, ...), and the methods are compiled from TorchScript source
-// that repeats network.cc and conv4d.cc op for op, each Conv4d layer with the algorithm the
-// C++ net resolves for it, so both give the same numbers to float rounding.
+// (ae.fc1.weight, cnn.conv3.bias, ...). The architecture (NetworkArchitecture::script) gives
+// its learned layers forwards traced from the C++ modules themselves and the TorchScript source
+// of the remaining methods, which repeats its C++ code op for op, so both give the same numbers
+// to float rounding.
 //
 // Methods of the exported module (B patches, N measurements, a U x V x h x w patch):
 //   forward(y, phase=None)            y (B, N h w) or (B, N, h, w) -> (B, U, V, h, w)
@@ -35,6 +36,8 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <functional>
+#include <map>
 #include <string>
 
 #include "lfnet/nn/network.h"
@@ -57,6 +60,37 @@ struct ScriptMetadata {
 
   // The metadata JSON of a file exported from a net with these options and phases.
   nlohmann::json to_json(const NetworkOptions& network, int64_t phases) const;
+};
+
+// What an architecture's export (NetworkArchitecture::script) builds on: the exported module,
+// whose submodules (one per dotted prefix of a registered name) already hold the net's
+// parameters under their registered names.
+class ScriptBuilder {
+ public:
+  explicit ScriptBuilder(torch::jit::Module root);
+  // The submodule at a dotted path ("" for the root), made and attached on first use.
+  torch::jit::Module module(const std::string& path);
+  // A copy of `value` as the buffer of dotted name `name`.
+  void buffer(const std::string& name, const torch::Tensor& value);
+  // A stack of patch matrices (P, M, D) as the root's buffer `name` or, when that halves its
+  // size, as flat `<name>_index` (int32) and `<name>_values`; returns the source of the method
+  // `<method>()` that gives the dense stack (rebuilt once and cached).
+  std::string stack(const std::string& name, const std::string& method, const torch::Tensor& value);
+  // Gives the submodule at `path` a `forward` traced from the C++ module that `run` calls on one
+  // input, `example`; the submodule holds that module's parameters as the very same tensors.
+  // Shapes are erased from the traced graph: the module must have no batch- or size-dependent
+  // operations.
+  void trace(const std::string& path, const std::function<torch::Tensor(const torch::Tensor&)>& run,
+             const torch::Tensor& example);
+  // Attributes of the root.
+  void attribute(const std::string& name, int64_t value);
+  void attribute(const std::string& name, bool value);
+  // A float literal that TorchScript reads back as the same double.
+  static std::string literal(double value);
+
+ private:
+  torch::jit::Module root_;
+  std::map<std::string, torch::jit::Module> children_;
 };
 
 // The TorchScript module of `net` (its parameters copied, detached). Throws ConfigError when

@@ -40,8 +40,8 @@ struct BenchOptions {
   bool skip_kernels = false;
   std::string device = "cpu";
   recon::CnnMode cnn_mode = recon::CnnMode::kPatches;
-  // Untrained nets without models.
-  std::vector<nn::Architecture> architectures = {nn::Architecture::kPaper};
+  // Untrained nets without models: registered architectures (nn/architecture.h).
+  std::vector<std::string> architectures = {nn::kPaperArchitecture};
   int64_t tile = 0;  // tile of cnn_mode full and of lfnet models (0: 128 and 256)
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch's convolutions
   bool self_ensemble = false;        // lfnet models: average over the Phi's mirror images

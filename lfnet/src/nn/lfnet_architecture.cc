@@ -1,0 +1,296 @@
+// lfnet's own architecture (docs/architectures.md): the per-pixel Tikhonov pseudo-inverse of the
+// sensor image, refined by a U-Net over the spatial axes (nn/image_net.h) whose channels are the
+// views. Fully convolutional: trained on crops, it reconstructs whole sensor images.
+#include <torch/torch.h>
+
+#include <vector>
+
+#include "lfnet/core/error.h"
+#include "lfnet/nn/architecture.h"
+#include "lfnet/nn/image_net.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
+
+namespace lfnet::nn {
+
+namespace {
+
+// The methods of an exported net of the lfnet architecture (docs/export.md). The U-Net is the
+// submodule `image`, traced from the C++ module itself; these methods repeat only the
+// per-pixel pseudo-inverse, the padding and the noise channel of this file and the tiles of
+// nn::image_tiles / recon::reconstruct_sensor_tiled, op for op.
+constexpr const char* kImageSource = R"TS(
+def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
+    t = self.pixel_pinv.size(0)
+    x = sensor.to(self.pixel_pinv.dtype)
+    if t == 1:
+        return torch.einsum("nk,bnij->bkij", [self.pixel_pinv[0][0], x])
+    h = x.size(2)
+    w = x.size(3)
+    rows = torch.remainder(torch.arange(h, device=x.device) + phase // t, t)
+    cols = torch.remainder(torch.arange(w, device=x.device) + phase % t, t)
+    m = self.pixel_pinv.index_select(0, rows).index_select(1, cols)
+    return torch.einsum("ijnk,bnij->bkij", [m, x])
+
+def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
+    if sensor.dim() != 4 or sensor.size(1) != self.measurements:
+        raise ValueError("forward_image: expected sensor images (B, N, H, W) with N the measurements")
+    if phase < 0 or phase >= self.period * self.period:
+        raise ValueError("forward_image: phase outside [0, period^2)")
+    b = sensor.size(0)
+    h = sensor.size(2)
+    w = sensor.size(3)
+    m = self.multiple
+    ph = (m - h % m) % m
+    pw = (m - w % m) % m
+    base = self.pixel_pinv_image(sensor, phase)
+    if ph > 0 or pw > 0:
+        base = torch.constant_pad_nd(base, [0, pw, 0, ph])
+    x = base
+    if self.noise_input:
+        x = torch.cat([base, base.new_full([b, 1, base.size(2), base.size(3)], noise_sigma)], 1)
+    out = base + self.image.forward(x)
+    return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
+
+def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
+    return self.forward_image(sensor, phase, noise_sigma)
+
+def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
+    if sensor.dim() != 3 or sensor.size(0) != self.measurements:
+        raise ValueError("reconstruct: expected a sensor image (N, H, W) with N the measurements")
+    if tile < 1:
+        raise ValueError("reconstruct: the tile must be positive")
+    m = self.multiple
+    t = self.period
+    h = sensor.size(1)
+    w = sensor.size(2)
+    hp = (h + m - 1) // m * m
+    wp = (w + m - 1) // m * m
+    halo = (self.receptive_radius + m - 1) // m * m
+    step = (tile + m - 1) // m * m
+    padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
+    out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)
+    for y0 in range(0, hp, step):
+        for x0 in range(0, wp, step):
+            a0 = max(0, y0 - halo)
+            a1 = min(hp, y0 + step + halo)
+            b0 = max(0, x0 - halo)
+            b1 = min(wp, x0 + step + halo)
+            crop = padded.narrow(1, a0, a1 - a0).narrow(2, b0, b1 - b0).unsqueeze(0)
+            est = self.forward_image(crop, (a0 % t) * t + b0 % t, noise_sigma)[0]
+            th = min(y0 + step, h) - y0
+            tw = min(x0 + step, w) - x0
+            if th > 0 and tw > 0:
+                out.narrow(2, y0, th).narrow(3, x0, tw).copy_(est.narrow(2, y0 - a0, th).narrow(3, x0 - b0, tw))
+    if clamp:
+        out.clamp_(0.0, 1.0)
+    return out
+
+def simulate(self, lf: Tensor) -> Tensor:
+    t = self.phi.size(3)
+    h = lf.size(2)
+    w = lf.size(3)
+    rows = torch.remainder(torch.arange(h, device=lf.device), t)
+    cols = torch.remainder(torch.arange(w, device=lf.device), t)
+    weights = self.phi.index_select(3, rows).index_select(4, cols)
+    return (weights * lf.to(self.phi.dtype).unsqueeze(0)).sum([1, 2])
+)TS";
+
+// The prefix of the U-Net's parameter names: the network's submodule "image".
+constexpr std::string_view kImagePrefix = "image.";
+
+// The pseudo-inverse plus the U-Net's correction on a base (B, U V, h, w), with a noise channel
+// (B sigmas, undefined: 0) when the net is noise-aware.
+torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
+                     const torch::Tensor& noise) {
+  if (!net.options().image.noise_input) return base + net.image->forward(base);
+  auto sigma =
+      noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
+  auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
+  return base + net.image->forward(torch::cat({base, channel}, 1));
+}
+
+class LfnetArchitecture : public NetworkArchitecture {
+ public:
+  std::string name() const override { return kLfnetArchitecture; }
+  std::string summary() const override {
+    return "lfnet's U-Net over the per-pixel pseudo-inverse of the whole sensor image";
+  }
+  bool whole_image() const override { return true; }
+  PhiInput phi_input() const override { return PhiInput::kPixelWeights; }
+
+  void validate(const NetworkOptions& o) const override {
+    o.image.validate();
+    const int64_t m = o.image.multiple();
+    if (o.patch.height % m != 0 || o.patch.width % m != 0) {
+      throw ConfigError(
+          "patch: the lfnet architecture's training crops need sides that are "
+          "multiples of " +
+          std::to_string(m) + ", got " + o.patch.to_json().dump());
+    }
+  }
+
+  void build(LightFieldNetImpl& net) const override {
+    const auto& o = net.options();
+    const auto& p = o.patch;
+    const int64_t views = p.rows * p.cols;
+    net.phi = net.register_buffer("phi", torch::zeros({o.measurements, p.rows, p.cols, 1, 1}));
+    net.pixel_pinv = net.register_buffer("pixel_pinv", torch::zeros({1, 1, o.measurements, views}));
+    const int64_t in = views + (o.image.noise_input ? 1 : 0);
+    net.image = net.register_module("image", ImageNet(o.image, in, views));
+  }
+
+  void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
+    const auto& o = net.options();
+    const auto& p = o.patch;
+    LFNET_CHECK(stack.dim() == 5 && stack.size(0) == o.measurements && stack.size(1) == p.rows &&
+                    stack.size(2) == p.cols && stack.size(3) >= 1 && stack.size(3) == stack.size(4),
+                "set_phi: the lfnet architecture expects the pixel weights of one period (",
+                o.measurements, ", ", p.rows, ", ", p.cols, ", T, T), got ", stack.sizes());
+    LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
+                   "set_phi: the pixel weights contain NaN or inf");
+    torch::NoGradGuard no_grad;
+    // Per pixel, A (N, U V) -> A^T (A A^T + lambda I)^-1, stored transposed as (N, U V).
+    const int64_t n = o.measurements, t = stack.size(3);
+    auto a = stack.to(torch::kFloat64).reshape({n, p.rows * p.cols, t, t}).permute({2, 3, 0, 1});
+    auto gram = torch::matmul(a, a.transpose(2, 3)) + o.pinv_lambda * torch::eye(n, a.options());
+    auto inverse = at::linalg_solve(gram, a);  // (T, T, N, U V)
+    net.phi.set_(stack.to(net.phi.options()).contiguous().clone());
+    net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
+  }
+
+  int64_t phases(const LightFieldNetImpl& net) const override {
+    return net.phi.size(3) * net.phi.size(4);
+  }
+  // The period axes of the pixel weights (N, U, V, T, T) and pseudo-inverses (T, T, N, U V).
+  std::vector<size_t> phase_axes(const std::string& name, size_t rank) const override {
+    if (name == "phi" && rank == 5) return {3, 4};
+    if (name == "pixel_pinv") return {0, 1};
+    return {};
+  }
+
+  NetworkOutputs forward_all(LightFieldNetImpl& net, const torch::Tensor& y,
+                             const torch::Tensor& phase, const torch::Tensor& noise,
+                             const BranchSelection&) const override {
+    const auto& o = net.options();
+    const auto& p = o.patch;
+    auto ph = net.check_phase(y, phase);
+    // A crop: its pixel (0, 0) has the crop's phase.
+    auto sensor = y.reshape({y.size(0), o.measurements, p.height, p.width});
+    auto base = net.pixel_pinv_image(sensor, ph);
+    const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
+    NetworkOutputs out;
+    out.base = base.view(shape);
+    out.output = refine(net, base, noise).view(shape);
+    return out;
+  }
+
+  torch::Tensor forward_image(LightFieldNetImpl& net, const torch::Tensor& sensor, int64_t phase,
+                              double noise_sigma) const override {
+    const auto& o = net.options();
+    LFNET_CHECK(sensor.dim() == 4, "forward_image: expected (B, N, H, W), got ", sensor.sizes());
+    const auto& p = o.patch;
+    const int64_t m = o.image.multiple(), h = sensor.size(2), w = sensor.size(3);
+    const int64_t ph = (m - h % m) % m, pw = (m - w % m) % m;
+    LFNET_CHECK(phase >= 0 && phase < net.phases(), "forward_image: phase ", phase, " outside [0, ",
+                net.phases(), ")");
+    auto base = net.pixel_pinv_image(
+        sensor, phase == 0 ? torch::Tensor() : torch::full({sensor.size(0)}, phase, torch::kInt64));
+    if (ph > 0 || pw > 0) base = torch::constant_pad_nd(base, {0, pw, 0, ph});
+    auto out = refine(net, base, torch::full({sensor.size(0)}, noise_sigma, base.options()));
+    return out.slice(2, 0, h).slice(3, 0, w).reshape({sensor.size(0), p.rows, p.cols, h, w});
+  }
+
+  ImageTiling image_tiling(const NetworkOptions& o) const override { return o.image.tiling(); }
+
+  void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
+    net.image->set_precision(dtype);
+  }
+
+  double patch_flops(const NetworkOptions& o, const BranchSelection&) const override {
+    return image_pixel_flops(o) * static_cast<double>(o.patch.pixels());
+  }
+
+  double image_flops(const NetworkOptions& o, int64_t height, int64_t width,
+                     int64_t tile) const override {
+    double pixels = 0;
+    for (const auto& t : image_tiles(o.image.tiling(), height, width, tile)) {
+      pixels += static_cast<double>((t.a1 - t.a0) * (t.b1 - t.b0));
+    }
+    return image_pixel_flops(o) * pixels;
+  }
+
+  std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {
+    const auto& o = net.options();
+    for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
+    const int64_t channels = o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0);
+    const int64_t m = o.image.multiple();
+    auto module = net.image;  // a handle: the same module, callable
+    // The U-Net has no size-dependent operations, so one trace serves every image size.
+    builder.trace(
+        "image", [&](const torch::Tensor& x) { return module->forward(x); },
+        torch::rand({1, channels, 2 * m, 2 * m}));
+    builder.attribute("multiple", m);
+    builder.attribute("receptive_radius", o.image.receptive_radius());
+    builder.attribute("noise_input", o.image.noise_input);
+    return kImageSource;
+  }
+
+  WarmStart warm_start(const LightFieldNetImpl& net, const std::string& name,
+                       const torch::Tensor& src, torch::Tensor& dst,
+                       const WarmStartSource& from) const override {
+    // A wider U-Net starts as the narrower one (embed_narrow_parameter).
+    if (src.sizes() != dst.sizes() && name.rfind(kImagePrefix, 0) == 0 &&
+        embed_narrow_parameter(name.substr(kImagePrefix.size()), src, dst)) {
+      return WarmStart::kWidened;
+    }
+    return NetworkArchitecture::warm_start(net, name, src, dst, from);
+  }
+
+  std::vector<std::string> finish_warm_start(LightFieldNetImpl& net,
+                                             const WarmStartSource& from) const override {
+    // A deeper U-Net starts as the shallower one (ImageNetImpl::start_new_levels).
+    std::vector<std::string> names;
+    if (!from.network.is_object() || !from.network.contains("image")) return names;
+    const int64_t from_levels = from.network["image"].value("levels", int64_t{0});
+    if (from_levels < 1 || from_levels >= net.options().image.levels) return names;
+    for (const auto& name : net.image->start_new_levels(from_levels)) {
+      names.push_back(std::string(kImagePrefix) + name);
+    }
+    return names;
+  }
+};
+
+}  // namespace
+
+torch::Tensor LightFieldNetImpl::pixel_pinv_image(const torch::Tensor& sensor,
+                                                  const torch::Tensor& phase) const {
+  LFNET_CHECK(pixel_pinv.defined(), "pixel_pinv_image: the ", architecture().name(),
+              " architecture has no per-pixel pseudo-inverse");
+  LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == options_.measurements,
+              "pixel_pinv_image: expected sensor crops (B, ", options_.measurements,
+              ", h, w), got ", sensor.sizes());
+  const int64_t t = pixel_pinv.size(0), h = sensor.size(2), w = sensor.size(3);
+  const auto x = sensor.to(pixel_pinv.scalar_type());
+  if (t == 1) return torch::einsum("nk,bnij->bkij", {pixel_pinv[0][0], x});
+  // The map of pixel (i, j) of a crop of phase (py, px) is the tile's entry
+  // ((py + i) mod T, (px + j) mod T).
+  auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({x.size(0)}, torch::kInt64);
+  auto out = torch::empty({x.size(0), pixel_pinv.size(3), h, w}, x.options());
+  auto iota = [&](int64_t n) { return torch::arange(n, torch::kInt64).to(x.device()); };
+  const auto values = std::get<0>(at::_unique(ph));
+  for (int64_t k = 0; k < values.size(0); ++k) {
+    const int64_t v = values[k].item<int64_t>();
+    auto rows = (iota(h) + v / t) % t, cols = (iota(w) + v % t) % t;
+    auto map = pixel_pinv.index_select(0, rows).index_select(1, cols);  // (h, w, N, U V)
+    auto index = torch::nonzero(ph == v).squeeze(1).to(x.device());
+    out.index_copy_(0, index, torch::einsum("ijnk,bnij->bkij", {map, x.index_select(0, index)}));
+  }
+  return out;
+}
+
+std::unique_ptr<NetworkArchitecture> make_lfnet_architecture() {
+  return std::make_unique<LfnetArchitecture>();
+}
+
+}  // namespace lfnet::nn
