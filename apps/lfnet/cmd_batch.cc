@@ -9,6 +9,7 @@
 #include "dist_flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/pipeline/batch.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -51,24 +52,20 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
                   "output folder: reconstructions, records/, summary.csv, summary.json")
       ->required();
   cmd->add_option("--methods", a->methods,
-                  "comma-separated methods (default net with --model, pinv without)");
-  cmd->add_option("--model", o.model,
-                  "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
+                  "comma-separated methods: " + recon::method_list() +
+                      " (default net with --model, pinv without)");
+  add_reconstruction_flags(cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile,
+                                 &o.stride, nullptr, &o.self_ensemble, &o.self_ensemble_passes});
   cmd->add_option("--dictionary", o.dictionary, "dictionary file for dict");
   add_dict_coding_options(cmd, o.dict_method, o.dict_options);
-  cmd->add_option(
-      "--phi", o.phi,
-      "Phi for evaluation without --model: NAME[:N], a spec or a calibrated-Phi folder");
   add_enum_option(cmd, "--mode", o.mode, "simulation mode of evaluations: sensor or per_patch");
   cmd->add_option("--noise", o.noise, "Gaussian noise sigma of evaluations")
       ->check(kFiniteNonNegative);
   cmd->add_option("--seed", o.seed, "noise seed of evaluations");
-  cmd->add_option("--stride", o.stride, "patch stride (default 5)")->check(kStride);
   cmd->add_option("--batch", o.batch, "patches per solver call")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", o.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");
   cmd->add_flag("--match-mean", o.match_mean, "scale real measurements to the training mean");
-  add_self_ensemble_options(cmd, o.self_ensemble, o.self_ensemble_passes);
   cmd->add_flag("--force", o.force, "write into an existing non-empty output folder");
   add_dist_flags(cmd, a->dist);
   cmd->callback([a] { run(*a); });

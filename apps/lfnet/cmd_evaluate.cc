@@ -10,6 +10,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/evaluate.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -59,13 +60,10 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
       "evaluate", "Simulate a light field's measurements, reconstruct them and report PSNR/SSIM");
   auto a = std::make_shared<EvaluateArgs>();
   auto& q = a->request;
-  cmd->add_option("--model", q.model,
-                  "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
+  add_reconstruction_flags(cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile,
+                                 &q.stride, nullptr, &q.self_ensemble, &q.self_ensemble_passes});
   cmd->add_option("--lf", q.lf, "light field folder with the truth");
   cmd->add_option("--scene", q.scene, "or a procedural scene spec");
-  cmd->add_option("--phi", q.phi,
-                  "NAME[:N], a spec (.json) or a calibrated-Phi folder: needed without --model; "
-                  "must match the model");
   cmd->add_option("--views", q.views, "angular window R0:R1,C0:C1 (1-based; default central)");
   cmd->add_option(
       "--orient", q.orient,
@@ -79,11 +77,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
                   "--noise sets its Gaussian sigma")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--stride", q.stride, "patch stride (default 5)")->check(kStride);
   add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
   cmd->add_option("--method", q.method,
-                  "net, ae, cnn, dict, pinv, adjoint or no-parallax (default net with --model, "
-                  "pinv without)");
+                  recon::method_list() + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   add_dict_coding_options(cmd, q.dict_method, q.dict_options);
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
@@ -93,10 +89,6 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--seed", q.seed, "noise seed");
   cmd->add_option("--batch", q.batch, "patches per forward pass")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
-  cmd->add_option("--device", q.device, "cpu or cuda[:K] for the network (default cpu)");
-  add_enum_option(cmd, "--precision", q.precision,
-                  "float32 (default) or bfloat16 for the CNN branch, or lfnet's U-Net");
-  add_self_ensemble_options(cmd, q.self_ensemble, q.self_ensemble_passes);
   cmd->callback([a] { run_evaluate(*a); });
 }
 

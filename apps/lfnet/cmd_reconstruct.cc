@@ -10,6 +10,7 @@
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/pipeline/stages.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -54,16 +55,14 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--out", a->out,
                   "output light-field folder (views, grid.png, EPIs, viewer index.html)")
       ->required();
-  cmd->add_option("--phi", q.phi,
-                  "Phi of a plain sensor image: NAME[:N], a JSON spec file or a calibrated-Phi "
-                  "folder (default: the model's)");
-  cmd->add_option("--method", q.method, "net, ae, cnn, dict, pinv or adjoint (default net)");
-  cmd->add_option("--model", q.model,
-                  "trained model for net, ae and cnn: a checkpoint or a file lfnet export wrote");
+  add_reconstruction_flags(
+      cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.options.stride, nullptr,
+            &q.self_ensemble, &q.self_ensemble_passes});
+  cmd->add_option(
+      "--method", q.method,
+      recon::method_list(recon::MethodNeeds::kTruth) + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   add_dict_coding_options(cmd, q.dict_method, q.dict_options);
-  cmd->add_option("--stride", q.options.stride, "patch stride (sensor images; default 5)")
-      ->check(kStride);
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--window", q.options.window,
@@ -73,20 +72,13 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--match-mean", q.match_mean,
                 "scale real measurements to the training data's mean (the paper's step)");
   cmd->add_flag("--force", a->force, "replace an existing output folder");
-  cmd->add_option("--device", q.device, "cpu or cuda[:K] (default cpu)");
   add_enum_option(cmd, "--cnn-mode", q.cnn_mode,
                   "CNN branch per patch ('patches', default) or once over the light field in "
                   "tiles ('full'; docs/performance.md)");
-  cmd->add_option("--tile", q.tile,
-                  "tile size of --cnn-mode full (default 128) and of lfnet models (default 256)")
-      ->check(CLI::PositiveNumber);
   cmd->add_option("--noise-sigma", q.noise_sigma,
                   "the sensor's noise sigma (relative to white) for noise-aware models (default: "
                   "what the acquisition's sensor.json records, else 0)")
       ->check(CLI::NonNegativeNumber);
-  add_enum_option(cmd, "--precision", q.precision,
-                  "float32 (default) or bfloat16 for the CNN branch, or lfnet's U-Net");
-  add_self_ensemble_options(cmd, q.self_ensemble, q.self_ensemble_passes);
   cmd->callback([a] { run_reconstruct(*a); });
 }
 

@@ -36,3 +36,43 @@ TEST_CASE("errors are one line with a non-zero exit", "[app]") {
   CHECK(out.find("lfnet: error: ") != std::string::npos);
   CHECK(run_command(lfnet_binary() + " --threads -3 info --lf x", out) != 0);
 }
+
+TEST_CASE("every reconstructing command takes the shared flags with one meaning", "[app]") {
+  const std::vector<std::string> shared = {
+      "--model", "--phi",    "--device",        "--precision",
+      "--tile",  "--stride", "--self-ensemble", "--ensemble-passes"};
+  for (const std::string command : {"evaluate", "reconstruct", "batch", "bench"}) {
+    INFO(command);
+    std::string out;
+    // --threads is lfnet's own option; it may follow the command's name too.
+    REQUIRE(run_command(lfnet_binary() + " " + command + " --threads 1 --help", out) == 0);
+    for (const auto& flag : shared) {
+      INFO(flag);
+      const auto at = out.find("  " + flag + " ");
+      REQUIRE(at != std::string::npos);
+      const auto line = out.substr(at, out.find('\n', at) - at);
+      // The help texts come from one binding: the device's is word for word the same.
+      if (flag == "--device")
+        CHECK(line.find("cpu or cuda[:K] for the network") != std::string::npos);
+      if (flag == "--precision") CHECK(line.find("bfloat16") != std::string::npos);
+    }
+    // Every registered method is offered, pinv-nlm included.
+    CHECK(out.find("pinv-nlm") != std::string::npos);
+  }
+  // bench's --stride is one stride of its sweep.
+  std::string out;
+  CHECK(run_command(lfnet_binary() + " bench --stride 0", out) != 0);
+  CHECK(out.find("--stride") != std::string::npos);
+  // The values are checked the same way in every command.
+  const std::vector<std::string> commands = {
+      "evaluate", "reconstruct --sensor /nonexistent --out /nonexistent-out",
+      "batch --input /nonexistent --out /nonexistent-out", "bench"};
+  for (const auto& command : commands) {
+    INFO(command);
+    CHECK(run_command(lfnet_binary() + " " + command + " --precision half", out) != 0);
+    CHECK(out.find("--precision: 'half' is unknown (known: float32, bfloat16)") !=
+          std::string::npos);
+    CHECK(run_command(lfnet_binary() + " " + command + " --tile 0", out) != 0);
+    CHECK(out.find("--tile") != std::string::npos);
+  }
+}

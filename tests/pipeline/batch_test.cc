@@ -156,3 +156,47 @@ TEST_CASE("run_batch --self-ensemble averages the mirror passes of an lfnet chec
   CHECK_THROWS_WITH(pipeline::run_batch(o), Catch::Contains("pass --model"));
   CHECK_FALSE(fs::exists(tmp.path() / "refused"));
 }
+
+TEST_CASE(
+    "run_batch takes the shared flags: --tile, --precision, and --phi checked against "
+    "the model",
+    "[pipeline][batch]") {
+  test::TempDir tmp;
+  write_inputs(tmp / "in");
+  save_small_lfnet(tmp / "m.ckpt");
+
+  pipeline::BatchOptions o;
+  o.in = tmp / "in";
+  o.model = tmp / "m.ckpt";
+  o.out = tmp / "whole";
+  const auto whole = pipeline::run_batch(o);
+  REQUIRE(whole.failures == 0);
+  // Small tiles give the same light field to float rounding (tiles carry their halo).
+  o.tile = 8;
+  o.out = tmp / "tiled";
+  const auto tiled = pipeline::run_batch(o);
+  REQUIRE(tiled.failures == 0);
+  CHECK(tiled.records[0]["tile"] == 8);  // the acquisition's reconstruction record
+  CHECK(whole.records[0]["tile"] == 0);
+  CHECK(tiled.records[1]["psnr_db"].get<double>() ==
+        Approx(whole.records[1]["psnr_db"].get<double>()).margin(1e-4));
+  // bfloat16 runs the U-Net in lower precision: close, and recorded.
+  o.tile = 0;
+  o.precision = nn::Precision::kBFloat16;
+  o.out = tmp / "bf16";
+  const auto bf16 = pipeline::run_batch(o);
+  REQUIRE(bf16.failures == 0);
+  CHECK(bf16.records[0]["precision"] == "bfloat16");
+  CHECK(bf16.records[1]["psnr_db"].get<double>() ==
+        Approx(whole.records[1]["psnr_db"].get<double>()).margin(0.5));
+  // A --phi that contradicts the model is an error record for every item, never ignored.
+  o.precision = nn::Precision::kFloat32;
+  o.phi = "mask:2";
+  o.out = tmp / "contradiction";
+  const auto refused = pipeline::run_batch(o);
+  CHECK(refused.failures == 2);
+  for (const auto& r : refused.records) {
+    CHECK(r["status"] == "error");
+    CHECK(r["error"].get<std::string>().find("does not match the model") != std::string::npos);
+  }
+}

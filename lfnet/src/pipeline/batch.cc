@@ -145,6 +145,10 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.match_mean = a.match_mean;
         q.self_ensemble = a.self_ensemble;
         q.self_ensemble_passes = a.self_ensemble_passes;
+        q.device = a.device;
+        q.precision = a.precision;
+        q.tile = a.tile;
+        if (!a.model.empty()) check_phi_argument(cache.model(a.model), a.phi);
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
@@ -173,6 +177,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     if (!a.model.empty()) {
       const auto& model = cache.model(a.model);
       spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
+      check_phi_argument(model, a.phi);
+      place_network(model, a.device, a.precision);
       context.net = model.net;
       context.script = model.script;
       patch = model.network.patch_grid();
@@ -189,6 +195,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.dict_options = a.dict_options;
     context.self_ensemble = a.self_ensemble;
     context.self_ensemble_passes = a.self_ensemble_passes;
+    context.tile = a.tile;
     LightFieldSources sources;
     sources.light_fields = {item.path};
     truths = load_sources(sources, phi->rows(), phi->cols());

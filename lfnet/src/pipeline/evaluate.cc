@@ -56,6 +56,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     resources.script = context.script.get();
     resources.self_ensemble = context.self_ensemble;
     resources.self_ensemble_passes = context.self_ensemble_passes;
+    if (context.tile > 0) resources.tile = context.tile;
     ModelCache local;
     if (needs == recon::MethodNeeds::kDictionary && !context.dictionary.empty()) {
       resources.dictionary =
@@ -104,6 +105,28 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   return result.record;
 }
 
+void place_network(const ModelFile& model, const std::string& device, nn::Precision precision) {
+  if (model.net) {
+    auto net = model.net;  // a handle: the model's own net
+    net->to(parse_device(device));
+    nn::set_cnn_precision(net, precision);
+    return;
+  }
+  LFNET_CHECK_AS(ConfigError,
+                 !model.scripted || (device == "cpu" && precision == nn::Precision::kFloat32),
+                 "--device and --precision apply to checkpoints; ", model.path,
+                 " is an exported TorchScript file");
+}
+
+void check_phi_argument(const ModelFile& model, const std::string& phi) {
+  if (phi.empty()) return;
+  const auto given = phi_from_argument(phi);
+  const auto spec = optics::PhiSpec::from_json(model.phi, model.path + ":$.phi");
+  LFNET_CHECK_AS(ConfigError, given.name == spec.name && given.n == spec.n, "--phi ", phi,
+                 " does not match the model ", model.path, ", which was trained for ",
+                 spec.label());
+}
+
 EvaluateResult evaluate_request(const EvaluateRequest& a) {
   LFNET_CHECK_AS(ConfigError, a.lf.empty() != a.scene.empty(),
                  "give exactly one of --lf DIR and --scene SCENE.json");
@@ -123,24 +146,12 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   if (!a.model.empty()) {
     const auto model = load_model(a.model, recon::needs_network(method));
     spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
-    if (!a.phi.empty()) {
-      auto given = phi_from_argument(a.phi);
-      LFNET_CHECK_AS(ConfigError, given.name == spec.name && given.n == spec.n, "--phi ", a.phi,
-                     " does not match the model ", a.model, ", which was trained for ",
-                     spec.label());
-    }
+    check_phi_argument(model, a.phi);
     if (recon::needs_network(method)) {
       context.net = model.net;
       context.script = model.script;
       network_patch = model.network.patch_grid();
-      if (context.net) {
-        context.net->to(parse_device(a.device));
-        nn::set_cnn_precision(context.net, a.precision);
-      } else {
-        LFNET_CHECK_AS(ConfigError, a.device == "cpu" && a.precision == nn::Precision::kFloat32,
-                       "--device and --precision apply to checkpoints; ", a.model,
-                       " is an exported TorchScript file");
-      }
+      place_network(model, a.device, a.precision);
     }
   } else {
     LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
@@ -167,6 +178,8 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
   context.self_ensemble = a.self_ensemble;
   context.self_ensemble_passes = a.self_ensemble_passes;
+  LFNET_CHECK_AS(ConfigError, a.tile >= 0, "--tile must be positive, got ", a.tile);
+  context.tile = a.tile;
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;

@@ -224,6 +224,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"window", o.window},
               {"device", a.device},
               {"cnn_mode", recon::to_string(a.cnn_mode)},
+              {"tile", a.tile},  // 0: the method's default
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
   return r;

@@ -21,12 +21,15 @@ struct BatchOptions {
   std::string in;   // folder searched recursively for items
   std::string out;  // output folder: reconstructions, records/, summary.*
   std::vector<std::string>
-      methods;               // methods run on every item (empty: net with a model, else pinv)
-  std::string model;         // checkpoint or exported model for net, ae, cnn
-  std::string dictionary;    // dictionary file for dict
-  std::string dict_method;   // omp or admm for dict ("" = the dictionary's)
-  std::string dict_options;  // SparseCodingOptions JSON or file for dict
-  std::string phi;           // Phi of evaluations without a model
+      methods;                 // methods run on every item (empty: net with a model, else pinv)
+  std::string model;           // checkpoint or exported model for net, ae, cnn
+  std::string dictionary;      // dictionary file for dict
+  std::string dict_method;     // omp or admm for dict ("" = the dictionary's)
+  std::string dict_options;    // SparseCodingOptions JSON or file for dict
+  std::string phi;             // Phi of evaluations without a model; must match the model
+  std::string device = "cpu";  // cpu or cuda[:K] for the network
+  nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
+  int64_t tile = 0;  // whole-image methods' spatial tile (0: their default, 256)
   optics::SimulationMode mode = optics::SimulationMode::kSensor;  // of evaluations
   int64_t stride = 5;                                             // patch stride
   int64_t batch = 1024;                                           // patches per solver call

@@ -30,7 +30,17 @@ struct MethodContext {
   std::string dict_options;    // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
   bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
+  int64_t tile = 0;                  // whole-image methods' spatial tile (0: their default)
 };
+
+// Puts a model's network where the command asked (the flags every reconstructing command
+// shares): a checkpoint's net moved to `device` with `precision`; an exported file, which runs
+// on the CPU in float32, refuses other values. `model` is named in the error.
+void place_network(const ModelFile& model, const std::string& device, nn::Precision precision);
+
+// Throws a ConfigError unless the Phi `phi` (a --phi argument) is the one the model was trained
+// for. Empty `phi`: nothing to check.
+void check_phi_argument(const ModelFile& model, const std::string& phi);
 
 // The evaluation options of the command line: simulation mode, Gaussian noise sigma (0: none),
 // noise seed, patch stride, solver batch, window stitching, and the model's patch size when
@@ -65,6 +75,7 @@ struct EvaluateRequest {
   int64_t stride = 5;          // patch stride
   int64_t batch = 1024;        // patches per forward pass
   bool window = false;         // weight patch estimates by a smooth window when stitching
+  int64_t tile = 0;            // whole-image methods' spatial tile (0: their default, 256)
   std::string device = "cpu";  // cpu or cuda[:K] for a checkpoint's network
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   bool keep_estimate = false;                         // return the reconstruction too
