@@ -140,7 +140,7 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
 
   // Teachers that cannot teach, and bad values, are one error each before any training.
   const std::pair<std::string, std::string> bad[] = {
-      {"distill.teacher=" + models + "asp-n2.ckpt", "must be of the lfnet architecture"},
+      {"distill.teacher=" + models + "asp-n2.ckpt", "must be of a whole-image architecture"},
       {"distill.teacher=" + models + "lfnet-asp-n15.ckpt", "Phi"},
       {"distill.teacher=" + (tmp / "missing.ckpt"), "missing.ckpt: no such file"},
       {"distill.weight=1.5", "$.distill.weight: must lie in [0, 1]"},
