@@ -35,7 +35,8 @@ constexpr int64_t kHeight = 45, kWidth = 54;  // multiples of 9: random:N's bloc
 // Network checkpoints (not dictionaries) under models/, sorted.
 std::vector<fs::path> shipped_checkpoints() {
   std::vector<fs::path> files;
-  for (const auto& entry : fs::recursive_directory_iterator(fs::path(LFNET_SOURCE_DIR) / "models")) {
+  for (const auto& entry :
+       fs::recursive_directory_iterator(fs::path(LFNET_SOURCE_DIR) / "models")) {
     if (!entry.is_regular_file() || entry.path().extension() != ".ckpt") continue;
     std::ifstream in(entry.path(), std::ios::binary);
     char magic[8] = {0};
