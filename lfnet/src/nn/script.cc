@@ -151,7 +151,7 @@ nlohmann::json ScriptMetadata::to_json(const NetworkOptions& network, int64_t ph
           {"source", source}};
 }
 
-ScriptBuilder::ScriptBuilder(jit::Module root) : root_(std::move(root)) {}
+ScriptBuilder::ScriptBuilder(const jit::Module& root) : root_(root) {}
 
 jit::Module ScriptBuilder::module(const std::string& path) {
   if (path.empty()) return root_;

@@ -67,7 +67,7 @@ struct ScriptMetadata {
 // parameters under their registered names.
 class ScriptBuilder {
  public:
-  explicit ScriptBuilder(torch::jit::Module root);
+  explicit ScriptBuilder(const torch::jit::Module& root);
   // The submodule at a dotted path ("" for the root), made and attached on first use.
   torch::jit::Module module(const std::string& path);
   // A copy of `value` as the buffer of dotted name `name`.
