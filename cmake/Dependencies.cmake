@@ -3,8 +3,8 @@
 # The numerical core (core, optics, nn, recon) needs LibTorch and header-only nlohmann_json
 # alone, so it builds on any machine that has LibTorch (a CUDA one included). OpenImageIO,
 # CLI11 and spdlog are needed only by the I/O library and the program (LFNET_BUILD_APPS).
-# OpenCV is linked by no target (figures are drawn by scripts/figures.py); a target that comes
-# to use it finds it here and links it alone.
+# OpenCV (its core and photo modules) is linked by the cv area alone (lfnet/cv/opencv.h:
+# OpenCV's non-local means for pinv-nlm), which the program links; the core never does.
 
 find_package(Torch REQUIRED)
 find_package(Threads REQUIRED)
@@ -32,6 +32,7 @@ if(LFNET_BUILD_APPS)
   find_package(OpenImageIO REQUIRED)
   find_package(spdlog REQUIRED)
   find_package(CLI11 REQUIRED)
+  find_package(OpenCV REQUIRED COMPONENTS core photo)
 endif()
 
 if(LFNET_BUILD_TESTS)

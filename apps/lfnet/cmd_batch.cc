@@ -54,10 +54,10 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--methods", a->methods,
                   "comma-separated methods: " + recon::method_list() +
                       " (default net with --model, pinv without)");
-  add_reconstruction_flags(cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile,
-                                 &o.stride, nullptr, &o.self_ensemble, &o.self_ensemble_passes});
+  add_reconstruction_flags(
+      cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile, &o.stride, nullptr,
+            &o.self_ensemble, &o.self_ensemble_passes, &o.method_options});
   cmd->add_option("--dictionary", o.dictionary, "dictionary file for dict");
-  add_dict_coding_options(cmd, o.dict_method, o.dict_options);
   add_enum_option(cmd, "--mode", o.mode, "simulation mode of evaluations: sensor or per_patch");
   cmd->add_option("--noise", o.noise, "Gaussian noise sigma of evaluations")
       ->check(kFiniteNonNegative);

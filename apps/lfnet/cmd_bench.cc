@@ -80,10 +80,18 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--methods", a->methods,
                   "methods to time: " + recon::method_list(recon::MethodNeeds::kTruth))
       ->delimiter(',');
-  ReconstructionFlags shared{
-      nullptr,  &a->models, &a->phi,     &a->device,        &a->precision,
-      &a->tile, nullptr,    &a->strides, &a->self_ensemble, &a->self_ensemble_passes,
-      "time"};
+  ReconstructionFlags shared{nullptr,
+                             &a->models,
+                             &a->phi,
+                             &a->device,
+                             &a->precision,
+                             &a->tile,
+                             nullptr,
+                             &a->strides,
+                             &a->self_ensemble,
+                             &a->self_ensemble_passes,
+                             &a->method_options,
+                             "time"};
   add_reconstruction_flags(cmd, shared);
   cmd->add_option("--height", a->height, "light-field height (default 593)")
       ->check(CLI::PositiveNumber);

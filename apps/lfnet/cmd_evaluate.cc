@@ -60,8 +60,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
       "evaluate", "Simulate a light field's measurements, reconstruct them and report PSNR/SSIM");
   auto a = std::make_shared<EvaluateArgs>();
   auto& q = a->request;
-  add_reconstruction_flags(cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile,
-                                 &q.stride, nullptr, &q.self_ensemble, &q.self_ensemble_passes});
+  add_reconstruction_flags(
+      cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.stride, nullptr,
+            &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
   cmd->add_option("--lf", q.lf, "light field folder with the truth");
   cmd->add_option("--scene", q.scene, "or a procedural scene spec");
   cmd->add_option("--views", q.views, "angular window R0:R1,C0:C1 (1-based; default central)");
@@ -81,7 +82,6 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--method", q.method,
                   recon::method_list() + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
-  add_dict_coding_options(cmd, q.dict_method, q.dict_options);
   cmd->add_option("--json", a->json, "write the evaluation record to this file");
   cmd->add_option("--out", a->out,
                   "write the reconstruction as a light-field folder with a viewer (index.html)");

@@ -57,12 +57,11 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       ->required();
   add_reconstruction_flags(
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.options.stride, nullptr,
-            &q.self_ensemble, &q.self_ensemble_passes});
+            &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
   cmd->add_option(
       "--method", q.method,
       recon::method_list(recon::MethodNeeds::kTruth) + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
-  add_dict_coding_options(cmd, q.dict_method, q.dict_options);
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
       ->check(CLI::PositiveNumber);
   cmd->add_flag("--window", q.options.window,

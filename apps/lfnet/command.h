@@ -13,6 +13,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/version.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -89,16 +90,6 @@ CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, std::vector
       help);
 }
 
-// --dict-method and --dict-options: how the dict method codes (pipeline::dict_coding).
-inline void add_dict_coding_options(CLI::App* cmd, std::string& method, std::string& options) {
-  cmd->add_option("--dict-method", method,
-                  "sparse coding for dict: omp or admm (default: the dictionary's)")
-      ->check(CLI::IsMember({"omp", "admm"}));
-  cmd->add_option("--dict-options", options,
-                  "sparse coding for dict: a JSON object or file, e.g. '{\"omp\": "
-                  "{\"max_atoms\": 20}}' (docs/dictionary.md)");
-}
-
 // --self-ensemble and --ensemble-passes: lfnet models averaged over the Phi's mirror images
 // (recon::reconstruct_sensor_mirrored), all of them or the first `passes`. `what` opens the
 // flag's help ("reconstruct" or "time").
@@ -133,13 +124,14 @@ struct ReconstructionFlags {
   std::vector<int64_t>* strides = nullptr;  // instead of `stride`
   bool* self_ensemble = nullptr;
   int64_t* ensemble_passes = nullptr;
+  std::string* method_options = nullptr;
   std::string ensemble_verb = "reconstruct";  // opens --self-ensemble's help
 };
 
 inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f) {
   if ((f.model == nullptr) == (f.models == nullptr) ||
       (f.stride == nullptr) == (f.strides == nullptr) || !f.phi || !f.device || !f.precision ||
-      !f.tile || !f.self_ensemble || !f.ensemble_passes) {
+      !f.tile || !f.self_ensemble || !f.ensemble_passes || !f.method_options) {
     throw std::logic_error("add_reconstruction_flags: every shared flag needs one target");
   }
   const std::string model =
@@ -180,6 +172,10 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
         ->check(kStride);
   }
   add_self_ensemble_options(cmd, *f.self_ensemble, *f.ensemble_passes, f.ensemble_verb);
+  cmd->add_option("--method-options", *f.method_options,
+                  "options of the methods with options (" + recon::methods_with_options() +
+                      "), keyed by method: a JSON object or file, e.g. '{\"dict\": {\"method\": "
+                      "\"admm\"}}' (docs/methods.md)");
 }
 
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.

@@ -39,8 +39,8 @@ TEST_CASE("errors are one line with a non-zero exit", "[app]") {
 
 TEST_CASE("every reconstructing command takes the shared flags with one meaning", "[app]") {
   const std::vector<std::string> shared = {
-      "--model", "--phi",    "--device",        "--precision",
-      "--tile",  "--stride", "--self-ensemble", "--ensemble-passes"};
+      "--model",  "--phi",           "--device",          "--precision",     "--tile",
+      "--stride", "--self-ensemble", "--ensemble-passes", "--method-options"};
   for (const std::string command : {"evaluate", "reconstruct", "batch", "bench"}) {
     INFO(command);
     std::string out;
@@ -55,6 +55,8 @@ TEST_CASE("every reconstructing command takes the shared flags with one meaning"
       if (flag == "--device")
         CHECK(line.find("cpu or cuda[:K] for the network") != std::string::npos);
       if (flag == "--precision") CHECK(line.find("bfloat16") != std::string::npos);
+      // The methods with options come from the registry.
+      if (flag == "--method-options") CHECK(line.find("(dict, pinv-nlm)") != std::string::npos);
     }
     // Every registered method is offered, pinv-nlm included.
     CHECK(out.find("pinv-nlm") != std::string::npos);
@@ -74,5 +76,11 @@ TEST_CASE("every reconstructing command takes the shared flags with one meaning"
           std::string::npos);
     CHECK(run_command(lfnet_binary() + " " + command + " --tile 0", out) != 0);
     CHECK(out.find("--tile") != std::string::npos);
+    CHECK(run_command(lfnet_binary() + " " + command + " --method-options '{\"net\": {\"x\": 1}}'",
+                      out) != 0);
+    // Either "'net' takes no options" or "options for method 'net', which this command does not
+    // run": evaluate and batch run pinv without a model.
+    CHECK(out.find("--method-options") != std::string::npos);
+    CHECK(out.find("'net'") != std::string::npos);
   }
 }

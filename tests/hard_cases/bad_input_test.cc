@@ -161,13 +161,15 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
   expect_error(sim + "--views 1:99999999999999999999,1:5", "99999999999999999999", tmp.path());
   CHECK_FALSE(fs::exists(tmp / "acq"));
   // Options that belong to another method are refused, not ignored.
-  expect_error(eval + "--dict-options '{\"omp\": {\"max_atoms\": 5}}'", "--method dict",
+  expect_error(eval + "--method-options '{\"dict\": {\"omp\": {\"max_atoms\": 5}}}'",
+               "which this command does not run", tmp.path());
+  expect_error(eval + "--method-options '{\"pinv\": {\"lambda\": 5}}'", "takes no options",
                tmp.path());
-  expect_error(eval + "--dict-method admm", "--method dict", tmp.path());
   const std::string dict = "evaluate --phi asp:2 --lf " + lf + " --method dict --dictionary " +
                            std::string(LFNET_SOURCE_DIR) + "/models/dictionary.ckpt ";
-  expect_error(dict + "--dict-options '{\"admm\": {\"lambda\": -1}}'", "$.admm", tmp.path());
-  expect_error(dict + "--dict-options " + (tmp / "none.json"), "--dict-options", tmp.path());
+  expect_error(dict + "--method-options '{\"dict\": {\"admm\": {\"lambda\": -1}}}'",
+               "--method-options.dict.admm", tmp.path());
+  expect_error(dict + "--method-options " + (tmp / "none.json"), "--method-options", tmp.path());
   // A calibrated Phi that is not one, and phi export's own checks.
   expect_error("simulate --lf " + lf + " --phi " + tmp.path().string() + " --out " + (tmp / "acq"),
                "not a calibrated Phi", tmp.path());

@@ -67,6 +67,12 @@ TEST_CASE("pinv-nlm beats pinv on a noisy sensor image and equals it without noi
   }
   recon::MethodResources r;
   r.phi = phi.get();
+  // OpenCV's denoiser, pinv-nlm's default, is not in the numerical core (lfnet/cv registers it):
+  // the core alone says so, and runs lfnet's own when told.
+  CHECK_THROWS_WITH(recon::make_image_solver("pinv-nlm", r),
+                    Catch::Contains("unknown denoiser 'opencv-nlm'") &&
+                        Catch::Contains("not by the numerical core"));
+  r.options = {{"denoiser", "nlm"}};
   auto nlm = recon::make_image_solver("pinv-nlm", r);
   REQUIRE(nlm);
   recon::ReconstructOptions ro;
@@ -83,4 +89,16 @@ TEST_CASE("pinv-nlm beats pinv on a noisy sensor image and equals it without noi
         0.7 * rmse(recon::reconstruct_sensor(*phi, noisy, pinv, ro), truth));
   CHECK_THROWS_AS(recon::make_solver("pinv-nlm", r)(torch::zeros({1, 162}), torch::Tensor()),
                   ConfigError);
+}
+
+TEST_CASE("lfnet's NLM options are read strictly, with their paths", "[recon][denoise]") {
+  const auto& nlm = recon::find_denoiser("nlm");
+  const auto complete = nlm.read_options({{"search", 3}}, "opts");
+  CHECK(complete["search"] == 3);
+  CHECK(complete["patch"] == 1);
+  CHECK(complete["h"] == 0.35);
+  CHECK_THROWS_WITH(nlm.read_options({{"radius", 3}}, "opts"), Catch::Contains("opts.radius"));
+  CHECK_THROWS_WITH(nlm.read_options({{"patch", -1}}, "opts"),
+                    Catch::Contains("opts.patch: must be in 0..20"));
+  CHECK(recon::registered_denoisers().front() == "nlm");
 }

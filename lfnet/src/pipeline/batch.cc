@@ -136,8 +136,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.method = method;
         q.model = a.model;
         q.dictionary = a.dictionary;
-        q.dict_method = a.dict_method;
-        q.dict_options = a.dict_options;
+        // The options of this method alone (they were checked for all methods at the start).
+        const auto all = method_options_argument(a.method_options, methods);
+        if (all.contains(method)) q.method_options = nlohmann::json{{method, all[method]}}.dump();
         q.options.stride = a.stride;
         q.options.batch = a.batch;
         q.options.window = a.window;
@@ -191,8 +192,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.phi = phi.get();
     context.dictionary = a.dictionary;
     context.cache = &cache;
-    context.dict_method = a.dict_method;
-    context.dict_options = a.dict_options;
+    context.method_options = method_options_argument(a.method_options, methods);
     context.self_ensemble = a.self_ensemble;
     context.self_ensemble_passes = a.self_ensemble_passes;
     context.tile = a.tile;
@@ -247,13 +247,6 @@ void write_batch_summary(const std::string& out_dir, const std::vector<nlohmann:
 BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator> comm) {
   if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
   const int64_t rank = comm->rank(), world = comm->world_size();
-  OutputFolderPolicy policy;
-  policy.force = a.force;
-  policy.inputs = {a.in, a.model, a.dictionary};
-  check_output_folder(a.out, policy);
-  const auto items = discover_items(a.in);
-  LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
-                 ") and no light-field folder under ", a.in);
   std::vector<std::string> methods = a.methods;
   if (methods.empty()) methods = {a.model.empty() ? "pinv" : "net"};
   for (const auto& m : methods) {
@@ -263,12 +256,15 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
       throw ConfigError(std::string("--methods: ") + e.what());
     }
   }
+  method_options_argument(a.method_options, methods);  // checked before any work
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = {a.in, a.model, a.dictionary};
+  check_output_folder(a.out, policy);
+  const auto items = discover_items(a.in);
+  LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
+                 ") and no light-field folder under ", a.in);
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
-  LFNET_CHECK_AS(ConfigError,
-                 std::find(methods.begin(), methods.end(), "dict") != methods.end() ||
-                     (a.dict_method.empty() && a.dict_options.empty()),
-                 "--dict-method and --dict-options apply to the dict method, which --methods does "
-                 "not name");
   ModelCache cache;  // every item shares one read of the model and the dictionary
   recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
   if (a.self_ensemble) {

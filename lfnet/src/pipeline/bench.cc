@@ -22,6 +22,7 @@
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -30,7 +31,6 @@
 #include "lfnet/scene/random_scene.h"
 #include "lfnet/scene/render.h"
 #include "lfnet/scene/scene_spec.h"
-#include "lfnet/train/checkpoint.h"
 
 namespace lfnet::pipeline {
 
@@ -136,7 +136,9 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
                           double gemm) {
   const torch::Device device = parse_device(a.device);
   Stopwatch setup_clock;
-  nn::LightFieldNet net{nullptr};
+  nn::LightFieldNet net{nullptr};               // a checkpoint's or an untrained network,
+  std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported one
+  nn::NetworkOptions network;                   // its options
   optics::PhiSpec spec = phi_from_argument(a.phi);
   nlohmann::json model_info = "untrained default network";
   if (recon::needs_network(method)) {
@@ -144,9 +146,15 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     std::string architecture = nn::kPaperArchitecture;
     if (!a.architectures.empty()) architecture = a.architectures.front();
     if (!model.empty()) {
-      const auto ckpt = train::load_checkpoint(model);
-      spec = optics::PhiSpec::from_json(ckpt.phi, model + ":phi");
-      net = train::build_net(ckpt, model);
+      const auto file = load_model(model, true);  // a checkpoint or an exported file
+      spec = optics::PhiSpec::from_json(file.phi, model + ":$.phi");
+      place_network(file, a.device, a.precision);
+      LFNET_CHECK_AS(ConfigError, file.net || a.cnn_mode != recon::CnnMode::kFull,
+                     "--cnn-mode full applies to checkpoints; ", model,
+                     " is an exported TorchScript file");
+      net = file.net;
+      script = file.script;
+      network = file.network;
       model_info = model;
     } else {
       nn::NetworkOptions no;
@@ -158,12 +166,14 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
       }
       torch::manual_seed(0);
       net = nn::LightFieldNet(no);
+      network = no;
     }
   }
+  const bool has_net = net || script;
   const auto phi = optics::make_phi(spec);
   if (net && a.models.empty()) net->set_phi(phi_tensor(*phi, net->options()));
   // The patch grid of patch methods (lfnet reconstructs whole images: its crop is no patch).
-  const auto net_grid = net ? net->options().patch_grid() : std::nullopt;
+  const auto net_grid = has_net ? network.patch_grid() : std::nullopt;
   const int64_t patch = net_grid ? net_grid->height : 9;
   recon::ReconstructOptions o;
   o.patch_h = o.patch_w = patch;
@@ -177,38 +187,51 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const int64_t cnn_tile = a.tile > 0 ? a.tile : recon::kDefaultCnnTile;
   const int64_t image_tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
   nlohmann::json extra = nlohmann::json::object();
-  recon::MethodResources resources;
-  resources.phi = phi.get();
-  resources.patch_h = resources.patch_w = patch;
+  MethodContext context;
+  context.phi = phi.get();
+  // This method's options (the whole run's were checked by bench_report).
+  const auto all_options = a.method_options.empty()
+                               ? nlohmann::json::object()
+                               : read_json_argument(a.method_options, "--method-options");
+  if (all_options.is_object() && all_options.contains(method)) {
+    context.method_options = {{method, all_options[method]}};
+  }
   dict::Dictionary dictionary;
-  if (net) {
-    net->to(device);
-    nn::set_cnn_precision(net, a.precision);
-    resources.net = net;
+  if (has_net) {
+    if (net) {
+      net->to(device);
+      nn::set_cnn_precision(net, a.precision);
+    }
+    context.net = net;
+    context.script = script;
     extra["model"] = model_info;
-    extra["architecture"] = net->options().architecture;
+    extra["architecture"] = network.architecture;
     extra["cnn_mode"] = full ? "full" : "patches";
     extra["precision"] = nn::to_string(a.precision);
     if (full) extra["tile"] = cnn_tile;
   } else if (recon::find_method(method).needs() == recon::MethodNeeds::kDictionary) {
     dictionary = bench_dictionary(a, patch);
-    resources.dictionary = &dictionary;
+    context.dictionary_data = &dictionary;
     extra["dictionary_atoms"] = dictionary.size();
     extra["dictionary"] = a.dictionary.empty() ? "bench K-SVD (3 iterations)" : a.dictionary;
-    extra["omp_atoms"] = resources.coding.omp.max_atoms;
   }
-  resources.tile = image_tile;
+  context.tile = image_tile;
   int64_t passes = 1;  // of the lfnet architecture's whole-image pass
-  if (a.self_ensemble && net && net->architecture().whole_image()) {
-    resources.self_ensemble = true;
-    resources.self_ensemble_passes = a.self_ensemble_passes;
-    passes = static_cast<int64_t>(recon::ensemble_mirrors(net->phi, a.self_ensemble_passes).size());
+  if (a.self_ensemble && has_net && network.arch().whole_image()) {
+    context.self_ensemble = true;
+    context.self_ensemble_passes = a.self_ensemble_passes;
+    passes = static_cast<int64_t>(
+        recon::ensemble_mirrors(net ? net->phi : script->pixel_weights(), a.self_ensemble_passes)
+            .size());
     extra["self_ensemble_passes"] = passes;
   }
-  const recon::PatchSolver solver = recon::make_solver(method, resources);
-  const recon::ImageSolver image = recon::make_image_solver(method, resources);
+  const auto prepared = prepare_method(method, context, patch, patch);
+  if (!prepared.options.empty()) extra["method_options"] = prepared.options;
+  if (prepared.options.contains("omp")) extra["omp_atoms"] = prepared.options["omp"]["max_atoms"];
+  const recon::PatchSolver solver = prepared.solver;
+  const recon::ImageSolver image = prepared.image;
   if (image) extra["tile"] = image_tile;
-  const double flops_per_patch = recon::find_method(method).patch_flops(resources);
+  const double flops_per_patch = recon::find_method(method).patch_flops(prepared.resources);
   const double setup_seconds = setup_clock.seconds();
   const double setup_peak = status_mb("VmHWM");
   const bool isolated_peak = reset_peak_rss();
@@ -227,13 +250,13 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
   const PatchGrid grid(truth.height(), truth.width(), patch, patch, stride);
   // Patch stitching computes flops_per_patch for every patch; the fully convolutional pass
   // computes the CNN once per tile position instead.
-  double flops =
-      image ? static_cast<double>(passes) *
-                  nn::image_full_flops(net->options(), truth.height(), truth.width(), image_tile)
-            : flops_per_patch * static_cast<double>(grid.size());
+  double flops = image
+                     ? static_cast<double>(passes) *
+                           nn::image_full_flops(network, truth.height(), truth.width(), image_tile)
+                     : flops_per_patch * static_cast<double>(grid.size());
   if (full && !image) {
-    flops += nn::cnn_full_flops(net->options(), truth.height(), truth.width(), cnn_tile) -
-             nn::cnn_patch_flops(net->options()) * static_cast<double>(grid.size());
+    flops += nn::cnn_full_flops(network, truth.height(), truth.width(), cnn_tile) -
+             nn::cnn_patch_flops(network) * static_cast<double>(grid.size());
   }
   nlohmann::json r = {{"method", method},
                       {"stride", stride},
@@ -329,6 +352,7 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
                             const std::function<void(const std::string&)>& print) {
   auto say = [&](const char* format, auto... args) { print(format_text(format, args...)); };
   const torch::Device device = parse_device(a.device);
+  method_options_argument(a.method_options, a.methods);  // checked before any work
   nlohmann::json report;
   report["machine"] = {{"cpu", machine_name()},
                        {"hardware_threads", static_cast<int64_t>(sysconf(_SC_NPROCESSORS_ONLN))},
@@ -473,6 +497,13 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
     args.insert(args.end(), {"--save-dictionary", shell_quote(a.save_dictionary)});
   }
   if (!a.scene.empty()) args.insert(args.end(), {"--scene", shell_quote(a.scene)});
+  if (!a.method_options.empty()) {
+    const auto all = read_json_argument(a.method_options, "--method-options");
+    if (all.is_object() && all.contains(method)) {
+      args.insert(args.end(),
+                  {"--method-options", shell_quote(nlohmann::json{{method, all[method]}}.dump())});
+    }
+  }
   FILE* pipe = popen(join(args, " ").c_str(), "r");
   LFNET_CHECK_AS(IoError, pipe, "bench: cannot start a child process");
   std::string output;

@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <filesystem>
 
 #include "lfnet/core/error.h"
@@ -9,6 +10,7 @@
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/cv/opencv.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -35,39 +37,93 @@ eval::EvalOptions make_eval_options(optics::SimulationMode mode, double noise, u
   return o;
 }
 
+PreparedMethod prepare_method(const std::string& method, const MethodContext& c, int64_t patch_h,
+                              int64_t patch_w) {
+  cv::register_opencv();  // OpenCV's denoiser for pinv-nlm
+  LFNET_CHECK(c.phi != nullptr, "method '", method, "' without a Phi");
+  const auto& m = recon::find_method(method);
+  PreparedMethod p;
+  auto& r = p.resources;
+  r.phi = c.phi;
+  r.patch_h = patch_h;
+  r.patch_w = patch_w;
+  r.net = c.net;
+  r.script = c.script.get();
+  r.self_ensemble = c.self_ensemble;
+  r.self_ensemble_passes = c.self_ensemble_passes;
+  if (c.tile > 0) r.tile = c.tile;
+  if (c.method_options.is_object() && c.method_options.contains(method)) {
+    r.options = c.method_options[method];
+  }
+  p.options = m.read_options(r.options, "--method-options." + method);
+  if (m.needs() == recon::MethodNeeds::kTruth) return p;  // computed from the truth
+  if (m.needs() == recon::MethodNeeds::kDictionary) {
+    if (c.dictionary_data) {
+      r.dictionary = c.dictionary_data;
+    } else if (!c.dictionary.empty()) {
+      if (!c.cache) p.files = std::make_shared<ModelCache>();
+      r.dictionary = &(c.cache ? *c.cache : *p.files).dictionary(c.dictionary);
+    }
+    p.report = std::make_shared<recon::SolverReport>();
+    r.report = p.report;
+  }
+  if (c.self_ensemble) recon::check_self_ensemble(method, c.net, c.script.get());
+  recon::check_ensemble_passes(c.self_ensemble, c.self_ensemble_passes);
+  p.solver = recon::make_solver(method, r);
+  p.image = recon::make_image_solver(method, r);
+  p.options = m.options_used(r);
+  return p;
+}
+
+namespace {
+std::string list_text(const std::vector<std::string>& names) {
+  std::string out;
+  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
+}  // namespace
+
+void check_method_options(const nlohmann::json& by_method, const std::vector<std::string>& methods,
+                          const std::string& source) {
+  cv::register_opencv();  // the denoisers pinv-nlm's options may name
+  LFNET_CHECK_AS(ConfigError, by_method.is_object(), source,
+                 ": expected a JSON object keyed by method, e.g. {\"dict\": {\"method\": "
+                 "\"admm\"}}, got ",
+                 by_method.dump());
+  for (const auto& [name, options] : by_method.items()) {
+    recon::find_method(name);  // an unknown method, with the known ones
+    LFNET_CHECK_AS(ConfigError, std::find(methods.begin(), methods.end(), name) != methods.end(),
+                   source, ": options for method '", name, "', which this command does not run (",
+                   list_text(methods), ")");
+    recon::check_method_options(name, options, source + "." + name);
+  }
+}
+
+nlohmann::json method_options_argument(const std::string& text,
+                                       const std::vector<std::string>& methods,
+                                       const std::string& source) {
+  if (text.empty()) return nlohmann::json::object();
+  const auto options = read_json_argument(text, source);
+  check_method_options(options, methods, json_argument_source(text, source));
+  return options;
+}
+
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, const eval::EvalOptions& options,
                                torch::Tensor* estimate, bool show_progress) {
   LFNET_CHECK(context.phi != nullptr, "evaluation without a Phi");
   const auto& phi = *context.phi;
   eval::EvalResult result;
-  std::shared_ptr<recon::SolverReport> report;  // iterative methods: non-convergence
   const std::string label =
       method + " " + truth.name + " stride " + std::to_string(options.reconstruct.stride);
-  const auto needs = recon::find_method(method).needs();
-  if (needs == recon::MethodNeeds::kTruth) {
+  auto prepared =
+      prepare_method(method, context, options.reconstruct.patch_h, options.reconstruct.patch_w);
+  const auto report = prepared.report;
+  if (recon::find_method(method).needs() == recon::MethodNeeds::kTruth) {
     result = eval::evaluate_no_parallax(truth.lf, phi, options);
   } else {
-    recon::MethodResources resources;
-    resources.phi = &phi;
-    resources.patch_h = options.reconstruct.patch_h;
-    resources.patch_w = options.reconstruct.patch_w;
-    resources.net = context.net;
-    resources.script = context.script.get();
-    resources.self_ensemble = context.self_ensemble;
-    resources.self_ensemble_passes = context.self_ensemble_passes;
-    if (context.tile > 0) resources.tile = context.tile;
-    ModelCache local;
-    if (needs == recon::MethodNeeds::kDictionary && !context.dictionary.empty()) {
-      resources.dictionary =
-          &(context.cache ? *context.cache : local).dictionary(context.dictionary);
-      resources.coding =
-          dict_coding(*resources.dictionary, context.dict_options, context.dict_method);
-      report = std::make_shared<recon::SolverReport>();
-      resources.report = report;
-    }
-    const recon::PatchSolver solver = recon::make_solver(method, resources);
-    const recon::ImageSolver image = recon::make_image_solver(method, resources);
+    const recon::PatchSolver solver = prepared.solver;
+    const recon::ImageSolver image = prepared.image;
     std::unique_ptr<ProgressBar> patches_bar;
     if (show_progress) {
       patches_bar = std::make_unique<ProgressBar>(
@@ -87,6 +143,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
         image);
   }
   result.record["light_field"] = truth.name;
+  if (!prepared.options.empty()) result.record["method_options"] = prepared.options;
   if (context.self_ensemble) {
     result.record["self_ensemble"] = true;
     result.record["self_ensemble_passes"] =
@@ -128,6 +185,8 @@ void check_phi_argument(const ModelFile& model, const std::string& phi) {
 }
 
 EvaluateResult evaluate_request(const EvaluateRequest& a) {
+  const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
+  const auto method_options = method_options_argument(a.method_options, {method});
   LFNET_CHECK_AS(ConfigError, a.lf.empty() != a.scene.empty(),
                  "give exactly one of --lf DIR and --scene SCENE.json");
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
@@ -136,9 +195,6 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     // As lfnet simulate reads them: the file, then --noise as its Gaussian sigma.
     effects = simulation_effects(a.effects, a.noise > 0 ? a.noise : -1, SimulateInput{}, "");
   }
-  const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
-  LFNET_CHECK_AS(ConfigError, method == "dict" || (a.dict_method.empty() && a.dict_options.empty()),
-                 "--dict-method and --dict-options apply to --method dict, not '", method, "'");
   parse_device(a.device);  // a clear error before any work
   MethodContext context;
   optics::PhiSpec spec;
@@ -176,6 +232,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   }
   if (a.self_ensemble) recon::check_self_ensemble(method, context.net, context.script.get());
   recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
+  context.method_options = method_options;
   context.self_ensemble = a.self_ensemble;
   context.self_ensemble_passes = a.self_ensemble_passes;
   LFNET_CHECK_AS(ConfigError, a.tile >= 0, "--tile must be positive, got ", a.tile);
@@ -183,8 +240,6 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
-  context.dict_method = a.dict_method;
-  context.dict_options = a.dict_options;
   const auto truths = load_sources(sources, phi->rows(), phi->cols());
 
   auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);

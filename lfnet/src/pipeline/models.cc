@@ -106,34 +106,6 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   return it->second;
 }
 
-dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
-                                      const std::string& options, const std::string& method,
-                                      const std::string& option) {
-  nlohmann::json merged = dict::SparseCodingOptions{}.to_json();
-  auto merge = [&](const nlohmann::json& patch, const std::string& source) {
-    LFNET_CHECK_AS(ConfigError, patch.is_object(), source, ": expected a JSON object, got ",
-                   patch.dump());
-    merged.merge_patch(patch);
-    return dict::SparseCodingOptions::from_json(merged, source);
-  };
-  dict::SparseCodingOptions coding;
-  if (dictionary.training.is_object() && dictionary.training.contains("coding")) {
-    coding = merge(dictionary.training["coding"], "the dictionary's coding");
-  }
-  if (!options.empty()) {
-    coding =
-        merge(read_json_argument(options, option), json_argument_source(options, option) + ":$");
-  }
-  if (!method.empty()) {
-    try {
-      coding.method = dict::from_string(method, coding.method);
-    } catch (const ConfigError& e) {
-      throw ConfigError(std::string("--dict-method: ") + e.what());
-    }
-  }
-  return coding;
-}
-
 bool phi_argument_is_file(const std::string& text) {
   std::error_code ec;
   return fs::path(text).extension() == ".json" || fs::exists(text, ec);

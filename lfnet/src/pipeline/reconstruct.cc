@@ -12,6 +12,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/io/viewer.h"
+#include "lfnet/pipeline/evaluate.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
 #include "lfnet/recon/post_filter.h"
@@ -58,10 +59,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
                  " needs the true light field: it is a method of lfnet evaluate");
   LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kDictionary || !a.dictionary.empty(),
                  "method '", method, "' needs --dictionary FILE (e.g. models/dictionary.ckpt)");
-  LFNET_CHECK_AS(
-      ConfigError,
-      needs == recon::MethodNeeds::kDictionary || (a.dict_method.empty() && a.dict_options.empty()),
-      "--dict-method and --dict-options apply to the dict method, not '", method, "'");
+  const auto method_options = method_options_argument(a.method_options, {method});
   ModelCache local;
   ModelCache& files = cache ? *cache : local;
   // The model first: its Phi is the default for plain sensor images.
@@ -120,28 +118,24 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
     train_mean = model->measurement_mean();
   }
+  nlohmann::json options_used;  // the method's options, complete
   {
-    recon::MethodResources resources;
-    resources.phi = phi.get();
-    resources.patch_h = o.patch_h;
-    resources.patch_w = o.patch_w;
+    MethodContext context;
+    context.phi = phi.get();
     if (model) {
-      resources.net = model->net;
-      resources.script = model->script.get();
+      context.net = model->net;
+      context.script = model->script;
     }
-    resources.tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
-    resources.self_ensemble = a.self_ensemble;
-    resources.self_ensemble_passes = a.self_ensemble_passes;
-    if (a.self_ensemble)
-      recon::check_self_ensemble(method, model ? model->net : nn::LightFieldNet{nullptr},
-                                 model ? model->script.get() : nullptr);
-    recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
-    if (needs == recon::MethodNeeds::kDictionary) {
-      resources.dictionary = &files.dictionary(a.dictionary);
-      resources.coding = dict_coding(*resources.dictionary, a.dict_options, a.dict_method);
-    }
-    solver = recon::make_solver(method, resources);
-    image = recon::make_image_solver(method, resources);
+    context.dictionary = a.dictionary;
+    context.cache = &files;
+    context.method_options = method_options;
+    context.tile = a.tile;
+    context.self_ensemble = a.self_ensemble;
+    context.self_ensemble_passes = a.self_ensemble_passes;
+    auto prepared = prepare_method(method, context, o.patch_h, o.patch_w);
+    solver = prepared.solver;
+    image = prepared.image;
+    options_used = prepared.options;
     LFNET_CHECK_AS(ConfigError, !(image && full),
                    "--cnn-mode full applies to the paper's architecture; a model of the lfnet "
                    "architecture always reconstructs the whole image");
@@ -227,6 +221,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"tile", a.tile},  // 0: the method's default
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
+  if (!options_used.empty()) r.record["method_options"] = options_used;
   return r;
 }
 

@@ -2,6 +2,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/dict/omp.h"
+#include "lfnet/dict/sparse_coding.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/fully_convolutional.h"
 
@@ -106,24 +107,42 @@ class NetworkMethod : public Method {
   std::string branch_;
 };
 
-// dict: sparse coding in a learned dictionary (OMP or ADMM-LASSO).
-class DictionaryMethod : public Method {
+// dict: sparse coding in a learned dictionary (OMP or ADMM-LASSO). Its options are
+// dict::SparseCodingOptions: OMP with 10 atoms, then the dictionary's own recommendation (its
+// record's "coding", set when it was tuned), then the options given.
+class DictionaryMethod : public MethodWithOptions<dict::SparseCodingOptions> {
  public:
   std::string name() const override { return "dict"; }
   std::string summary() const override {
-    return "sparse coding in a K-SVD dictionary (--dictionary; OMP or ADMM)";
+    return "sparse coding in a K-SVD dictionary (--dictionary; OMP or ADMM, by its options)";
   }
   MethodNeeds needs() const override { return MethodNeeds::kDictionary; }
   bool baseline() const override { return true; }  // the paper's baseline
   PatchSolver solver(const MethodResources& r) const override {
-    return dictionary_solver(*r.phi, *r.dictionary, r.coding, r.patch_h, r.patch_w, r.report);
+    return dictionary_solver(*r.phi, *r.dictionary, coding(r), r.patch_h, r.patch_w, r.report);
   }
   double patch_flops(const MethodResources& r) const override {
     if (!r.dictionary) return 0;
     return dict::omp_patch_flops(static_cast<double>(r.phi->measurements() * r.patch_h * r.patch_w),
                                  static_cast<double>(r.dictionary->dimension()),
                                  static_cast<double>(r.dictionary->size()),
-                                 static_cast<double>(r.coding.omp.max_atoms));
+                                 static_cast<double>(coding(r).omp.max_atoms));
+  }
+  nlohmann::json options_used(const MethodResources& r) const override {
+    return r.dictionary ? coding(r).to_json() : read_options(r.options, "--method-options");
+  }
+
+ private:
+  static dict::SparseCodingOptions coding(const MethodResources& r) {
+    options(r);  // the options given, checked on their own: errors name their own keys
+    nlohmann::json merged = dict::SparseCodingOptions{}.to_json();
+    const auto& record = r.dictionary->training;
+    if (record.is_object() && record.contains("coding") && record["coding"].is_object()) {
+      merged.merge_patch(record["coding"]);
+      dict::SparseCodingOptions::from_json(merged, "the dictionary's coding");
+    }
+    merged.merge_patch(r.options);
+    return dict::SparseCodingOptions::from_json(merged, "--method-options");
   }
 };
 

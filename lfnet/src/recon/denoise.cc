@@ -5,8 +5,16 @@
 #include <cmath>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/registry.h"
 
 namespace lfnet::recon {
+
+void NlmOptions::validate() const {
+  LFNET_CHECK_AS(ConfigError, search >= 0 && search <= 50, "search: must be in 0..50, got ",
+                 search);
+  LFNET_CHECK_AS(ConfigError, patch >= 0 && patch <= 20, "patch: must be in 0..20, got ", patch);
+  LFNET_CHECK_AS(ConfigError, h > 0 && std::isfinite(h), "h: must be > 0, got ", h);
+}
 
 torch::Tensor non_local_means(const torch::Tensor& x, double sigma, const NlmOptions& o) {
   LFNET_CHECK_AS(ConfigError, x.dim() == 3, "non_local_means: expected (C, H, W), got ", x.sizes());
@@ -45,5 +53,49 @@ double pinv_noise_sigma(const torch::Tensor& pinv_matrix, double sigma) {
               pinv_matrix.sizes());
   return sigma * std::sqrt(pinv_matrix.to(torch::kFloat64).square().sum(1).mean().item<double>());
 }
+
+namespace {
+
+// lfnet's own non-local means over all views at once.
+class NlmDenoiser : public DenoiserWithOptions<NlmOptions> {
+ public:
+  std::string name() const override { return "nlm"; }
+  std::string summary() const override {
+    return "lfnet's non-local means: (2 patch + 1)^2 neighbourhoods of all views at once, within "
+           "a (2 search + 1)^2 window, strength h times the noise sigma";
+  }
+
+ protected:
+  torch::Tensor run(const torch::Tensor& views, double sigma,
+                    const NlmOptions& options) const override {
+    return non_local_means(views, sigma, options);
+  }
+};
+
+NamedRegistry<Denoiser>& registry() {
+  static NamedRegistry<Denoiser> r(
+      [](NamedRegistry<Denoiser>& builtins) { builtins.add(std::make_unique<NlmDenoiser>()); });
+  return r;
+}
+
+}  // namespace
+
+void register_denoiser(std::unique_ptr<Denoiser> denoiser) {
+  LFNET_CHECK(denoiser != nullptr, "register_denoiser: no denoiser");
+  registry().add(std::move(denoiser));
+}
+
+const Denoiser& find_denoiser(const std::string& name) {
+  if (const Denoiser* d = registry().find(name)) return *d;
+  std::string hint;
+  if (name.rfind("opencv", 0) == 0) {
+    hint =
+        "; OpenCV's denoisers are registered by lfnet's program (built with OpenCV), not by "
+        "the numerical core alone";
+  }
+  throw ConfigError("unknown denoiser '" + name + "' (known: " + registry().list() + ")" + hint);
+}
+
+std::vector<std::string> registered_denoisers() { return registry().names(); }
 
 }  // namespace lfnet::recon

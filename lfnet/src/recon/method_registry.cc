@@ -1,10 +1,9 @@
 #include "lfnet/recon/method_registry.h"
 
 #include <algorithm>
-#include <map>
-#include <mutex>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/registry.h"
 #include "lfnet/dict/omp.h"
 #include "lfnet/recon/builtin_methods.h"
 
@@ -12,76 +11,51 @@ namespace lfnet::recon {
 
 namespace {
 
-struct Registry {
-  std::mutex mutex;
-  std::vector<std::unique_ptr<Method>> methods;  // registration order
-};
-
-Registry& registry() {
-  static Registry r;
+NamedRegistry<Method>& registry() {
+  static NamedRegistry<Method> r([](NamedRegistry<Method>& builtins) {
+    register_builtin_methods([&](std::unique_ptr<Method> m) { builtins.add(std::move(m)); });
+  });
   return r;
-}
-
-void add(std::unique_ptr<Method> method) {
-  auto& r = registry();
-  std::lock_guard<std::mutex> lock(r.mutex);
-  for (auto& m : r.methods) {
-    if (m->name() == method->name()) {
-      m = std::move(method);
-      return;
-    }
-  }
-  r.methods.push_back(std::move(method));
-}
-
-void ensure_builtins() {
-  static std::once_flag once;
-  std::call_once(once, [] { register_builtin_methods(add); });
 }
 
 }  // namespace
 
+nlohmann::json Method::read_options(const nlohmann::json& given, const std::string& path) const {
+  LFNET_CHECK_AS(ConfigError, given.is_object(), path, ": expected a JSON object, got ",
+                 given.dump());
+  LFNET_CHECK_AS(ConfigError, given.empty(), path, ": method '", name(),
+                 "' takes no options (methods with options: ", methods_with_options(), ")");
+  return nlohmann::json::object();
+}
+
 void register_method(std::unique_ptr<Method> method) {
   LFNET_CHECK(method != nullptr, "register_method: no method");
-  ensure_builtins();
-  add(std::move(method));
+  registry().add(std::move(method));
 }
 
 const Method& find_method(const std::string& name) {
-  ensure_builtins();
-  auto& r = registry();
-  {
-    std::lock_guard<std::mutex> lock(r.mutex);
-    for (const auto& m : r.methods) {
-      if (m->name() == name) return *m;
-    }
-  }
+  if (const Method* m = registry().find(name)) return *m;
   throw ConfigError("unknown method '" + name + "' (known: " + method_list() + ")");
 }
 
-std::vector<std::string> registered_methods() {
-  ensure_builtins();
-  auto& r = registry();
-  std::lock_guard<std::mutex> lock(r.mutex);
-  std::vector<std::string> names;
-  for (const auto& m : r.methods) names.push_back(m->name());
-  return names;
-}
+std::vector<std::string> registered_methods() { return registry().names(); }
 
 bool is_baseline(const std::string& name) {
-  for (const auto& known : registered_methods()) {
-    if (known == name) return find_method(name).baseline();
-  }
-  return false;
+  const Method* m = registry().find(name);
+  return m != nullptr && m->baseline();
 }
 
 std::string method_list(std::optional<MethodNeeds> excluded) {
-  std::string out;
-  for (const auto& name : registered_methods()) {
-    if (excluded && find_method(name).needs() == *excluded) continue;
-    out += (out.empty() ? "" : ", ") + name;
-  }
-  return out;
+  return registry().list([&](const Method& m) { return !excluded || m.needs() != *excluded; });
+}
+
+std::string methods_with_options() {
+  return registry().list([](const Method& m) { return !m.default_options().empty(); });
+}
+
+nlohmann::json check_method_options(const std::string& name, const nlohmann::json& given,
+                                    const std::string& path) {
+  return find_method(name).read_options(given, path);
 }
 
 namespace {

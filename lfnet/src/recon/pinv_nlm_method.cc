@@ -1,5 +1,6 @@
-// pinv-nlm: the pseudo-inverse, then non-local means over all views: the classical baseline
-// for noisy sensor images (docs/methods.md).
+// pinv-nlm: the pseudo-inverse, then a denoiser of the views (non-local means: OpenCV's by
+// default, lfnet's own as "nlm"): the classical baseline for noisy sensor images
+// (docs/methods.md).
 #include "lfnet/core/error.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/builtin_methods.h"
@@ -9,13 +10,36 @@ namespace lfnet::recon {
 
 namespace {
 
-class PinvNlmMethod : public Method {
+// Its options: the denoiser (recon::find_denoiser) and the denoiser's own options.
+struct PinvNlmOptions {
+  std::string denoiser = "opencv-nlm";
+  nlohmann::json options = nlohmann::json::object();
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("denoiser", denoiser);
+    f("options", options);
+  }
+};
+
+class PinvNlmMethod : public MethodWithOptions<PinvNlmOptions> {
  public:
   std::string name() const override { return "pinv-nlm"; }
   bool baseline() const override { return true; }
   std::string summary() const override {
-    return "the pseudo-inverse, then non-local means over all views (sensor images; the noise "
-           "sigma sets its strength)";
+    return "the pseudo-inverse, then non-local means of the views (sensor images; the noise "
+           "sigma sets its strength; OpenCV's by default)";
+  }
+  nlohmann::json read_options(const nlohmann::json& given, const std::string& path) const override {
+    auto o = options_from_json<PinvNlmOptions>(given, path);
+    const Denoiser* denoiser = nullptr;
+    try {
+      denoiser = &find_denoiser(o.denoiser);
+    } catch (const ConfigError& e) {
+      throw ConfigError(path + ".denoiser: " + e.what());
+    }
+    o.options = denoiser->read_options(o.options, path + ".options");
+    return fields_to_json(o);
   }
   PatchSolver solver(const MethodResources&) const override {
     return [](const torch::Tensor&, const torch::Tensor&) -> torch::Tensor {
@@ -23,6 +47,9 @@ class PinvNlmMethod : public Method {
     };
   }
   ImageSolver image_solver(const MethodResources& r) const override {
+    const nlohmann::json o = read_options(r.options, "--method-options");
+    const Denoiser* denoiser = &find_denoiser(o["denoiser"].get<std::string>());
+    const nlohmann::json denoiser_options = o["options"];
     const auto pinv = optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w);
     // The pseudo-inverse's noise per unit of measurement noise (the same for every phase of
     // the periodic models, up to their small differences: the mean over phases).
@@ -35,11 +62,14 @@ class PinvNlmMethod : public Method {
     ro.stride = r.phi->local() ? r.patch_h : ro.stride;  // per pixel: overlaps add nothing
     ro.clamp = false;                                    // clamping would bias the noise
     const optics::Phi* phi = r.phi;
-    return [phi, pinv, gain, ro](const torch::Tensor& sensor, double sigma) {
+    return [phi, pinv, gain, ro, denoiser, denoiser_options](const torch::Tensor& sensor,
+                                                             double sigma) {
       auto lf = reconstruct_sensor(*phi, sensor, pinv_solver(pinv), ro);  // (1, U, V, H, W)
       const auto shape = lf.sizes().vec();
       auto views = lf.reshape({shape[1] * shape[2], shape[3], shape[4]});
-      return non_local_means(views, sigma * gain).reshape(shape).clamp(0.0, 1.0);
+      return denoiser->denoise(views, sigma * gain, denoiser_options)
+          .reshape(shape)
+          .clamp(0.0, 1.0);
     };
   }
   double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }

@@ -155,4 +155,29 @@ void with_path(const JsonReader& reader, Fn&& fn) {
   }
 }
 
+namespace detail {
+template <typename T, typename = void>
+struct HasValidate : std::false_type {};
+template <typename T>
+struct HasValidate<T, std::void_t<decltype(std::declval<const T&>().validate())>> : std::true_type {
+};
+}  // namespace detail
+
+// An Options struct read from `given` (a JSON object): its defaults, then every key of
+// `given` (unknown keys and wrong kinds refused, with `path`, e.g. "--method-options.omp"),
+// then its validate() when it has one.
+template <typename Options>
+Options options_from_json(const nlohmann::json& given, const std::string& path) {
+  LFNET_CHECK_AS(ConfigError, given.is_object(), path, ": expected a JSON object, got ",
+                 given.dump());
+  Options options;
+  JsonReader reader(given, path);
+  read_fields(reader, options);
+  reader.finish();
+  if constexpr (detail::HasValidate<Options>::value) {
+    with_path(reader, [&] { options.validate(); });
+  }
+  return options;
+}
+
 }  // namespace lfnet

@@ -24,8 +24,7 @@ struct BatchOptions {
       methods;                 // methods run on every item (empty: net with a model, else pinv)
   std::string model;           // checkpoint or exported model for net, ae, cnn
   std::string dictionary;      // dictionary file for dict
-  std::string dict_method;     // omp or admm for dict ("" = the dictionary's)
-  std::string dict_options;    // SparseCodingOptions JSON or file for dict
+  std::string method_options;  // --method-options: JSON or file, keyed by method
   std::string phi;             // Phi of evaluations without a model; must match the model
   std::string device = "cpu";  // cpu or cuda[:K] for the network
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)

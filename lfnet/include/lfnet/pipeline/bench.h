@@ -31,6 +31,7 @@ struct BenchOptions {
   // share one run). Empty: an untrained net of each of `architectures`.
   std::vector<std::string> models;
   std::string dictionary;       // dictionary file; default a small K-SVD dictionary
+  std::string method_options;   // --method-options: JSON or file, keyed by method
   std::string save_dictionary;  // write the bench's K-SVD dictionary here
   std::string scene;            // scene spec file; default random_scene(seed) at height x width
   int64_t dict_atoms = 1000;

@@ -8,6 +8,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "lfnet/eval/evaluate.h"
 #include "lfnet/nn/network.h"
@@ -15,23 +16,57 @@
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/sources.h"
+#include "lfnet/recon/method_registry.h"
+#include "lfnet/recon/methods.h"
 
 namespace lfnet::pipeline {
 
-// What a method needs besides the measurements.
+// What a method needs besides the measurements: the one description every command fills
+// (evaluate, reconstruct, batch, bench, an experiment's evaluation), turned into a method's
+// resources in one place (prepare_method).
 struct MethodContext {
   const optics::Phi* phi = nullptr;
-  nn::LightFieldNet net{nullptr};               // for net, ae, cnn
-  std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported net (used when set)
-  std::string dictionary;                       // for dict: a dictionary file
+  nn::LightFieldNet net{nullptr};                     // for net, ae, cnn
+  std::shared_ptr<nn::ScriptedNetwork> script;        // or an exported net (used when set)
+  std::string dictionary;                             // for dict: a dictionary file,
+  const dict::Dictionary* dictionary_data = nullptr;  // or the dictionary itself (used when set)
   ModelCache* cache =
       nullptr;  // where to read it (and keep it) for many calls; none: read it each call
-  std::string dict_method;     // for dict: omp or admm ("": dict_options', else the dictionary's)
-  std::string dict_options;    // for dict: SparseCodingOptions JSON or file (pipeline/models.h)
-  bool self_ensemble = false;  // lfnet architecture: average over the Phi's mirrors
+  // The options of the methods, keyed by method name (--method-options): given, not completed.
+  nlohmann::json method_options = nlohmann::json::object();
+  bool self_ensemble = false;        // lfnet architecture: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   int64_t tile = 0;                  // whole-image methods' spatial tile (0: their default)
 };
+
+// A method ready to run on one Phi and patch size.
+struct PreparedMethod {
+  recon::MethodResources resources;
+  recon::PatchSolver solver;  // none for evaluation baselines (MethodNeeds::kTruth)
+  recon::ImageSolver image;   // empty for methods that go patch by patch
+  std::shared_ptr<recon::SolverReport> report;  // iterative methods' non-convergence
+  nlohmann::json options;                       // the method's options, complete ({}: none)
+  std::shared_ptr<ModelCache> files;            // a dictionary read without the context's cache
+};
+
+// The method `method` with the context's resources, its options checked: the one place that
+// turns a MethodContext into recon::MethodResources. `patch_h` x `patch_w`: the patch of patch
+// methods (a network's own, else 9 x 9).
+PreparedMethod prepare_method(const std::string& method, const MethodContext& context,
+                              int64_t patch_h, int64_t patch_w);
+
+// --method-options: a JSON object, inline or in a file ("" is {}), keyed by method name, each
+// value that method's options, e.g. {"dict": {"method": "admm"}, "pinv-nlm": {"denoiser":
+// "nlm"}} (docs/methods.md "Method options"). Read and checked against `methods` (the methods
+// the command runs: every key must be one of them, every value its method's options) before
+// any work; `source` names it in errors.
+nlohmann::json method_options_argument(const std::string& text,
+                                       const std::vector<std::string>& methods,
+                                       const std::string& source = "--method-options");
+
+// The same check for options already read (a config's $.evaluation.method_options).
+void check_method_options(const nlohmann::json& by_method, const std::vector<std::string>& methods,
+                          const std::string& source);
 
 // Puts a model's network where the command asked (the flags every reconstructing command
 // shares): a checkpoint's net moved to `device` with `precision`; an exported file, which runs
@@ -57,17 +92,16 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
 
 // What `lfnet evaluate` does with one light field (a folder or a procedural scene).
 struct EvaluateRequest {
-  std::string lf;            // light-field folder with the truth
-  std::string scene;         // or a procedural scene spec (exactly one of lf and scene)
-  std::string views;         // angular window R0:R1,C0:C1 (1-based; "" = central)
-  std::string orient;        // flip-u, flip-v, transpose (comma-separated)
-  std::string layout;        // file-naming pattern of lf (docs/conventions.md)
-  std::string model;         // checkpoint or exported model ("" for models-free methods)
-  std::string phi;           // NAME[:N], a spec or a calibrated-Phi folder; must match model
-  std::string method;        // "" = net with a model, pinv without
-  std::string dictionary;    // dictionary file for dict
-  std::string dict_method;   // omp or admm for dict ("" = the dictionary's)
-  std::string dict_options;  // SparseCodingOptions JSON or file for dict
+  std::string lf;              // light-field folder with the truth
+  std::string scene;           // or a procedural scene spec (exactly one of lf and scene)
+  std::string views;           // angular window R0:R1,C0:C1 (1-based; "" = central)
+  std::string orient;          // flip-u, flip-v, transpose (comma-separated)
+  std::string layout;          // file-naming pattern of lf (docs/conventions.md)
+  std::string model;           // checkpoint or exported model ("" for models-free methods)
+  std::string phi;             // NAME[:N], a spec or a calibrated-Phi folder; must match model
+  std::string method;          // "" = net with a model, pinv without
+  std::string dictionary;      // dictionary file for dict
+  std::string method_options;  // --method-options: JSON or file, keyed by method
   optics::SimulationMode mode = optics::SimulationMode::kSensor;
   double noise = 0;            // Gaussian noise sigma, relative to a white scene's mean
   std::string effects;         // sensor effects JSON file (shot, read, ...); noise on top

@@ -68,14 +68,6 @@ class ModelCache {
 // models/asp-n2.ckpt` simulates exactly the camera the model was trained for.
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option = "--phi");
 
-// The sparse coding of the dict method: OMP with 10 atoms, then the dictionary's own
-// recommendation (its record's "coding", set when it was tuned), then `options` (a JSON object
-// such as {"omp": {"max_atoms": 20}}, or a .json file holding one), then `method` (omp or
-// admm) when not empty. Bad options are ConfigErrors naming `option` and the JSON path.
-dict::SparseCodingOptions dict_coding(const dict::Dictionary& dictionary,
-                                      const std::string& options, const std::string& method,
-                                      const std::string& option = "--dict-options");
-
 // True when `text` names a file or folder (a spec, a calibrated Phi, a model) rather than
 // NAME[:N].
 bool phi_argument_is_file(const std::string& text);

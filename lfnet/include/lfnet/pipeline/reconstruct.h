@@ -24,8 +24,7 @@ struct ReconstructRequest {
   std::string method = "net";
   std::string model;                  // checkpoint for net, ae, cnn
   std::string dictionary;             // dictionary file for dict
-  std::string dict_method;            // omp or admm ("": dict_options', else the dictionary's)
-  std::string dict_options;           // SparseCodingOptions JSON or file (pipeline/models.h)
+  std::string method_options;         // --method-options: JSON or file, keyed by method
   recon::ReconstructOptions options;  // stride (sensor mode), batch, window
   bool match_mean = false;            // scale the measurements to the training mean
   bool post_filter = false;           // suppress artefacts with the stride's period

@@ -8,8 +8,10 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
+#include "lfnet/core/fields.h"
 #include "lfnet/dict/dictionary.h"
-#include "lfnet/dict/sparse_coding.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
@@ -33,11 +35,13 @@ struct MethodResources {
   nn::LightFieldNet net{nullptr};                // kNetwork: a checkpoint's network,
   const nn::ScriptedNetwork* script = nullptr;   // or an exported one (used when set)
   const dict::Dictionary* dictionary = nullptr;  // kDictionary
-  dict::SparseCodingOptions coding;              // kDictionary: OMP or ADMM
-  std::shared_ptr<SolverReport> report;          // iterative methods: non-convergence counts
-  int64_t tile = 256;                            // whole-image methods: spatial tile
-  bool self_ensemble = false;        // whole-image methods: average over the Phi's mirrors
-  int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
+  // The method's options as given (--method-options; docs/methods.md "Method options"),
+  // read by the method itself (MethodWithOptions); {} for its defaults.
+  nlohmann::json options = nlohmann::json::object();
+  std::shared_ptr<SolverReport> report;  // iterative methods: non-convergence counts
+  int64_t tile = 256;                    // whole-image methods: spatial tile
+  bool self_ensemble = false;            // whole-image methods: average over the Phi's mirrors
+  int64_t self_ensemble_passes = 0;      // at most this many of them (0: all)
 };
 
 class Method {
@@ -57,6 +61,34 @@ class Method {
   virtual ImageSolver image_solver(const MethodResources&) const { return {}; }
   // Nominal floating-point operations per patch (lfnet bench), 0 when unknown.
   virtual double patch_flops(const MethodResources&) const { return 0; }
+  // The method's options, checked: `given` (a JSON object; `path` names it in errors, e.g.
+  // "--method-options") read strictly, returned complete as records write them. A method
+  // without options (the default) refuses every key.
+  virtual nlohmann::json read_options(const nlohmann::json& given, const std::string& path) const;
+  // The options it runs with, given `resources`: read_options of resources.options, unless
+  // the method completes them from its resources (dict: from its dictionary's record).
+  virtual nlohmann::json options_used(const MethodResources& resources) const {
+    return read_options(resources.options, "--method-options");
+  }
+  // Its options' defaults ({} without options), for help texts and docs.
+  virtual nlohmann::json default_options() const { return nlohmann::json::object(); }
+};
+
+// The base of a method with options: Options is a struct with fields() (and optionally
+// validate()), read from MethodResources::options by options(), so that the method declares
+// its options once and every command reads them the same way.
+template <typename Options>
+class MethodWithOptions : public Method {
+ public:
+  nlohmann::json read_options(const nlohmann::json& given, const std::string& path) const override {
+    return fields_to_json(options_from_json<Options>(given, path));
+  }
+  nlohmann::json default_options() const override { return fields_to_json(Options{}); }
+
+ protected:
+  static Options options(const MethodResources& r) {
+    return options_from_json<Options>(r.options, "--method-options");
+  }
 };
 
 // Adds a method, replacing one of the same name.
@@ -74,6 +106,14 @@ bool is_baseline(const std::string& name);
 
 // "a, b, c": the registered methods, optionally without those needing `excluded`.
 std::string method_list(std::optional<MethodNeeds> excluded = std::nullopt);
+
+// "dict, pinv-nlm": the registered methods that take options.
+std::string methods_with_options();
+
+// The options of `name` read from `given` and checked (Method::read_options) before any work;
+// returned complete. `path` names the source in errors.
+nlohmann::json check_method_options(const std::string& name, const nlohmann::json& given,
+                                    const std::string& path = "--method-options");
 
 // The solver of `name` with `resources`, after checking that they hold what it needs (the
 // message names the option that supplies it).
