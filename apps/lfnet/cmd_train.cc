@@ -14,6 +14,7 @@ struct TrainArgs {
   pipeline::TrainRequest request;
   dist::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
   bool check = false;      // read and check the config, then stop
+  bool show = false;       // print the resolved config as JSON, then stop
 };
 
 std::string command_line_of(const TrainArgs& a, const std::string& verb) {
@@ -34,16 +35,29 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
 // Prints what the config holds and that it is valid.
 void check_config(const TrainArgs& a) {
   const auto config = pipeline::resolve_request(a.request);
+  if (a.show) {
+    // The config as the run would record it: bases, scale and --set merged in.
+    auto resolved = config.raw;
+    resolved["scale"] = config.scale;
+    std::printf("%s\n", resolved.dump(2).c_str());
+    return;
+  }
   std::string names;
   for (const auto& s : config.stages) {
     if (pipeline::is_network_stage(s.name))
       (void)config.stage_network(s), (void)config.stage_options(s);
     names += (names.empty() ? "" : ", ") + s.name;
   }
+  std::string from;
+  if (!a.request.init.empty() || !config.init.empty()) {
+    from = ", starting from " + (a.request.init.empty() ? config.init : a.request.init);
+  }
+  if (config.distill.enabled()) from += ", distilled from " + config.distill.teacher;
   std::printf(
-      "%s: %s, scale '%s', Phi %s, stages %s; the config is valid\n",
+      "%s: %s, scale '%s', Phi %s, stages %s%s; the config is valid\n",
       (a.request.config.empty() ? a.request.resume + "/config.json" : a.request.config).c_str(),
-      config.name.c_str(), config.scale.c_str(), config.phi.label().c_str(), names.c_str());
+      config.name.c_str(), config.scale.c_str(), config.phi.label().c_str(), names.c_str(),
+      from.c_str());
 }
 
 void add_train_args(CLI::App* cmd, TrainArgs& a) {
@@ -60,11 +74,14 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
                   "last.ckpt with --stage");
   cmd->add_flag("--force", r.force, "replace an existing run folder: start the run afresh");
   cmd->add_flag("--check", a.check, "only read and check the config (every stage), then stop");
+  cmd->add_flag("--show-config", a.show,
+                "print the resolved config (its bases, the scale and --set merged in) as JSON, "
+                "then stop");
   cmd->add_option("--device", r.device,
                   "cpu or cuda[:K]: where to train (default: the config's training.device, cpu)");
   cmd->add_option("--init", r.init,
                   "start the first stage from a checkpoint: finetuning, or Phi switching when "
-                  "its Phi differs");
+                  "its Phi differs (overrides the config's $.init)");
 }
 
 }  // namespace
@@ -76,7 +93,7 @@ void add_train_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--stage", args->request.stage, "train only this stage of the config");
   add_dist_flags(cmd, args->dist);
   cmd->callback([args] {
-    if (args->check) return check_config(*args);
+    if (args->check || args->show) return check_config(*args);
     auto comm = join_job(args->dist);  // a rank that cannot reach the others fails first
     args->request.command_line = command_line_of(*args, "train");
     pipeline::train_experiment(args->request, comm);
@@ -89,7 +106,7 @@ void add_experiment_command(CLI::App& app, const GlobalOptions&) {
   auto args = std::make_shared<TrainArgs>();
   add_train_args(cmd, *args);
   cmd->callback([args] {
-    if (args->check) return check_config(*args);
+    if (args->check || args->show) return check_config(*args);
     args->request.command_line = command_line_of(*args, "experiment");
     const auto run = pipeline::train_experiment(args->request);
     pipeline::evaluate_experiment(run.config, run.out);

@@ -8,6 +8,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/measure.h"
@@ -55,6 +56,63 @@ TEST_CASE("a config's scale and --set overrides apply in order and are type-chec
                     Catch::Contains("KEY.PATH=VALUE"));
   CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "c.json", "", {"name.x=1"}),
                     Catch::Contains("not an object"));
+}
+
+TEST_CASE("a config extends its base at the same scale, then its own keys, then its own scale",
+          "[pipeline][recipes]") {
+  lfnet::test::TempDir tmp;
+  auto base = small_config();
+  base["scales"]["paper"] = {{"training", {{"epochs", 20}}}, {"dataset", {{"seed", 5}}}};
+  fs::create_directories(tmp / "models");
+  write_json_file(tmp / "models/base.json", base);
+  write_text_file(tmp / "start.ckpt", "a checkpoint");
+  // The step: relative to itself; keys that hold at every scale, and its own paper patch.
+  write_json_file(tmp / "step.json", {{"extends", "models/base.json"},
+                                      {"name", "step"},
+                                      {"init", tmp / "start.ckpt"},
+                                      {"training", {{"lr", 0.0004}}},
+                                      {"scales", {{"paper", {{"training", {{"epochs", 30}}}}}}}});
+  auto quick = pipeline::ExperimentConfig::load(tmp / "step.json");  // the base's default scale
+  CHECK(quick.scale == "quick");
+  CHECK(quick.name == "step");
+  CHECK(quick.training["epochs"] == 1);
+  CHECK(quick.training["lr"] == 0.0004);
+  CHECK(quick.training["batch_size"] == 64);
+  CHECK(quick.init == tmp / "start.ckpt");
+  CHECK(quick.raw["init"] == tmp / "start.ckpt");  // recorded in the run's config.json
+  CHECK_FALSE(quick.raw.contains("extends"));
+  auto paper = pipeline::ExperimentConfig::load(tmp / "step.json", "paper", {"dataset.seed=8"});
+  CHECK(paper.training["epochs"] == 30);  // the step's own patch comes after the base's
+  CHECK(paper.training["lr"] == 0.0004);
+  CHECK(paper.dataset.seed == 8);  // --set last
+  // A chain of two, a scale no file has, a missing base, a cycle, a missing init.
+  write_json_file(tmp / "step2.json", {{"extends", "step.json"}, {"training", {{"lr", 0.0001}}}});
+  auto second = pipeline::ExperimentConfig::load(tmp / "step2.json", "paper");
+  CHECK(second.training["epochs"] == 30);
+  CHECK(second.training["lr"] == 0.0001);
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "step2.json", "huge"),
+                    Catch::Contains("no scale 'huge'"));
+  write_json_file(tmp / "orphan.json", {{"extends", "nowhere.json"}});
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "orphan.json"),
+                    Catch::Contains("nowhere.json") && Catch::Contains("does not exist"));
+  write_json_file(tmp / "a.json", {{"extends", "b.json"}});
+  write_json_file(tmp / "b.json", {{"extends", "a.json"}});
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "a.json"), Catch::Contains("cycle"));
+  write_json_file(tmp / "lost.json", {{"extends", "step.json"}, {"init", tmp / "gone.ckpt"}});
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "lost.json"),
+                    Catch::Contains("$.init") && Catch::Contains("gone.ckpt"));
+}
+
+TEST_CASE("every model in models/ has a recipe, and every recipe's config is valid",
+          "[pipeline][recipes][slow]") {
+  std::string out;
+  const int rc =
+      lfnet::test::run_command(std::string("LFNET=") + LFNET_BINARY + " " + LFNET_TEST_PYTHON +
+                                   " " + LFNET_SOURCE_DIR + "/scripts/models.py check 2>&1",
+                               out);
+  INFO(out);
+  CHECK(rc == 0);
+  CHECK(out.find("38 recipes") != std::string::npos);
 }
 
 TEST_CASE("network.patch and network.measurements are honoured when they agree, else refused",
@@ -226,31 +284,77 @@ TEST_CASE("evaluate --effects reads the file as simulate does, --noise as its Ga
   CHECK_THROWS_WITH(pipeline::evaluate_request(q), Catch::Contains("bad.json:$.shot.modle"));
 }
 
-TEST_CASE("the dict method codes as its dictionary recommends, unless told otherwise",
-          "[pipeline][dict]") {
+TEST_CASE("the dict method codes as its dictionary recommends, unless its options say otherwise",
+          "[pipeline][dict][method_options]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   dict::Dictionary d;
+  d.atoms = torch::nn::functional::normalize(torch::randn({25 * 81, 40}),
+                                             torch::nn::functional::NormalizeFuncOptions().dim(0));
+  pipeline::MethodContext context;
+  context.phi = phi.get();
+  context.dictionary_data = &d;
+  auto used = [&](const nlohmann::json& options) {
+    context.method_options = options;
+    return pipeline::prepare_method("dict", context, 9, 9).options;
+  };
   // No recommendation: the library's default, OMP.
-  CHECK(pipeline::dict_coding(d, "", "").method == lfnet::dict::CodingMethod::kOmp);
+  CHECK(used(nlohmann::json::object())["method"] == "omp");
   d.training["coding"] = {{"method", "admm"}, {"admm", {{"lambda", 0.001}}}};
-  auto c = pipeline::dict_coding(d, "", "");
-  CHECK(c.method == lfnet::dict::CodingMethod::kAdmm);
-  CHECK(c.admm.lambda == 0.001);
-  // --dict-options overrides field by field; --dict-method last.
-  c = pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "");
-  CHECK(c.method == lfnet::dict::CodingMethod::kAdmm);
-  CHECK(c.admm.lambda == 0.001);
-  CHECK(c.admm.rho == 2.0);
-  CHECK(pipeline::dict_coding(d, R"({"admm": {"rho": 2}})", "omp").method ==
-        lfnet::dict::CodingMethod::kOmp);
-  // From a file, and errors that name the option and the JSON path.
+  auto c = used(nlohmann::json::object());
+  CHECK(c["method"] == "admm");
+  CHECK(c["admm"]["lambda"] == 0.001);
+  // The options given override field by field.
+  c = used({{"dict", {{"admm", {{"rho", 2}}}}}});
+  CHECK(c["method"] == "admm");
+  CHECK(c["admm"]["lambda"] == 0.001);
+  CHECK(c["admm"]["rho"] == 2.0);
+  CHECK(used({{"dict", {{"method", "omp"}}}})["method"] == "omp");
+  // Errors name the option and the JSON path.
+  CHECK_THROWS_WITH(used({{"dict", {{"omp", {{"max_atom", 20}}}}}}),
+                    Catch::Contains("--method-options.dict.omp.max_atom"));
+  CHECK_THROWS_WITH(
+      used({{"dict", {{"method", "lasso"}}}}),
+      Catch::Contains("--method-options.dict.method") && Catch::Contains("known: omp, admm"));
+}
+
+TEST_CASE("--method-options is keyed by method, read from JSON or a file, and checked before work",
+          "[pipeline][method_options]") {
   test::TempDir tmp;
-  write_json_file(tmp / "coding.json", {{"omp", {{"max_atoms", 20}}}});
-  CHECK(pipeline::dict_coding(d, tmp / "coding.json", "").omp.max_atoms == 20);
-  CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": {"max_atom": 20}})", ""),
-                    Catch::Contains("--dict-options:$.omp.max_atom"));
-  CHECK_THROWS_WITH(pipeline::dict_coding(d, R"({"omp": )", ""), Catch::Contains("--dict-options"));
-  CHECK_THROWS_WITH(pipeline::dict_coding(d, "", "lasso"),
-                    Catch::Contains("--dict-method") && Catch::Contains("known: omp, admm"));
+  const std::vector<std::string> run = {"dict", "pinv", "pinv-nlm"};
+  write_json_file(tmp / "options.json", {{"dict", {{"omp", {{"max_atoms", 20}}}}}});
+  CHECK(pipeline::method_options_argument(tmp / "options.json", run)["dict"]["omp"]["max_atoms"] ==
+        20);
+  CHECK(pipeline::method_options_argument("", run).empty());
+  CHECK_THROWS_WITH(pipeline::method_options_argument(R"({"dict": )", run),
+                    Catch::Contains("--method-options"));
+  CHECK_THROWS_WITH(pipeline::method_options_argument(tmp / "none.json", run),
+                    Catch::Contains("--method-options"));
+  // Not keyed by method: the keys are read as method names.
+  CHECK_THROWS_WITH(pipeline::method_options_argument(R"({"omp": {"max_atoms": 20}})", run),
+                    Catch::Contains("unknown method 'omp'"));
+  CHECK_THROWS_WITH(pipeline::method_options_argument(R"({"dict": {}})", {"pinv"}),
+                    Catch::Contains("'dict', which this command does not run (pinv)"));
+  CHECK_THROWS_WITH(
+      pipeline::method_options_argument(R"({"pinv": {"lambda": 1}})", run),
+      Catch::Contains("method 'pinv' takes no options") && Catch::Contains("dict, pinv-nlm"));
+  // pinv-nlm: a registered denoiser, and that denoiser's own options.
+  CHECK_NOTHROW(pipeline::method_options_argument(
+      R"({"pinv-nlm": {"denoiser": "nlm", "options": {"search": 3}}})", run));
+  CHECK_THROWS_WITH(pipeline::method_options_argument(R"({"pinv-nlm": {"denoiser": "bm3d"}})", run),
+                    Catch::Contains("unknown denoiser 'bm3d'") && Catch::Contains("nlm"));
+  CHECK_THROWS_WITH(
+      pipeline::method_options_argument(
+          R"({"pinv-nlm": {"denoiser": "nlm", "options": {"h": -1}}})", run),
+      Catch::Contains("--method-options.pinv-nlm.options") && Catch::Contains("h: must be > 0"));
+  // A run's record says which options it ran with, complete.
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  pipeline::MethodContext context;
+  context.phi = phi.get();
+  context.method_options = {{"pinv-nlm", {{"denoiser", "nlm"}}}};
+  const auto p = pipeline::prepare_method("pinv-nlm", context, 9, 9);
+  CHECK(p.options["denoiser"] == "nlm");
+  CHECK(p.options["options"]["search"] == 5);
+  CHECK(pipeline::prepare_method("pinv", context, 9, 9).options.empty());
 }
 
 TEST_CASE("write_acquisition writes what the optics simulate, and read_acquisition reads it",

@@ -1,12 +1,15 @@
 #include "lfnet/pipeline/experiment.h"
 
+#include <cmath>
 #include <filesystem>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
+#include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/stages.h"
+#include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
 
@@ -18,19 +21,34 @@ void EvaluationConfig::read(JsonReader& r) {
     data.read(d);
   }
   r.get("methods", methods);
+  for (size_t i = 0; i < methods.size(); ++i) {
+    try {
+      recon::find_method(methods[i]);
+    } catch (const ConfigError& e) {
+      throw ConfigError(r.path_of("methods") + "[" + std::to_string(i) + "]: " + e.what());
+    }
+  }
+  r.get("method_options", method_options);
+  check_method_options(method_options, methods, r.path_of("method_options"));
   r.get("strides", strides);
+  for (size_t i = 0; i < strides.size(); ++i) {
+    LFNET_CHECK_AS(ConfigError, strides[i] >= 1, r.path_of("strides"), "[", i,
+                   "]: a stride must be >= 1, got ", strides[i]);
+  }
   FieldReader{r}("modes", modes);
   r.get("noise", noise);
+  for (size_t i = 0; i < noise.size(); ++i) {
+    LFNET_CHECK_AS(ConfigError, noise[i] >= 0 && std::isfinite(noise[i]), r.path_of("noise"), "[",
+                   i, "]: a noise sigma must be finite and >= 0, got ", noise[i]);
+  }
   r.get("model_stage", model_stage);
   r.finish();
 }
 
 nlohmann::json EvaluationConfig::to_json() const {
-  nlohmann::json out = {{"data", data.to_json()},
-                        {"methods", methods},
-                        {"strides", strides},
-                        {"noise", noise},
-                        {"model_stage", model_stage}};
+  nlohmann::json out = {
+      {"data", data.to_json()}, {"methods", methods}, {"method_options", method_options},
+      {"strides", strides},     {"noise", noise},     {"model_stage", model_stage}};
   FieldWriter{out}("modes", modes);
   return out;
 }
@@ -78,17 +96,40 @@ ExperimentConfig ExperimentConfig::load_run(const std::string& run_dir) {
   return config;
 }
 
-ExperimentConfig ExperimentConfig::load(const std::string& path, const std::string& scale,
-                                        const std::vector<std::string>& overrides) {
+namespace {
+
+// A config file with its bases merged in ($.extends) and `scale` applied: the base's own
+// resolution at that scale, then this file's keys (objects merged key by key, lists and values
+// replaced), then this file's patch for the scale. `scale` empty: the file's default_scale,
+// else its base's. `found`: whether some file of the chain has the scale.
+struct ResolvedConfig {
+  nlohmann::json j;
+  std::string scale;
+  bool found = false;
+};
+
+ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
+                              std::vector<std::string>& chain) {
+  LFNET_CHECK_AS(
+      ConfigError, fs::is_regular_file(path), "config ", path,
+      chain.empty() ? " does not exist" : " (extended by " + chain.back() + ") does not exist");
+  const std::string canonical = fs::weakly_canonical(path).string();
+  for (const auto& seen : chain) {
+    LFNET_CHECK_AS(ConfigError, seen != canonical, path, ": $.extends makes a cycle");
+  }
+  LFNET_CHECK_AS(ConfigError, chain.size() < 16, path, ": $.extends goes 16 files deep");
+  chain.push_back(canonical);
   auto j = read_json_file(path);
   LFNET_CHECK_AS(ConfigError, j.is_object(), path, ": a config is a JSON object");
-  std::string chosen = scale;
-  if (chosen.empty() && j.contains("default_scale")) {
+  ResolvedConfig out;
+  out.scale = scale;
+  if (out.scale.empty() && j.contains("default_scale")) {
     LFNET_CHECK_AS(ConfigError, j["default_scale"].is_string(), path,
                    ": $.default_scale: expected the name of a scale, got ",
                    j["default_scale"].dump());
-    chosen = j["default_scale"].get<std::string>();
+    out.scale = j["default_scale"].get<std::string>();
   }
+  nlohmann::json scales = nlohmann::json::object();
   if (j.contains("scales")) {
     LFNET_CHECK_AS(ConfigError, j["scales"].is_object(), path,
                    ": $.scales: expected an object of named config patches");
@@ -97,18 +138,45 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
       LFNET_CHECK_AS(ConfigError, patch.is_object(), path, ": $.scales.", name,
                      ": expected an object (a patch merged into the config)");
     }
+    scales = j["scales"];
   }
-  if (!chosen.empty()) {
-    LFNET_CHECK_AS(ConfigError, j.contains("scales") && j["scales"].contains(chosen), path,
-                   ": $.scales has no scale '", chosen, "'");
-    const nlohmann::json patch = j["scales"][chosen];
-    j.merge_patch(patch);
+  if (j.contains("extends")) {
+    LFNET_CHECK_AS(ConfigError, j["extends"].is_string(), path,
+                   ": $.extends: expected the path of a config (relative to this one), got ",
+                   j["extends"].dump());
+    const auto base_path = fs::path(path).parent_path() / j["extends"].get<std::string>();
+    auto base = resolve_config(base_path.lexically_normal().string(), out.scale, chain);
+    out.scale = base.scale;
+    out.found = base.found;
+    out.j = std::move(base.j);
   }
+  j.erase("extends");
   j.erase("scales");
   j.erase("default_scale");
+  out.j.merge_patch(j);
+  if (!out.scale.empty() && scales.contains(out.scale)) {
+    out.j.merge_patch(scales[out.scale]);
+    out.found = true;
+  }
+  chain.pop_back();
+  return out;
+}
+
+}  // namespace
+
+ExperimentConfig ExperimentConfig::load(const std::string& path, const std::string& scale,
+                                        const std::vector<std::string>& overrides) {
+  std::vector<std::string> chain;
+  auto resolved = resolve_config(path, scale, chain);
+  LFNET_CHECK_AS(ConfigError, resolved.scale.empty() || resolved.found, path,
+                 ": $.scales has no scale '", resolved.scale, "'");
+  auto j = std::move(resolved.j);
   for (const auto& o : overrides) apply_override(j, o);
   auto config = from_json(j, overrides.empty() ? path : path + " (with --set)");
-  config.scale = chosen;
+  config.scale = resolved.scale;
+  // A new run starts from $.init: it must be there (a resumed run may no longer need it).
+  LFNET_CHECK_AS(ConfigError, config.init.empty() || fs::is_regular_file(config.init), path,
+                 ": $.init: ", config.init, " is not a file: give a checkpoint to start from");
   return config;
 }
 
@@ -128,6 +196,7 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   try {
     JsonReader r(j, "$");
     r.get("name", c.name);
+    r.get("init", c.init);
     nlohmann::json phi;
     r.require("phi", phi);
     // A string is NAME[:N] or a file: a calibrated-Phi folder, a spec, a model.

@@ -88,7 +88,7 @@ TrainResult train_experiment(const TrainRequest& request,
   if (lead) {
     OutputFolderPolicy policy;
     policy.force = request.force;
-    policy.inputs = {request.config, request.init};
+    policy.inputs = {request.config, request.init, config.init};
     for (const auto& lf : config.train_data.light_fields) policy.inputs.push_back(lf);
     if (config.distill.enabled()) policy.inputs.push_back(config.distill.teacher);
     folder = std::make_unique<RunFolder>(out, policy, continue_in_place);
@@ -146,8 +146,10 @@ TrainResult train_experiment(const TrainRequest& request,
       resume = last_of(stage);
       spdlog::info("stage {}: resuming from {}", stage.name, resume);
     }
-    // --init applies to the first stage trained; later stages follow the usual chain.
-    last = train_stage(config, stage, *dataset, out, i == 0 ? request.init : "", resume,
+    // --init (else the config's $.init) applies to the first stage; later stages follow the
+    // usual chain.
+    const std::string init = request.init.empty() ? config.init : request.init;
+    last = train_stage(config, stage, *dataset, out, i == 0 ? init : "", resume,
                        request.command_line, comm, saved);
     spdlog::info("stage {} done: {}", stage.name, last);
   }
@@ -180,6 +182,7 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
   if (fs::exists(dictionary)) context.dictionary = dictionary.string();
   ModelCache cache;  // the dictionary is read once for every light field, stride, mode and noise
   context.cache = &cache;
+  context.method_options = ev.method_options;
   const std::string results = (fs::path(out) / "results.jsonl").string();
   if (fs::exists(results)) {
     spdlog::info("evaluations: done ({})", results);

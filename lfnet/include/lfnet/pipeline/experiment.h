@@ -30,6 +30,8 @@ struct StageConfig {
 struct EvaluationConfig {
   LightFieldSources data;  // held-out light fields
   std::vector<std::string> methods = {"net", "no-parallax"};
+  // The methods' options, keyed by method name (as --method-options; docs/methods.md).
+  nlohmann::json method_options = nlohmann::json::object();
   std::vector<int64_t> strides = {5};
   std::vector<optics::SimulationMode> modes = {optics::SimulationMode::kSensor};
   std::vector<double> noise = {0.0};
@@ -69,6 +71,9 @@ void apply_override(nlohmann::json& config, const std::string& override_text);
 struct ExperimentConfig {
   std::string name = "experiment";
   std::string scale;  // the scale applied (its overrides are merged in)
+  // $.init: the checkpoint the first stage starts from (warm start, widening, deepening,
+  // switching the Phi: as `lfnet train --init`, which overrides it); "" starts from scratch.
+  std::string init;
   optics::PhiSpec phi;
   LightFieldSources train_data;
   data::DatasetOptions dataset;
@@ -85,7 +90,10 @@ struct ExperimentConfig {
   nlohmann::json raw;  // the config after merging the scale, as written to config.json
 
   // Reads a config file; `scale` picks one of its "scales" (merge patches) or, when empty,
-  // its "default_scale". `overrides` (KEY.PATH=VALUE, see apply_override) apply last.
+  // its "default_scale". A config may extend another ($.extends: a path relative to it): the
+  // base resolved at the same scale, then this file's keys, then this file's patch for the
+  // scale (docs/experiments.md "Recipes"). `overrides` (KEY.PATH=VALUE, see apply_override)
+  // apply last.
   static ExperimentConfig load(const std::string& path, const std::string& scale = "",
                                const std::vector<std::string>& overrides = {});
   // Reads the config.json of a run folder (the config as it was trained, scale merged).
