@@ -19,11 +19,9 @@ for step in "${steps[@]}"; do
     continue
   fi
   echo "== $step: training ($(date -u +%H:%M))"
-  out=out/generalisation/$step
-  "$lfnet" --threads "$threads" --log-level warn experiment "configs/generalisation/$step.json" \
-    --out "$out" --force
-  cp "$out/models/joint.ckpt" "$model.tmp" && mv "$model.tmp" "$model"
-  cp "$out/training.jsonl" "models/generalisation/$step.training.jsonl"
+  # Its recipe (configs/recipes.json): lfnet experiment, resumable, into out/models/.
+  out=out/models/generalisation/$step
+  LFNET=$lfnet LFNET_THREADS=$threads scripts/models.py make "generalisation/$step"
   # The step's cross-scene records, labelled with the step and its training time.
   scripts/label-records.py "$out" "$step" "results/generalisation-ablation/records.jsonl"
   echo "== $step: done ($(date -u +%H:%M))"

@@ -13,7 +13,6 @@
 # it; `scripts/run-snapshot.sh save OUT SNAPSHOT` refreshes it before a session ends.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-source scripts/model-steps.sh
 lfnet=${LFNET:-build/apps/lfnet}
 config=${CONFIG:-configs/paper/phi-comparison/asp.json}
 scale=${SCALE:-paper}
@@ -31,6 +30,7 @@ else
   # shellcheck disable=SC2086
   "$lfnet" ${LFNET_OPTS:-} train "$config" --scale "$scale" --out "$out" "$@"
 fi
-keep_model "$out" "$model"
+mkdir -p "$(dirname "$model")"
+cp "$(ls -t "$out"/models/*.ckpt | head -n1)" "$model.tmp" && mv "$model.tmp" "$model"
 cp "$out/training.jsonl" "${model%.ckpt}.training.jsonl"
 ls -l "$model"

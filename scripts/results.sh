@@ -2,7 +2,7 @@
 # Makes the records of results/<section>/records.jsonl, then regenerates docs/RESULTS.md with
 # `lfnet report`. Usage: scripts/results.sh [SECTION...]   (default: every section below;
 # `pictures` remakes only the reconstructions the report shows, and `report` nothing).
-# Needs the trained models (models/, scripts/train-models.sh) and ../shared/data.
+# Needs the trained models (models/, scripts/models.py) and ../shared/data.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 lfnet=${LFNET:-build/apps/lfnet}
@@ -109,7 +109,7 @@ noise-sweep() {
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
     VARIANT="trained at sigma 0.2" record "$tmp" --model $pq/noise-trained-0.2.ckpt \
       --lf ../shared/data/hci_antinous --method net --mode sensor --stride 5 --noise "$sigma"
-    # lfnet's architecture (scripts/noise-models.sh): without noise, noise-aware, one sigma.
+    # lfnet's architecture (scripts/models.py): without noise, noise-aware, one sigma.
     local name model
     for name in lfnet-asp-n2 lfnet-asp-n2-first20 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 \
       lfnet-noise/aware-s0.1 lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
@@ -306,7 +306,7 @@ self-ensemble() {
 # The shipped models for other cameras on the light fields of the cross-scene benchmark, each
 # against pinv and no-parallax of its Phi (stride 5): ASP N = 15 and 25, the coded mask and
 # random projections N = 2 of the paper's architecture (configs/models/, quick scale), and
-# lfnet's architecture where it has a model (scripts/lfnet-models.sh: ASP N = 15, the mask).
+# lfnet's architecture where it has a model (scripts/models.py: ASP N = 15, the mask).
 # Random projections are measured per patch (their 9-pixel blocks do not tile a sensor image
 # at stride 5), the others in sensor mode.
 other-phi() {

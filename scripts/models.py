@@ -1,0 +1,210 @@
+#!/usr/bin/python3
+"""Makes the models of models/ from their recipes (configs/recipes.json; docs/models.md, "Recipes").
+
+Every model is one config run by one lfnet command at one scale. A config may extend another
+($.extends) and start from a model ($.init) or distil one ($.distill.teacher): those inputs are
+found in the resolved config (`lfnet train CONFIG --show-config`), and a recipe whose model is
+an input of another is made first.
+
+    scripts/models.py list                 # every recipe, its inputs, whether its model exists
+    scripts/models.py check                # every config valid, every model in models/ has a recipe
+    scripts/models.py make NAME [NAME...]  # make missing models (and their missing inputs)
+    scripts/models.py make --force NAME    # make NAME again, even if its model exists
+
+`make` is resumable: each run goes to out/models/NAME, and running it again after an
+interruption continues the run (`--resume`). The model of the run's last stage is copied to the
+recipe's model path whole or not at all, with its training log beside it (NAME.training.jsonl;
+`log.after` puts the log of the model it was finetuned from first). LFNET (default
+build/apps/lfnet) is the program; LFNET_THREADS (default 1: it runs beside other work) its
+--threads.
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RECIPES = os.path.join("configs", "recipes.json")
+
+
+def fail(message):
+    print("models.py: error: " + message, file=sys.stderr)
+    sys.exit(1)
+
+
+def lfnet():
+    return os.environ.get("LFNET", "build/apps/lfnet")
+
+
+def load_recipes():
+    with open(RECIPES) as f:
+        recipes = json.load(f)["recipes"]
+    by_name = {}
+    for r in recipes:
+        for key in ("name", "model", "config", "scale", "command"):
+            if key not in r:
+                fail(f"{RECIPES}: recipe {r.get('name', '?')} has no '{key}'")
+        if r["name"] in by_name:
+            fail(f"{RECIPES}: two recipes are called {r['name']}")
+        if r["command"] not in ("train", "experiment"):
+            fail(f"{RECIPES}: {r['name']}: command must be train or experiment")
+        by_name[r["name"]] = r
+    for r in recipes:
+        after = r.get("log", {}).get("after")
+        if after is not None and after not in by_name:
+            fail(f"{RECIPES}: {r['name']}: log.after names no recipe ('{after}')")
+    return recipes, by_name
+
+
+def scale_args(recipe):
+    return ["--scale", recipe["scale"]] if recipe["scale"] else []
+
+
+def resolved_config(recipe):
+    """The config as lfnet resolves it (bases, scale); a clear error when it is not valid."""
+    cmd = [lfnet(), "--log-level", "error", "train", recipe["config"]] + scale_args(recipe)
+    out = subprocess.run(cmd + ["--show-config"], capture_output=True, text=True)
+    if out.returncode != 0:
+        fail(f"{recipe['name']}: {recipe['config']}: {out.stderr.strip()}")
+    return json.loads(out.stdout)
+
+
+def inputs_of(config):
+    """The model files a config starts from or distils."""
+    found = []
+    if config.get("init"):
+        found.append(("starts from", config["init"]))
+    teacher = config.get("distill", {}).get("teacher")
+    if teacher:
+        found.append(("distils", teacher))
+    return found
+
+
+def dependencies(recipe, by_model):
+    return [by_model[path] for _, path in inputs_of(resolved_config(recipe)) if path in by_model]
+
+
+def cmd_list(recipes, by_name):
+    for r in recipes:
+        config = resolved_config(r)
+        state = "exists" if os.path.isfile(r["model"]) else "missing"
+        inputs = "; ".join(f"{how} {path}" for how, path in inputs_of(config))
+        scale = r["scale"] or config.get("scale", "") or "default"
+        print(f"{r['name']:<36} {state:<8} {r['command']} {r['config']} ({scale})"
+              + (f"; {inputs}" if inputs else ""))
+
+
+def cmd_check(recipes, by_name):
+    problems = []
+    by_model = {r["model"]: r for r in recipes}
+    for r in recipes:
+        check = subprocess.run([lfnet(), "--log-level", "error", "train", r["config"]]
+                               + scale_args(r) + ["--check"], capture_output=True, text=True)
+        if check.returncode != 0:
+            problems.append(f"{r['name']}: {check.stderr.strip()}")
+            continue
+        for how, path in inputs_of(resolved_config(r)):
+            if path not in by_model and not os.path.isfile(path):
+                problems.append(f"{r['name']}: {how} {path}, which no recipe makes")
+    shipped = []
+    for folder, _, files in os.walk("models"):
+        shipped += [os.path.join(folder, f) for f in files if f.endswith(".ckpt")]
+    for path in sorted(shipped):
+        if path not in by_model:
+            problems.append(f"{path} has no recipe in {RECIPES}")
+    for p in problems:
+        print(p, file=sys.stderr)
+    if problems:
+        fail(f"{len(problems)} problem(s) in {len(recipes)} recipes")
+    print(f"{len(recipes)} recipes: every config is valid at its scale, every input is made by a "
+          f"recipe, and each of the {len(shipped)} models in models/ has one")
+
+
+def compose_log(recipe, by_name, out):
+    own = os.path.join(out, "training.jsonl")
+    target = os.path.splitext(recipe["model"])[0] + ".training.jsonl"
+    lines = []
+    after = recipe.get("log", {}).get("after")
+    if after:
+        first = os.path.splitext(by_name[after]["model"])[0] + ".training.jsonl"
+        with open(first) as f:
+            lines += [line for line in f.read().splitlines() if line]
+    stage = recipe.get("log", {}).get("stage")
+    if os.path.isfile(own):
+        with open(own) as f:
+            for line in f.read().splitlines():
+                if not line:
+                    continue
+                if stage:
+                    entry = json.loads(line)
+                    entry["stage"] = stage
+                    line = json.dumps(entry, separators=(",", ":"))
+                lines.append(line)
+    with open(target + ".tmp", "w") as f:
+        f.write("".join(line + "\n" for line in lines))
+    os.replace(target + ".tmp", target)
+
+
+def make(recipe, by_name, by_model, force, making):
+    name = recipe["name"]
+    if name in making:
+        fail(f"{name}: its inputs make a cycle ({' -> '.join(making + [name])})")
+    if os.path.isfile(recipe["model"]) and not force:
+        print(f"== {name}: {recipe['model']} exists, skipped")
+        return
+    for dep in dependencies(recipe, by_model):
+        make(dep, by_name, by_model, False, making + [name])
+    out = os.path.join("out", "models", name)
+    threads = os.environ.get("LFNET_THREADS", "1")
+    base = [lfnet(), "--threads", threads, recipe["command"]]
+    if os.path.isfile(os.path.join(out, "config.json")) and not force:
+        print(f"== {name}: resuming {out}", flush=True)
+        cmd = base + ["--resume", out]
+    else:
+        print(f"== {name}: {recipe['command']} {recipe['config']} -> {out}", flush=True)
+        cmd = base + [recipe["config"]] + scale_args(recipe) + ["--out", out]
+        if force:
+            cmd.append("--force")
+    if subprocess.run(cmd).returncode != 0:
+        fail(f"{name}: {' '.join(cmd)} failed")
+    with open(os.path.join(out, "config.json")) as f:
+        stages = json.load(f)["stages"]
+    last = stages[-1] if isinstance(stages[-1], str) else stages[-1]["name"]
+    trained = os.path.join(out, "models", last + ".ckpt")
+    os.makedirs(os.path.dirname(recipe["model"]) or ".", exist_ok=True)
+    shutil.copyfile(trained, recipe["model"] + ".tmp")
+    os.replace(recipe["model"] + ".tmp", recipe["model"])
+    compose_log(recipe, by_name, out)
+    print(f"== {name}: {recipe['model']}", flush=True)
+
+
+def main():
+    os.chdir(ROOT)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="what", required=True)
+    sub.add_parser("list", help="every recipe, its inputs, whether its model exists")
+    sub.add_parser("check", help="every config valid, every model in models/ has a recipe")
+    m = sub.add_parser("make", help="make missing models and their missing inputs")
+    m.add_argument("names", nargs="+", metavar="NAME")
+    m.add_argument("--force", action="store_true", help="make the named models again")
+    args = parser.parse_args()
+    if not os.path.isfile(lfnet()):
+        fail(f"{lfnet()} is not built: run scripts/build.sh (or set LFNET)")
+    recipes, by_name = load_recipes()
+    if args.what == "list":
+        cmd_list(recipes, by_name)
+    elif args.what == "check":
+        cmd_check(recipes, by_name)
+    else:
+        by_model = {r["model"]: r for r in recipes}
+        for n in args.names:
+            if n not in by_name:
+                fail(f"unknown recipe '{n}' (known: {', '.join(by_name)})")
+        for n in args.names:
+            make(by_name[n], by_name, by_model, args.force, [])
+
+
+if __name__ == "__main__":
+    main()
