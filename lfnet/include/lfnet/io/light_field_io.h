@@ -108,6 +108,9 @@ torch::Tensor vertical_epi(const LightField& lf, int64_t x = -1, int64_t scale =
 // Writes grid.png, epi_h.png and epi_v.png into `dir`, for looking at a result.
 void write_previews(const LightField& lf, const std::string& dir);
 
+// PFM by hand: OpenImageIO 2.4 (Debian bookworm) reads PFM but has no PFM writer ("could not
+// find a format writer"), and one format is best read and written by one piece of code. GIF
+// (write_parallax_gif) goes through OpenImageIO, which writes it.
 // Reads a PFM (PF: 3 channels, Pf: 1) as (C, H, W) float32, rows top to bottom.
 torch::Tensor read_pfm(const std::string& path);
 // Writes a (H, W) or (C, H, W) float tensor as little-endian PFM.
