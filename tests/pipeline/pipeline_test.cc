@@ -16,6 +16,7 @@
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/simulate.h"
+#include "lfnet/recon/method_registry.h"
 #include "lfnet/recon/methods.h"
 #include "support/test_support.h"
 
@@ -216,6 +217,57 @@ TEST_CASE("evaluate_method scores the registry's methods and the no-parallax bas
   CHECK_THROWS_WITH(pipeline::evaluate_method(truth, "net", context, o, nullptr, false),
                     Catch::Contains("--model"));
   CHECK_FALSE(pinv.contains("equivalent_sigma"));
+}
+
+namespace {
+
+// A method with an option, registered from outside the library: the pseudo-inverse times a
+// gain. Its class and the one register_method call are all it takes.
+struct GainOptions {
+  double gain = 1.0;
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("gain", gain);
+  }
+  void validate() const { LFNET_CHECK_AS(ConfigError, gain > 0, "gain: must be > 0, got ", gain); }
+};
+
+class GainPinvMethod : public recon::MethodWithOptions<GainOptions> {
+ public:
+  std::string name() const override { return "gain-pinv"; }
+  std::string summary() const override { return "the pseudo-inverse times a gain (a test)"; }
+  recon::PatchSolver solver(const recon::MethodResources& r) const override {
+    const double gain = options(r).gain;
+    auto pinv = recon::pinv_solver(optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w));
+    return [pinv, gain](const torch::Tensor& y, const torch::Tensor& phase) {
+      return pinv(y, phase) * gain;
+    };
+  }
+};
+
+}  // namespace
+
+TEST_CASE("a method with options registered from outside is read and run like the built-ins",
+          "[pipeline][method_options]") {
+  recon::register_method(std::make_unique<GainPinvMethod>());
+  CHECK(recon::methods_with_options() == "dict, pinv-nlm, gain-pinv");
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  pipeline::NamedLightField truth{"flat", LightField(torch::full({1, 5, 5, 18, 18}, 0.4))};
+  pipeline::MethodContext context;
+  context.phi = phi.get();
+  const auto o = pipeline::make_eval_options(optics::SimulationMode::kSensor, 0.0, 0, 9, 256, false,
+                                             std::nullopt);
+  torch::Tensor plain, halved;
+  const auto r1 = pipeline::evaluate_method(truth, "gain-pinv", context, o, &plain, false);
+  context.method_options =
+      pipeline::method_options_argument(R"({"gain-pinv": {"gain": 0.5}})", {"gain-pinv"});
+  const auto r2 = pipeline::evaluate_method(truth, "gain-pinv", context, o, &halved, false);
+  CHECK(r1["method_options"] == nlohmann::json({{"gain", 1.0}}));
+  CHECK(r2["method_options"] == nlohmann::json({{"gain", 0.5}}));
+  CHECK(torch::allclose(halved, plain * 0.5, 1e-5, 1e-6));
+  CHECK_THROWS_WITH(
+      pipeline::method_options_argument(R"({"gain-pinv": {"gain": -1}})", {"gain-pinv"}),
+      Catch::Contains("--method-options.gain-pinv.gain: must be > 0"));
 }
 
 TEST_CASE("shot and read noise are recorded as their equivalent Gaussian sigma",
