@@ -1,8 +1,11 @@
 // lfnet: recovers 4D light fields from single coded 2D sensor images.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <regex>
+#include <string>
+#include <thread>
 #include <vector>
 
 #include "command.h"
@@ -37,9 +40,22 @@ int main(int argc, char** argv) {
   app.fallthrough();
   app.set_version_flag("--version", std::string("lfnet ") + lfnet::kVersion);
   GlobalOptions global;
+  // At most 4 threads per core: more only wait for each other (300 threads made a 1 s job
+  // take 39 s), and a typo such as 10000 would make a job appear to hang.
+  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const int max_threads = 4 * cores;
   app.add_option("--threads", global.threads,
-                 "CPU threads (default: OMP_NUM_THREADS, else every core)")
-      ->check(CLI::NonNegativeNumber);
+                 "CPU threads (default: OMP_NUM_THREADS, else every core; at most 4 per core)")
+      ->check(CLI::Validator(
+          [cores, max_threads](std::string& text) -> std::string {
+            int v = 0;
+            if (!CLI::detail::lexical_cast(text, v) || v < 0 || v > max_threads) {
+              return "must be 0 (every core) to " + std::to_string(max_threads) + " (4 per core, " +
+                     std::to_string(cores) + " cores here), got " + text;
+            }
+            return "";
+          },
+          "0.." + std::to_string(max_threads)));
   app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
   app.parse_complete_callback([&] {
@@ -67,6 +83,24 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
+    // A command that does not exist reads better named than as "a subcommand is required".
+    for (int i = 1; i < argc; ++i) {
+      const std::string arg = argv[i];
+      const std::string before = i > 1 ? argv[i - 1] : "";
+      if (arg.empty() || arg[0] == '-' || before == "--threads" || before == "--log-level") {
+        continue;
+      }
+      std::string known;
+      bool found = false;
+      for (auto* sub : app.get_subcommands([](CLI::App*) { return true; })) {
+        known += (known.empty() ? "" : ", ") + sub->get_name();
+        found = found || sub->check_name(arg);
+      }
+      if (!found) {
+        return fail("unknown command '" + arg + "' (known: " + known + "; run lfnet --help)");
+      }
+      break;
+    }
     return fail(e.what() + std::string(" (run lfnet --help)"));
   } catch (const std::exception& e) {
     return fail(e.what());

@@ -4,6 +4,8 @@
 #include <catch2/catch.hpp>
 #include <nlohmann/json.hpp>
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -131,6 +133,12 @@ TEST_CASE("malformed configs and unknown keys name the file and the JSON path",
       {with("/stages", nlohmann::json::array({{{"name", "cnn"}, {"training", 5}}})),
        "$.stages[0].training"},
       {with("/data", nlohmann::json::object()), "no training data"},
+      // The evaluations are checked with the config, not after every stage has trained.
+      {with("/evaluation", nlohmann::json{{"methods", {"pinv", "pinv-nml"}}}),
+       "$.evaluation.methods[1]: unknown method 'pinv-nml'"},
+      {with("/evaluation", nlohmann::json{{"strides", {5, 0}}}), "$.evaluation.strides[1]"},
+      {with("/evaluation", nlohmann::json{{"method_options", {{"dict", {{"omp", 1}}}}}}),
+       "'dict', which this command does not run"},
       // Fractions where whole numbers belong are refused, not rounded.
       {with("/phi", nlohmann::json{{"name", "asp"}, {"n", 2.5}}), "$.phi.n"},
       {with("/training/epochs", 1.7), "$.training.epochs"},
@@ -143,6 +151,52 @@ TEST_CASE("malformed configs and unknown keys name the file and the JSON path",
     expect_error("train " + cfg + " --out " + (tmp / "run"), c.what, tmp.path());
     CHECK_FALSE(fs::exists(tmp / "run"));
   }
+}
+
+TEST_CASE("careless input, round 2: run names, resumes, starts, model paths, threads, commands",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const auto cfg = tmp / "c.json";
+  auto config = nlohmann::json::parse(kTinyConfig);
+  // A run's name is one folder name: out/<name> is what --force replaces.
+  for (const std::string name : {"", ".", "..", "../../escape", "a/b"}) {
+    config["name"] = name;
+    write_bytes(cfg, config.dump());
+    expect_error("train " + cfg + " --check", "$.name: a run's name is one folder name",
+                 tmp.path());
+  }
+  config["name"] = "tiny";
+  write_bytes(cfg, config.dump());
+  // --resume RUN keeps the run's own config; a checkpoint continues one stage only.
+  fs::create_directories(tmp / "run");
+  expect_error("experiment " + cfg + " --resume " + (tmp / "run"), "give no config file",
+               tmp.path());
+  write_bytes(tmp / "last.ckpt", "LFNETCKP");
+  expect_error("train --resume " + (tmp / "last.ckpt"), "is a checkpoint: it continues one stage",
+               tmp.path());
+  // What a run starts from is checked before any data is loaded.
+  write_bytes(tmp / "weights.pt", "not a checkpoint");
+  expect_error("train " + cfg + " --init " + (tmp / "weights.pt"),
+               "not an lfnet checkpoint: give a checkpoint", tmp.path());
+  config["init"] = tmp / "weights.pt";
+  write_bytes(cfg, config.dump());
+  expect_error("train " + cfg, "$.init", tmp.path());
+  // A model path that is a folder or a FIFO: one line, and no read that blocks.
+  expect_error("evaluate --model " + tmp.path().string() + " --lf " + (tmp / "lf"),
+               "is a folder, not a model file", tmp.path());
+  REQUIRE(mkfifo((tmp / "fifo").c_str(), 0600) == 0);
+  expect_error("evaluate --model " + (tmp / "fifo") + " --lf " + (tmp / "lf"),
+               "is not a regular file", tmp.path());
+  // --threads has a bound that the message states; an unknown command is named.
+  std::string out;
+  for (const std::string n : {"10000", "-1"}) {
+    CHECK(run_command(lfnet_binary() + " --threads " + n + " info", out) != 0);
+    INFO(out);
+    CHECK(out.find("--threads") != std::string::npos);
+    CHECK(out.find("per core") != std::string::npos);
+    CHECK(out.size() < 300);
+  }
+  expect_error("frobnicate", "unknown command 'frobnicate' (known: info", tmp.path());
 }
 
 TEST_CASE("out-of-domain numbers on the command line name the option before any work",

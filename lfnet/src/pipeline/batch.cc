@@ -129,6 +129,16 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     return records;
   }
   if (item.kind == "reconstruct") {
+    // What holds for every method, checked once per item: --phi against the model, and the
+    // methods' options (checked for all methods at the start, read again here).
+    nlohmann::json all_options;
+    try {
+      if (!a.model.empty()) check_phi_argument(cache.model(a.model), a.phi);
+      all_options = method_options_argument(a.method_options, methods);
+    } catch (const std::exception& e) {
+      for (const auto& method : methods) records.push_back(failed(method, e.what()));
+      return records;
+    }
     for (const auto& method : methods) {
       try {
         ReconstructRequest q;
@@ -136,9 +146,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.method = method;
         q.model = a.model;
         q.dictionary = a.dictionary;
-        // The options of this method alone (they were checked for all methods at the start).
-        const auto all = method_options_argument(a.method_options, methods);
-        if (all.contains(method)) q.method_options = nlohmann::json{{method, all[method]}}.dump();
+        if (all_options.contains(method)) {
+          q.method_options = nlohmann::json{{method, all_options[method]}}.dump();
+        }
         q.options.stride = a.stride;
         q.options.batch = a.batch;
         q.options.window = a.window;
@@ -149,7 +159,6 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.device = a.device;
         q.precision = a.precision;
         q.tile = a.tile;
-        if (!a.model.empty()) check_phi_argument(cache.model(a.model), a.phi);
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;

@@ -108,7 +108,10 @@ LightField bench_light_field(const BenchOptions& a) {
 }
 
 dict::Dictionary bench_dictionary(const BenchOptions& a, int64_t patch) {
-  if (!a.dictionary.empty()) return dict::load_dictionary(a.dictionary);
+  if (!a.dictionary.empty()) {
+    ModelCache files;  // refuses a network given as the dictionary, with the fix
+    return files.dictionary(a.dictionary);
+  }
   // Trained on another scene than the one reconstructed; few signals and iterations, since
   // OMP's cost depends on the dictionary's size and the atoms per patch, not on its training.
   scene::RandomSceneOptions so;

@@ -196,6 +196,14 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   try {
     JsonReader r(j, "$");
     r.get("name", c.name);
+    // The name makes the default run folder out/<name>, which --force replaces: one path
+    // component, never "", "." or "..".
+    LFNET_CHECK_AS(
+        ConfigError,
+        !c.name.empty() && c.name != "." && c.name != ".." &&
+            c.name.find('/') == std::string::npos && c.name.find('\\') == std::string::npos,
+        "$.name: a run's name is one folder name (no '/', not empty, '.' or '..'), got '", c.name,
+        "'");
     r.get("init", c.init);
     nlohmann::json phi;
     r.require("phi", phi);

@@ -1,5 +1,6 @@
 #include "lfnet/pipeline/models.h"
 
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -28,8 +29,17 @@ torch::Tensor phi_tensor(const optics::Phi& phi, const nn::NetworkOptions& optio
 }
 
 ModelFileKind model_file_kind(const std::string& path) {
+  // Only a regular file: a folder would fail with the stream library's words, and reading a
+  // FIFO or a device could block forever.
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  LFNET_CHECK_AS(IoError, !ec, "cannot read ", path, ": ", ec.message());
+  LFNET_CHECK_AS(IoError, !fs::is_directory(status), path,
+                 " is a folder, not a model file: give the checkpoint or exported file in it");
+  LFNET_CHECK_AS(IoError, fs::is_regular_file(status), path,
+                 " is not a regular file (a FIFO, socket or device): give a model file");
   std::ifstream in(path, std::ios::binary);
-  LFNET_CHECK_AS(IoError, in.good(), "cannot read ", path, ": no such file or not readable");
+  LFNET_CHECK_AS(IoError, in.good(), "cannot read ", path, ": ", std::strerror(errno));
   char head[8] = {0};
   in.read(head, 8);
   if (in.gcount() == 8 && std::memcmp(head, "LFNETCKP", 8) == 0) return ModelFileKind::kCheckpoint;

@@ -36,6 +36,10 @@ ExperimentConfig resolve_request(const TrainRequest& r) {
                  " is not a file: give a checkpoint");
   ExperimentConfig config;
   if (resumes_folder(r)) {
+    LFNET_CHECK_AS(ConfigError, r.config.empty(), "--resume ", r.resume,
+                   " continues the run with the config it recorded (its config.json); give no "
+                   "config file (",
+                   r.config, "), or start a new run from it without --resume");
     LFNET_CHECK_AS(ConfigError, r.scale.empty() && r.set.empty(),
                    "--scale and --set apply to "
                    "a new run; a resumed run keeps the config in ",
@@ -44,6 +48,9 @@ ExperimentConfig resolve_request(const TrainRequest& r) {
     LFNET_CHECK_AS(ConfigError, r.out.empty() || fs::equivalent(r.out, r.resume), "--out ", r.out,
                    " differs from the run folder --resume ", r.resume, " continues");
   } else {
+    LFNET_CHECK_AS(ConfigError, !r.config.empty() || r.resume.empty(), "--resume ", r.resume,
+                   " is a checkpoint: it continues one stage of a run, so give the run's config "
+                   "and --stage NAME too (or give the run folder to continue every stage)");
     LFNET_CHECK_AS(ConfigError, !r.config.empty(), "give a config file (or --resume RUN_FOLDER)");
     config = ExperimentConfig::load(r.config, r.scale, r.set);
   }
@@ -51,6 +58,18 @@ ExperimentConfig resolve_request(const TrainRequest& r) {
     parse_device(r.device);  // a clear error before any data is prepared
     config.training["device"] = r.device;
     config.raw["training"]["device"] = r.device;
+  }
+  // What the first stage starts from must be an lfnet checkpoint: said now, not after the data
+  // is loaded.
+  const std::string init = !r.init.empty() ? r.init : resumes_folder(r) ? "" : config.init;
+  if (!init.empty()) {
+    const auto kind = model_file_kind(init);
+    LFNET_CHECK_AS(ConfigError, kind == ModelFileKind::kCheckpoint,
+                   r.init.empty() ? "$.init " : "--init ", init, " is ",
+                   kind == ModelFileKind::kExported     ? "an exported TorchScript file"
+                   : kind == ModelFileKind::kDictionary ? "a dictionary"
+                                                        : "not an lfnet checkpoint",
+                   ": give a checkpoint (.ckpt) to start from");
   }
   bool found = r.stage.empty();
   for (const auto& s : config.stages) found |= s.name == r.stage;
