@@ -2,7 +2,8 @@
 # Installs every Debian package lfnet needs. Idempotent: does nothing when all are present.
 set -euo pipefail
 
-# libopencv-dev is linked by no lfnet target: scripts/nlm-opencv.cc (a measurement) uses it.
+# libopencv-dev: its core and photo modules are linked by lfnet's cv library (OpenCV's
+# non-local means for pinv-nlm), outside the numerical core.
 packages=(
   build-essential cmake ninja-build pkg-config clang-format clang-tidy
   libtorch-dev libopenblas0-openmp libgloo-dev

@@ -95,7 +95,10 @@ void check_method_options(const nlohmann::json& by_method, const std::vector<std
     LFNET_CHECK_AS(ConfigError, std::find(methods.begin(), methods.end(), name) != methods.end(),
                    source, ": options for method '", name, "', which this command does not run (",
                    list_text(methods), ")");
-    recon::check_method_options(name, options, source + "." + name);
+    std::string path = source;
+    path += ".";
+    path += name;
+    recon::check_method_options(name, options, path);
   }
 }
 
@@ -103,7 +106,7 @@ nlohmann::json method_options_argument(const std::string& text,
                                        const std::vector<std::string>& methods,
                                        const std::string& source) {
   if (text.empty()) return nlohmann::json::object();
-  const auto options = read_json_argument(text, source);
+  auto options = read_json_argument(text, source);
   check_method_options(options, methods, json_argument_source(text, source));
   return options;
 }
