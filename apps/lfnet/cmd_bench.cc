@@ -47,6 +47,9 @@ void run_bench(const BenchArgs& args) {
     return;
   }
   parse_device(a.device);  // a clear error before any work
+  // With the report on standard output (--json -), the progress and the table go to standard
+  // error, so that standard output is the JSON alone.
+  FILE* text = args.json == "-" ? stderr : stdout;
   const auto report = pipeline::bench_report(
       a,
       [&](const pipeline::BenchOptions& narrowed, const std::string& method, int64_t stride,
@@ -54,11 +57,11 @@ void run_bench(const BenchArgs& args) {
         return args.in_process ? pipeline::bench_case(narrowed, method, stride, gemm)
                                : pipeline::bench_case_in_child(narrowed, method, stride, gemm);
       },
-      [](const std::string& line) {
-        std::fputs(line.c_str(), stdout);
-        std::fflush(stdout);
+      [text](const std::string& line) {
+        std::fputs(line.c_str(), text);
+        std::fflush(text);
       });
-  std::printf("\n%s", pipeline::bench_table(report).c_str());
+  std::fprintf(text, "\n%s", pipeline::bench_table(report).c_str());
   if (!args.json.empty()) {
     if (args.json == "-") {
       std::printf("%s\n", report.dump(2).c_str());
@@ -67,6 +70,12 @@ void run_bench(const BenchArgs& args) {
       std::printf("wrote %s\n", args.json.c_str());
     }
   }
+  // A bench in which no case ran is a failure (the report, written above, says why).
+  int64_t failed = 0;
+  for (const auto& r : report["cases"]) failed += r.contains("error") ? 1 : 0;
+  const auto cases = static_cast<int64_t>(report["cases"].size());
+  LFNET_CHECK_AS(Error, cases == 0 || failed < cases, "bench: every case failed (", failed, " of ",
+                 cases, "); the first: ", report["cases"][0].value("error", std::string()));
 }
 
 }  // namespace

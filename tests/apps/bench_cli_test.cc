@@ -75,3 +75,24 @@ TEST_CASE("lfnet bench refuses a device it does not have", "[app]") {
   CHECK(run_command(lfnet_binary() + " bench --methods net --architecture unet", out) != 0);
   CHECK(out.find("--architecture: 'unet' is unknown (known: paper, lfnet)") != std::string::npos);
 }
+
+TEST_CASE("lfnet bench --json - writes the JSON alone, and a bench with no case run fails",
+          "[app]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string small =
+      " --threads 1 bench --height 20 --width 20 --strides 9 --reps 1"
+      " --skip-kernels";
+  // Standard output is the report alone (progress and table on standard error).
+  REQUIRE(run_command("(" + lfnet_binary() + small + " --methods pinv --json - 2>/dev/null)",
+                      out) == 0);
+  const auto report = nlohmann::json::parse(out);
+  CHECK(report["cases"].size() == 1);
+  // Every case failing (each in its child process: a JSON file is no dictionary): non-zero,
+  // with the reason.
+  lfnet::write_json_file(tmp / "json.json", {{"not", "a dictionary"}});
+  CHECK(run_command(lfnet_binary() + small + " --methods dict --dictionary " + (tmp / "json.json"),
+                    out) != 0);
+  INFO(out);
+  CHECK(out.find("every case failed (1 of 1)") != std::string::npos);
+}
