@@ -73,6 +73,21 @@ TEST_CASE("malformed JSON is a ConfigError with the byte offset", "[core][json]"
   CHECK_THROWS_AS(lfnet::parse_json("{", "x"), lfnet::ConfigError);
 }
 
+TEST_CASE("a key given twice in one object is refused with its path, not silently dropped",
+          "[core][json]") {
+  CHECK_THROWS_WITH(lfnet::parse_json(R"({"training": {"lr": 1, "lr": 2}})", "cfg.json"),
+                    Catch::Contains("cfg.json: $.training.lr: the key appears twice"));
+  CHECK_THROWS_WITH(
+      lfnet::parse_json(R"({"stages": [{"name": "ae"}, {"name": "cnn", "name": "joint"}]})", "c"),
+      Catch::Contains("$.stages[].name"));
+  CHECK_THROWS_WITH(lfnet::parse_json(R"({"a": 1, "b": {}, "a": 3})", "c"),
+                    Catch::Contains("c: $.a: the key appears twice"));
+  // The same key in different objects is no duplicate.
+  const auto j =
+      lfnet::parse_json(R"({"a": {"x": 1}, "b": {"x": 2}, "c": [{"x": 3}, {"x": 4}]})", "c");
+  CHECK(j["c"][1]["x"] == 4);
+}
+
 TEST_CASE("JSON files are written atomically and read back", "[core][json]") {
   lfnet::test::TempDir tmp;
   nlohmann::json j = {{"a", 1}, {"b", {1, 2, 3}}};

@@ -1,17 +1,16 @@
 #include "lfnet/core/json.h"
 
-#include <set>
-#include <vector>
-
-#include "lfnet/core/output.h"
-
 #include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <set>
 #include <sstream>
+#include <vector>
+
+#include "lfnet/core/output.h"
 
 namespace lfnet {
 
@@ -61,8 +60,44 @@ void JsonReader::finish() const {
 }
 
 nlohmann::json parse_json(const std::string& text, const std::string& source) {
+  // A key that appears twice in one object is refused: the parser would keep the last and
+  // drop the first without a word. Each frame is an open object or list; its name is the key
+  // it was found under ("[]" inside a list).
+  struct Frame {
+    bool object = false;
+    std::string name, key;
+    std::set<std::string> keys;
+  };
+  std::vector<Frame> frames;
+  std::string duplicate;
+  using Event = nlohmann::json::parse_event_t;
+  auto check = [&](int, Event event, nlohmann::json& parsed) {
+    if (!duplicate.empty()) return true;
+    if (event == Event::object_start || event == Event::array_start) {
+      Frame f;
+      f.object = event == Event::object_start;
+      if (!frames.empty()) f.name = frames.back().object ? frames.back().key : "[]";
+      frames.push_back(std::move(f));
+    } else if (event == Event::object_end || event == Event::array_end) {
+      if (!frames.empty()) frames.pop_back();
+    } else if (event == Event::key && !frames.empty()) {
+      auto& f = frames.back();
+      f.key = parsed.get<std::string>();
+      if (!f.keys.insert(f.key).second) {
+        duplicate = "$";
+        for (size_t i = 1; i < frames.size(); ++i) {
+          duplicate += frames[i].name == "[]" ? "[]" : "." + frames[i].name;
+        }
+        duplicate += "." + f.key;
+      }
+    }
+    return true;
+  };
   try {
-    return nlohmann::json::parse(text);
+    auto j = nlohmann::json::parse(text, check);
+    LFNET_CHECK_AS(ConfigError, duplicate.empty(), source, ": ", duplicate,
+                   ": the key appears twice in one object (only one may be given)");
+    return j;
   } catch (const nlohmann::json::parse_error& e) {
     throw ConfigError(source + ": malformed JSON at byte " + std::to_string(e.byte) + ": " +
                       e.what());
