@@ -116,7 +116,7 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                   "scene spec to render instead of a random scene (its own size)");
   cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")
       ->check(CLI::PositiveNumber);
-  cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)");
+  cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)")->check(kSeed);
   cmd->add_option("--conv-batch", a->conv_batch, "patches per Conv4d timing (default 256)")
       ->check(CLI::PositiveNumber);
   cmd->add_option("--reps", a->reps, "repetitions of the kernel timings (best is kept)")

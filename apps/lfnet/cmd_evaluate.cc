@@ -73,7 +73,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "file-naming pattern of --lf: view_{row}_{col}.png, or "
                   "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
   cmd->add_option("--noise", q.noise, "Gaussian noise sigma, relative to a white scene's mean")
-      ->check(kFiniteNonNegative);
+      ->check(kNoiseSigma);
   cmd->add_option("--effects", q.effects,
                   "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
                   "--noise sets its Gaussian sigma")
@@ -86,7 +86,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--out", a->out,
                   "write the reconstruction as a light-field folder with a viewer (index.html)");
   cmd->add_flag("--force", a->force, "replace an existing --out folder");
-  cmd->add_option("--seed", q.seed, "noise seed");
+  cmd->add_option("--seed", q.seed, "noise seed")->check(kSeed);
   cmd->add_option("--batch", q.batch, "patches per forward pass")->check(CLI::PositiveNumber);
   cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
   cmd->callback([a] { run_evaluate(*a); });

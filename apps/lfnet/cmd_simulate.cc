@@ -102,8 +102,8 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                   "(the paper's protocol)");
   cmd->add_option("--noise", args->noise,
                   "Gaussian noise sigma, relative to a white scene's mean measurement (1)")
-      ->check(kFiniteNonNegative);
-  cmd->add_option("--seed", args->seed, "seed of the noise")->capture_default_str();
+      ->check(kNoiseSigma);
+  cmd->add_option("--seed", args->seed, "seed of the noise")->capture_default_str()->check(kSeed);
   cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)");
   cmd->add_option("--views", args->source.views,
                   "angular window R0:R1,C0:C1, 1-based inclusive (default: the central 5x5)");

@@ -27,16 +27,33 @@ struct GlobalOptions {
 
 // Option checks with short messages that name the value: CLI11's own ranges print the
 // type's limits (a 309-digit number for a double).
-// A finite number >= 0 (noise sigmas): nan, inf and negatives are refused.
-inline const CLI::Validator kFiniteNonNegative(
+// A Gaussian noise sigma, relative to a white scene's measurement: a finite number from 0 to
+// 10 (sigma 10 already buries any signal; larger values would write infinities into sensor
+// files). nan, inf, negatives and overflowing numbers are refused with this message.
+inline const CLI::Validator kNoiseSigma(
     [](std::string& text) -> std::string {
       double v = 0;
-      if (!CLI::detail::lexical_cast(text, v) || !std::isfinite(v) || v < 0) {
-        return "must be a finite number >= 0, got " + text;
+      if (!CLI::detail::lexical_cast(text, v) || !std::isfinite(v) || v < 0 || v > 10) {
+        return "must be a noise sigma from 0 to 10 (relative to white), got " + text;
       }
       return "";
     },
-    "FLOAT>=0");
+    "0..10");
+// A seed: a whole number from 0 to 2^64 - 1, read exactly: -1 does not wrap around and larger
+// numbers do not saturate to the same seed.
+inline const CLI::Validator kSeed(
+    [](std::string& text) -> std::string {
+      const std::string message =
+          "must be a whole number from 0 to 18446744073709551615 (2^64 - 1), got " + text;
+      if (text.empty() || text.size() > 20 ||
+          text.find_first_not_of("0123456789") != std::string::npos) {
+        return message;
+      }
+      // 20 digits: compare with 2^64 - 1 as text.
+      if (text.size() == 20 && text > "18446744073709551615") return message;
+      return "";
+    },
+    "0..2^64-1");
 // A patch stride: a whole number from 1 to 64 (the largest patch side; the patch size itself
 // bounds it further when the patch is known).
 inline const CLI::Validator kStride(

@@ -212,6 +212,13 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
   expect_error(eval + "--noise -0.1", "--noise", tmp.path());
   const std::string sim = "simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "acq") + " ";
   expect_error(sim + "--noise nan", "--noise", tmp.path());
+  // Overflowing noise would write infinities; seeds beyond 64 bits or negative would wrap or
+  // saturate to one seed: each is refused with its flag and its range.
+  expect_error(sim + "--noise 1e308", "--noise: must be a noise sigma from 0 to 10", tmp.path());
+  expect_error(eval + "--noise 1e39", "--noise: must be a noise sigma from 0 to 10", tmp.path());
+  expect_error(sim + "--seed -1", "--seed: must be a whole number from 0 to", tmp.path());
+  expect_error(eval + "--seed 18446744073709551616", "(2^64 - 1)", tmp.path());
+  expect_error(sim + "--seed 1.5", "--seed", tmp.path());
   expect_error(sim + "--views 1:99999999999999999999,1:5", "99999999999999999999", tmp.path());
   CHECK_FALSE(fs::exists(tmp / "acq"));
   // Options that belong to another method are refused, not ignored.
