@@ -369,7 +369,7 @@ TEST_CASE("the dict method codes as its dictionary recommends, unless its option
       Catch::Contains("--method-options.dict.method") && Catch::Contains("known: omp, admm"));
 }
 
-TEST_CASE("--method-options is keyed by method, read from JSON or a file, and checked before work",
+TEST_CASE("method options are keyed by method, read from JSON or a file, and checked before work",
           "[pipeline][method_options]") {
   test::TempDir tmp;
   const std::vector<std::string> run = {"dict", "pinv", "pinv-nlm"};
