@@ -152,6 +152,10 @@ TEST_CASE(
   const auto config = lfnet::read_json_file(tmp / "run/config.json");
   CHECK(config["training"]["epochs"] == 2);
   const std::string ae = read_bytes(tmp / "run/models/ae.ckpt");
+  // Running the config again into it says how to continue, not only how to discard.
+  CHECK(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run")), out) != 0);
+  CHECK(out.find("holds a run (its config.json); continue it with --resume") != std::string::npos);
+  CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
   // Resuming the folder keeps the finished stage and trains the other, with the run's config.
   REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
   CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);

@@ -96,6 +96,15 @@ TrainResult train_experiment(const TrainRequest& request,
   const bool continue_folder = resumes_folder(request);
   // Resuming one stage from its checkpoint writes into the folder that holds it.
   const bool continue_in_place = continue_folder || !request.resume.empty();
+  // An interrupted run in the way: say how to continue it, not only how to discard it (rank 0
+  // owns the folder; the launcher stops the others).
+  LFNET_CHECK_AS(ConfigError,
+                 !lead || continue_in_place || request.force ||
+                     !fs::is_regular_file(fs::path(out) / "config.json"),
+                 "--out ", out,
+                 " exists and is not empty: it holds a run (its config.json); continue it with "
+                 "--resume ",
+                 out, " (no config file), or pass --force to start it afresh");
   std::vector<StageConfig> stages;
   for (const auto& s : config.stages) {
     if (request.stage.empty() || s.name == request.stage) stages.push_back(s);
