@@ -444,12 +444,6 @@ std::string shell_quote(const std::string& s) {
   return out + "'";
 }
 
-std::string join(const std::vector<std::string>& items, const std::string& sep) {
-  std::string out;
-  for (size_t i = 0; i < items.size(); ++i) out += (i ? sep : "") + items[i];
-  return out;
-}
-
 }  // namespace
 
 nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& method, int64_t stride,

@@ -10,6 +10,7 @@
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/text.h"
 #include "lfnet/cv/opencv.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/simulate.h"
@@ -75,14 +76,6 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   return p;
 }
 
-namespace {
-std::string list_text(const std::vector<std::string>& names) {
-  std::string out;
-  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
-  return out;
-}
-}  // namespace
-
 void check_method_options(const nlohmann::json& by_method, const std::vector<std::string>& methods,
                           const std::string& source) {
   cv::register_opencv();  // the denoisers pinv-nlm's options may name
@@ -94,7 +87,7 @@ void check_method_options(const nlohmann::json& by_method, const std::vector<std
     recon::find_method(name);  // an unknown method, with the known ones
     LFNET_CHECK_AS(ConfigError, std::find(methods.begin(), methods.end(), name) != methods.end(),
                    source, ": options for method '", name, "', which this command does not run (",
-                   list_text(methods), ")");
+                   join(methods, ", "), ")");
     std::string path = source;
     path += ".";
     path += name;

@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <string>
+#include <vector>
 
 namespace lfnet {
 
@@ -16,6 +17,13 @@ std::string format_text(const char* format, Args... args) {
   std::snprintf(text.data(), text.size(), format, args...);  // NOLINT
   text.pop_back();
   return text;
+}
+
+// The items with `separator` between them: join({"a", "b"}, ", ") is "a, b".
+inline std::string join(const std::vector<std::string>& items, const std::string& separator) {
+  std::string out;
+  for (size_t i = 0; i < items.size(); ++i) out += (i ? separator : "") + items[i];
+  return out;
 }
 
 }  // namespace lfnet
