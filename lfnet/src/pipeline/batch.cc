@@ -265,7 +265,10 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
       throw ConfigError(std::string("--methods: ") + e.what());
     }
   }
-  method_options_argument(a.method_options, methods);  // checked before any work
+  // Checked before any work, and read once: the items take it inline, not from its file again.
+  BatchOptions resolved = a;
+  const auto method_options = method_options_argument(a.method_options, methods);
+  resolved.method_options = method_options.empty() ? "" : method_options.dump();
   OutputFolderPolicy policy;
   policy.force = a.force;
   policy.inputs = {a.in, a.model, a.dictionary};
@@ -311,7 +314,7 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   for (size_t index : mine) {
     const auto& item = items[index];
     bar.set_note(item.name);
-    for (auto& r : process_item(item, a, methods, a.out, cache)) {
+    for (auto& r : process_item(item, resolved, methods, a.out, cache)) {
       const bool ok = r["status"] == "ok";
       summary.failures += !ok;
       const std::string file =
