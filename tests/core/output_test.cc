@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 #include <catch2/catch.hpp>
+#include <csignal>
 
 #include <filesystem>
 #include <fstream>
@@ -117,14 +118,98 @@ TEST_CASE("temporaries of dead writers are removed, a live writer's are kept", "
   CHECK_FALSE(fs::exists(stale_file));
   CHECK(fs::exists(live_file));
   CHECK(fs::exists(unrelated));
-  // Folders: a dead writer's half-built folder and a folder it was replacing.
+  // Folders: a dead writer's half-built folder, and the folder it was replacing after the new
+  // one took its place (the swap was complete: the old one goes).
   const fs::path half = tmp.path() / (".rec.tmp" + std::to_string(dead));
   const fs::path old = tmp.path() / (".rec.tmp" + std::to_string(dead) + ".old");
   fs::create_directories(half);
   fs::create_directories(old);
-  lfnet::write_folder(tmp / "rec", {}, [](const std::string&) {});
+  std::ofstream(old / "old.txt") << "old";
+  fs::create_directories(tmp.path() / "rec");
+  std::ofstream(tmp.path() / "rec/new.txt") << "new";
+  lfnet::OutputFolderPolicy force;
+  force.force = true;
+  lfnet::write_folder(tmp / "rec", force, [](const std::string& dir) {
+    std::ofstream(fs::path(dir) / "a.txt") << "a";
+  });
   CHECK_FALSE(fs::exists(half));
   CHECK_FALSE(fs::exists(old));
+  CHECK(fs::exists(tmp.path() / "rec/a.txt"));
+}
+
+TEST_CASE("what an interrupted replacement moved aside comes back", "[core][output]") {
+  lfnet::test::TempDir tmp;
+  const pid_t dead = dead_pid();
+  // A folder swap cut between its two renames: the old folder aside, no folder in its place.
+  const fs::path old = tmp.path() / (".rec.tmp" + std::to_string(dead) + ".old");
+  fs::create_directories(old);
+  std::ofstream(old / "old.txt") << "old";
+  CHECK(lfnet::remove_stale_temporaries(tmp.path() / "rec"));
+  CHECK(read_text(tmp.path() / "rec/old.txt") == "old");
+  CHECK_FALSE(fs::exists(old));
+  // A run replaced by --force whose new run died before its first checkpoint: the new run goes,
+  // the old one comes back, whoever opens the folder next (here a resume).
+  const std::string run = tmp / "run";
+  const fs::path replaced = tmp.path() / (".run.tmp" + std::to_string(dead) + ".replaced");
+  fs::create_directories(replaced / "models");
+  std::ofstream(replaced / "models/ae.ckpt") << "old run";
+  fs::create_directories(run);
+  std::ofstream(fs::path(run) / "config.json") << "{\"new\": true}";
+  {
+    lfnet::RunFolder resumed(run, {}, /*resume=*/true);
+    CHECK(read_text(fs::path(run) / "models/ae.ckpt") == "old run");
+    CHECK_FALSE(fs::exists(fs::path(run) / "config.json"));
+  }
+  CHECK(entries(tmp.path()) == 2);  // rec and run: nothing aside, no lock
+  // A committed --force run leaves nothing to put back: its old run is gone for good.
+  lfnet::OutputFolderPolicy force;
+  force.force = true;
+  {
+    lfnet::RunFolder fresh(run, force);
+    std::ofstream(fs::path(run) / "new.ckpt") << "new";
+    fresh.commit();
+  }
+  CHECK_FALSE(lfnet::remove_stale_temporaries(run));
+  CHECK(fs::exists(fs::path(run) / "new.ckpt"));
+  CHECK_FALSE(fs::exists(fs::path(run) / "models"));
+  CHECK(entries(tmp.path()) == 2);
+}
+
+TEST_CASE("an output that cannot be written names the output and the system's reason",
+          "[core][output]") {
+  lfnet::test::TempDir tmp;
+  // A writer that fails with the temporary's name in its message: the message names the target.
+  try {
+    lfnet::write_file_atomically(tmp / "out.png", [](const std::string& temporary) {
+      throw lfnet::IoError("cannot write " + temporary + ": some library failed");
+    });
+    FAIL("no error");
+  } catch (const lfnet::IoError& e) {
+    CHECK(std::string(e.what()) == "cannot write " + (tmp / "out.png") + ": some library failed");
+  }
+  CHECK(entries(tmp.path()) == 0);
+  // The same inside a folder being written.
+  try {
+    lfnet::write_folder(tmp / "rec", {}, [](const std::string& dir) {
+      throw lfnet::IoError("cannot write " + dir + "/index.html");
+    });
+    FAIL("no error");
+  } catch (const lfnet::IoError& e) {
+    CHECK(std::string(e.what()) == "cannot write " + (tmp / "rec") + "/index.html");
+  }
+  CHECK(entries(tmp.path()) == 0);
+  // A folder the lock had to make goes again when the output never came.
+  CHECK_THROWS(lfnet::write_folder(tmp / "a/b/rec", {},
+                                   [](const std::string&) { throw lfnet::IoError("failed"); }));
+  CHECK(entries(tmp.path()) == 0);
+  // write_all reports the system's reason: a pipe with no reader.
+  int fds[2];
+  REQUIRE(pipe(fds) == 0);
+  close(fds[0]);
+  signal(SIGPIPE, SIG_IGN);
+  CHECK_THROWS_WITH(lfnet::write_all(fds[1], "data", "the pipe"),
+                    Catch::Contains("cannot write the pipe: Broken pipe"));
+  close(fds[1]);
 }
 
 TEST_CASE("output files: refused when taken or a folder, replaced with force", "[core][output]") {
@@ -135,6 +220,9 @@ TEST_CASE("output files: refused when taken or a folder, replaced with force", "
   CHECK_THROWS_WITH(lfnet::check_output_file(tmp / "in.json", policy), Catch::Contains("--json"));
   CHECK_THROWS_WITH(lfnet::check_output_file(tmp.path().string(), policy),
                     Catch::Contains("contains the input"));
+  // An empty file (made by mktemp, say) holds nothing to lose; one with content needs --force.
+  lfnet::write_text_file(tmp / "out.json", "");
+  CHECK_NOTHROW(lfnet::check_output_file(tmp / "out.json", policy));
   lfnet::write_text_file(tmp / "out.json", "{}");
   CHECK_THROWS_WITH(lfnet::check_output_file(tmp / "out.json", policy), Catch::Contains("--force"));
   policy.force = true;

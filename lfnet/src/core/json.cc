@@ -133,12 +133,7 @@ nlohmann::json read_json_argument(const std::string& text, const std::string& op
 }
 
 void write_json_file(const std::string& path, const nlohmann::json& value) {
-  write_file_atomically(path, [&](const std::string& tmp) {
-    std::ofstream out(tmp);
-    if (!out) throw IoError("cannot write " + path);
-    out << value.dump(2) << "\n";
-    if (!out.good()) throw IoError("cannot write " + path);
-  });
+  write_text_file(path, value.dump(2) + "\n");
 }
 
 namespace {

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -54,17 +55,21 @@ fs::path temporary_path(const fs::path& target) {
                               name.extension().string());
 }
 
-void remove_stale_temporaries(const fs::path& target) {
-  // Temporaries are `.<stem>.tmp<pid><extension>` (temporary_path) and, for a folder being
-  // replaced, `.<name>.tmp<pid>.old`.
+bool remove_stale_temporaries(const fs::path& target) {
+  // Temporaries are `.<stem>.tmp<pid><extension>` (temporary_path); a folder being replaced
+  // (write_folder) is moved to `.<name>.tmp<pid>.old`, a run replaced by --force (RunFolder) to
+  // `.<name>.tmp<pid>.replaced`, and either goes through `.<name>.tmp<pid>.discard` on its way
+  // out.
   const fs::path name = target.filename();
   const std::string prefixes[] = {"." + name.stem().string() + ".tmp",
                                   "." + name.string() + ".tmp"};
-  const std::string endings[] = {name.extension().string(), ".old", ""};
+  const std::string endings[] = {name.extension().string(), ".old", ".replaced", ".discard", ""};
   std::error_code ec;
+  std::vector<std::pair<fs::path, std::string>> dead;  // entry, ending
   for (fs::directory_iterator it(folder_of(target), ec), end; !ec && it != end; it.increment(ec)) {
     const std::string entry = it->path().filename().string();
     pid_t pid = 0;
+    std::string kind;
     for (const auto& prefix : prefixes) {
       if (entry.rfind(prefix, 0) != 0) continue;
       const size_t digits_end = entry.find_first_not_of("0123456789", prefix.size());
@@ -72,14 +77,69 @@ void remove_stale_temporaries(const fs::path& target) {
       const std::string rest = digits_end == std::string::npos ? "" : entry.substr(digits_end);
       if (digits.empty() || digits.size() > 9) continue;
       for (const auto& ending : endings) {
-        if (rest == ending) pid = static_cast<pid_t>(std::stol(digits));
+        if (rest == ending) {
+          pid = static_cast<pid_t>(std::stol(digits));
+          kind = ending;
+        }
       }
     }
     if (pid <= 0 || pid == ::getpid()) continue;
-    if (::kill(pid, 0) != 0 && errno == ESRCH) {
-      std::error_code ignored;
-      fs::remove_all(it->path(), ignored);
+    if (::kill(pid, 0) != 0 && errno == ESRCH) dead.emplace_back(it->path(), kind);
+  }
+  bool restored = false;
+  for (const auto& [path, kind] : dead) {
+    std::error_code ignored;
+    const bool target_exists = fs::exists(fs::symlink_status(target, ignored));
+    // A run replaced by --force whose new run never reached its first checkpoint comes back (the
+    // new run's folder goes); a folder swap cut between its two renames gets its old folder back.
+    const bool put_back = kind == ".replaced" || (kind == ".old" && !target_exists);
+    if (put_back && fs::is_directory(path, ignored)) {
+      if (target_exists) {
+        const fs::path discard = temporary_path(target).string() + ".discard";
+        fs::rename(target, discard, ignored);
+        fs::remove_all(discard, ignored);
+      }
+      fs::rename(path, target, ignored);
+      restored = restored || !ignored;
+      if (!ignored) continue;
     }
+    fs::remove_all(path, ignored);
+  }
+  return restored;
+}
+
+namespace {
+
+// ": No space left on device" when the file system holding `p` has no block left: libraries
+// that write images or archives report a failed write without the system's reason.
+std::string full_disk_reason(const fs::path& p, int error) {
+  if (error == ENOSPC || error == EDQUOT || error == EFBIG)
+    return std::string(": ") + std::strerror(error);
+  struct statvfs fs_info {};
+  if (::statvfs(folder_of(p).c_str(), &fs_info) == 0 && fs_info.f_bavail == 0) {
+    return std::string(": ") + std::strerror(ENOSPC);
+  }
+  return "";
+}
+
+// `text` with every `from` replaced by `to`: an error about a temporary names what it becomes.
+std::string replace_all(std::string text, const std::string& from, const std::string& to) {
+  if (from.empty()) return text;
+  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
+    text.replace(at, from.size(), to);
+  }
+  return text;
+}
+
+}  // namespace
+
+void write_all(int fd, std::string_view data, const std::string& path) {
+  size_t done = 0;
+  while (done < data.size()) {
+    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError("cannot write " + path + ": " + std::strerror(n < 0 ? errno : EIO));
+    done += static_cast<size_t>(n);
   }
 }
 
@@ -89,8 +149,16 @@ void write_file_atomically(const std::string& target,
   const std::string tmp = temporary_path(path).string();
   std::error_code ec;
   try {
+    errno = 0;
     write(tmp);
     if (durable) sync_path(tmp, O_RDONLY);
+  } catch (const IoError& e) {
+    // Before the temporary goes, while the space it took is still taken.
+    const std::string what = replace_all(e.what(), tmp, target);
+    const std::string reason =
+        what.find(std::strerror(ENOSPC)) == std::string::npos ? full_disk_reason(tmp, errno) : "";
+    fs::remove(tmp, ec);
+    throw IoError(what + reason);
   } catch (...) {
     fs::remove(tmp, ec);
     throw;
@@ -105,14 +173,25 @@ void write_file_atomically(const std::string& target,
   if (durable) sync_path(folder_of(path), O_RDONLY | O_DIRECTORY);
 }
 
+void write_bytes_file(const std::string& target, std::string_view bytes, bool durable) {
+  write_file_atomically(
+      target,
+      [&](const std::string& tmp) {
+        const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        if (fd < 0) throw IoError("cannot write " + target + ": " + std::strerror(errno));
+        try {
+          write_all(fd, bytes, target);
+        } catch (...) {
+          ::close(fd);
+          throw;
+        }
+        if (::close(fd) != 0) throw IoError("cannot write " + target + ": " + std::strerror(errno));
+      },
+      durable);
+}
+
 void write_text_file(const std::string& target, const std::string& text) {
-  write_file_atomically(target, [&](const std::string& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    LFNET_CHECK_AS(IoError, out, "cannot write ", target);
-    out << text;
-    out.flush();
-    LFNET_CHECK_AS(IoError, out.good(), "cannot write ", target);
-  });
+  write_bytes_file(target, text);
 }
 
 void check_output_apart(const std::string& output, const std::vector<std::string>& inputs,
@@ -131,6 +210,11 @@ void check_output_apart(const std::string& output, const std::vector<std::string
 OutputLock::OutputLock(const std::string& output, const std::string& option) {
   fs::path target = normalised(output);
   std::error_code ec;
+  // The folders made here go again with the lock if the output never came (a failed write).
+  for (fs::path p = target.parent_path(); !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+    made_ = p;
+    if (p == p.parent_path()) break;
+  }
   fs::create_directories(target.parent_path(), ec);
   LFNET_CHECK_AS(IoError, !ec, "cannot create the folder of ", option, " ", output, ": ",
                  ec.message());
@@ -164,6 +248,12 @@ OutputLock::~OutputLock() {
   if (fd_ < 0) return;
   ::unlink(path_.c_str());
   ::close(fd_);
+  // Empty folders this lock made, innermost first, up to the first it made.
+  std::error_code ec;
+  for (fs::path p = fs::path(path_).parent_path(); !made_.empty(); p = p.parent_path()) {
+    if (!fs::is_empty(p, ec) || ec || !fs::remove(p, ec)) break;
+    if (p == made_) break;
+  }
 }
 
 void check_output_folder(const std::string& out, const OutputFolderPolicy& policy) {
@@ -188,7 +278,8 @@ void check_output_file(const std::string& out, const OutputFolderPolicy& policy)
   if (!fs::exists(status)) return;
   LFNET_CHECK_AS(ConfigError, !fs::is_directory(status), policy.option, " ", out,
                  " is a folder: name a file");
-  LFNET_CHECK_AS(ConfigError, policy.force, policy.option, " ", out,
+  // An empty file (one made by mktemp, say) holds nothing to lose, as an empty folder.
+  LFNET_CHECK_AS(ConfigError, policy.force || fs::file_size(out, ec) == 0, policy.option, " ", out,
                  " exists: choose another file or pass --force to replace it");
 }
 
@@ -211,16 +302,19 @@ void write_folder(const std::string& out, const OutputFolderPolicy& policy,
   const fs::path target = normalised(out);
   check_output_folder(out, policy);
   OutputLock lock(out, policy.option);
+  remove_stale_temporaries(target);  // may put back a folder an interrupted swap had moved aside
   check_output_folder(out, policy);  // again, now that no other writer can change it
   std::error_code ec;
   const bool exists = fs::exists(fs::symlink_status(target, ec));
-  remove_stale_temporaries(target);
   const fs::path tmp = temporary_path(target);
   fs::remove_all(tmp, ec);
   fs::create_directories(tmp, ec);
   LFNET_CHECK_AS(IoError, !ec, "cannot create the output folder ", out, ": ", ec.message());
   try {
     write(tmp.string());
+  } catch (const IoError& e) {
+    fs::remove_all(tmp, ec);
+    throw IoError(replace_all(e.what(), tmp.string(), target.string()));
   } catch (...) {
     fs::remove_all(tmp, ec);
     throw;
@@ -257,14 +351,14 @@ OutputFolderPolicy with_force(OutputFolderPolicy policy, bool force) {
 
 RunFolder::RunFolder(const std::string& dir, const OutputFolderPolicy& policy, bool resume)
     : dir_(dir), lock_(dir, policy.option) {
-  check_output_folder(dir, with_force(policy, policy.force || resume));
   const fs::path target = normalised(dir);
+  remove_stale_temporaries(target);  // first: it may put back a run an interrupted --force replaced
+  check_output_folder(dir, with_force(policy, policy.force || resume));
   std::error_code ec;
-  remove_stale_temporaries(target);
   const bool exists = fs::exists(target, ec);
   if (exists && !resume && !fs::is_empty(target, ec)) {
     aside_ = target.parent_path() /
-             ("." + target.filename().string() + ".tmp" + std::to_string(::getpid()) + ".old");
+             ("." + target.filename().string() + ".tmp" + std::to_string(::getpid()) + ".replaced");
     fs::rename(target, aside_, ec);
     LFNET_CHECK_AS(IoError, !ec, "cannot move the old ", dir, " aside: ", ec.message());
   }
@@ -280,8 +374,12 @@ RunFolder::RunFolder(const std::string& dir, const OutputFolderPolicy& policy, b
 void RunFolder::commit() {
   if (committed_) return;
   committed_ = true;
+  if (aside_.empty()) return;
+  // Renamed first, in one step: a `.replaced` folder left behind would be put back.
   std::error_code ec;
-  if (!aside_.empty()) fs::remove_all(aside_, ec);
+  const fs::path discard = aside_.parent_path() / (aside_.stem().string() + ".discard");
+  fs::rename(aside_, discard, ec);
+  fs::remove_all(ec ? aside_ : discard, ec);
 }
 
 RunFolder::~RunFolder() {

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <sstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
@@ -45,13 +46,14 @@ void save_dictionary(const Dictionary& dictionary, const std::string& path) {
   torch::serialize::OutputArchive archive;
   archive.write(kAtomsKey, dictionary.atoms.contiguous());
   archive.write(kMetaKey, c10::IValue(meta.dump()));
-  write_file_atomically(path, [&](const std::string& tmp) {
-    try {
-      archive.save_to(tmp);
-    } catch (const c10::Error& e) {
-      throw IoError("cannot write dictionary " + path + ": " + e.what_without_backtrace());
-    }
-  });
+  // Archived in memory, then written by lfnet (LibTorch's file writer aborts on a full disk).
+  std::ostringstream bytes;
+  try {
+    archive.save_to(bytes);
+  } catch (const c10::Error& e) {
+    throw IoError("cannot write dictionary " + path + ": " + e.what_without_backtrace());
+  }
+  write_bytes_file(path, bytes.str());
 }
 
 Dictionary load_dictionary(const std::string& path) {

@@ -3,6 +3,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <atomic>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -96,6 +97,8 @@ torch::Tensor read_image_channels(const std::string& path) {
     throw IoError("cannot decode image " + path + " (truncated or corrupt?): " + err);
   }
   input->close();
+  LFNET_CHECK_AS(IoError, torch::isfinite(pixels).all().item<bool>(), "image ", path,
+                 " holds NaN or infinite values");
   return pixels.permute({2, 0, 1}).contiguous();
 }
 
@@ -106,14 +109,14 @@ MeasurementWriter::MeasurementWriter(const std::string& path, int64_t channels, 
                  "raw measurement files are little-endian; this "
                  "machine is not");
   out_.open(path, std::ios::binary | std::ios::trunc);
-  LFNET_CHECK_AS(IoError, out_.good(), "cannot write ", path);
+  LFNET_CHECK_AS(IoError, out_.good(), "cannot write ", path, ": ", std::strerror(errno));
   // Size the file up front, so bands can be written in place.
   const auto bytes = static_cast<std::streamoff>(channels * patches * values * 4);
   if (bytes > 0) {
     out_.seekp(bytes - 1);
     out_.put('\0');
   }
-  LFNET_CHECK_AS(IoError, out_.good(), "cannot write ", path, " (disk full?)");
+  LFNET_CHECK_AS(IoError, out_.good(), "cannot write ", path, ": ", std::strerror(errno));
 }
 
 void MeasurementWriter::write(const torch::Tensor& band, int64_t patch_begin) {
@@ -128,12 +131,12 @@ void MeasurementWriter::write(const torch::Tensor& band, int64_t patch_begin) {
     out_.write(reinterpret_cast<const char*>(data[c].data_ptr<float>()),
                static_cast<std::streamsize>(p * values_ * 4));
   }
-  LFNET_CHECK_AS(IoError, out_.good(), "cannot write ", path_, " (disk full?)");
+  LFNET_CHECK_AS(IoError, out_.good(), "cannot write ", path_, ": ", std::strerror(errno));
 }
 
 void MeasurementWriter::close() {
   out_.close();
-  LFNET_CHECK_AS(IoError, !out_.fail(), "cannot write ", path_);
+  LFNET_CHECK_AS(IoError, !out_.fail(), "cannot write ", path_, ": ", std::strerror(errno));
 }
 
 torch::Tensor read_measurements(const std::string& path, int64_t channels, int64_t patches,

@@ -247,13 +247,15 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
 
 void export_network(const LightFieldNet& net, const ScriptMetadata& meta, const std::string& path) {
   auto module = script_network(net, meta);
-  write_file_atomically(path, [&](const std::string& tmp) {
-    try {
-      module.save(tmp, {{kScriptMetadataFile, metadata_text(module)}});
-    } catch (const c10::Error& e) {
-      throw IoError("cannot write " + path + ": " + e.what_without_backtrace());
-    }
-  });
+  // Archived in memory, then written by lfnet: LibTorch's file writer aborts the program when a
+  // write fails (a full disk) while it finishes the archive.
+  std::ostringstream bytes;
+  try {
+    module.save(bytes, {{kScriptMetadataFile, metadata_text(module)}});
+  } catch (const c10::Error& e) {
+    throw IoError("cannot write " + path + ": " + e.what_without_backtrace());
+  }
+  write_bytes_file(path, bytes.str());
 }
 
 bool is_script_file(const std::string& path) {

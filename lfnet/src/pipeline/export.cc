@@ -66,38 +66,42 @@ ExportResult export_model(const ExportRequest& a) {
                  {"lfnet_version", kVersion}};
   if (std::isfinite(ckpt.training.best_metric))
     meta.source["best_psnr_db"] = ckpt.training.best_metric;
-  nn::export_network(net, meta, a.out);
-
-  // Read the file back and compare it with the checkpoint's net on realistic inputs.
-  const auto loaded = nn::load_script(a.out);
+  // Written to a temporary, read back and compared with the checkpoint's net on realistic
+  // inputs, and only then moved into place: a failed comparison leaves no exported file.
   double diff = 0;
   ExportResult r;
-  if (a.check > 0 && o.arch().whole_image()) {
-    // A sensor image wider than two halos, with sides that are no multiples of the U-Net's, in
-    // many tiles.
-    auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
-    const auto tiling = o.arch().image_tiling(o);
-    const int64_t m = tiling.multiple, halo = tiling.receptive_radius;
-    auto sensor = torch::rand({o.measurements, 2 * halo + m + 3, 3 * halo + 1}, gen);
-    const double sigma = 0.05;  // read by noise-aware nets only
-    const int64_t tile = 2 * m;
-    auto want = recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
-    auto got = loaded.reconstruct_image(sensor, tile, false, sigma);
-    diff = (got - want.squeeze(0)).abs().max().item<double>();
-    r.compared = "a " + std::to_string(sensor.size(1)) + " x " + std::to_string(sensor.size(2)) +
-                 " sensor image in tiles of " + std::to_string(tile);
-    LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
-                   diff, " on a sensor image (more than 1e-5): please report this");
-  } else if (a.check > 0) {
-    auto [y, phase] = check_inputs(net, a.check);
-    torch::NoGradGuard no_grad;
-    auto want = net->forward(y, phase).reshape({a.check, -1});
-    auto got = loaded.forward(y, phase).reshape({a.check, -1});
-    diff = (got - want).abs().max().item<double>();
-    r.compared = std::to_string(a.check) + " patches";
-    LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
-                   diff, " on ", a.check, " patches (more than 1e-5): please report this");
-  }
+  write_file_atomically(a.out, [&](const std::string& tmp) {
+    nn::export_network(net, meta, tmp);
+    const auto loaded = nn::load_script(tmp);
+    if (a.check > 0 && o.arch().whole_image()) {
+      // A sensor image wider than two halos, with sides that are no multiples of the U-Net's, in
+      // many tiles.
+      auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
+      const auto tiling = o.arch().image_tiling(o);
+      const int64_t m = tiling.multiple, halo = tiling.receptive_radius;
+      auto sensor = torch::rand({o.measurements, 2 * halo + m + 3, 3 * halo + 1}, gen);
+      const double sigma = 0.05;  // read by noise-aware nets only
+      const int64_t tile = 2 * m;
+      auto want = recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
+      auto got = loaded.reconstruct_image(sensor, tile, false, sigma);
+      diff = (got - want.squeeze(0)).abs().max().item<double>();
+      r.compared = "a " + std::to_string(sensor.size(1)) + " x " + std::to_string(sensor.size(2)) +
+                   " sensor image in tiles of " + std::to_string(tile);
+      LFNET_CHECK_AS(NumericalError, diff <= 1e-5,
+                     "the exported net differs from the checkpoint by ", diff,
+                     " on a sensor image (more than 1e-5): please report this");
+    } else if (a.check > 0) {
+      auto [y, phase] = check_inputs(net, a.check);
+      torch::NoGradGuard no_grad;
+      auto want = net->forward(y, phase).reshape({a.check, -1});
+      auto got = loaded.forward(y, phase).reshape({a.check, -1});
+      diff = (got - want).abs().max().item<double>();
+      r.compared = std::to_string(a.check) + " patches";
+      LFNET_CHECK_AS(NumericalError, diff <= 1e-5,
+                     "the exported net differs from the checkpoint by ", diff, " on ", a.check,
+                     " patches (more than 1e-5): please report this");
+    }
+  });
   r.phi = spec.label();
   r.branches = o.arch().whole_image() ? o.architecture : nn::to_string(o.branches);
   r.phases = net->phases();

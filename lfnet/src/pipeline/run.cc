@@ -21,6 +21,24 @@ namespace fs = std::filesystem;
 
 namespace lfnet::pipeline {
 
+namespace {
+
+// Puts back a run that an interrupted --force had replaced (core/output.h,
+// remove_stale_temporaries) before anything reads the folder.
+void recover_run_folder(const std::string& dir) {
+  if (dir.empty()) return;
+  fs::path path = fs::absolute(dir).lexically_normal();
+  if (path.filename().empty()) path = path.parent_path();
+  if (remove_stale_temporaries(path)) {
+    spdlog::warn(
+        "{}: put back the run that an interrupted --force had replaced (the new run "
+        "stopped before its first checkpoint)",
+        dir);
+  }
+}
+
+}  // namespace
+
 bool resumes_folder(const TrainRequest& request) {
   return !request.resume.empty() && fs::is_directory(request.resume);
 }
@@ -91,8 +109,11 @@ TrainResult train_experiment(const TrainRequest& request,
                              std::shared_ptr<dist::Communicator> comm) {
   if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
   const bool lead = comm->rank() == 0;
+  // Rank 0 owns the folder (another host's process ids mean nothing here).
+  if (lead && resumes_folder(request)) recover_run_folder(request.resume);
   ExperimentConfig config = resolve_request(request);
   const std::string out = run_folder(request, config);
+  if (lead) recover_run_folder(out);
   const bool continue_folder = resumes_folder(request);
   // Resuming one stage from its checkpoint writes into the folder that holds it.
   const bool continue_in_place = continue_folder || !request.resume.empty();

@@ -1,8 +1,13 @@
 #include "lfnet/pipeline/stages.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -199,10 +204,15 @@ std::string train_dictionary_stage(const ExperimentConfig& config, const std::st
 }
 
 void append_jsonl(const std::string& path, const nlohmann::json& record) {
-  std::ofstream out(path, std::ios::app);
-  LFNET_CHECK_AS(IoError, out, "cannot append to ", path);
-  out << record.dump() << "\n";
-  LFNET_CHECK_AS(IoError, out.good(), "cannot append to ", path);
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  LFNET_CHECK_AS(IoError, fd >= 0, "cannot append to ", path, ": ", std::strerror(errno));
+  try {
+    write_all(fd, record.dump() + "\n", path);
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  ::close(fd);
 }
 
 }  // namespace lfnet::pipeline

@@ -165,16 +165,6 @@ torch::Tensor decode(const std::string& file, size_t payload_begin, size_t paylo
   return t.view(shape);
 }
 
-void write_all(int fd, const std::string& data, const std::string& path) {
-  size_t done = 0;
-  while (done < data.size()) {
-    const ssize_t n = ::write(fd, data.data() + done, data.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw IoError("cannot write " + path + ": " + std::strerror(errno));
-    done += static_cast<size_t>(n);
-  }
-}
-
 std::string shape_text(torch::IntArrayRef sizes) {
   std::ostringstream out;
   out << sizes;
@@ -240,20 +230,7 @@ void save_checkpoint(const Checkpoint& checkpoint, const std::string& path) {
   put<uint64_t>(file, fnv1a(file.data(), file.size()));
   file.append(kEndMagic, 8);
 
-  write_file_atomically(
-      path,
-      [&](const std::string& tmp) {
-        const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-        if (fd < 0) throw IoError("cannot write checkpoint " + path + ": " + std::strerror(errno));
-        try {
-          write_all(fd, file, tmp);
-        } catch (...) {
-          ::close(fd);
-          throw;
-        }
-        ::close(fd);
-      },
-      /*durable=*/true);
+  write_bytes_file(path, file, /*durable=*/true);
 }
 
 Checkpoint load_checkpoint(const std::string& path) {

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace lfnet {
@@ -14,19 +15,31 @@ namespace lfnet {
 // folder (the extension is kept, so writers that pick a format by name still do).
 std::filesystem::path temporary_path(const std::filesystem::path& target);
 
-// Removes the temporaries (files or folders) of `target` that writers which are no longer
-// running left behind; a live writer's temporary is left alone.
-void remove_stale_temporaries(const std::filesystem::path& target);
+// Cleans up after writers of `target` that are no longer running (a live writer's files are left
+// alone): removes their temporaries, and puts back what an interrupted replacement had moved
+// aside: a run that `--force` replaced (RunFolder) whose new run never reached its first
+// checkpoint, or a folder whose swap (write_folder) was cut between its two renames. Returns
+// whether something was put back.
+bool remove_stale_temporaries(const std::filesystem::path& target);
 
 // Writes the file `target` through `write(temporary)`, then renames it into place, so `target`
-// is never half-written. On failure the temporary is removed and the error passed on. With
+// is never half-written. On failure the temporary is removed and the error passed on (an IoError
+// on a full file system gains the system's reason, which image libraries leave out). With
 // `durable`, the file and its folder are synced to disk before returning.
 void write_file_atomically(const std::string& target,
                            const std::function<void(const std::string& temporary)>& write,
                            bool durable = false);
 
+// Writes `bytes` to the file `target` atomically (write_file_atomically); a failure names the
+// file and the system's reason ("No space left on device").
+void write_bytes_file(const std::string& target, std::string_view bytes, bool durable = false);
+
 // Writes `text` to the file `target` atomically.
 void write_text_file(const std::string& target, const std::string& text);
+
+// Writes all of `data` to the open file `fd` (retrying short writes); a failure throws IoError
+// naming `path` and the system's reason.
+void write_all(int fd, std::string_view data, const std::string& path);
 
 // Refuses (ConfigError naming `option`) an output that is, contains or lies inside one of
 // `inputs` (files or folders; empty entries are ignored).
@@ -35,7 +48,8 @@ void check_output_apart(const std::string& output, const std::vector<std::string
 
 // An exclusive lock on one output path, held while the object lives: a second writer of the
 // same output (in this process or another) fails at once with a ConfigError. The lock is a
-// hidden `.<name>.lock` file beside the output, removed on release.
+// hidden `.<name>.lock` file beside the output, removed on release, with the folders it had to
+// make for it if they are still empty (the output never came).
 class OutputLock {
  public:
   explicit OutputLock(const std::string& output, const std::string& option = "--out");
@@ -46,6 +60,7 @@ class OutputLock {
  private:
   std::string path_;
   int fd_ = -1;
+  std::filesystem::path made_;  // the outermost folder the lock made, if any
 };
 
 // What a command writes into one output folder.
@@ -59,8 +74,8 @@ struct OutputFolderPolicy {
 // apart from the inputs, a folder, empty unless `force`.
 void check_output_folder(const std::string& out, const OutputFolderPolicy& policy);
 
-// The checks for one output file: apart from the inputs, not a folder, and absent unless
-// `force`.
+// The checks for one output file: apart from the inputs, not a folder, and absent or empty
+// unless `force`.
 void check_output_file(const std::string& out, const OutputFolderPolicy& policy);
 
 // Splits a comma-separated list of paths (e.g. --sensor a.tif,b.tif) for the inputs of a policy.
