@@ -6,7 +6,8 @@ Usage:
   figures.py SPEC.json               every figure of a spec: {"figures": [{"kind": ..., ...}]}
   figures.py training LOG.jsonl STEM training curves of a run (RUN/training.jsonl)
 
-Kinds of a spec (each has "stem": the output path without extension, and "title"):
+Kinds of a spec (each has "stem": the output path without extension, relative to the spec file's
+folder, and "title"; image paths in a spec are relative to that folder too):
   pareto    points [{method, variant, n, stride, whole_image, seconds, psnr_db, front}]
   heatmaps  panels [{label, psnr}] of U x V per-view PSNR, one shared colour range
   views     panels [{label, psnr_db, view, epi}] (16-bit PNG crops); the first is the truth
@@ -16,6 +17,7 @@ Kinds of a spec (each has "stem": the output path without extension, and "title"
 """
 import json
 import math
+import os
 import sys
 
 import matplotlib
@@ -61,6 +63,7 @@ class Colours:
 
 
 def save(fig, stem):
+    stem = os.path.join(BASE, stem)
     fig.savefig(stem + ".png", bbox_inches="tight")
     fig.savefig(stem + ".svg", bbox_inches="tight", metadata={"Date": None})
     plt.close(fig)
@@ -166,9 +169,12 @@ def heatmaps(spec):
     save(fig, spec["stem"])
 
 
+BASE = ""  # the spec file's folder: relative stems and image paths are read from it
+
+
 def read_png(path):
     """A 16-bit (or 8-bit) grey PNG as floats in [0, 1]."""
-    a = np.asarray(Image.open(path))
+    a = np.asarray(Image.open(os.path.join(BASE, path)))
     return a.astype(np.float64) / (65535.0 if a.dtype == np.uint16 or a.max() > 255 else 255.0)
 
 
@@ -348,7 +354,9 @@ KINDS = {"pareto": pareto, "heatmaps": heatmaps, "views": views, "sweep": sweep,
 
 
 def main(argv):
+    global BASE
     if len(argv) == 2 and argv[1].endswith(".json"):
+        BASE = os.path.dirname(argv[1])
         with open(argv[1]) as f:
             spec = json.load(f)
         if "methods" in spec:

@@ -19,7 +19,8 @@ namespace {
 
 struct BenchArgs {
   pipeline::BenchOptions options;
-  std::string json;  // write the report here ("-": standard output)
+  std::string json;    // write the report here ("-": standard output)
+  bool force = false;  // replace an existing --json file
   bool in_process = false;
   // Child mode: one case "method:stride", with the parent's GEMM figure.
   std::string one_case;
@@ -29,10 +30,10 @@ struct BenchArgs {
 void run_bench(const BenchArgs& args) {
   const auto& a = args.options;
   if (!args.json.empty() && args.json != "-" && args.one_case.empty()) {
-    // The report is rewritten on each run; it may not be one of the files the bench reads.
+    // The report may not be one of the files the bench reads, nor replace a file unasked.
     OutputFolderPolicy policy;
     policy.option = "--json";
-    policy.force = true;
+    policy.force = args.force;
     policy.inputs = {a.dictionary, a.scene};
     policy.inputs.insert(policy.inputs.end(), a.models.begin(), a.models.end());
     check_output_file(args.json, policy);
@@ -85,7 +86,10 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
       "bench", "Measure GEMM and Conv4d FLOP/s and whole-light-field reconstruction speed");
   auto args = std::make_shared<BenchArgs>();
   auto* a = &args->options;
-  cmd->add_option("--json", args->json, "also write the report as JSON to this file ('-': stdout)");
+  cmd->add_option("--json", args->json,
+                  "also write the report as JSON to this file (a new or empty file, or --force; "
+                  "'-': stdout)");
+  cmd->add_flag("--force", args->force, "replace an existing --json file");
   cmd->add_option("--methods", a->methods,
                   "methods to time: " + recon::method_list(recon::MethodNeeds::kTruth))
       ->delimiter(',');
@@ -102,12 +106,9 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                              &a->method_options,
                              "time"};
   add_reconstruction_flags(cmd, shared);
-  cmd->add_option("--height", a->height, "light-field height (default 593)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--width", a->width, "light-field width (default 840)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")
-      ->check(CLI::PositiveNumber);
+  cmd->add_option("--height", a->height, "light-field height (default 593)")->check(kCount);
+  cmd->add_option("--width", a->width, "light-field width (default 840)")->check(kCount);
+  cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")->check(kCount);
   cmd->add_option("--dictionary", a->dictionary,
                   "dictionary file (default: a small K-SVD dictionary)");
   cmd->add_option("--save-dictionary", a->save_dictionary,
@@ -115,12 +116,12 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--scene", a->scene,
                   "scene spec to render instead of a random scene (its own size)");
   cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)")->check(kSeed);
   cmd->add_option("--conv-batch", a->conv_batch, "patches per Conv4d timing (default 256)")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   cmd->add_option("--reps", a->reps, "repetitions of the kernel timings (best is kept)")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   add_enum_option(
       cmd, "--cnn-mode", a->cnn_mode,
       "CNN branch per patch ('patches', the default) or once over the light field ('full')");

@@ -27,7 +27,12 @@ void run_evaluate(EvaluateArgs& a) {
   policy.force = a.force;
   policy.inputs = {q.lf, q.scene, q.model, q.dictionary, q.effects};
   if (!a.out.empty()) check_output_folder(a.out, policy);
-  if (!a.json.empty()) check_output_apart(a.json, policy.inputs, "--json");
+  if (!a.json.empty()) {
+    OutputFolderPolicy json_policy = policy;
+    json_policy.option = "--json";
+    json_policy.inputs.push_back(a.out);
+    check_output_file(a.json, json_policy);
+  }
   q.keep_estimate = !a.out.empty();
   const auto r = pipeline::evaluate_request(q);
   const auto& record = r.record;
@@ -82,12 +87,13 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--method", q.method,
                   recon::method_list() + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
-  cmd->add_option("--json", a->json, "write the evaluation record to this file");
+  cmd->add_option("--json", a->json,
+                  "write the evaluation record to this file (a new or empty file, or --force)");
   cmd->add_option("--out", a->out,
                   "write the reconstruction as a light-field folder with a viewer (index.html)");
-  cmd->add_flag("--force", a->force, "replace an existing --out folder");
+  cmd->add_flag("--force", a->force, "replace an existing --out folder and --json file");
   cmd->add_option("--seed", q.seed, "noise seed")->check(kSeed);
-  cmd->add_option("--batch", q.batch, "patches per forward pass")->check(CLI::PositiveNumber);
+  cmd->add_option("--batch", q.batch, "patches per forward pass")->check(kCount);
   cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
   cmd->callback([a] { run_evaluate(*a); });
 }

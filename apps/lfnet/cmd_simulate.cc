@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 
 #include "command.h"
@@ -49,8 +50,17 @@ void run_simulate(const SimulateArgs& args) {
 
   OutputFolderPolicy policy;
   policy.force = args.force;
-  policy.inputs = {source.lf, source.scene, args.plot_weights};
+  policy.inputs = {source.lf, source.scene, args.effects};
+  if (std::filesystem::exists(args.phi)) policy.inputs.push_back(args.phi);  // a spec or model
+  // --plot-weights DIR receives files under the same policy, apart from the inputs and --out.
+  OutputFolderPolicy weights_policy = policy;
+  weights_policy.option = "--plot-weights";
+  weights_policy.inputs.push_back(args.out);
+  policy.inputs.push_back(args.plot_weights);
   if (simulate) check_output_folder(args.out, policy);
+  if (!args.plot_weights.empty()) {
+    check_output_apart(args.plot_weights, weights_policy.inputs, weights_policy.option);
+  }
   pipeline::SimulateInput input;
   int64_t rows = 0, cols = 0;
   if (simulate) {
@@ -65,7 +75,7 @@ void run_simulate(const SimulateArgs& args) {
   const auto phi = optics::make_phi(pipeline::phi_for_window(args.phi, rows, cols));
   if (args.describe) std::fputs(pipeline::describe_phi(*phi).c_str(), stdout);
   if (!args.plot_weights.empty()) {
-    spdlog::info("wrote {}", pipeline::plot_weights(*phi, args.plot_weights));
+    spdlog::info("wrote {}", pipeline::plot_weights(*phi, args.plot_weights, weights_policy));
   }
   if (!simulate) return;
 
@@ -120,12 +130,14 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
       ->check(kStride)
       ->capture_default_str();
   cmd->add_option("--patch", args->patch, "patch size, per_patch mode")->capture_default_str();
-  cmd->add_flag("--force", args->force, "replace an existing non-empty --out folder");
+  cmd->add_flag("--force", args->force,
+                "replace an existing non-empty --out folder (and --plot-weights files)");
   cmd->add_flag("--describe", args->describe,
                 "print the singular values and condition numbers of the Phi's per-pixel (or "
                 "per-block) matrices");
   cmd->add_option("--plot-weights", args->plot_weights,
-                  "draw every measurement's angular response M_n(u, v) into DIR (PNG and SVG)");
+                  "draw every measurement's angular response M_n(u, v) into DIR/NAME-nN.png (and "
+                  ".svg, .json; existing ones are replaced with --force)");
   cmd->callback([args] { run_simulate(*args); });
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/output.h"
 #include "lfnet/optics/phi.h"
 
 namespace lfnet::pipeline {
@@ -51,7 +52,8 @@ class FigureSet {
 
   // A figure spec (scripts/figures.py); its "stem" is a file name inside the folder.
   void add(nlohmann::json spec);
-  // Writes a grey (H, W) image in [0, 1] as a 16-bit PNG for a spec; returns its path.
+  // Writes a grey (H, W) image in [0, 1] as a 16-bit PNG for a spec; returns its path relative to
+  // the folder, as specs hold it.
   std::string image(const std::string& name, const torch::Tensor& image) const;
   bool empty() const { return specs_.empty(); }
 
@@ -67,8 +69,11 @@ class FigureSet {
 };
 
 // The angular responses of a Phi (optics::weight_tiles) as DIR/NAME-nN.png and .svg, with their
-// spec beside them (NAME-nN.json); returns the PNG's path. A figure that cannot be drawn is an
-// IoError that says why.
-std::string plot_weights(const optics::Phi& phi, const std::string& dir);
+// spec beside them (NAME-nN.json); returns the PNG's path. The files go through the output policy
+// (core/output.h): DIR apart from `policy.inputs`, an existing file replaced only with
+// `policy.force`, the three written whole. A figure that cannot be drawn is an IoError that says
+// why.
+std::string plot_weights(const optics::Phi& phi, const std::string& dir,
+                         const OutputFolderPolicy& policy = {});
 
 }  // namespace lfnet::pipeline
