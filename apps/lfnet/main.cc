@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <regex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -12,6 +11,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/text.h"
 
 namespace {
 
@@ -23,8 +23,7 @@ int fail(const std::string& what) {
     if (ch == '\n') ch = ' ';
   }
   spdlog::debug("error with source locations: {}", line);
-  static const std::regex location(R"( \[[^\[\]]*\.(cc|h|hpp|cpp):[0-9]+\])");
-  line = std::regex_replace(line, location, "");
+  line = lfnet::without_source_locations(line);
   std::fprintf(stderr, "lfnet: error: %s\n", line.c_str());
   return 1;
 }

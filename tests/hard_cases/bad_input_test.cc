@@ -232,8 +232,10 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
                "--method-options.dict.admm", tmp.path());
   expect_error(dict + "--method-options " + (tmp / "none.json"), "--method-options", tmp.path());
   // A calibrated Phi that is not one, and phi export's own checks.
-  expect_error("simulate --lf " + lf + " --phi " + tmp.path().string() + " --out " + (tmp / "acq"),
-               "not a calibrated Phi", tmp.path());
+  fs::create_directories(tmp / "not_a_camera");
+  expect_error(
+      "simulate --lf " + lf + " --phi " + (tmp / "not_a_camera") + " --out " + (tmp / "acq"),
+      "not a calibrated Phi", tmp.path());
   expect_error("phi export --phi asp:2 --grid 0x5 --out " + (tmp / "cam"), "--grid", tmp.path());
   expect_error("phi export --phi random:2 --out " + (tmp / "cam"), "not local", tmp.path());
   CHECK_FALSE(fs::exists(tmp / "cam"));
@@ -284,7 +286,55 @@ TEST_CASE("missing, mismatched, truncated and foreign image files are one-line e
   auto small = tmp / "small";
   lfnet::io::write_light_field(lfnet::LightField(torch::rand({1, 3, 3, 18, 18})), small);
   expect_error(simulate(small), "3x3 views", root);
+
+  // A view that is a folder is named as such, not as missing; two schemes name a file of each.
+  auto folder_view = fresh("folder_view");
+  fs::remove(folder_view + "/lf_2_3.png");
+  fs::create_directories(folder_view + "/lf_2_3.png");
+  expect_error(simulate(folder_view), "lf_2_3.png is not a regular file", root);
+  expect_error(simulate(mixed), "such as input_Cam000.png", root);
+
+  // Float views are radiance in [0, 1]: far outside it (another unit) is refused with the file.
+  const std::string far = tmp / "far";
+  lfnet::io::write_light_field(lfnet::LightField(239 + 412 * torch::rand({1, 5, 5, 18, 18})), far,
+                               {"tif", 32});
+  expect_error(simulate(far), "lfnet reads views as radiance in [0, 1]", root);
   CHECK_FALSE(fs::exists(tmp / "acq"));
+}
+
+TEST_CASE("sensor images, calibrated Phis and export checks name the file and the flag",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  const fs::path root = tmp.path();
+  // A camera's plain sensor image with a NaN: the file is named.
+  auto sensor = torch::rand({2, 20, 20});
+  sensor[1][3][4] = std::nanf("");
+  lfnet::io::write_image(tmp / "sensor.tif", sensor, 32);
+  expect_error("reconstruct --phi asp:2 --method pinv --sensor " + (tmp / "sensor.tif") +
+                   " --out " + (tmp / "rec"),
+               "sensor.tif holds NaN", root);
+  // A calibrated Phi whose response images are zero: the file is named.
+  std::string out;
+  REQUIRE(run_command(program("phi export --phi mask:2 --out " + (tmp / "cam")), out) == 0);
+  lfnet::io::write_image(tmp / "cam/response_2.tif", torch::zeros({45, 45}), 32);
+  write_light_field(tmp / "lf");
+  expect_error(
+      "simulate --lf " + (tmp / "lf") + " --phi " + (tmp / "cam") + " --out " + (tmp / "acq"),
+      "response_2.tif is zero everywhere", root);
+  // export --check is bounded before anything is written.
+  write_model(tmp / "asp.ckpt", "asp:2");
+  expect_error(
+      "export --model " + (tmp / "asp.ckpt") + " --out " + (tmp / "m.pt") + " --check 100000000",
+      "--check: must be a whole number of patches from 0 to 65536", root);
+  // Other bounds read as ranges, not as 309-digit numbers.
+  expect_error("render --random -1 --out " + (tmp / "r"), "--random: must be a whole number >= 0",
+               root);
+  expect_error("launch -n 2 --grace -1 -- info", "--grace: must be a number of seconds", root);
+  // batch --input a link that loops (made outside the watched folder, which is walked).
+  lfnet::test::TempDir links;
+  fs::create_symlink(links / "self", links / "self");
+  expect_error("batch --phi asp:2 --input " + (links / "self") + " --out " + (tmp / "b"),
+               "is a link that loops", root);
 }
 
 TEST_CASE("truncated and foreign checkpoints, and another Phi's measurements, are refused",
@@ -381,4 +431,103 @@ TEST_CASE("existing and unwritable output folders are never overwritten without 
   REQUIRE(run_command(program(sim + (tmp / "taken") + " --force"), out) == 0);
   CHECK_FALSE(fs::exists(tmp / "taken/notes.txt"));
   CHECK(fs::exists(tmp / "taken/sensor.json"));
+}
+
+namespace {
+
+// A tmpfs of `kilobytes` mounted on `dir` for the life of the object (root, or a machine that
+// lets the tests mount; `mounted()` says whether it worked).
+class SmallFileSystem {
+ public:
+  SmallFileSystem(const fs::path& dir, int kilobytes) : dir_(dir) {
+    fs::create_directories(dir);
+    std::string out;
+    mounted_ = run_command("mount -t tmpfs -o size=" + std::to_string(kilobytes) + "k tmpfs '" +
+                               dir.string() + "' 2>&1",
+                           out) == 0;
+  }
+  ~SmallFileSystem() {
+    std::string out;
+    if (mounted_) run_command("umount '" + dir_.string() + "' 2>&1", out);
+  }
+  SmallFileSystem(const SmallFileSystem&) = delete;
+  SmallFileSystem& operator=(const SmallFileSystem&) = delete;
+  bool mounted() const { return mounted_; }
+
+  // Fills what is left with one file, so that the next write of any size fails.
+  void fill() const {
+    std::ofstream filler(dir_ / "filler", std::ios::binary | std::ios::app);
+    const std::string block(4096, '\0');
+    while (filler.write(block.data(), static_cast<std::streamsize>(block.size())) &&
+           filler.flush()) {
+    }
+  }
+
+ private:
+  fs::path dir_;
+  bool mounted_ = false;
+};
+
+}  // namespace
+
+TEST_CASE("on a full disk every command that writes fails with the reason and leaves all as it was",
+          "[app][bad_input][full_disk]") {
+  lfnet::test::TempDir tmp;
+  SmallFileSystem disk(tmp.path() / "full", 512);
+  if (!disk.mounted()) LFNET_SKIP("cannot mount a tmpfs here (not root?): no full-disk test");
+  const fs::path full = tmp.path() / "full";
+  const std::string lf = tmp / "lf";
+  write_light_field(lf);
+  write_model(tmp / "asp.ckpt", "asp:2");
+  write_bytes(tmp / "c.json", kTinyConfig);
+  std::string out;
+  REQUIRE(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "in/acq")),
+                      out) == 0);
+  REQUIRE(run_command(program("train " + (tmp / "c.json") + " --out " + (tmp / "run")), out) == 0);
+  // Existing outputs on the full disk, which no failing command may touch: a record, a run, a
+  // reconstruction, a model, a report with its figures.
+  write_bytes((full / "old.json").string(), "{\"old\": true}\n");
+  REQUIRE(run_command(program("train " + (tmp / "c.json") + " --out " + (full / "oldrun").string()),
+                      out) == 0);
+  REQUIRE(run_command(program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
+                              (tmp / "in/acq") + " --out " + (full / "oldrec").string()),
+                      out) == 0);
+  write_bytes((full / "old.pt").string(), "an older export");
+  fs::copy(tmp / "run", full / "report_run", fs::copy_options::recursive);
+  disk.fill();
+  const std::string f = full.string() + "/";
+  const std::vector<std::string> commands = {
+      "render --random 3 --size 20x20 --out " + f + "r",
+      "simulate --lf " + lf + " --phi asp:2 --out " + f + "s",
+      "simulate --phi asp:2 --plot-weights " + f + "w",
+      "evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + f + "e",
+      "evaluate --lf " + lf + " --phi asp:2 --method pinv --json " + f + "old.json --force",
+      "reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " + (tmp / "in/acq") + " --out " +
+          f + "oldrec --force",
+      "batch --input " + (tmp / "in") + " --phi asp:2 --methods pinv --out " + f + "b",
+      "train " + (tmp / "c.json") + " --out " + f + "t",
+      "train " + (tmp / "c.json") + " --out " + f + "oldrun --force",
+      "experiment " + (tmp / "c.json") + " --out " + f + "x",
+      "export --model " + (tmp / "asp.ckpt") + " --out " + f + "old.pt --force",
+      "phi export --phi mask:2 --out " + f + "cam",
+      "bench --phi asp:2 --methods pinv --reps 1 --strides 9 --height 24 --width 24 "
+      "--skip-kernels --json " +
+          f + "bench.json",
+      "report " + f + "report_run",
+  };
+  // Work that ran before the write may have printed its result (evaluate's summary, bench's
+  // table); the error is one line with the reason, and nothing changed.
+  const auto before = snapshot(full);
+  for (const auto& command : commands) {
+    const int rc = run_command(program(command), out);
+    INFO("lfnet " << command << "\n-> " << out);
+    CHECK(rc != 0);
+    const size_t error = out.find("lfnet: error: ");
+    REQUIRE(error != std::string::npos);
+    CHECK(out.find("lfnet: error: ", error + 1) == std::string::npos);
+    const std::string line = out.substr(error, out.find('\n', error) - error);
+    CHECK(line.find("No space left on device") != std::string::npos);
+    CHECK(line.find(".tmp") == std::string::npos);  // named as the output, not its temporary
+    CHECK(snapshot(full) == before);
+  }
 }

@@ -8,8 +8,11 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -241,17 +244,36 @@ TEST_CASE("batch records unreadable entries as failed items and goes on", "[app]
       run_command(program("render --random 2 --size 24x24 --grey --out " + (in / "good").string()),
                   out) == 0);
   fs::create_symlink(in / "nowhere", in / "broken");
-  fs::create_symlink(in, in / "loop");  // a link back to the root
+  fs::create_symlink(in, in / "loop");           // a link back to the root
+  fs::create_symlink(in / "self", in / "self");  // a link to itself
+  // Light fields that cannot be read are failed items, not folders to skip: a missing view, a
+  // view that is a folder. macOS's "._" files beside the views are no views.
+  fs::copy(in / "good", in / "gap");
+  fs::remove(in / "gap/lf_3_3.png");
+  fs::copy(in / "good", in / "viewdir");
+  fs::remove(in / "viewdir/lf_2_2.png");
+  fs::create_directories(in / "viewdir/lf_2_2.png");
+  fs::copy(in / "good", in / "mac");
+  for (const auto& e : fs::directory_iterator(in / "good")) {
+    lfnet::test::write_bytes((in / "mac" / ("._" + e.path().filename().string())).string(), "x");
+  }
   REQUIRE(run_command(program("batch --input " + in.string() +
                               " --phi asp:2 --methods pinv --out " + (tmp / "b")),
                       out) != 0);
-  CHECK(out.find("2 of 3 item-method pair(s) failed") != std::string::npos);
+  CHECK(out.find("5 of 7 item-method pair(s) failed") != std::string::npos);
   const auto summary = lfnet::read_json_file(tmp / "b/summary.json");
-  REQUIRE(summary.size() == 3);
+  REQUIRE(summary.size() == 7);
+  std::map<std::string, std::string> errors;
+  for (const auto& r : summary) errors[r["item"].get<std::string>()] = r.value("error", "");
+  CHECK(errors["gap"].find("lf_3_3.png is missing") != std::string::npos);
+  CHECK(errors["viewdir"].find("lf_2_2.png is not a regular file") != std::string::npos);
+  CHECK(errors["self"] == "a link that loops");
+  CHECK(errors["viewdir"].find(".cc:") == std::string::npos);  // no source locations
   std::map<std::string, std::string> status;
   for (const auto& r : summary)
     status[r["item"].get<std::string>()] = r["status"].get<std::string>();
   CHECK(status["good"] == "ok");
+  CHECK(status["mac"] == "ok");
   CHECK(status["broken"] == "error");
   CHECK(status["loop"] == "error");
   // The output may not lie inside the input (the batch would find its own outputs).
@@ -304,4 +326,141 @@ TEST_CASE("batch records a folder it may not read as a failed item and goes on",
   CHECK(status["good"] == "ok");
   CHECK(status["secret"] == "error");
   fs::permissions(in / "secret", fs::perms::owner_all);  // so the folder can be removed
+}
+
+TEST_CASE("files named by --json and --plot-weights go through the output policy",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string lf = tmp / "lf";
+  REQUIRE(run_command(program("render --random 1 --size 24x24 --grey --out " + lf), out) == 0);
+  const std::string eval = "evaluate --lf " + lf + " --phi asp:2 --method pinv --json ";
+  // An existing record is replaced only with --force; an empty file (mktemp's) is written.
+  lfnet::test::write_bytes(tmp / "r.json", "{\"kept\": true}\n");
+  CHECK(run_command(program(eval + (tmp / "r.json")), out) != 0);
+  expect_one_error(out, "--json");
+  CHECK(read_bytes(tmp / "r.json") == "{\"kept\": true}\n");
+  lfnet::test::write_bytes(tmp / "empty.json", "");
+  REQUIRE(run_command(program(eval + (tmp / "empty.json")), out) == 0);
+  CHECK(lfnet::read_json_file(tmp / "empty.json")["method"] == "pinv");
+  REQUIRE(run_command(program(eval + (tmp / "r.json") + " --force"), out) == 0);
+  CHECK(lfnet::read_json_file(tmp / "r.json")["method"] == "pinv");
+  CHECK(run_command(program("bench --phi asp:2 --methods pinv --reps 1 --strides 9 --height 24 "
+                            "--width 24 --skip-kernels --json " +
+                            (tmp / "r.json")),
+                    out) != 0);
+  expect_one_error(out, "--force");
+  // --plot-weights: never into what the command reads, existing drawings only with --force,
+  // several cameras side by side in one folder.
+  CHECK(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "acq") +
+                            " --plot-weights " + lf),
+                    out) != 0);
+  expect_one_error(out, "--plot-weights");
+  CHECK_FALSE(fs::exists(tmp / "acq"));
+  fs::create_directories(tmp / "specs");
+  lfnet::write_json_file(tmp / "specs/asp-n2.json", {{"name", "asp"}, {"n", 2}});
+  const std::string spec = read_bytes(tmp / "specs/asp-n2.json");
+  CHECK(run_command(program("simulate --phi " + (tmp / "specs/asp-n2.json") + " --plot-weights " +
+                            (tmp / "specs") + " --force"),
+                    out) != 0);
+  expect_one_error(out, "contains the input");
+  CHECK(read_bytes(tmp / "specs/asp-n2.json") == spec);
+  if (run_command("/usr/bin/python3 -c 'import matplotlib'", out) != 0) return;  // no plotter
+  REQUIRE(run_command(program("simulate --phi asp:2 --plot-weights " + (tmp / "w")), out) == 0);
+  REQUIRE(run_command(program("simulate --phi mask:2 --plot-weights " + (tmp / "w")), out) == 0);
+  CHECK(fs::exists(tmp / "w/asp-n2.png"));
+  CHECK(fs::exists(tmp / "w/mask-n2.svg"));
+  CHECK(run_command(program("simulate --phi asp:2 --plot-weights " + (tmp / "w")), out) != 0);
+  expect_one_error(out, "--force");
+  REQUIRE(run_command(program("simulate --phi asp:2 --plot-weights " + (tmp / "w") + " --force"),
+                      out) == 0);
+  size_t files = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(tmp / "w")) ++files;
+  CHECK(files == 6);  // png, svg and json of each: no temporaries, no lock
+}
+
+TEST_CASE("train --force killed before its first checkpoint: the old run comes back",
+          "[app][bad_input][slow]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  auto config = two_stage_config();
+  config["stages"] = {"ae"};
+  lfnet::write_json_file(tmp / "one.json", config);
+  REQUIRE(run_command(program("train " + (tmp / "one.json") + " --out " + (tmp / "run")), out) ==
+          0);
+  const std::string ae = read_bytes(tmp / "run/models/ae.ckpt");
+  // A replacement whose data take a while to make, killed while they are made (its old run is
+  // aside, its new folder holds only config.json).
+  config["data"]["random_scenes"] = 24;
+  config["data"]["random_options"] = {{"height", 256}, {"width", 256}};
+  lfnet::write_json_file(tmp / "slow.json", config);
+  const pid_t pid = lfnet::test::spawn_command(
+      program("train " + (tmp / "slow.json") + " --out " + (tmp / "run") + " --force"));
+  const fs::path aside = tmp.path() / (".run.tmp" + std::to_string(pid) + ".replaced");
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  bool caught = false;
+  while (std::chrono::steady_clock::now() < deadline && !caught) {
+    caught = fs::exists(aside) && fs::exists(tmp.path() / "run/config.json");
+    if (waitpid(pid, nullptr, WNOHANG) == pid) FAIL("the replacement ended before it was killed");
+    if (!caught) usleep(20000);
+  }
+  kill(pid, SIGKILL);
+  waitpid(pid, nullptr, 0);
+  REQUIRE(caught);
+  CHECK_FALSE(fs::exists(tmp.path() / "run/models/ae.ckpt"));  // the new run's folder
+  // Whoever opens the run next (here a resume) finds the old run, whole.
+  REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
+  CHECK(out.find("put back the run that an interrupted --force had replaced") != std::string::npos);
+  CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
+  CHECK(lfnet::read_json_file(tmp / "run/config.json")["data"]["random_scenes"] == 1);
+  CHECK_FALSE(fs::exists(aside));
+}
+
+TEST_CASE("report: its plotter dies with it, and a failed report leaves the old one",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  lfnet::write_json_file(tmp / "two.json", two_stage_config());
+  REQUIRE(run_command(
+              program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae"),
+              out) == 0);
+  // A plotter that records its pid and then takes its time.
+  fs::create_directories(tmp / "slow");
+  lfnet::test::write_bytes(tmp / "slow/figures.py",
+                           "import os, sys, time\nopen('" + (tmp / "plotter.pid") +
+                               "', 'w').write(str(os.getpid()))\ntime.sleep(60)\n");
+  const pid_t pid = lfnet::test::spawn_command("env LFNET_SCRIPTS=" + (tmp / "slow") + " " +
+                                               program("report " + (tmp / "run")));
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (std::chrono::steady_clock::now() < deadline && !fs::exists(tmp / "plotter.pid")) {
+    usleep(20000);
+  }
+  REQUIRE(fs::exists(tmp / "plotter.pid"));
+  usleep(100000);  // the pid is written
+  const pid_t plotter = std::stoi(read_bytes(tmp / "plotter.pid"));
+  kill(pid, SIGKILL);
+  waitpid(pid, nullptr, 0);
+  // Gone, or a zombie waiting for init: not running, not writing.
+  bool running = true;
+  for (int i = 0; i < 100 && running; ++i) {
+    const std::string stat = read_bytes("/proc/" + std::to_string(plotter) + "/stat");
+    const size_t paren = stat.rfind(')');
+    running = paren != std::string::npos && paren + 2 < stat.size() && stat[paren + 2] != 'Z' &&
+              stat[paren + 2] != 'X';
+    if (running) usleep(20000);
+  }
+  CHECK_FALSE(running);
+  if (running) kill(plotter, SIGKILL);
+  CHECK_FALSE(fs::exists(tmp / "run/report.md"));
+  CHECK_FALSE(fs::exists(tmp / "run/figures"));
+  // A report, then a damaged training log: the second report fails and the first stays.
+  REQUIRE(run_command(program("report " + (tmp / "run")), out) == 0);
+  const std::string report = read_bytes(tmp / "run/report.md");
+  std::ofstream(tmp / "run/training.jsonl", std::ios::app) << "{not json\n";
+  CHECK(run_command(program("report " + (tmp / "run")), out) != 0);
+  expect_one_error(out, "training.jsonl");
+  CHECK(read_bytes(tmp / "run/report.md") == report);
+  size_t entries = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(tmp / "run")) ++entries;
+  CHECK(entries == 5);  // config.json, training.jsonl, models, report.md, figures: no temporary
 }

@@ -64,16 +64,6 @@ bool writing_checkpoint(const fs::path& dir) {
 }
 
 // Starts `command` through the shell, replaced by the program itself: returns its pid.
-pid_t spawn(const std::string& command) {
-  const pid_t pid = fork();
-  if (pid == 0) {
-    execl("/bin/sh", "sh", "-c", ("exec " + command + " >/dev/null 2>&1").c_str(),
-          static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  return pid;
-}
-
 }  // namespace
 
 TEST_CASE("training killed while writing a checkpoint resumes from the previous one",
@@ -82,7 +72,8 @@ TEST_CASE("training killed while writing a checkpoint resumes from the previous 
   write_config(tmp / "long.json", tiny_config(400, 1024));
   const fs::path stage_dir = tmp.path() / "run/models/ae";
   const fs::path last = stage_dir / "last.ckpt";
-  const pid_t pid = spawn(program("train " + (tmp / "long.json") + " --out " + (tmp / "run")));
+  const pid_t pid = lfnet::test::spawn_command(
+      program("train " + (tmp / "long.json") + " --out " + (tmp / "run")));
   REQUIRE(pid > 0);
   // Wait for a first complete checkpoint, then for the next write to start, and kill then.
   bool caught = false;

@@ -119,13 +119,13 @@ TEST_CASE("a malformed calibrated folder is refused naming the file and field", 
   m = good;
   m["extra"] = 1;
   expect_error(m, "$.extra");
-  // An all-zero response measures nothing.
+  // An all-zero response measures nothing: the file is named.
   lfnet::write_json_file(dir + "/phi.json", good);
   io::write_image(dir + "/zero.png", torch::zeros({5, 5}), 8);
   m = good;
   m["files"] = {"zero.png", "zero.png"};
   m["normalise"] = true;
-  expect_error(m, "measures nothing");
+  expect_error(m, "zero.png is zero everywhere");
   REQUIRE_THROWS_WITH(io::read_calibrated_phi(dir + "/nothing"), Catch::Contains("no phi.json"));
   // A sidecar is known by its format, not its name: a Phi spec file called phi.json is not one,
   // and a sidecar under another name is.

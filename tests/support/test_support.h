@@ -3,6 +3,8 @@
 
 #include <torch/torch.h>
 
+#include <sys/types.h>
+
 #include <filesystem>
 #include <iostream>
 #include <string>
@@ -43,6 +45,10 @@ std::string shared_data_dir();
 
 // Runs a shell command; returns its exit status and sets `output` to stdout and stderr.
 int run_command(const std::string& command, std::string& output);
+
+// Starts a shell command in the background, its output discarded; returns its pid (the shell
+// execs the command, so the pid is the command's own) for waitpid and kill.
+pid_t spawn_command(const std::string& command);
 
 // Debian's python3 with the reference packages, or "" when a module is missing.
 std::string python_with(const std::string& module);

@@ -2,6 +2,7 @@
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -257,19 +258,44 @@ FolderLayout scan_custom(const std::string& dir, const std::vector<std::string>&
   return layout_from_pairs(NamingScheme::kCustom, found, dir, base, example);
 }
 
+// A file name of one of the recognised naming schemes.
+bool is_view_name(const std::string& name) {
+  return std::regex_match(name, kHci) || std::regex_match(name, kRowColRe) ||
+         std::regex_match(name, kTm) || std::regex_match(name, kNameRowColRe) ||
+         std::regex_match(name, kMit);
+}
+
 }  // namespace
 
 FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
   std::error_code ec;
   LFNET_CHECK_AS(IoError, fs::is_directory(dir, ec), "light field folder ", dir,
                  " does not exist or is not a folder");
-  std::vector<std::string> names;
+  // Hidden files (".DS_Store", the "._lf_1_1.png" resource forks macOS leaves on other file
+  // systems) are no views. A view name that is not a regular file (a folder) is an error
+  // naming it, not a view gone missing.
+  std::vector<std::string> names, not_files;
   for (const auto& entry : fs::directory_iterator(dir, ec)) {
-    if (entry.is_regular_file()) names.push_back(entry.path().filename().string());
+    const std::string name = entry.path().filename().string();
+    if (name.empty() || name[0] == '.') continue;
+    std::error_code kind_ec;
+    (entry.is_regular_file(kind_ec) ? names : not_files).push_back(name);
   }
   LFNET_CHECK_AS(IoError, !ec, "cannot list ", dir, ": ", ec.message());
   std::sort(names.begin(), names.end());
-  if (!layout.empty()) return scan_custom(dir, names, parse_layout(layout));
+  if (!layout.empty()) {
+    try {
+      return scan_custom(dir, names, parse_layout(layout));
+    } catch (const IoError& e) {
+      if (not_files.empty()) throw;
+      throw IoError(std::string(e.what()) + " (" + (fs::path(dir) / not_files.front()).string() +
+                    " is not a regular file: a view is an image file)");
+    }
+  }
+  for (const auto& name : not_files) {
+    LFNET_CHECK_AS(IoError, !is_view_name(name), "view ", (fs::path(dir) / name).string(),
+                   " is not a regular file (a folder?): a view is an image file");
+  }
 
   std::map<NamingScheme, std::vector<Candidate>> found;
   std::string generic_prefix;  // <name>_ of <name>_RR_CC, which every such file must share
@@ -306,9 +332,11 @@ FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
         "<name>-NN.png files");
   }
   if (found.size() > 1) {
-    std::string schemes;
-    for (const auto& [scheme, files] : found)
-      schemes += (schemes.empty() ? "" : ", ") + to_string(scheme);
+    std::string schemes;  // each with its first file, so the odd one out can be found
+    for (const auto& [scheme, files] : found) {
+      schemes += (schemes.empty() ? "" : ", ") + to_string(scheme) + " such as " +
+                 fs::path(files.front().path).filename().string();
+    }
     throw IoError("light field folder " + dir + " mixes naming schemes (" + schemes +
                   "): keep one light field per folder");
   }
@@ -341,6 +369,41 @@ FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
   throw IoError("unhandled naming scheme");
 }
 
+namespace {
+
+// One warning per light field whose values leave [0, 1] by more than rounding (an HDR highlight,
+// a float pipeline's negative noise), naming the first such view.
+void warn_view_range(const std::vector<torch::Tensor>& images, const FolderLayout& layout) {
+  double min = 0, max = 1;
+  std::string first;
+  for (size_t i = 0; i < images.size(); ++i) {
+    const auto [lo, hi] = torch::aminmax(images[i]);
+    const double a = lo.item<double>(), b = hi.item<double>();
+    if ((a < -kViewValueSlack || b > 1 + kViewValueSlack) && first.empty()) {
+      first = layout.views[i].path;
+    }
+    min = std::min(min, a);
+    max = std::max(max, b);
+  }
+  if (first.empty()) return;
+  spdlog::warn(
+      "light field views hold values from {:.4g} to {:.4g} (first: {}); lfnet reads radiance in "
+      "[0, 1], clamps what it writes to it and scores against it",
+      min, max, first);
+}
+
+}  // namespace
+
+bool holds_view_names(const std::string& dir) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.empty() || name[0] == '.') continue;
+    if (is_view_name(name)) return true;
+  }
+  return false;
+}
+
 torch::Tensor read_image(const std::string& path) {
   auto chw = read_image_channels(path);
   const int64_t nc = chw.size(0);
@@ -351,8 +414,15 @@ torch::Tensor read_image(const std::string& path) {
   LFNET_CHECK_AS(IoError, keep == 1 || keep == 3, "image ", path, " has ", nc,
                  " channels; lfnet reads grey, grey+alpha, RGB and RGBA");
   chw = chw.slice(0, 0, keep).contiguous();
-  LFNET_CHECK_AS(IoError, torch::isfinite(chw).all().item<bool>(), "image ", path,
-                 " holds NaN or infinite values");
+  // Non-finite values were refused by read_image_channels. A view is radiance relative to white,
+  // in [0, 1]; a float file far outside that holds another unit (docs/conventions.md, "Value
+  // range").
+  const auto [lo, hi] = torch::aminmax(chw);
+  const double min = lo.item<double>(), max = hi.item<double>();
+  LFNET_CHECK_AS(IoError, min >= kViewValueRefused.first && max <= kViewValueRefused.second,
+                 "image ", path, " holds values from ", min, " to ", max,
+                 "; lfnet reads views as radiance in [0, 1] (white = 1): scale the files (e.g. "
+                 "divide by their largest value)");
   return chw;
 }
 
@@ -381,6 +451,7 @@ LightField read_light_field(const std::string& dir, int threads, const std::stri
   for (int t = 0; t < workers; ++t) pool.emplace_back(work);
   for (auto& t : pool) t.join();
   if (!first_error.empty()) throw IoError(first_error);
+  warn_view_range(images, layout);
 
   const auto ref = images[0].sizes().vec();
   for (int64_t i = 1; i < n; ++i) {
@@ -571,15 +642,11 @@ void write_pfm(const std::string& path, const torch::Tensor& image) {
   LFNET_CHECK(chw.dim() == 3 && (chw.size(0) == 1 || chw.size(0) == 3),
               "PFM holds 1 or 3 channels");
   auto hwc = chw.to(torch::kFloat32).permute({1, 2, 0}).flip({0}).contiguous();
-  write_file_atomically(path, [&](const std::string& tmp) {
-    std::ofstream out(tmp, std::ios::binary);
-    LFNET_CHECK_AS(IoError, out, "cannot write ", path);
-    out << (chw.size(0) == 3 ? "PF" : "Pf") << "\n"
-        << chw.size(2) << " " << chw.size(1) << "\n-1.0\n";
-    out.write(reinterpret_cast<const char*>(hwc.data_ptr<float>()),
-              static_cast<std::streamsize>(hwc.numel() * sizeof(float)));
-    LFNET_CHECK_AS(IoError, out.good(), "cannot write ", path);
-  });
+  std::string bytes = std::string(chw.size(0) == 3 ? "PF" : "Pf") + "\n" +
+                      std::to_string(chw.size(2)) + " " + std::to_string(chw.size(1)) + "\n-1.0\n";
+  bytes.append(reinterpret_cast<const char*>(hwc.data_ptr<float>()),
+               static_cast<size_t>(hwc.numel()) * sizeof(float));
+  write_bytes_file(path, bytes);
 }
 
 }  // namespace lfnet::io

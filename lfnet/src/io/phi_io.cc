@@ -155,6 +155,11 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
     LFNET_CHECK_AS(IoError, !name.empty() && fs::path(name).filename() == fs::path(name), sidecar,
                    ": files must name images inside the folder, got \"", name, "\"");
     auto image = read_response((dir / name).string(), period * rows, period * cols);
+    // A measurement that responds to no ray records nothing: a failed or unexposed capture.
+    LFNET_CHECK_AS(IoError, image.ne(0).any().item<bool>(), (dir / name).string(),
+                   " is zero everywhere: its measurement would record nothing (recalibrate, or "
+                   "leave the measurement out and lower n in ",
+                   sidecar, ")");
     // (T U, T V) -> (T, U, T, V) -> (U, V, T, T)
     responses.push_back(image.view({period, rows, period, cols}).permute({1, 3, 0, 2}) * scale);
   }
@@ -171,7 +176,7 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   if (!source.empty()) spec.params["source"] = source;
   try {
     return optics::make_phi(spec)->spec();
-  } catch (const ConfigError& e) {
+  } catch (const Error& e) {  // a code the Phi refuses, named by its folder
     throw IoError(dir.string() + ": " + e.what());
   }
 }

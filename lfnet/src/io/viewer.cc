@@ -31,12 +31,20 @@ void fill(std::string& text, std::string_view marker, const std::string& value) 
   text.replace(at, marker.size(), value);
 }
 
-// JSON inside <script>: "</" would end the element early.
-std::string script_safe(std::string json) {
-  for (size_t at = json.find("</"); at != std::string::npos; at = json.find("</", at + 3)) {
-    json.replace(at, 2, "<\\/");
+// JSON inside <script>: "</" would end the element early, and "<!--" followed by "<script" would
+// swallow the rest of the page (the HTML parser's double-escaped script state). JSON holds "<"
+// only inside strings, where "\u003c" reads as the same character.
+std::string script_safe(const std::string& json) {
+  std::string out;
+  out.reserve(json.size());
+  for (const char c : json) {
+    if (c == '<') {
+      out += "\\u003c";
+    } else {
+      out += c;
+    }
   }
-  return json;
+  return out;
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/core/text.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/pipeline/evaluate.h"
@@ -29,12 +30,16 @@ namespace lfnet::pipeline {
 
 namespace {
 
-bool looks_like_light_field(const fs::path& dir) {
+// "" for a light-field folder, why it cannot be read for a folder that holds view files but no
+// complete light field (a missing view, a view that is a folder, two naming schemes), nullopt
+// for a folder of anything else.
+std::optional<std::string> light_field_problem(const fs::path& dir) {
   try {
     io::scan_folder(dir.string());
-    return true;
-  } catch (const std::exception&) {
-    return false;
+    return "";
+  } catch (const std::exception& e) {
+    if (!io::holds_view_names(dir.string())) return std::nullopt;
+    return std::string(e.what());
   }
 }
 
@@ -59,14 +64,21 @@ std::string safe_file_name(std::string name) {
 }  // namespace
 
 std::vector<BatchItem> discover_items(const std::string& root) {
-  LFNET_CHECK_AS(IoError, fs::is_directory(root), root, " is not a folder");
+  std::error_code root_error;
+  const bool root_is_folder = fs::is_directory(root, root_error);
+  LFNET_CHECK_AS(IoError, root_is_folder, "--input ", root,
+                 root_error.value() == ELOOP ? " is a link that loops"
+                 : root_error && root_error != std::errc::no_such_file_or_directory
+                     ? ": " + root_error.message()
+                 : fs::exists(fs::symlink_status(root, root_error)) ? " is not a folder"
+                                                                    : " does not exist");
   std::vector<BatchItem> items;
   std::vector<fs::path> pending = {fs::path(root)};
   std::set<std::string> visited;  // canonical folders: a link back up is not followed again
   while (!pending.empty()) {
     const fs::path dir = pending.back();
     pending.pop_back();
-    std::string name = fs::relative(dir, root).generic_string();
+    std::string name = dir.lexically_relative(root).generic_string();
     if (name.empty() || name == ".")
       name = fs::absolute(dir).lexically_normal().filename().string();
     std::error_code canonical_error;
@@ -88,8 +100,10 @@ std::vector<BatchItem> discover_items(const std::string& root) {
       items.push_back({dir.string(), name, "reconstruct", ""});
       continue;
     }
-    if (looks_like_light_field(dir)) {
-      items.push_back({dir.string(), name, "evaluate", ""});
+    if (const auto problem = light_field_problem(dir)) {
+      // A light field that cannot be read is a failed item, not a folder to skip.
+      items.push_back(problem->empty() ? BatchItem{dir.string(), name, "evaluate", ""}
+                                       : BatchItem{dir.string(), name, "unreadable", *problem});
       continue;
     }
     std::error_code ec;
@@ -100,7 +114,7 @@ std::vector<BatchItem> discover_items(const std::string& root) {
       const bool is_link = fs::is_symlink(fs::symlink_status(path, kind_error));
       const auto status = fs::status(path, kind_error);
       if (is_link && kind_error) {
-        const std::string rel = fs::relative(path, root).generic_string();
+        const std::string rel = path.lexically_relative(root).generic_string();
         items.push_back({path.string(), rel, "unreadable",
                          kind_error.value() == ELOOP
                              ? "a link that loops"
@@ -121,8 +135,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
                                          const std::string& out_dir, ModelCache& cache) {
   std::vector<nlohmann::json> records;
   auto failed = [&](const std::string& method, const std::string& error) {
-    return nlohmann::json{{"item", item.name}, {"path", item.path}, {"kind", item.kind},
-                          {"method", method},  {"status", "error"}, {"error", error}};
+    return nlohmann::json{{"item", item.name}, {"path", item.path},
+                          {"kind", item.kind}, {"method", method},
+                          {"status", "error"}, {"error", without_source_locations(error)}};
   };
   if (item.kind == "unreadable") {
     for (const auto& method : methods) records.push_back(failed(method, item.error));

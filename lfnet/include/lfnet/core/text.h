@@ -26,4 +26,29 @@ inline std::string join(const std::vector<std::string>& items, const std::string
   return out;
 }
 
+// `message` without the source locations lfnet's checks append (" [lfnet/src/io/x.cc:12]",
+// core/error.h): the text for a user, a record or a summary.
+inline std::string without_source_locations(std::string message) {
+  for (size_t open = message.find(" ["); open != std::string::npos;
+       open = message.find(" [", open + 1)) {
+    const size_t close = message.find(']', open);
+    if (close == std::string::npos) break;
+    const std::string inside = message.substr(open + 2, close - open - 2);
+    const size_t colon = inside.rfind(':');
+    const bool digits = colon != std::string::npos && colon + 1 < inside.size() &&
+                        inside.find_first_not_of("0123456789", colon + 1) == std::string::npos;
+    const std::string file = colon == std::string::npos ? "" : inside.substr(0, colon);
+    bool source = false;
+    for (const std::string ending : {".cc", ".h", ".cpp", ".hpp"}) {
+      source = source || (file.size() > ending.size() &&
+                          file.compare(file.size() - ending.size(), ending.size(), ending) == 0);
+    }
+    if (digits && source && file.find_first_of("[]") == std::string::npos) {
+      message.erase(open, close - open + 1);
+      open = open == 0 ? 0 : open - 1;
+    }
+  }
+  return message;
+}
+
 }  // namespace lfnet

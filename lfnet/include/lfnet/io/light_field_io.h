@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "lfnet/core/light_field.h"
@@ -58,6 +59,16 @@ CustomLayout parse_layout(const std::string& text, const std::string& what = "--
 // naming the folder or the missing file. A non-empty `layout` (parse_layout) replaces the
 // recognition.
 FolderLayout scan_folder(const std::string& dir, const std::string& layout = "");
+
+// The values a view may hold (radiance relative to white, docs/conventions.md "Value range"):
+// within kViewValueSlack of [0, 1] silently, up to kViewValueRefused with a warning (once per
+// light field), beyond it refused (an IoError naming the file). Non-finite values are refused.
+inline constexpr double kViewValueSlack = 1e-3;
+inline constexpr std::pair<double, double> kViewValueRefused = {-1.0, 2.0};
+
+// Whether `dir` holds anything named like a view of a recognised scheme (hidden files aside),
+// whether or not the grid is complete: a folder meant as a light field.
+bool holds_view_names(const std::string& dir);
 
 // Reads every view of a folder into a light field (C, U, V, H, W) with C = 3 (RGB; alpha
 // dropped) or 1 (grey). Views of different sizes or channel counts are an IoError naming the
