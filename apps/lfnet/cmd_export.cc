@@ -13,10 +13,20 @@ void add_export_command(CLI::App& app, const GlobalOptions&) {
   auto a = std::make_shared<pipeline::ExportRequest>();
   cmd->add_option("--model", a->model, "trained model (checkpoint)")->required();
   cmd->add_option("--out", a->out, "TorchScript file to write (e.g. model.pt)")->required();
+  // The comparison holds every patch's measurements and both outputs in memory (about 16 KB a
+  // patch): bounded so that a typo cannot exhaust the memory after the file is written.
   cmd->add_option("--check", a->check,
-                  "patches on which to compare the exported net with the checkpoint (0: none; the "
-                  "lfnet architecture is compared on one sensor image)")
-      ->check(CLI::NonNegativeNumber);
+                  "patches on which to compare the exported net with the checkpoint, 0 to 65536 "
+                  "(0: none; the lfnet architecture is compared on one sensor image)")
+      ->check(CLI::Validator(
+          [](std::string& text) -> std::string {
+            int64_t v = 0;
+            if (!CLI::detail::lexical_cast(text, v) || v < 0 || v > 65536) {
+              return "must be a whole number of patches from 0 to 65536, got " + text;
+            }
+            return "";
+          },
+          "0..65536"));
   cmd->add_flag("--force", a->force, "replace an existing file");
   cmd->callback([a] {
     const auto r = pipeline::export_model(*a);

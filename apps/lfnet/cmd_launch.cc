@@ -71,7 +71,7 @@ void add_launch_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::Range(1, 65535));
   cmd->add_option("--grace", args->grace_s,
                   "seconds the other ranks get to stop after one fails, before SIGKILL (default 5)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kSeconds);
   cmd->add_option("command", args->command, "after --: the subcommand and its arguments")
       ->required();
   cmd->callback([args, &global] { run_launch(*args, global); });

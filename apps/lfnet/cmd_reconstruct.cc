@@ -63,7 +63,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       recon::method_list(recon::MethodNeeds::kTruth) + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   cmd->add_flag("--window", q.options.window,
                 "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", q.post_filter,
@@ -77,7 +77,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--noise-sigma", q.noise_sigma,
                   "the sensor's noise sigma (relative to white) for noise-aware models (default: "
                   "what the acquisition's sensor.json records, else 0)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kNoiseSigma);
   cmd->callback([a] { run_reconstruct(*a); });
 }
 

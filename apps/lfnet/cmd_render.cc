@@ -74,7 +74,7 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   cmd->add_option("--scene", args->request.scene, "scene spec (JSON); see docs/scenes.md");
   cmd->add_option("--random", args->request.random_seed,
                   "render the random training scene of this seed")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kWhole);
   cmd->add_option("--random-options", args->request.random_options,
                   "with --random: the random scene's options (docs/scenes.md), a JSON object "
                   "or file, e.g. '{\"frame_probability\": 1}'");
@@ -91,7 +91,7 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--epi-row", args->request.epi_row,
                   "spatial row of the EPI in preview.png (default: the centre row)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(kWhole);
   cmd->callback([args] { run_render(*args); });
 }
 

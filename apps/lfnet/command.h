@@ -77,6 +77,34 @@ inline const CLI::Validator kCount(
     },
     "N>=1");
 
+// A whole number >= 0 (an index, a seed of a scene, a count that may be none).
+inline const CLI::Validator kWhole(
+    [](std::string& text) -> std::string {
+      int64_t v = 0;
+      if (!CLI::detail::lexical_cast(text, v) || v < 0) {
+        return "must be a whole number >= 0, got " + text;
+      }
+      return "";
+    },
+    "N>=0");
+
+// A duration in seconds, at most a year: >= 0, or > 0 for a timeout.
+inline CLI::Validator seconds_validator(bool positive) {
+  return CLI::Validator(
+      [positive](std::string& text) -> std::string {
+        double v = 0;
+        if (!CLI::detail::lexical_cast(text, v) || !std::isfinite(v) || v < 0 ||
+            (positive && v == 0) || v > 3.2e7) {
+          return std::string("must be a number of seconds ") + (positive ? "above 0" : "from 0") +
+                 " to 3.2e7 (a year), got " + text;
+        }
+        return "";
+      },
+      "SECONDS");
+}
+inline const CLI::Validator kSeconds = seconds_validator(false);
+inline const CLI::Validator kTimeout = seconds_validator(true);
+
 // An option whose value names one of an enum's values, read by the enum's `from_string` (its
 // one name table, core/enum_names.h): a bad name is a usage error naming the option and the
 // known names. Repeatable when `value` is a vector; given values then replace the default.
@@ -171,7 +199,7 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
   cmd->add_option("--tile", *f.tile,
                   "spatial tile of whole-image models (default 256) and of --cnn-mode full "
                   "(default 128)")
-      ->check(CLI::PositiveNumber);
+      ->check(kCount);
   if (f.strides) {
     cmd->add_option("--strides", *f.strides,
                     "patch strides, comma-separated (default 9,5,2; 9: non-overlapping 9x9 "
