@@ -1,6 +1,9 @@
 // lfnet bench: how fast this machine runs lfnet (docs/performance.md; pipeline/bench.h measures).
 // Each reconstruction runs in a child process of its own (pipeline::bench_case_in_child), so its
 // peak resident memory is its own and not the high-water mark of the cases before it.
+#include <sys/prctl.h>
+
+#include <csignal>
 #include <cstdio>
 #include <string>
 
@@ -11,6 +14,8 @@
 #include "lfnet/core/runtime.h"
 #include "lfnet/nn/architecture.h"
 #include "lfnet/pipeline/bench.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
@@ -19,8 +24,9 @@ namespace {
 
 struct BenchArgs {
   pipeline::BenchOptions options;
-  std::string json;    // write the report here ("-": standard output)
-  bool force = false;  // replace an existing --json file
+  std::string json;        // write the report here ("-": standard output)
+  bool force = false;      // replace an existing --json file
+  bool phi_given = false;  // --phi on the command line (else the default, for untrained nets)
   bool in_process = false;
   // Child mode: one case "method:stride", with the parent's GEMM figure.
   std::string one_case;
@@ -39,6 +45,7 @@ void run_bench(const BenchArgs& args) {
     check_output_file(args.json, policy);
   }
   if (!args.one_case.empty()) {
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a case dies with the bench that started it
     const auto colon = args.one_case.find(':');
     LFNET_CHECK_AS(ConfigError, colon != std::string::npos, "--case takes method:stride, got '",
                    args.one_case, "'");
@@ -48,6 +55,12 @@ void run_bench(const BenchArgs& args) {
     return;
   }
   parse_device(a.device);  // a clear error before any work
+  // A --phi that contradicts a model is an error, as in evaluate (a model knows its camera).
+  if (args.phi_given) {
+    for (const auto& model : a.models) {
+      pipeline::check_phi_argument(pipeline::load_model(model, false), a.phi);
+    }
+  }
   // With the report on standard output (--json -), the progress and the table go to standard
   // error, so that standard output is the JSON alone.
   FILE* text = args.json == "-" ? stderr : stdout;
@@ -146,7 +159,10 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                   "run one case method:stride and print it as JSON (used by the parent run)")
       ->group("");
   cmd->add_option("--gemm", args->gemm, "GEMM FLOP/s measured by the parent run")->group("");
-  cmd->callback([args] { run_bench(*args); });
+  cmd->callback([args, cmd] {
+    args->phi_given = cmd->count("--phi") > 0;
+    run_bench(*args);
+  });
 }
 
 }  // namespace lfnet::app

@@ -35,6 +35,7 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
 // Prints what the config holds and that it is valid.
 void check_config(const TrainArgs& a) {
   const auto config = pipeline::resolve_request(a.request);
+  if (!a.show) pipeline::check_config_inputs(config);
   if (a.show) {
     // The config as the run would record it: bases, scale and --set merged in.
     auto resolved = config.raw;

@@ -95,4 +95,10 @@ TEST_CASE("lfnet bench --json - writes the JSON alone, and a bench with no case 
                     out) != 0);
   INFO(out);
   CHECK(out.find("every case failed (1 of 1)") != std::string::npos);
+  // A --phi that contradicts the model is refused, as evaluate refuses it, before any case runs.
+  const std::string model = std::string(LFNET_SOURCE_DIR) + "/models/lfnet-asp-n2.ckpt";
+  CHECK(run_command(lfnet_binary() + small + " --methods net --model " + model + " --phi mask:2",
+                    out) != 0);
+  CHECK(out.find("--phi mask:2 does not match the model") != std::string::npos);
+  CHECK(out.find("pinv stride") == std::string::npos);
 }

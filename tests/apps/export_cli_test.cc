@@ -121,7 +121,8 @@ TEST_CASE(
       std::string command = lfnet;
       for (const std::string& part :
            {std::string("evaluate --model "), std::string(model), std::string(" --method "), method,
-            std::string(" --lf "), tmp / "lf", std::string(" --stride 9 --json "), tmp / name}) {
+            std::string(" --lf "), tmp / "lf", std::string(" --stride 9 --force --json "),
+            tmp / name}) {
         command += part;
       }
       REQUIRE(run_command(command, out) == 0);
@@ -323,7 +324,7 @@ TEST_CASE(
       std::string command = lfnet;
       for (const std::string& part :
            {std::string("evaluate --model "), std::string(model), std::string(" --lf "), tmp / "lf",
-            std::string(" --json "), tmp / json}) {
+            std::string(" --force --json "), tmp / json}) {
         command += part;
       }
       REQUIRE(run_command(command, out) == 0);
@@ -341,7 +342,7 @@ TEST_CASE(
       std::string command = lfnet;
       for (const std::string& part :
            {std::string("evaluate --self-ensemble --model "), std::string(model),
-            std::string(" --lf "), tmp / "lf", std::string(" --json "), tmp / json}) {
+            std::string(" --lf "), tmp / "lf", std::string(" --force --json "), tmp / json}) {
         command += part;
       }
       REQUIRE(run_command(command, out) == 0);

@@ -181,6 +181,14 @@ TEST_CASE("careless input, round 2: run names, resumes, starts, model paths, thr
   config["init"] = tmp / "weights.pt";
   write_bytes(cfg, config.dump());
   expect_error("train " + cfg, "$.init", tmp.path());
+  config.erase("init");
+  // Every light field a run will read is checked by --check and before training, not after it.
+  config["evaluation"] = {{"data", {{"light_fields", {tmp / "no_such_lf"}}}}};
+  write_bytes(cfg, config.dump());
+  expect_error("train " + cfg + " --check", "$.evaluation.data.light_fields[0]", tmp.path());
+  expect_error("experiment " + cfg + " --out " + (tmp / "x"), "no_such_lf", tmp.path());
+  config.erase("evaluation");
+  write_bytes(cfg, config.dump());
   // A model path that is a folder or a FIFO: one line, and no read that blocks.
   expect_error("evaluate --model " + tmp.path().string() + " --lf " + (tmp / "lf"),
                "is a folder, not a model file", tmp.path());

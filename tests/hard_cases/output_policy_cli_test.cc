@@ -43,6 +43,16 @@ nlohmann::json two_stage_config(double lr = 1e-3) {
           {"stages", {"ae", "cnn"}}};
 }
 
+// A run of two_stage_config() in tmp/run (its config in tmp/two.json) with only its first stage
+// trained, as an interrupted run leaves it.
+void train_first_stage(const lfnet::test::TempDir& tmp) {
+  std::string out;
+  lfnet::write_json_file(tmp / "two.json", two_stage_config());
+  REQUIRE(run_command(
+              program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae"),
+              out) == 0);
+}
+
 // One lfnet: error line, naming `needle`.
 void expect_one_error(const std::string& out, const std::string& needle) {
   INFO(out);
@@ -196,10 +206,7 @@ TEST_CASE("a run snapshot carries an interrupted run to another folder, which re
           "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   std::string out;
-  lfnet::write_json_file(tmp / "two.json", two_stage_config());
-  REQUIRE(run_command(
-              program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae"),
-              out) == 0);
+  train_first_stage(tmp);
   // An unfinished stage's state, as an interrupted run leaves it.
   fs::create_directories(tmp.path() / "run/models/cnn");
   lfnet::test::write_bytes(tmp / "run/models/cnn/last.ckpt", "state");
@@ -420,10 +427,7 @@ TEST_CASE("report: its plotter dies with it, and a failed report leaves the old 
           "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   std::string out;
-  lfnet::write_json_file(tmp / "two.json", two_stage_config());
-  REQUIRE(run_command(
-              program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae"),
-              out) == 0);
+  train_first_stage(tmp);
   // A plotter that records its pid and then takes its time.
   fs::create_directories(tmp / "slow");
   lfnet::test::write_bytes(tmp / "slow/figures.py",

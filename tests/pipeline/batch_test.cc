@@ -65,6 +65,8 @@ TEST_CASE("discover_items finds acquisitions and light fields, and records what 
   CHECK(items[3].name == "scenes/a");
   CHECK(items[3].kind == "evaluate");
   CHECK_THROWS_WITH(pipeline::discover_items(tmp / "in/nowhere"),
+                    Catch::Contains("does not exist"));
+  CHECK_THROWS_WITH(pipeline::discover_items(tmp / "in/scenes/a/lf_1_1.png"),
                     Catch::Contains("is not a folder"));
 }
 

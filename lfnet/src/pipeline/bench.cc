@@ -501,7 +501,8 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
                   {"--method-options", shell_quote(nlohmann::json{{method, all[method]}}.dump())});
     }
   }
-  FILE* pipe = popen(join(args, " ").c_str(), "r");
+  // exec: the case is the bench's own child, which it dies with (cmd_bench's --case).
+  FILE* pipe = popen(("exec " + join(args, " ")).c_str(), "r");
   LFNET_CHECK_AS(IoError, pipe, "bench: cannot start a child process");
   std::string output;
   char buffer[4096];

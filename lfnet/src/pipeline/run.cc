@@ -39,6 +39,11 @@ void recover_run_folder(const std::string& dir) {
 
 }  // namespace
 
+void check_config_inputs(const ExperimentConfig& config) {
+  check_sources(config.train_data, "$.data");
+  check_sources(config.evaluation.data, "$.evaluation.data");
+}
+
 bool resumes_folder(const TrainRequest& request) {
   return !request.resume.empty() && fs::is_directory(request.resume);
 }
@@ -112,6 +117,7 @@ TrainResult train_experiment(const TrainRequest& request,
   // Rank 0 owns the folder (another host's process ids mean nothing here).
   if (lead && resumes_folder(request)) recover_run_folder(request.resume);
   ExperimentConfig config = resolve_request(request);
+  check_config_inputs(config);
   const std::string out = run_folder(request, config);
   if (lead) recover_run_folder(out);
   const bool continue_folder = resumes_folder(request);

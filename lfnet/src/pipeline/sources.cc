@@ -121,4 +121,20 @@ scene::RenderOptions scene_render_options(const std::string& scene_file) {
   return options;
 }
 
+void check_sources(const LightFieldSources& sources, const std::string& where) {
+  for (size_t i = 0; i < sources.light_fields.size(); ++i) {
+    const std::string path = where + ".light_fields[" + std::to_string(i) + "]";
+    try {
+      io::scan_folder(sources.light_fields[i], sources.layout);
+    } catch (const Error& e) {
+      throw ConfigError(path + ": " + e.what());
+    }
+  }
+  for (size_t i = 0; i < sources.scenes.size(); ++i) {
+    std::error_code ec;
+    LFNET_CHECK_AS(ConfigError, fs::is_regular_file(sources.scenes[i], ec), where, ".scenes[", i,
+                   "]: ", sources.scenes[i], " is not a file");
+  }
+}
+
 }  // namespace lfnet::pipeline

@@ -35,6 +35,10 @@ std::string run_folder(const TrainRequest& request, const ExperimentConfig& conf
 // True when `resume` names a run folder (rather than a checkpoint file).
 bool resumes_folder(const TrainRequest& request);
 
+// Checks every input a run of `config` will read, before any work: the training and evaluation
+// light-field folders (complete grids) and scene files (pipeline::check_sources).
+void check_config_inputs(const ExperimentConfig& config);
+
 struct TrainResult {
   ExperimentConfig config;
   std::string out;   // the run folder

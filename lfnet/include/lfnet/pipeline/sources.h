@@ -66,4 +66,9 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
 // the scene file's folder ("" for none).
 scene::RenderOptions scene_render_options(const std::string& scene_file);
 
+// Checks, before any work, that every light-field folder of `sources` holds a complete grid of
+// views (io::scan_folder; the files are not decoded) and every scene file exists. Errors name
+// the folder or file and `where` (a JSON path such as "$.evaluation.data").
+void check_sources(const LightFieldSources& sources, const std::string& where);
+
 }  // namespace lfnet::pipeline
