@@ -18,15 +18,7 @@ void add_export_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--check", a->check,
                   "patches on which to compare the exported net with the checkpoint, 0 to 65536 "
                   "(0: none; the lfnet architecture is compared on one sensor image)")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            int64_t v = 0;
-            if (!CLI::detail::lexical_cast(text, v) || v < 0 || v > 65536) {
-              return "must be a whole number of patches from 0 to 65536, got " + text;
-            }
-            return "";
-          },
-          "0..65536"));
+      ->check(whole_number_in(0, 65536, "patches"));
   cmd->add_flag("--force", a->force, "replace an existing file");
   cmd->callback([a] {
     const auto r = pipeline::export_model(*a);

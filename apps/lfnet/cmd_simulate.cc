@@ -130,15 +130,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
       ->check(kStride)
       ->capture_default_str();
   cmd->add_option("--patch", args->patch, "patch size, per_patch mode")
-      ->check(CLI::Validator(
-          [](std::string& text) -> std::string {
-            int64_t v = 0;
-            if (!CLI::detail::lexical_cast(text, v) || v < 1 || v > 64) {
-              return "must be a whole number of pixels from 1 to 64, got " + text;
-            }
-            return "";
-          },
-          "1..64"))
+      ->check(whole_number_in(1, 64, "pixels"))
       ->capture_default_str();
   cmd->add_flag("--force", args->force,
                 "replace an existing non-empty --out folder (and --plot-weights files)");

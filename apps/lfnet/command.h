@@ -88,6 +88,21 @@ inline const CLI::Validator kWhole(
     },
     "N>=0");
 
+// A whole number of `unit` from `lo` to `hi`.
+inline CLI::Validator whole_number_in(int64_t lo, int64_t hi, const std::string& unit) {
+  const std::string range = std::to_string(lo) + ".." + std::to_string(hi);
+  return CLI::Validator(
+      [lo, hi, unit](std::string& text) -> std::string {
+        int64_t v = 0;
+        if (!CLI::detail::lexical_cast(text, v) || v < lo || v > hi) {
+          return "must be a whole number of " + unit + " from " + std::to_string(lo) + " to " +
+                 std::to_string(hi) + ", got " + text;
+        }
+        return "";
+      },
+      range);
+}
+
 // A duration in seconds, at most a year: >= 0, or > 0 for a timeout.
 inline CLI::Validator seconds_validator(bool positive) {
   return CLI::Validator(
