@@ -39,9 +39,13 @@ void run_evaluate(EvaluateArgs& a) {
   const double psnr = record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>();
   // Shot and read noise are named by the Gaussian sigma of the same variance.
   const double noise = record.value("equivalent_sigma", q.noise);
-  std::printf("%s on %s (%s, %s, stride %lld, noise %.3g): PSNR %.2f dB, SSIM %.4f, %.2f s\n",
+  // A whole-image model has no stride.
+  const std::string stride = record.value("whole_image", false)
+                                 ? std::string("whole image")
+                                 : "stride " + std::to_string(q.stride);
+  std::printf("%s on %s (%s, %s, %s, noise %.3g): PSNR %.2f dB, SSIM %.4f, %.2f s\n",
               record["method"].get<std::string>().c_str(), r.light_field.c_str(), r.phi.c_str(),
-              optics::to_string(q.mode).c_str(), static_cast<long long>(q.stride), noise, psnr,
+              optics::to_string(q.mode).c_str(), stride.c_str(), noise, psnr,
               record["ssim"].get<double>(), record["seconds"].get<double>());
   if (!a.json.empty()) write_json_file(a.json, record);
   if (!a.out.empty()) {

@@ -4,6 +4,7 @@
 
 #include "command.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/nn/architecture.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/models.h"
@@ -11,6 +12,7 @@
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/pipeline/stages.h"
 #include "lfnet/recon/method_registry.h"
+#include "lfnet/recon/methods.h"
 
 namespace lfnet::app {
 
@@ -27,13 +29,22 @@ void run_reconstruct(const ReconstructArgs& a) {
   policy.inputs = split_paths(a.request.sensor);
   policy.inputs.insert(policy.inputs.end(), {a.request.model, a.request.dictionary, a.request.phi});
   check_output_folder(a.out, policy);
-  ProgressBar bar("reconstruct", 0, "patches");  // its total is known once the work starts
+  // A whole-image model reconstructs colour channels, not patches (the model, read here to
+  // know, is read once: the cache passes it on).
+  pipeline::ModelCache cache;
+  const bool whole_image = !a.request.model.empty() && recon::needs_network(a.request.method) &&
+                           cache.model(a.request.model).network.arch().whole_image();
+  // Its total is known once the work starts.
+  ProgressBar bar("reconstruct", 0, whole_image ? "channels" : "patches");
   int64_t shown = 0;
-  auto r = pipeline::reconstruct_acquisition(a.request, [&](int64_t done, int64_t total) {
-    bar.set_total(total);
-    bar.advance(done - shown);
-    shown = done;
-  });
+  auto r = pipeline::reconstruct_acquisition(
+      a.request,
+      [&](int64_t done, int64_t total) {
+        bar.set_total(total);
+        bar.advance(done - shown);
+        shown = done;
+      },
+      &cache);
   bar.finish();
   pipeline::write_reconstruction(r, a.out, policy);
   spdlog::info("reconstructed {} with {} in {:.2f} s into {}", r.lf.shape_string(),

@@ -328,6 +328,9 @@ TEST_CASE(
         command += part;
       }
       REQUIRE(run_command(command, out) == 0);
+      // The summary speaks of the whole image, not of a stride it does not have.
+      CHECK(out.find("whole image, noise") != std::string::npos);
+      CHECK(out.find("stride") == std::string::npos);
     }
     const auto a = read_json(tmp / "ck.json"), b = read_json(tmp / "pt.json");
     CHECK(std::abs(a["psnr_db"].get<double>() - b["psnr_db"].get<double>()) < 1e-4);

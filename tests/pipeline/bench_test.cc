@@ -108,29 +108,70 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
         Approx(2 * r["gflops"].get<double>() * r["seconds"].get<double>()).epsilon(1e-6));
 }
 
+TEST_CASE("bench_report runs a whole-image net once, and the other methods at every stride",
+          "[pipeline][bench]") {
+  pipeline::BenchOptions o;
+  o.skip_kernels = true;
+  o.reps = 1;
+  o.methods = {"net", "pinv"};
+  o.architectures = {"lfnet"};
+  o.strides = {9, 5};
+  std::vector<std::string> asked, lines;
+  pipeline::bench_report(
+      o,
+      [&](const pipeline::BenchOptions&, const std::string& method, int64_t stride, double) {
+        asked.push_back(method + ":" + std::to_string(stride));
+        nlohmann::json r = {{"method", method},          {"seconds", 1.0},
+                            {"peak_rss_mb", 3.0},        {"psnr_db", 4.0},
+                            {"patches_per_second", 2.0}, {"megapixels_per_second", 0.5}};
+        if (method == "net") r["whole_image"] = true;
+        return r;
+      },
+      [&](const std::string& line) { lines.push_back(line); });
+  CHECK(asked == std::vector<std::string>{"net:9", "pinv:9", "pinv:5"});
+  REQUIRE(lines.size() == 5);
+  CHECK(lines[2].find("whole image: 1.00 s, 0.50 Mpx/s") != std::string::npos);
+  CHECK(lines[3].find("pinv stride 9: 1.00 s, 2 patches/s") != std::string::npos);
+}
+
 TEST_CASE("bench_table prints a line per case, its architecture and its error",
           "[pipeline][bench]") {
   nlohmann::json report;
+  // A whole-image case has no stride and no patches; every case has its megapixels per second.
   report["cases"] = nlohmann::json::array(
       {{{"method", "net"},
         {"architecture", "lfnet"},
-        {"stride", 5},
-        {"patches", 0},
+        {"whole_image", true},
         {"seconds", 1.5},
-        {"patches_per_second", 0.0},
+        {"megapixels_per_second", 0.33},
         {"peak_rss_mb", 812.0},
         {"gflops", 40.5},
         {"gemm_fraction", 0.2},
         {"cpu_utilisation", 0.97},
         {"psnr_db", 36.5}},
+       {{"method", "pinv"},
+        {"stride", 5},
+        {"patches", 19824},
+        {"seconds", 0.72},
+        {"patches_per_second", 27556.9},
+        {"megapixels_per_second", 0.69},
+        {"peak_rss_mb", 563.0},
+        {"gflops", 18.1},
+        {"gemm_fraction", 0.13},
+        {"cpu_utilisation", 0.95},
+        {"psnr_db", 28.12}},
        {{"method", "dict"}, {"stride", 2}, {"error", "the child process failed (status 9)"}}});
   const auto table = pipeline::bench_table(report);
+  INFO(table);
   const auto first = table.find('\n');
   REQUIRE(first != std::string::npos);
   CHECK(table.substr(0, first).find("PSNR dB") != std::string::npos);
-  CHECK(table.find("net/lfnet      5             0       1.50          0.0       812     40.5"
-                   "     20.0%   0.97    36.50\n") != std::string::npos);
+  CHECK(table.substr(0, first).find("Mpx/s") != std::string::npos);
+  CHECK(table.find("net/lfnet      image         -       1.50            -     0.33       812     "
+                   "40.5     20.0%   0.97    36.50\n") != std::string::npos);
+  CHECK(table.find("pinv           5         19824       0.72      27556.9     0.69       563     "
+                   "18.1     13.0%   0.95    28.12\n") != std::string::npos);
   CHECK(table.find("dict           2       the child process failed (status 9)\n") !=
         std::string::npos);
-  CHECK(std::count(table.begin(), table.end(), '\n') == 3);
+  CHECK(std::count(table.begin(), table.end(), '\n') == 4);
 }

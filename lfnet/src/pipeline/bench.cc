@@ -261,11 +261,12 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     flops += nn::cnn_full_flops(network, truth.height(), truth.width(), cnn_tile) -
              nn::cnn_patch_flops(network) * static_cast<double>(grid.size());
   }
+  // Whole-image models have no stride and no patches: their rate is in sensor megapixels per
+  // second, which every case reports so that all compare.
   nlohmann::json r = {{"method", method},
-                      {"stride", stride},
-                      {"patches", grid.size()},
                       {"seconds", seconds},
-                      {"patches_per_second", grid.size() / seconds},
+                      {"megapixels_per_second",
+                       static_cast<double>(truth.height() * truth.width()) / seconds / 1e6},
                       {"cpu_utilisation", cpu / seconds / thread_count()},
                       {"cpu_user_seconds", user},
                       {"cpu_system_seconds", system},
@@ -281,6 +282,13 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
                       {"psnr_db", psnr(LightField(est), truth)},
                       {"phi", spec.label()},
                       {"device", a.device}};
+  if (image) {
+    r["whole_image"] = true;
+  } else {
+    r["stride"] = stride;
+    r["patches"] = grid.size();
+    r["patches_per_second"] = static_cast<double>(grid.size()) / seconds;
+  }
   if (method == "net") r["paper_ratio"] = kPaperNetSeconds / seconds;
   if (method == "dict") r["paper_ratio"] = kPaperDictSeconds / seconds;
   r.update(extra);
@@ -401,8 +409,9 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
     const int64_t stride = a.strides[s];
     for (const auto& method : a.methods) {
       const bool network = recon::needs_network(method);
-      for (const auto& [narrowed, image] : nets) {
-        if (image && s > 0) continue;  // whole images: the stride does not apply
+      for (const auto& [narrowed, image_net] : nets) {
+        const bool image = network && image_net;  // a whole-image network: no stride applies
+        if (image && s > 0) continue;
         auto r = run_case(narrowed, method, stride, gemm);
         const std::string label =
             !network ? method
@@ -410,14 +419,18 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
                            (narrowed.models.empty() ? narrowed.architectures.front()
                                                     : narrowed.models.front()) +
                            "]";
-        if (!r.contains("error")) {
-          say("%-4s stride %lld: %.2f s, %.0f patches/s, peak %.0f MB, PSNR %.2f dB\n",
-              label.c_str(), static_cast<long long>(stride), r["seconds"].get<double>(),
-              r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
-              r["psnr_db"].get<double>());
+        const std::string where =
+            image ? std::string("whole image") : "stride " + std::to_string(stride);
+        if (r.contains("error")) {
+          say("%-4s %s: %s\n", label.c_str(), where.c_str(), r["error"].get<std::string>().c_str());
+        } else if (image) {
+          say("%-4s %s: %.2f s, %.2f Mpx/s, peak %.0f MB, PSNR %.2f dB\n", label.c_str(),
+              where.c_str(), r["seconds"].get<double>(), r["megapixels_per_second"].get<double>(),
+              r["peak_rss_mb"].get<double>(), r["psnr_db"].get<double>());
         } else {
-          say("%-4s stride %lld: %s\n", label.c_str(), static_cast<long long>(stride),
-              r["error"].get<std::string>().c_str());
+          say("%-4s %s: %.2f s, %.0f patches/s, peak %.0f MB, PSNR %.2f dB\n", label.c_str(),
+              where.c_str(), r["seconds"].get<double>(), r["patches_per_second"].get<double>(),
+              r["peak_rss_mb"].get<double>(), r["psnr_db"].get<double>());
         }
         report["cases"].push_back(r);
         if (!network) break;  // one case for methods without a net
@@ -521,26 +534,31 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
 }
 
 std::string bench_table(const nlohmann::json& report) {
-  std::string out =
-      format_text("%-14s %-6s %8s %10s %12s %9s %8s %9s %6s %8s\n", "method", "stride", "patches",
-                  "seconds", "patches/s", "peak MB", "GFLOP/s", "% GEMM", "util", "PSNR dB");
+  // Whole-image cases have no stride and no patches ("image", "-"); Mpx/s compares every case.
+  std::string out = format_text("%-14s %-6s %8s %10s %12s %8s %9s %8s %9s %6s %8s\n", "method",
+                                "stride", "patches", "seconds", "patches/s", "Mpx/s", "peak MB",
+                                "GFLOP/s", "% GEMM", "util", "PSNR dB");
   for (const auto& r : report["cases"]) {
     // Network cases name their architecture: both may share a run.
     std::string method = r["method"].get<std::string>();
     if (r.contains("architecture")) method += "/" + r["architecture"].get<std::string>();
+    const bool image = r.value("whole_image", false);
+    const std::string stride = image ? std::string("image") : std::to_string(r.value("stride", 0));
     if (r.contains("error")) {
-      out += format_text("%-14s %-6lld  %s\n", method.c_str(),
-                         static_cast<long long>(r["stride"].get<int64_t>()),
+      out += format_text("%-14s %-6s  %s\n", method.c_str(), stride.c_str(),
                          r["error"].get<std::string>().c_str());
       continue;
     }
-    out +=
-        format_text("%-14s %-6lld %8lld %10.2f %12.1f %9.0f %8.1f %8.1f%% %6.2f %8.2f\n",
-                    method.c_str(), static_cast<long long>(r["stride"].get<int64_t>()),
-                    static_cast<long long>(r["patches"].get<int64_t>()), r["seconds"].get<double>(),
-                    r["patches_per_second"].get<double>(), r["peak_rss_mb"].get<double>(),
-                    r["gflops"].get<double>(), 100 * r["gemm_fraction"].get<double>(),
-                    r["cpu_utilisation"].get<double>(), r["psnr_db"].get<double>());
+    const std::string patches =
+        image ? std::string("-") : std::to_string(r["patches"].get<int64_t>());
+    const std::string rate =
+        image ? std::string("-") : format_text("%.1f", r["patches_per_second"].get<double>());
+    out += format_text("%-14s %-6s %8s %10.2f %12s %8.2f %9.0f %8.1f %8.1f%% %6.2f %8.2f\n",
+                       method.c_str(), stride.c_str(), patches.c_str(), r["seconds"].get<double>(),
+                       rate.c_str(), r.value("megapixels_per_second", 0.0),
+                       r["peak_rss_mb"].get<double>(), r["gflops"].get<double>(),
+                       100 * r["gemm_fraction"].get<double>(), r["cpu_utilisation"].get<double>(),
+                       r["psnr_db"].get<double>());
   }
   return out;
 }

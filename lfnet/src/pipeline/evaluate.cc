@@ -110,10 +110,13 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   LFNET_CHECK(context.phi != nullptr, "evaluation without a Phi");
   const auto& phi = *context.phi;
   eval::EvalResult result;
-  const std::string label =
-      method + " " + truth.name + " stride " + std::to_string(options.reconstruct.stride);
   auto prepared =
       prepare_method(method, context, options.reconstruct.patch_h, options.reconstruct.patch_w);
+  // A whole-image model has no stride and no patches: its progress counts tiles.
+  const bool whole_image = static_cast<bool>(prepared.image);
+  const std::string label =
+      method + " " + truth.name +
+      (whole_image ? " (whole image)" : " stride " + std::to_string(options.reconstruct.stride));
   const auto report = prepared.report;
   if (recon::find_method(method).needs() == recon::MethodNeeds::kTruth) {
     result = eval::evaluate_no_parallax(truth.lf, phi, options);
@@ -124,15 +127,17 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     if (show_progress) {
       patches_bar = std::make_unique<ProgressBar>(
           label,
-          PatchGrid(truth.lf.height(), truth.lf.width(), options.reconstruct.patch_h,
-                    options.reconstruct.patch_w, options.reconstruct.stride)
-              .size(),
-          "patches");
+          whole_image ? 0
+                      : PatchGrid(truth.lf.height(), truth.lf.width(), options.reconstruct.patch_h,
+                                  options.reconstruct.patch_w, options.reconstruct.stride)
+                            .size(),
+          whole_image ? "tiles" : "patches");
     }
     int64_t shown = 0;
     result = eval::evaluate(
         truth.lf, phi, method, solver, options,
-        [&](int64_t done, int64_t) {
+        [&](int64_t done, int64_t total) {
+          if (patches_bar && whole_image) patches_bar->set_total(total);
           if (patches_bar) patches_bar->advance(done - shown);
           shown = done;
         },

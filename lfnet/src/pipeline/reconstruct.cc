@@ -158,7 +158,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
         const double sigma =
             a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
         channels.push_back(image(sensor, sigma));
-        if (progress) progress((ch + 1) * per_channel, c * per_channel);
+        if (progress) progress(ch + 1, c);  // whole images: one step a colour channel
         continue;
       }
       if (full) {

@@ -255,7 +255,8 @@
     const facts = [];
     if (r.method) facts.push(`method ${r.method}`);
     if (r.phi && r.phi.name) facts.push(`Phi ${r.phi.name}` + (r.measurements ? `, N ${r.measurements}` : ''));
-    if (r.stride) facts.push(`stride ${r.stride}`);
+    if (r.whole_image) facts.push('whole image');
+    else if (r.stride) facts.push(`stride ${r.stride}`);
     if (r.mode) facts.push(`${r.mode} mode`);
     if (typeof r.psnr_db === 'number') facts.push(`PSNR ${r.psnr_db.toFixed(2)} dB`);
     if (typeof r.ssim === 'number') facts.push(`SSIM ${r.ssim.toFixed(4)}`);
