@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "command.h"
+#include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/nn/architecture.h"
 #include "lfnet/pipeline/evaluate.h"
@@ -47,8 +48,9 @@ void run_reconstruct(const ReconstructArgs& a) {
       &cache);
   bar.finish();
   pipeline::write_reconstruction(r, a.out, policy);
-  spdlog::info("reconstructed {} with {} in {:.2f} s into {}", r.lf.shape_string(),
-               a.request.method, r.record["seconds"].get<double>(), a.out);
+  spdlog::info("reconstructed {} with {} in {:.2f} s ({:.2f} s end to end) into {}",
+               r.lf.shape_string(), a.request.method, r.record["seconds"].get<double>(),
+               process_seconds(), a.out);
 }
 }  // namespace
 

@@ -338,6 +338,9 @@ TEST_CASE(
     for (const auto& r : {a, b}) {
       CHECK(r.value("whole_image", false));
       CHECK(r["patches"] == 0);
+      // The command's own time from its start covers the reconstruction and more.
+      CHECK(r["end_to_end_seconds"].get<double>() > r["seconds"].get<double>());
+      CHECK(r["end_to_end_seconds"].get<double>() < 300);
     }
     // The self-ensemble too: the file's Phi weights give the checkpoint's mirrors.
     CHECK(torch::equal(scripted.pixel_weights(), net->phi));

@@ -1,7 +1,12 @@
-// Text helpers (core/text.h).
+// Text helpers (core/text.h) and the process clock (core/process_time.h).
 #include "lfnet/core/text.h"
 
 #include <catch2/catch.hpp>
+
+#include <chrono>
+#include <thread>
+
+#include "lfnet/core/process_time.h"
 
 #include "lfnet/core/error.h"
 
@@ -20,4 +25,15 @@ TEST_CASE("source locations leave messages, the rest of the text stays", "[core]
     CHECK(without_source_locations(e.what()) == "view 3 is missing");
   }
   CHECK(lfnet::join({"a", "b", "c"}, ", ") == "a, b, c");
+}
+
+TEST_CASE("process_seconds counts from the start of the process", "[core][time]") {
+  const double a = lfnet::process_seconds();
+  CHECK(a >= 0);
+  CHECK(a < 3600);  // this test process started moments ago, not before the machine booted
+  std::this_thread::sleep_for(std::chrono::milliseconds(120));
+  const double b = lfnet::process_seconds();
+  // /proc's start time has a resolution of one clock tick (10 ms): the sleep shows.
+  CHECK(b - a >= 0.08);
+  CHECK(b - a < 5);
 }

@@ -178,7 +178,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
         policy.inputs = {item.path, a.model, a.dictionary};
-        write_reconstruction(r, target, policy);
+        write_reconstruction(r, target, policy,
+                             /*end_to_end=*/false);  // the batch's, not the item's
         auto record = r.record;
         record["item"] = item.name;
         record["path"] = item.path;

@@ -6,6 +6,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/patches.h"
+#include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/core/version.h"
@@ -226,16 +227,19 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
 }
 
 void write_reconstruction(const Reconstruction& r, const std::string& out,
-                          const OutputFolderPolicy& policy) {
+                          const OutputFolderPolicy& policy, bool end_to_end) {
   write_folder(out, policy, [&](const std::string& dir) {
     io::write_light_field(r.lf, dir);
     io::write_previews(r.lf, dir);
-    write_json_file((fs::path(dir) / "reconstruction.json").string(), r.record);
     io::ViewerPage page;
     page.title = r.record.value("method", "") + " reconstruction of " +
                  fs::path(r.record.value("sensor", "")).filename().string();
     page.record = r.record;
     io::write_viewer(r.lf, (fs::path(dir) / "index.html").string(), page);
+    // Last: the command's time from its start, every other output written.
+    auto record = r.record;
+    if (end_to_end) record["end_to_end_seconds"] = process_seconds();
+    write_json_file((fs::path(dir) / "reconstruction.json").string(), record);
   });
 }
 

@@ -52,8 +52,10 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
                                        ModelCache* cache = nullptr);
 
 // Writes a reconstruction as a light-field folder with previews and reconstruction.json, by
-// the output-folder policy (core/output.h).
+// the output-folder policy (core/output.h). With `end_to_end`, the record written gets
+// end_to_end_seconds: the process's time from its start up to it, every other output written
+// (a command's own; a batch's items leave it out).
 void write_reconstruction(const Reconstruction& r, const std::string& out,
-                          const OutputFolderPolicy& policy);
+                          const OutputFolderPolicy& policy, bool end_to_end = true);
 
 }  // namespace lfnet::pipeline
