@@ -1,11 +1,13 @@
 #include "lfnet/io/viewer.h"
 
 #include <string_view>
+#include <vector>
 
 #include "lfnet/core/colour_map.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/io/tasks.h"
 #include "viewer_assets.h"
 
 namespace lfnet::io {
@@ -17,10 +19,13 @@ std::string data_uri(const torch::Tensor& view) {
 }
 
 nlohmann::json view_uris(const LightField& lf) {
+  // One encode per view, on LibTorch's thread count.
+  const int64_t cols = lf.cols();
+  std::vector<std::string> encoded(static_cast<size_t>(lf.rows() * cols));
+  for_each_task(lf.rows() * cols, 0,
+                [&](int64_t i) { encoded[i] = data_uri(lf.view(i / cols, i % cols)); });
   auto uris = nlohmann::json::array();
-  for (int64_t u = 0; u < lf.rows(); ++u) {
-    for (int64_t v = 0; v < lf.cols(); ++v) uris.push_back(data_uri(lf.view(u, v)));
-  }
+  for (auto& uri : encoded) uris.push_back(std::move(uri));
   return uris;
 }
 
