@@ -9,7 +9,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
-#include "parallel.h"
+#include "lfnet/core/parallel.h"
 
 namespace lfnet::dict {
 
@@ -222,7 +222,7 @@ OmpResult run_batch(const torch::Tensor& gram, const torch::Tensor& xy_rows, int
   const T* xy = xy_rows.data_ptr<T>();
   const double* nrm = norms.defined() ? norms.data_ptr<double>() : nullptr;
   std::vector<Code> codes(b);
-  detail::parallel_chunks(b, 16, [&](int64_t begin, int64_t end) {
+  parallel_chunks(b, 16, [&](int64_t begin, int64_t end) {
     Workspace<T> ws;
     for (int64_t i = begin; i < end; ++i) {
       omp_column<T>(g, xy + i * k, k, max_atoms, tol, nrm ? nrm[i] : 0.0, nrm != nullptr, ws,
@@ -321,7 +321,7 @@ void accumulate_codes(const torch::Tensor& dictionary, const OmpResult& codes, d
   const int64_t* idx = codes.indices.data_ptr<int64_t>();
   const double* val = codes.values.data_ptr<double>();
   double* o = out.data_ptr<double>();
-  detail::parallel_chunks(b, 64, [&](int64_t begin, int64_t end) {
+  parallel_chunks(b, 64, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
       double* row = o + i * d;
       for (int64_t j = 0; j < width; ++j) {

@@ -12,8 +12,8 @@
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/parallel.h"
 #include "lfnet/dict/omp.h"
-#include "parallel.h"
 
 namespace lfnet::dict {
 
@@ -296,7 +296,7 @@ void admm_iterations(const AdmmOptions& o, const torch::Tensor& theta, const tor
     torch::mm_out(t_a, pq_a, theta);
     // One fused pass per patch: x, relaxation, soft threshold, dual update, residual norms,
     // and the next right-hand side q.
-    detail::parallel_chunks(active, grain, [&](int64_t begin, int64_t end) {
+    parallel_chunks(active, grain, [&](int64_t begin, int64_t end) {
       for (int64_t i = begin; i < end; ++i) {
         const T* qi0 = pq0 + i * k;
         const T* ti = pt + i * k;

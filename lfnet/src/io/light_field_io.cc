@@ -1,29 +1,24 @@
 #include "lfnet/io/light_field_io.h"
 
-#include <ATen/Parallel.h>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cctype>
 #include <cmath>
 #include <cstring>
-#include <exception>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <map>
-#include <mutex>
 #include <regex>
 #include <thread>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/parallel.h"
 #include "lfnet/io/sensor_io.h"
-#include "lfnet/io/tasks.h"
 
 namespace fs = std::filesystem;
 
@@ -406,31 +401,6 @@ void warn_view_range(const std::vector<torch::Tensor>& images, const FolderLayou
 
 }  // namespace
 
-void for_each_task(int64_t count, int threads, const std::function<void(int64_t)>& task) {
-  if (threads <= 0) threads = at::get_num_threads();
-  const int workers = static_cast<int>(std::max<int64_t>(1, std::min<int64_t>(threads, count)));
-  std::atomic<int64_t> next{0};
-  std::mutex error_mutex;
-  std::exception_ptr first_error;
-  auto work = [&] {
-    for (int64_t i = next++; i < count; i = next++) {
-      try {
-        task(i);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(error_mutex);
-        if (!first_error) first_error = std::current_exception();
-        next = count;
-      }
-    }
-  };
-  std::vector<std::thread> pool;
-  pool.reserve(static_cast<size_t>(workers - 1));
-  for (int t = 1; t < workers; ++t) pool.emplace_back(work);
-  work();
-  for (auto& t : pool) t.join();
-  if (first_error) std::rethrow_exception(first_error);
-}
-
 bool holds_view_names(const std::string& dir) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
@@ -467,8 +437,12 @@ LightField read_light_field(const std::string& dir, int threads, const std::stri
   const FolderLayout layout = scan_folder(dir, naming);
   const int64_t n = static_cast<int64_t>(layout.views.size());
   std::vector<torch::Tensor> images(n);
-  for_each_task(n, threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency()),
-                [&](int64_t i) { images[i] = read_image(layout.views[i].path); });
+  parallel_chunks(
+      n, 1,
+      [&](int64_t begin, int64_t end) {
+        for (int64_t i = begin; i < end; ++i) images[i] = read_image(layout.views[i].path);
+      },
+      threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency()));
   warn_view_range(images, layout);
 
   const auto ref = images[0].sizes().vec();
@@ -581,11 +555,13 @@ void write_light_field(const LightField& lf, const std::string& dir, const Write
                  ec.message());
   // One encode per view, on LibTorch's thread count (the first error is passed on).
   const int64_t cols = lf.cols();
-  for_each_task(lf.rows() * cols, 0, [&](int64_t i) {
-    const int64_t u = i / cols, v = i % cols;
-    auto name =
-        "lf_" + std::to_string(u + 1) + "_" + std::to_string(v + 1) + "." + options.extension;
-    write_image((fs::path(dir) / name).string(), lf.view(u, v), options.bits);
+  parallel_chunks(lf.rows() * cols, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) {
+      const int64_t u = i / cols, v = i % cols;
+      auto name =
+          "lf_" + std::to_string(u + 1) + "_" + std::to_string(v + 1) + "." + options.extension;
+      write_image((fs::path(dir) / name).string(), lf.view(u, v), options.bits);
+    }
   });
 }
 

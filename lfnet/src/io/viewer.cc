@@ -6,8 +6,8 @@
 #include "lfnet/core/colour_map.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/parallel.h"
 #include "lfnet/io/light_field_io.h"
-#include "lfnet/io/tasks.h"
 #include "viewer_assets.h"
 
 namespace lfnet::io {
@@ -22,8 +22,9 @@ nlohmann::json view_uris(const LightField& lf) {
   // One encode per view, on LibTorch's thread count.
   const int64_t cols = lf.cols();
   std::vector<std::string> encoded(static_cast<size_t>(lf.rows() * cols));
-  for_each_task(lf.rows() * cols, 0,
-                [&](int64_t i) { encoded[i] = data_uri(lf.view(i / cols, i % cols)); });
+  parallel_chunks(lf.rows() * cols, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) encoded[i] = data_uri(lf.view(i / cols, i % cols));
+  });
   auto uris = nlohmann::json::array();
   for (auto& uri : encoded) uris.push_back(std::move(uri));
   return uris;

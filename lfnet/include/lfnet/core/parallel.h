@@ -1,4 +1,5 @@
-// Dynamic work sharing over std::threads for the dict area's per-signal loops.
+// Dynamic work sharing over std::threads: the dict area's per-signal loops, and file tasks (one
+// image to read, encode or write each) in io.
 #pragma once
 
 #include <ATen/Parallel.h>
@@ -11,18 +12,20 @@
 #include <thread>
 #include <vector>
 
-namespace lfnet::dict::detail {
+namespace lfnet {
 
-// Calls fn(begin, end) on chunks of `grain` indices of [0, n) from LibTorch's intra-op thread
-// count of threads. Chunks are handed out one at a time and idle threads block in join()
-// rather than spin, so a thread that the OS deschedules on a busy machine does not hold the
-// others at a barrier (as static OpenMP splits do). The first exception is rethrown.
+// Calls fn(begin, end) on chunks of `grain` indices of [0, n) on `threads` threads (0: LibTorch's
+// intra-op thread count), the calling thread among them. Chunks are handed out one at a time and
+// idle threads block in join() rather than spin, so a thread that the OS deschedules on a busy
+// machine does not hold the others at a barrier (as static OpenMP splits do). The first exception
+// is rethrown.
 template <typename Fn>
-void parallel_chunks(int64_t n, int64_t grain, const Fn& fn) {
+void parallel_chunks(int64_t n, int64_t grain, const Fn& fn, int threads_wanted = 0) {
   if (n <= 0) return;
   grain = std::max<int64_t>(1, grain);
   const int64_t chunks = (n + grain - 1) / grain;
-  const int64_t threads = std::min<int64_t>(at::get_num_threads(), chunks);
+  const int64_t threads =
+      std::min<int64_t>(threads_wanted > 0 ? threads_wanted : at::get_num_threads(), chunks);
   if (threads <= 1) {
     fn(int64_t{0}, n);
     return;
@@ -51,4 +54,4 @@ void parallel_chunks(int64_t n, int64_t grain, const Fn& fn) {
   if (error) std::rethrow_exception(error);
 }
 
-}  // namespace lfnet::dict::detail
+}  // namespace lfnet
