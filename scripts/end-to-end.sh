@@ -4,6 +4,8 @@
 # lfnet binary given (default build/apps/lfnet), alternating, RUNS times (default 3), one line
 #   BINARY  reconstruction-seconds  end-to-end-seconds  ratio
 # from each run's reconstruction.json (docs/performance.md, "End to end").
+# The paper's scene is the one #43 times commands on; this script reads only seconds, never a
+# PSNR, so nothing is chosen by the scene's score.
 # Usage: scripts/end-to-end.sh [BINARY...]   (RUNS=5 scripts/end-to-end.sh ...)
 set -euo pipefail
 cd "$(dirname "$0")/.."

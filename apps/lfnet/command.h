@@ -66,27 +66,23 @@ inline const CLI::Validator kStride(
     },
     "1..PATCH");
 
+// A whole number >= `lo`, without an upper bound.
+inline CLI::Validator whole_number_at_least(int64_t lo) {
+  const std::string bound = ">= " + std::to_string(lo);
+  return CLI::Validator(
+      [lo, bound](std::string& text) -> std::string {
+        int64_t v = 0;
+        if (!CLI::detail::lexical_cast(text, v) || v < lo) {
+          return "must be a whole number " + bound + ", got " + text;
+        }
+        return "";
+      },
+      "N" + bound.substr(0, 2) + std::to_string(lo));
+}
 // A count: a whole number >= 1.
-inline const CLI::Validator kCount(
-    [](std::string& text) -> std::string {
-      int64_t v = 0;
-      if (!CLI::detail::lexical_cast(text, v) || v < 1) {
-        return "must be a whole number >= 1, got " + text;
-      }
-      return "";
-    },
-    "N>=1");
-
+inline const CLI::Validator kCount = whole_number_at_least(1);
 // A whole number >= 0 (an index, a seed of a scene, a count that may be none).
-inline const CLI::Validator kWhole(
-    [](std::string& text) -> std::string {
-      int64_t v = 0;
-      if (!CLI::detail::lexical_cast(text, v) || v < 0) {
-        return "must be a whole number >= 0, got " + text;
-      }
-      return "";
-    },
-    "N>=0");
+inline const CLI::Validator kWhole = whole_number_at_least(0);
 
 // A whole number of `unit` from `lo` to `hi`.
 inline CLI::Validator whole_number_in(int64_t lo, int64_t hi, const std::string& unit) {

@@ -25,6 +25,8 @@ TEST_CASE("source locations leave messages, the rest of the text stays", "[core]
     CHECK(without_source_locations(e.what()) == "view 3 is missing");
   }
   CHECK(lfnet::join({"a", "b", "c"}, ", ") == "a, b, c");
+  CHECK(lfnet::replace_all("d/.t1/x and d/.t1/y", "d/.t1", "d/out") == "d/out/x and d/out/y");
+  CHECK(lfnet::replace_all("aaa", "a", "aa") == "aaaaaa");  // replacements are not rescanned
 }
 
 TEST_CASE("process_seconds counts from the start of the process", "[core][time]") {

@@ -12,6 +12,7 @@
 #include <fstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/text.h"
 
 namespace fs = std::filesystem;
 
@@ -120,15 +121,6 @@ std::string full_disk_reason(const fs::path& p, int error) {
     return std::string(": ") + std::strerror(ENOSPC);
   }
   return "";
-}
-
-// `text` with every `from` replaced by `to`: an error about a temporary names what it becomes.
-std::string replace_all(std::string text, const std::string& from, const std::string& to) {
-  if (from.empty()) return text;
-  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
-    text.replace(at, from.size(), to);
-  }
-  return text;
 }
 
 }  // namespace

@@ -19,6 +19,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/text.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/weights_image.h"
 #include "lfnet/recon/method_registry.h"
@@ -265,12 +266,7 @@ std::string plot_weights(const optics::Phi& phi, const std::string& dir,
     fs::remove_all(tmp, ec);
     fail();
     // Named as the folder it was drawn for, not the temporary.
-    std::string what = e.what();
-    for (size_t at = what.find(tmp.string()); at != std::string::npos;
-         at = what.find(tmp.string(), at)) {
-      what.replace(at, tmp.string().size(), dir);
-    }
-    throw IoError(what);
+    throw IoError(replace_all(e.what(), tmp.string(), dir));
   } catch (...) {
     fs::remove_all(tmp, ec);
     fail();

@@ -26,6 +26,15 @@ inline std::string join(const std::vector<std::string>& items, const std::string
   return out;
 }
 
+// `text` with every `from` replaced by `to` (an error about a temporary names what it becomes).
+inline std::string replace_all(std::string text, const std::string& from, const std::string& to) {
+  if (from.empty()) return text;
+  for (size_t at = text.find(from); at != std::string::npos; at = text.find(from, at + to.size())) {
+    text.replace(at, from.size(), to);
+  }
+  return text;
+}
+
 // `message` without the source locations lfnet's checks append (" [lfnet/src/io/x.cc:12]",
 // core/error.h): the text for a user, a record or a summary.
 inline std::string without_source_locations(std::string message) {
