@@ -48,6 +48,7 @@ std::string run_script(const std::vector<std::string>& args, const std::string& 
   std::vector<std::string> argv_text = {"/usr/bin/python3", script};
   argv_text.insert(argv_text.end(), args.begin(), args.end());
   std::vector<char*> argv;
+  argv.reserve(argv_text.size() + 1);
   for (auto& a : argv_text) argv.push_back(a.data());
   argv.push_back(nullptr);
   int pipe_fds[2];
