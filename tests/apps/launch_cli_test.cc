@@ -7,6 +7,8 @@
 #include <fstream>
 #include <sstream>
 
+#include <unistd.h>
+
 #include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
 
@@ -130,7 +132,7 @@ TEST_CASE("a rank killed mid-training makes the other fail with a clear error", 
   INFO(out);
   CHECK(out.find("rank0 rc=1 after") != std::string::npos);
   CHECK(out.find("rank 0 of 2") != std::string::npos);
-  CHECK(out.find("another rank has died, stalled or failed") != std::string::npos);
+  CHECK(out.find("rank 1 stopped answering") != std::string::npos);
   const auto at = out.find("after ");
   REQUIRE(at != std::string::npos);
   CHECK(std::stoi(out.substr(at + 6)) < 30);
@@ -176,4 +178,25 @@ TEST_CASE("batch on 2 ranks shares the items and gathers one summary on rank 0",
   for (int k = 0; k < 3; ++k) {  // both ranks wrote their records into the shared folder
     CHECK(fs::exists(tmp / ("two/records/lf_" + std::to_string(k) + "__pinv.json")));
   }
+}
+
+TEST_CASE("a rank that never joins is named, and so is a store that never answers", "[app][dist]") {
+  if (!fs::exists("/usr/include/torch/csrc/distributed/c10d/ProcessGroupGloo.hpp")) return;
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "tiny.json") << tiny_config(1, 64);
+  const int port = 20000 + static_cast<int>(::getpid() % 20000);
+  const std::string common =
+      lfnet_binary() + " --threads 1 train " + (tmp / "tiny.json") +
+      " --world-size 2 --dist-timeout 4 --master 127.0.0.1:" + std::to_string(port);
+  std::string out;
+  auto start = std::chrono::steady_clock::now();
+  CHECK(run_command(common + " --rank 0 --out " + (tmp / "r0"), out) != 0);
+  CHECK(out.find("rank 0 of 2: rank 1 did not join within 4 s") != std::string::npos);
+  CHECK(seconds_since(start) < 20);
+  CHECK(!fs::exists(tmp / "r0"));
+  start = std::chrono::steady_clock::now();
+  CHECK(run_command(common + " --rank 1 --out " + (tmp / "r1"), out) != 0);
+  CHECK(out.find("rank 1 of 2: the job's store at 127.0.0.1:" + std::to_string(port) +
+                 " (rank 0) did not answer within 4 s") != std::string::npos);
+  CHECK(seconds_since(start) < 20);
 }
