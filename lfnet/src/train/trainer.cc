@@ -165,6 +165,7 @@ nlohmann::json EpochRecord::to_json() const {
           {"val_psnr_db", number(val_psnr_db)},
           {"seconds", seconds},
           {"patches_per_s", patches_per_s},
+          {"communication_s", communication_s},
           {"skipped_batches", skipped_batches},
           {"best", best}};
 }
@@ -179,6 +180,7 @@ EpochRecord EpochRecord::from_json(const nlohmann::json& j) {
   r.val_psnr_db = number_or(j.at("val_psnr_db"), INFINITY);
   r.seconds = j.at("seconds").get<double>();
   r.patches_per_s = j.at("patches_per_s").get<double>();
+  r.communication_s = j.value("communication_s", 0.0);  // absent in records of older runs
   r.skipped_batches = j.at("skipped_batches").get<int64_t>();
   r.best = j.at("best").get<bool>();
   return r;
@@ -349,7 +351,9 @@ void Trainer::average_gradients(double patches) {
     grads.push_back(p.grad().reshape({-1}));
   }
   auto flat = torch::cat(grads);
+  const Stopwatch clock;
   comm_->all_reduce_sum(flat);
+  communication_s_ += clock.seconds();
   flat.div_(patches);
   int64_t offset = 0;
   for (auto& p : net_->parameters()) {
@@ -605,7 +609,9 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
       if (std::isfinite(local_sum)) loss.backward();
     }
     auto totals = torch::tensor({local_sum, out.patches}, torch::kFloat64);
+    const Stopwatch clock;
     comm_->all_reduce_sum(totals);
+    communication_s_ += clock.seconds();
     out.patches = totals[1].item<double>();
     out.loss = totals[0].item<double>() / out.patches;
     average_gradients(out.patches);
@@ -654,6 +660,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
   }
   for (int64_t epoch = state_.epoch; epoch < options_.epochs; ++epoch) {
     Stopwatch clock;
+    communication_s_ = 0;
     source.start_epoch(epoch, options_.batch_size);
     const int64_t batches = source.train_batches_per_epoch();
     LFNET_CHECK(batches > 0, "the batch source has no training batches");
@@ -718,6 +725,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     r.val_loss = eval.loss;
     r.val_psnr_db = eval.psnr_db;
     r.patches_per_s = train_seconds > 0 ? static_cast<double>(seen) / train_seconds : 0;
+    r.communication_s = communication_s_;
     r.skipped_batches = skipped;
     r.best = eval.psnr_db > state_.best_metric;
     if (r.best) {

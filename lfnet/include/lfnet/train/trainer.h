@@ -114,14 +114,17 @@ double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch
 
 // One completed epoch, given to the on_epoch hook and kept in the checkpoint's history.
 struct EpochRecord {
-  int64_t epoch = 0;            // 1-based
-  int64_t step = 0;             // optimizer steps so far
-  double lr = 0;                // learning rate at the epoch's last step
-  double train_loss = 0;        // mean loss over the epoch's trained batches
-  double val_loss = 0;          // loss over the validation set
-  double val_psnr_db = 0;       // PSNR of the validation patches, predictions clipped to [0, 1]
-  double seconds = 0;           // wall time of the epoch, validation included
-  double patches_per_s = 0;     // training throughput (forward, backward and step)
+  int64_t epoch = 0;         // 1-based
+  int64_t step = 0;          // optimizer steps so far
+  double lr = 0;             // learning rate at the epoch's last step
+  double train_loss = 0;     // mean loss over the epoch's trained batches
+  double val_loss = 0;       // loss over the validation set
+  double val_psnr_db = 0;    // PSNR of the validation patches, predictions clipped to [0, 1]
+  double seconds = 0;        // wall time of the epoch, validation included
+  double patches_per_s = 0;  // training throughput (forward, backward and step)
+  // Of the epoch's training time, the seconds spent in the steps' collectives (the gradients'
+  // and the loss's all-reduce, waiting for the slowest rank included); 0 on one process.
+  double communication_s = 0;
   int64_t skipped_batches = 0;  // batches dropped for non-finite numbers
   bool best = false;            // a new best validation PSNR (written to best.ckpt)
 
@@ -273,6 +276,7 @@ class Trainer {
   TrainingState state_;
   std::string last_written_;  // the last checkpoint this run wrote, for error messages
   std::shared_ptr<dist::Communicator> comm_;  // LocalCommunicator unless set_communicator
+  double communication_s_ = 0;                // the current epoch's EpochRecord::communication_s
 };
 
 // "<dir>/last.ckpt" and "<dir>/best.ckpt".
