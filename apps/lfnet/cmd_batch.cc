@@ -66,6 +66,9 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");
   cmd->add_flag("--match-mean", o.match_mean, "scale real measurements to the training mean");
   cmd->add_flag("--force", o.force, "write into an existing non-empty output folder");
+  cmd->add_flag("--resume", o.resume,
+                "continue the batch in --out: only the item-method pairs without a record of "
+                "success are done (same options as the batch it continues)");
   add_dist_flags(cmd, a->dist);
   cmd->callback([a] { run(*a); });
 }

@@ -73,6 +73,66 @@ TEST_CASE("batch reconstructs and evaluates every item, records bad ones and goe
   CHECK(out.find("not empty") != std::string::npos);
 }
 
+TEST_CASE("batch --resume does only the pairs without a record of success", "[app]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 1 ";
+  std::string out;
+  for (const char* name : {"a", "b", "c"})
+    write_test_light_field(tmp / ("in/lf_" + std::string(name)), 27, 36);
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "in/lf_a") + " --phi asp:2 --out " +
+                          (tmp / "in/shot"),
+                      out) == 0);
+  const std::string cmd = lfnet + "batch --input " + (tmp / "in") +
+                          " --phi asp:2 --methods pinv,adjoint --stride 9 --out ";
+  REQUIRE(run_command(cmd + (tmp / "whole"), out) == 0);
+  REQUIRE(run_command(cmd + (tmp / "part"), out) == 0);
+  const fs::path records = tmp / "part/records";
+  // As if interrupted: lf_b's pinv never recorded, lf_c's a failure, shot's a torn file, and
+  // shot/pinv's output left without its record.
+  fs::remove(records / "lf_b__pinv.json");
+  std::ofstream(records / "lf_c__adjoint.json") << R"({"status": "error", "method": "adjoint"})";
+  std::ofstream(records / "shot__pinv.json") << R"({"status": "o)";
+  fs::remove(tmp / "part/summary.csv");
+  std::map<std::string, fs::file_time_type> before;
+  for (const auto& e : fs::directory_iterator(records))
+    before[e.path().filename()] = e.last_write_time();
+
+  CHECK(run_command(cmd + (tmp / "part"), out) != 0);  // not empty: says that it can resume
+  CHECK(out.find("holds a batch: --resume continues it") != std::string::npos);
+  CHECK(run_command(cmd + (tmp / "part") + " --resume --noise 0.01", out) != 0);
+  CHECK(out.find("--resume: the batch in " + (tmp / "part") +
+                 " was run with noise = 0.0, this command gives 0.01") != std::string::npos);
+  CHECK(run_command(cmd + (tmp / "part") + " --resume --force", out) != 0);
+  CHECK(out.find("give one of them") != std::string::npos);
+  CHECK(run_command(cmd + (tmp / "empty") + " --resume", out) != 0);
+  CHECK(out.find("holds no batch to continue") != std::string::npos);
+
+  REQUIRE(run_command(cmd + (tmp / "part") + " --resume", out) == 0);
+  INFO(out);
+  CHECK(out.find("5 of 8 item-method pair(s) done before, 3 item(s) to do") != std::string::npos);
+  for (const auto& [name, time] : before) {
+    const bool redone = name == "lf_c__adjoint.json" || name == "shot__pinv.json";
+    INFO(name);
+    CHECK((fs::last_write_time(records / name) != time) == redone);
+  }
+  CHECK(fs::exists(records / "lf_b__pinv.json"));
+  // The summary is that of the uninterrupted batch but for the seconds (the 7th column) and
+  // the output folder's name.
+  auto without_seconds = [&](const std::string& path) {
+    std::vector<std::string> rows;
+    for (auto line : lines_of(path)) {
+      for (auto at = line.find(tmp / "part"); at != std::string::npos; at = line.find(tmp / "part"))
+        line.replace(at, (tmp / "part").size(), tmp / "whole");
+      std::stringstream fields(line);
+      std::string row, f;
+      for (int i = 0; std::getline(fields, f, ','); ++i) row += i == 6 ? "," : f + ",";
+      rows.push_back(row);
+    }
+    return rows;
+  };
+  CHECK(without_seconds(tmp / "part/summary.csv") == without_seconds(tmp / "whole/summary.csv"));
+}
+
 TEST_CASE("batch reads the model once for all its items", "[app]") {
   lfnet::test::TempDir tmp;
   write_test_light_field(tmp / "in/lf_a", 27, 27);

@@ -178,6 +178,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
         policy.inputs = {item.path, a.model, a.dictionary};
+        policy.force = a.resume;  // an output without its record is an unfinished attempt
         write_reconstruction(r, target, policy,
                              /*end_to_end=*/false);  // the batch's, not the item's
         auto record = r.record;
@@ -269,6 +270,67 @@ void write_batch_summary(const std::string& out_dir, const std::vector<nlohmann:
   write_json_file((fs::path(out_dir) / "summary.json").string(), all);
 }
 
+nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::string>& methods) {
+  auto absolute = [](const std::string& p) {
+    return p.empty() ? p : fs::absolute(p).lexically_normal().string();
+  };
+  return {{"input", absolute(a.in)},
+          {"methods", methods},
+          {"model", absolute(a.model)},
+          {"dictionary", absolute(a.dictionary)},
+          {"phi", a.phi},
+          {"method_options", a.method_options},
+          {"mode", optics::to_string(a.mode)},
+          {"noise", a.noise},
+          {"seed", a.seed},
+          {"stride", a.stride},
+          {"window", a.window},
+          {"post_filter", a.post_filter},
+          {"match_mean", a.match_mean},
+          {"self_ensemble", a.self_ensemble},
+          {"self_ensemble_passes", a.self_ensemble_passes}};
+}
+
+namespace {
+
+std::string record_file(const std::string& item, const std::string& method) {
+  return safe_file_name(item) + "__" + method + ".json";
+}
+
+// `--resume`: OUT holds a batch of the same options (its batch.json).
+void check_resumable(const BatchOptions& a, const nlohmann::json& manifest) {
+  const fs::path out(a.out);
+  LFNET_CHECK_AS(ConfigError, !a.force, "--resume continues the batch in ", a.out,
+                 " and --force would replace it: give one of them");
+  const fs::path file = out / "batch.json";
+  std::error_code ec;
+  LFNET_CHECK_AS(ConfigError, fs::is_regular_file(file, ec), "--resume: ", a.out,
+                 " holds no batch to continue (no batch.json); run without --resume to start one");
+  const auto earlier = read_json_file(file.string());
+  for (const auto& [key, value] : manifest.items()) {
+    LFNET_CHECK_AS(ConfigError, earlier.contains(key) && earlier[key] == value,
+                   "--resume: the batch in ", a.out, " was run with ", key, " = ",
+                   earlier.contains(key) ? earlier[key].dump() : std::string("nothing"),
+                   ", this command gives ", value.dump(),
+                   "; give the same options, or another --out");
+  }
+}
+
+// The record of a pair done earlier, when it is there and says "ok".
+std::optional<nlohmann::json> finished_record(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return std::nullopt;
+  try {
+    auto record = read_json_file(file.string());
+    if (record.value("status", "") == "ok") return record;
+  } catch (const std::exception&) {
+    // Unreadable: done again.
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
 BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator> comm) {
   if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
   const int64_t rank = comm->rank(), world = comm->world_size();
@@ -285,10 +347,21 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   BatchOptions resolved = a;
   const auto method_options = method_options_argument(a.method_options, methods);
   resolved.method_options = method_options.empty() ? "" : method_options.dump();
+  const auto manifest = batch_manifest(a, methods);
   OutputFolderPolicy policy;
   policy.force = a.force;
   policy.inputs = {a.in, a.model, a.dictionary};
-  check_output_folder(a.out, policy);
+  if (a.resume) {
+    check_resumable(a, manifest);
+  } else {
+    try {
+      check_output_folder(a.out, policy);
+    } catch (const ConfigError& e) {
+      std::error_code ec;
+      if (!fs::is_regular_file(fs::path(a.out) / "batch.json", ec)) throw;
+      throw ConfigError(std::string(e.what()) + "; it holds a batch: --resume continues it");
+    }
+  }
   const auto items = discover_items(a.in);
   LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
                  ") and no light-field folder under ", a.in);
@@ -303,9 +376,13 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
     for (const auto& m : methods) recon::check_self_ensemble(m, model.net, model.script.get());
   }
   std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
-  if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy);
-  // The other ranks write only once rank 0 has checked and made the folder (when it is shared).
+  if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy, a.resume);
+  // The other ranks write only once rank 0 has checked and made the folder (when it is shared),
+  // and rank 0 writes into it only once they have checked it.
   comm->barrier();
+  if (rank == 0 && !a.resume) {
+    write_json_file((fs::path(a.out) / "batch.json").string(), manifest);
+  }
   const fs::path records_dir = fs::path(a.out) / "records";
   fs::create_directories(records_dir);
   int64_t reconstruct = 0;
@@ -315,27 +392,57 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
                items.size(), a.in, reconstruct, items.size() - reconstruct, method_list);
 
-  // Rank r takes items r, r + W, r + 2W, ... of the sorted list: neighbours in the list (often
-  // alike in size) go to different ranks.
+  // The pairs still to do (all of them unless resumed), and the records of those done.
+  struct Pending {
+    size_t item;
+    std::vector<std::string> methods;
+  };
+  std::vector<Pending> pending;
+  std::vector<std::pair<std::pair<size_t, size_t>, nlohmann::json>>
+      kept;  // ((item, method), record)
+  for (size_t i = 0; i < items.size(); ++i) {
+    Pending p{i, {}};
+    for (size_t m = 0; m < methods.size(); ++m) {
+      auto done = a.resume ? finished_record(records_dir / record_file(items[i].name, methods[m]))
+                           : std::nullopt;
+      if (done) {
+        kept.push_back({{i, m}, std::move(*done)});
+      } else {
+        p.methods.push_back(methods[m]);
+      }
+    }
+    if (!p.methods.empty()) pending.push_back(std::move(p));
+  }
+  if (a.resume) {
+    spdlog::info("batch: resumed; {} of {} item-method pair(s) done before, {} item(s) to do",
+                 kept.size(), items.size() * methods.size(), pending.size());
+  }
+
+  // Rank r takes pending items r, r + W, r + 2W, ...: neighbours in the list (often alike in
+  // size) go to different ranks.
   std::vector<size_t> mine;
-  for (size_t i = static_cast<size_t>(rank); i < items.size(); i += static_cast<size_t>(world)) {
+  for (size_t i = static_cast<size_t>(rank); i < pending.size(); i += static_cast<size_t>(world)) {
     mine.push_back(i);
   }
   if (world > 1) {
     spdlog::info("batch: {} rank(s), rank 0 takes {} item(s)", world, mine.size());
   }
+  auto method_index = [&](const nlohmann::json& r) {
+    const auto name = r["method"].get<std::string>();
+    return static_cast<size_t>(std::find(methods.begin(), methods.end(), name) - methods.begin());
+  };
   BatchSummary summary;
-  std::vector<size_t> record_item;  // the item index of every record, for the gather
+  std::vector<std::pair<size_t, size_t>> record_key;  // (item, method) of every record
   ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
-  for (size_t index : mine) {
+  for (size_t p : mine) {
+    const size_t index = pending[p].item;
     const auto& item = items[index];
     bar.set_note(item.name);
-    for (auto& r : process_item(item, resolved, methods, a.out, cache)) {
+    for (auto& r : process_item(item, resolved, pending[p].methods, a.out, cache)) {
       const bool ok = r["status"] == "ok";
       summary.failures += !ok;
-      const std::string file =
-          safe_file_name(item.name) + "__" + r["method"].get<std::string>() + ".json";
-      write_json_file((records_dir / file).string(), r);
+      write_json_file(
+          (records_dir / record_file(item.name, r["method"].get<std::string>())).string(), r);
       if (folder) folder->commit();  // a record lasts: the batch keeps its folder from now on
       if (ok && r.contains("psnr_db")) {
         spdlog::info("{} {}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s", item.name,
@@ -349,35 +456,40 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
         spdlog::warn("{} {}: {}", item.name, r["method"].get<std::string>(),
                      r["error"].get<std::string>());
       }
+      record_key.emplace_back(index, method_index(r));
       summary.records.push_back(std::move(r));
-      record_item.push_back(index);
     }
     bar.advance(1);
   }
   bar.finish();
   summary.loads = cache.loads();
+  // One summary on rank 0: every rank's records and those kept, in the order of one process.
+  std::vector<std::pair<std::pair<size_t, size_t>, nlohmann::json>> all;
   if (world > 1) {
-    // One summary on rank 0: every rank's records, back in the order of one process.
     nlohmann::json shipped = nlohmann::json::array();
     for (size_t i = 0; i < summary.records.size(); ++i) {
-      shipped.push_back({record_item[i], summary.records[i]});
+      shipped.push_back({record_key[i].first, record_key[i].second, summary.records[i]});
     }
     const auto gathered = comm->all_gather(shipped.dump());
     if (rank != 0) return summary;  // rank 0 writes the summary
-    std::vector<std::pair<size_t, nlohmann::json>> all;
     for (const auto& part : gathered) {
       for (auto& entry : nlohmann::json::parse(part)) {
-        all.emplace_back(entry[0].get<size_t>(), std::move(entry[1]));
+        all.push_back({{entry[0].get<size_t>(), entry[1].get<size_t>()}, std::move(entry[2])});
       }
     }
-    std::stable_sort(all.begin(), all.end(),
-                     [](const auto& x, const auto& y) { return x.first < y.first; });
-    summary.records.clear();
-    summary.failures = 0;
-    for (auto& entry : all) {
-      summary.failures += entry.second["status"] != "ok";
-      summary.records.push_back(std::move(entry.second));
+  } else {
+    for (size_t i = 0; i < summary.records.size(); ++i) {
+      all.push_back({record_key[i], std::move(summary.records[i])});
     }
+  }
+  for (auto& k : kept) all.push_back(std::move(k));
+  std::stable_sort(all.begin(), all.end(),
+                   [](const auto& x, const auto& y) { return x.first < y.first; });
+  summary.records.clear();
+  summary.failures = 0;
+  for (auto& entry : all) {
+    summary.failures += entry.second["status"] != "ok";
+    summary.records.push_back(std::move(entry.second));
   }
   write_batch_summary(a.out, summary.records);
   if (folder) folder->commit();

@@ -40,6 +40,9 @@ struct BatchOptions {
   bool self_ensemble = false;        // net with an lfnet checkpoint: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   bool force = false;                // write into an existing non-empty output folder
+  // Continue the batch in `out`: the item-method pairs with a record of status "ok" are kept,
+  // the others (failed, or never finished) are done. The batch's options must be the same.
+  bool resume = false;
 };
 
 // One thing to process: an acquisition folder (reconstruct) or a light-field folder (evaluate).
@@ -69,10 +72,14 @@ struct BatchSummary {
 };
 
 // Runs a batch into options.out (the output-folder policy of core/output.h). With a
-// communicator of several ranks, rank r takes items r, r + W, ...; rank 0 writes the summary.
-// Failed items do not throw: they are counted in the summary.
+// communicator of several ranks, rank r takes items r, r + W, ... of the pairs still to do;
+// rank 0 writes the summary. Failed items do not throw: they are counted in the summary. With
+// options.resume, what OUT/records holds already is kept and not done again.
 BatchSummary run_batch(const BatchOptions& options,
                        std::shared_ptr<dist::Communicator> comm = nullptr);
+
+// What decides a batch's results, as recorded in OUT/batch.json; `--resume` must match it.
+nlohmann::json batch_manifest(const BatchOptions& options, const std::vector<std::string>& methods);
 
 // The summary files of a batch: OUT/summary.csv (one row per record) and OUT/summary.json.
 void write_batch_summary(const std::string& out_dir, const std::vector<nlohmann::json>& records);
