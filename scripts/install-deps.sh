@@ -3,7 +3,8 @@
 set -euo pipefail
 
 # libopencv-dev: its core and photo modules are linked by lfnet's cv library (OpenCV's
-# non-local means for pinv-nlm), outside the numerical core.
+# non-local means for pinv-nlm), outside the numerical core. iproute2: the two-host test's
+# network namespaces (tests/dist/two_hosts.sh).
 packages=(
   build-essential cmake ninja-build pkg-config clang-format clang-tidy
   libtorch-dev libopenblas0-openmp libgloo-dev
@@ -12,6 +13,7 @@ packages=(
   python3 python3-numpy python3-skimage python3-sklearn python3-torch python3-imageio
   python3-matplotlib python3-pil
   chromium
+  iproute2
 )
 
 missing=()
