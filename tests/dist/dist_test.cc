@@ -50,6 +50,7 @@ std::vector<std::string> run_ranks(int64_t world,
     }));
   }
   std::vector<std::string> errors;
+  errors.reserve(ranks.size());
   for (auto& f : ranks) errors.push_back(f.get());
   return errors;
 }

@@ -10,6 +10,7 @@
 #include <optional>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -406,7 +407,7 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
       auto done = a.resume ? finished_record(records_dir / record_file(items[i].name, methods[m]))
                            : std::nullopt;
       if (done) {
-        kept.push_back({{i, m}, std::move(*done)});
+        kept.emplace_back(std::make_pair(i, m), std::move(*done));
       } else {
         p.methods.push_back(methods[m]);
       }
@@ -474,12 +475,13 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
     if (rank != 0) return summary;  // rank 0 writes the summary
     for (const auto& part : gathered) {
       for (auto& entry : nlohmann::json::parse(part)) {
-        all.push_back({{entry[0].get<size_t>(), entry[1].get<size_t>()}, std::move(entry[2])});
+        all.emplace_back(std::make_pair(entry[0].get<size_t>(), entry[1].get<size_t>()),
+                         std::move(entry[2]));
       }
     }
   } else {
     for (size_t i = 0; i < summary.records.size(); ++i) {
-      all.push_back({record_key[i], std::move(summary.records[i])});
+      all.emplace_back(record_key[i], std::move(summary.records[i]));
     }
   }
   for (auto& k : kept) all.push_back(std::move(k));
