@@ -87,6 +87,26 @@ finish() {
   return $rc
 }
 error_line() { grep -m1 'lfnet: error:' "$1" | sed 's/.*lfnet: error: //'; }
+# job NAME OUT0 OUT1 ARGS...: ranks 0 and 1 of one job on a fresh port, logs NAME0.log and
+# NAME1.log, pids in p0 and p1.
+job() {
+  local name=$1 out0=$2 out1=$3
+  shift 3
+  next_port
+  on_host 0 "$@" --out "$out0" >"${name}0.log" 2>&1
+  p0=$!
+  on_host 1 "$@" --out "$out1" >"${name}1.log" 2>&1
+  p1=$!
+  pids+=("$p0" "$p1")
+}
+# first_item_of_rank1 OUT: until rank 1 (items 2, 4, ...) has recorded its first item.
+first_item_of_rank1() {
+  for _ in $(seq 1200); do
+    compgen -G "$1/records/lf_02__*" >/dev/null && return 0
+    sleep 0.05
+  done
+  return 1
+}
 table=()
 row() { table+=("| $1 | $2 | $3 | $4 | $5 |"); }
 
@@ -150,14 +170,9 @@ start=$(date +%s.%N)
 "$lfnet" --threads 1 --log-level warn $batch_args --out batch-one >batch-one.log 2>&1
 batch_one_s=$(awk "BEGIN { print $(date +%s.%N) - $start }")
 check "one-process batch" test -f batch-one/summary.csv
-next_port
 start=$(date +%s)
 batch_start=$(date +%s.%N)
-on_host 0 $batch_args --out batch-two >b0.log 2>&1
-p0=$!
-on_host 1 $batch_args --out batch-two >b1.log 2>&1
-p1=$!
-pids+=("$p0" "$p1")
+job b batch-two batch-two $batch_args
 finish "$p0"
 rc0=$?
 finish "$p1"
@@ -170,12 +185,7 @@ check "two hosts' batch summary equals one process's" same_summary batch-one/sum
   batch-two/summary.csv
 
 # ---- 2. the link of rank 1's host cut mid-epoch ----------------------------------------------
-next_port
-on_host 0 train long.json --out cut >cut0.log 2>&1
-p0=$!
-on_host 1 train long.json --out cut-rank1 >cut1.log 2>&1
-p1=$!
-pids+=("$p0" "$p1")
+job cut cut cut-rank1 train long.json
 wait_for cut0.log "epoch 2:" 120
 sleep 0.5
 ip -n "$ns1" link set "$if1" down
@@ -200,12 +210,7 @@ row "link of rank 1's host cut" "training, epoch $((epochs_before + 1))" \
   "\`train --resume\` from epoch $epochs_before of 12: $(wc -l <cut/training.jsonl) epochs"
 
 # ---- 3. rank 0, holding the store, killed mid-epoch ---------------------------------------
-next_port
-on_host 0 train long.json --out killed >kill0.log 2>&1
-p0=$!
-on_host 1 train long.json --out killed-rank1 >kill1.log 2>&1
-p1=$!
-pids+=("$p0" "$p1")
+job kill killed killed-rank1 train long.json
 wait_for kill0.log "epoch 1:" 120
 sleep 0.5
 kill -9 "$p0"
@@ -245,17 +250,8 @@ row "rank 1 never starts" "rendezvous" "rank 0 ($t0 s): $(error_line alone0.log)
 row "rank 0 never starts" "rendezvous" "-" "rank 1 ($t1 s): $(error_line alone1.log)" "nothing to resume"
 
 # ---- 5. rank 1 killed mid-batch; batch --resume does the rest --------------------------------
-next_port
-on_host 0 $batch_args --out batch-kill >bk0.log 2>&1
-p0=$!
-on_host 1 $batch_args --out batch-kill >bk1.log 2>&1
-p1=$!
-pids+=("$p0" "$p1")
-# Rank 1 takes items 2, 4, 6, ...: killed once its first is recorded.
-for _ in $(seq 1200); do
-  compgen -G "batch-kill/records/lf_02__*" >/dev/null && break
-  sleep 0.05
-done
+job bk batch-kill batch-kill $batch_args
+first_item_of_rank1 batch-kill
 kill -9 "$p1"
 wait "$p1" 2>/dev/null
 start=$(date +%s)
@@ -281,16 +277,8 @@ row "rank 1 killed" "batch, after its first item" "rank 0 ($t0 s): $(error_line 
   "\`batch --resume\`: $records_before of 20 records kept, $todo item(s) done; 0 lost, 0 twice"
 
 # ---- 6. the link of rank 1's host cut mid-batch ----------------------------------------------
-next_port
-on_host 0 $batch_args --out batch-cut >bc0.log 2>&1
-p0=$!
-on_host 1 $batch_args --out batch-cut >bc1.log 2>&1
-p1=$!
-pids+=("$p0" "$p1")
-for _ in $(seq 1200); do
-  compgen -G "batch-cut/records/lf_02__*" >/dev/null && break
-  sleep 0.05
-done
+job bc batch-cut batch-cut $batch_args
+first_item_of_rank1 batch-cut
 ip -n "$ns1" link set "$if1" down
 start=$(date +%s)
 finish "$p0"
