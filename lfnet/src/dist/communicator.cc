@@ -156,9 +156,13 @@ class Heartbeat {
       }
     }
     // While the store cannot be reached, nothing is known of the other ranks: the lost one is
-    // the store's.
+    // the store's. Rank 0 holds the store, so a silent rank 0 is named as its holder too: a
+    // rank 0 killed a moment ago may be seen silent before this thread's next call to its store
+    // fails.
     const bool store_unreached = s.rank != 0 && now - s.store_seen > 2 * kPeriod;
-    if (store_unreached && (!silent.empty() || now - s.store_seen > silence)) {
+    const bool rank0_silent = !silent.empty() && silent.front() == 0;
+    if (s.rank != 0 &&
+        (rank0_silent || (store_unreached && (!silent.empty() || now - s.store_seen > silence)))) {
       return "rank 0, which holds the job's store, stopped answering (its process ended, or "
              "its host or the network to it is down)";
     }
