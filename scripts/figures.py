@@ -8,7 +8,7 @@ Usage:
 
 Kinds of a spec (each has "stem": the output path without extension, relative to the spec file's
 folder, and "title"; image paths in a spec are relative to that folder too):
-  pareto    points [{method, variant, n, stride, whole_image, seconds, psnr_db, front}]
+  pareto    points [{method, variant, n, stride, whole_image, seconds, psnr_db, front}], xlabel
   heatmaps  panels [{label, psnr}] of U x V per-view PSNR, one shared colour range
   views     panels [{label, psnr_db, view, epi}] (16-bit PNG crops); the first is the truth
   sweep     series [{label, method, x, y, kind: ours|paper|baseline}], xlabel, xlog
@@ -119,7 +119,7 @@ def pareto(spec):
                 color="black", linestyle="--", linewidth=1, zorder=2)
     ax.set_xscale("log")
     ax.set_ylim(y_bottom - pad, y_top + pad)
-    ax.set_xlabel("reconstruction time (s, log scale)")
+    ax.set_xlabel(spec.get("xlabel", "reconstruction time (s, log scale)"))
     ax.set_ylabel("PSNR (dB)")
     ax.set_title(spec["title"])
     ax.grid(True, which="both", alpha=0.25)

@@ -12,13 +12,15 @@ py=/usr/bin/python3
 # $4 (a training.jsonl), "training_seconds": the sum of its epochs' seconds.
 append_record() {
   "$py" - "$@" <<'PY'
-import json, sys
+import json, os, sys
 out, path = sys.argv[1], sys.argv[2]
 r = json.load(open(path))
 if len(sys.argv) > 3 and sys.argv[3]:
     r["variant"] = sys.argv[3]
 if len(sys.argv) > 4 and sys.argv[4]:
     r["training_seconds"] = sum(json.loads(l)["record"]["seconds"] for l in open(sys.argv[4]) if l.strip())
+if os.environ.get("RUN"):
+    r["run"] = os.environ["RUN"]
 open(out, "a").write(json.dumps(r) + "\n")
 PY
 }
@@ -335,6 +337,115 @@ other-phi() {
   mv "$tmp" results/other-phi/records.jsonl
 }
 
+# The paper's own test scene, MIT "Dragons and Bunnies" at its four apertures (3, 4, 5 and
+# 6.6 cm; docs/results.md, "The paper's scene"): the paper's Fig. 5 (paper-fig5), Table 1
+# (paper-table1), Table 2 (paper-table2), its branch, schedule and loss claims and lfnet's
+# models (paper-branches), each section one table over the four apertures. Measured only, never
+# trained on or selected by. Resumable: a record whose run (its variant and arguments) is in its
+# section already is not measured again, so an interrupted run goes on where it stopped;
+# PAPER_SCENE_FRESH=1 starts the four sections anew. PAPER_APERTURES picks apertures.
+apertures=(${PAPER_APERTURES:-5 3 4 6.6})
+
+# One evaluation of the paper's scene into section $1 unless its records hold the run already;
+# evaluate's arguments follow, $VARIANT labels the record.
+scene_record() {
+  local section=$1 file key tmp
+  shift
+  file=results/$section/records.jsonl
+  key="${VARIANT:-}|$*"
+  if [[ -f $file ]] && KEY=$key "$py" -c '
+import json, os, sys
+sys.exit(0 if any(json.loads(l).get("run") == os.environ["KEY"]
+                  for l in open(sys.argv[1]) if l.strip()) else 1)' "$file"; then
+    return 0
+  fi
+  tmp=$(mktemp)
+  "$lfnet" evaluate "$@" --json "$tmp"
+  RUN=$key append_record "$file" "$tmp" "${VARIANT:-}"
+  rm -f "$tmp"
+}
+
+paper-scene() {
+  local ap lf method phi n sigma
+  if [[ ${PAPER_SCENE_FRESH:-0} == 1 ]]; then
+    for s in paper-fig5 paper-table1 paper-branches paper-table2; do
+      rm -f results/$s/records.jsonl
+    done
+  fi
+  for m in asp-n2 mask-n2 random-n2 asp-n15 asp-n25 noise-trained noise-trained-0.2 \
+    joint-from-scratch l2; do
+    need_model "$pq/$m.ckpt"
+  done
+  need_model models/asp-n2-paper.ckpt
+  need_model models/lfnet-asp-n2.ckpt
+  need_model models/lfnet-asp-n2-noise.ckpt
+  # Fig. 5: the three cameras at N = 2, stride 5, per patch (random projections have no sensor
+  # image at stride 5).
+  for ap in "${apertures[@]}"; do
+    lf=(--lf "../shared/data/mit_dragons_bunnies_5x5_ap$ap")
+    for phi in asp mask random; do
+      for method in net pinv no-parallax; do
+        scene_record paper-fig5 --model "$pq/$phi-n2.ckpt" "${lf[@]}" --method "$method" \
+          --mode per_patch --stride 5
+      done
+    done
+  done
+  # Table 1: ASP N = 2, 15 and 25 on non-overlapping patches, against the dictionary.
+  for ap in "${apertures[@]}"; do
+    lf=(--lf "../shared/data/mit_dragons_bunnies_5x5_ap$ap")
+    for n in 2 15 25; do
+      for method in net dict pinv no-parallax; do
+        scene_record paper-table1 --model "$pq/asp-n$n.ckpt" --dictionary models/dictionary.ckpt \
+          "${lf[@]}" --method "$method" --mode sensor --stride 9
+      done
+    done
+  done
+  # Fig. 4 and sections 3.2 and 3.3: each branch alone, joint training from scratch, plain L2,
+  # the paper scale; lfnet's shipped model beside them. Stride 5, sensor mode.
+  for ap in "${apertures[@]}"; do
+    lf=(--lf "../shared/data/mit_dragons_bunnies_5x5_ap$ap" --mode sensor)
+    for method in net ae cnn pinv no-parallax; do
+      VARIANT="quick scale" scene_record paper-branches --model $pq/asp-n2.ckpt "${lf[@]}" \
+        --stride 5 --method "$method"
+    done
+    VARIANT="quick scale, joint from scratch" scene_record paper-branches \
+      --model $pq/joint-from-scratch.ckpt "${lf[@]}" --stride 5 --method net
+    VARIANT="quick scale, plain L2" scene_record paper-branches --model $pq/l2.ckpt "${lf[@]}" \
+      --stride 5 --method net
+    for method in net ae cnn; do
+      VARIANT="paper scale" scene_record paper-branches --model models/asp-n2-paper.ckpt \
+        "${lf[@]}" --stride 5 --method "$method"
+    done
+    VARIANT=lfnet-asp-n2 scene_record paper-branches --model models/lfnet-asp-n2.ckpt \
+      "${lf[@]}" --method net
+    VARIANT="lfnet-asp-n2, self-ensemble of 2 passes" scene_record paper-branches \
+      --model models/lfnet-asp-n2.ckpt "${lf[@]}" --method net --self-ensemble \
+      --ensemble-passes 2
+  done
+  # Table 2: Gaussian noise 0, 0.1 and 0.2, ASP N = 2, stride 5; the paper's nets trained
+  # without noise and at each sigma, the dictionary, and lfnet's models (told the sigma).
+  for ap in "${apertures[@]}"; do
+    lf=(--lf "../shared/data/mit_dragons_bunnies_5x5_ap$ap" --mode sensor)
+    for sigma in 0 0.1 0.2; do
+      for method in net dict pinv pinv-nlm no-parallax; do
+        local variant=""
+        [[ $method == net || $method == dict ]] && variant="trained without noise"
+        VARIANT=$variant scene_record paper-table2 --model $pq/asp-n2.ckpt \
+          --dictionary models/dictionary.ckpt "${lf[@]}" --method "$method" --stride 5 \
+          --noise "$sigma"
+      done
+      VARIANT="trained at sigma 0.1" scene_record paper-table2 --model $pq/noise-trained.ckpt \
+        "${lf[@]}" --method net --stride 5 --noise "$sigma"
+      VARIANT="trained at sigma 0.2" scene_record paper-table2 \
+        --model $pq/noise-trained-0.2.ckpt "${lf[@]}" --method net --stride 5 --noise "$sigma"
+      VARIANT="lfnet-asp-n2, trained without noise" scene_record paper-table2 \
+        --model models/lfnet-asp-n2.ckpt "${lf[@]}" --method net --noise "$sigma"
+      VARIANT="lfnet-asp-n2-noise, noise-aware" scene_record paper-table2 \
+        --model models/lfnet-asp-n2-noise.ckpt "${lf[@]}" --method net --noise "$sigma"
+    done
+  done
+}
+
 # Only the reconstructions behind the pictures of heldout-asp-n2 and lytro (and their viewers,
 # index.html), leaving every record as it is: `scripts/results.sh pictures` on a fresh checkout.
 pictures() {
@@ -356,7 +467,8 @@ pictures() {
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
   sections=(cross-scene self-ensemble other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
-            sensor-noise stride-sweep branch-ablation loss-ablation lytro phi-switching)
+            sensor-noise stride-sweep branch-ablation loss-ablation lytro phi-switching
+            paper-scene)
 fi
 for s in "${sections[@]}"; do
   echo "== $s"

@@ -211,6 +211,9 @@ TEST_CASE("the dict stage learns a dictionary that evaluate uses", "[app][slow]"
 }
 
 TEST_CASE("report writes tables with the mode, margins, the paper's numbers and figures", "[app]") {
+  // Records on the paper's scene (mit_dragons_bunnies_*) are judged against the paper's numbers,
+  // per aperture; records elsewhere are not. The front page weighs the paper's scene at 5 cm.
+  const std::string ap5 = "mit_dragons_bunnies_5x5_ap5", ap3 = "mit_dragons_bunnies_5x5_ap3";
   lfnet::test::TempDir tmp;
   fs::create_directories(tmp / "results/a");
   std::ofstream(tmp / "results/a/section.json") << R"({"title": "Held out", "order": 1,
@@ -222,14 +225,22 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
              {"claim": "pinv beats net", "a": {"method": "pinv"}, "b": {"method": "net"}, "paper_db": 1, "source": "s. 5"},
              {"claim": "missing", "a": {"method": "ae"}, "b": {"method": "net"}, "paper_db": 1, "source": "s. 6"}]})";
   std::ofstream rec(tmp / "results/a/records.jsonl");
-  auto record = [](const std::string& method, double psnr, double seconds) {
+  auto record = [&](const std::string& method, double psnr, double seconds,
+                    const std::string& light_field = "") {
     nlohmann::json pv = nlohmann::json::array();
     for (int u = 0; u < 5; ++u) pv.push_back(std::vector<double>(5, psnr + u));
-    return nlohmann::json{
-        {"method", method},   {"psnr_db", psnr},       {"ssim", 0.9},
-        {"seconds", seconds}, {"stride", 5},           {"mode", "sensor"},
-        {"measurements", 2},  {"noise_sigma", 0.0},    {"phi", {{"name", "asp"}, {"n", 2}}},
-        {"light_field", "x"}, {"per_view_psnr_db", pv}}
+    return nlohmann::json{{"method", method},
+                          {"psnr_db", psnr},
+                          {"ssim", 0.9},
+                          {"seconds", seconds},
+                          {"stride", 5},
+                          {"mode", "sensor"},
+                          {"measurements", 2},
+                          {"noise_sigma", 0.0},
+                          {"phi", {{"name", "asp"}, {"n", 2}}},
+                          {"light_field", light_field.empty() ? ap5 : light_field},
+                          {"per_view_psnr_db", pv},
+                          {"end_to_end_seconds", seconds + 2}}
         .dump();
   };
   rec << record("net", 30.0, 10.0) << "\n"
@@ -239,36 +250,36 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   rec.close();
   // A section whose records say how long their model trained gets a "training s" column.
   fs::create_directories(tmp / "results/b");
-  std::ofstream(tmp / "results/b/section.json")
-      << R"({"title": "Switching", "order": 2, "pareto": false,
+  std::ofstream(tmp / "results/b/section.json") << R"({"title": "Switching", "order": 2,
     "heatmaps": [{"method": "net", "variant": "finetuned", "label": "fine tuned"}, {"method": "net", "variant": "none"}],
-    "training": [{"log": ")" +
-             (tmp / "b.training.jsonl") + R"(", "label": "the finetuned net"}]})";
+    "training": [{"log": ")" + (tmp / "b.training.jsonl") +
+                                                       R"(", "label": "the finetuned net"}]})";
   std::ofstream(tmp / "b.training.jsonl")
       << R"({"stage": "ae", "record": {"epoch": 1, "train_loss": 0.02, "val_psnr_db": 25.0}})"
       << "\n"
       << R"({"stage": "ae", "record": {"epoch": 2, "train_loss": 0.01, "val_psnr_db": 26.0}})"
       << "\n";
-  auto trained = nlohmann::json::parse(record("net", 27.0, 5.0));
+  auto trained = nlohmann::json::parse(record("net", 27.0, 5.0, "x"));
   trained["training_seconds"] = 321.4;
   trained["variant"] = "finetuned";
   std::ofstream(tmp / "results/b/records.jsonl") << trained.dump() << "\n"
-                                                 << record("no-parallax", 26.0, 0.1) << "\n";
+                                                 << record("no-parallax", 26.0, 0.1, "x") << "\n";
   // A sweep over N with the paper's numbers.
   fs::create_directories(tmp / "results/c");
-  std::ofstream(tmp / "results/c/section.json")
-      << R"({"title": "Compression", "order": 3, "pareto": false,
+  std::ofstream(tmp / "results/c/section.json") << R"({"title": "Compression", "order": 3,
     "sweep": {"x": "n", "label": "measurements per pixel N"},
     "paper": [{"method": "net", "n": 2, "psnr_db": 26.77}, {"method": "net", "n": 15, "psnr_db": 27.5}]})";
   {
     std::ofstream c(tmp / "results/c/records.jsonl");
     for (int n : {2, 15}) {
       for (const auto& [method, psnr] : {std::pair{"net", 29.0}, std::pair{"pinv", 28.0}}) {
-        auto r = nlohmann::json::parse(record(method, psnr + (n == 15 ? 1 : 0), 1.0));
+        auto r = nlohmann::json::parse(record(method, psnr + (n == 15 ? 1 : 0), 1.0, ap3));
         r["measurements"] = n;
         c << r.dump() << "\n";
       }
     }
+    // Another scene: no verdict against the paper's figure for N = 2.
+    c << record("net", 20.0, 1.0, "x") << "\n";
   }
   // A whole-image reconstruction (the lfnet architecture) beside a stride sweep: no stride.
   fs::create_directories(tmp / "results/d");
@@ -279,6 +290,7 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     for (int stride : {2, 9}) {
       auto r = nlohmann::json::parse(record("net", 29.0 - stride * 0.1, 60.0 / stride));
       r["stride"] = stride;
+      if (stride == 9) r.erase("end_to_end_seconds");  // listed, but not plotted end to end
       d << r.dump() << "\n";
     }
     auto whole = nlohmann::json::parse(record("net", 31.5, 20.0));
@@ -297,14 +309,16 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("## Held out") != std::string::npos);
   CHECK(text.find("| method | mode |") != std::string::npos);
   CHECK(text.find("| net | sensor | 30.00 | 0.900 | 10.00 | 26.77 | 242 |") != std::string::npos);
+  // Section c's record on another scene has no paper figure beside it.
+  CHECK(text.find("| net | x | 2 | sensor | 20.00 | 0.900 | 1.00 | | |") != std::string::npos);
   CHECK(text.find("net - no-parallax = +1.50 dB") != std::string::npos);
   CHECK(text.find("net - dict = +0.50 dB") != std::string::npos);
   CHECK(text.find("time yes (24x faster)") != std::string::npos);
   // Differences: net - pinv = +1.00 against 2 to 3 dB; net - dict = +0.50 against 0.55 (within
   // 0.1 dB); pinv - dict = -0.50 against a drop of 0.1; pinv - net = -1.00 against +1; ae has no
   // record.
-  CHECK(text.find("| Held out | net beats pinv | +2.0 to +3.0 | +1.00 | direction only (-1.00 dB) "
-                  "| s. 3 |") != std::string::npos);
+  CHECK(text.find("| Held out | aperture 5 cm | net beats pinv | +2.0 to +3.0 | +1.00 | direction "
+                  "only (-1.00 dB) | s. 3 |") != std::string::npos);
   CHECK(text.find("| net beats dict | +0.6 | +0.50 | yes |") != std::string::npos);
   CHECK(text.find("| net barely drops | -0.1 | -0.50 | no (-0.40 dB) |") != std::string::npos);
   CHECK(text.find("| pinv beats net | +1.0 | -1.00 | no (-2.00 dB) |") != std::string::npos);
@@ -312,13 +326,29 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
         std::string::npos);
   CHECK(text.find("| net | finetuned | sensor | 27.00 | 0.900 | 5.00 | 321 |") !=
         std::string::npos);
-  // Section a's net and section c's two sweep points against the paper's numbers.
-  CHECK(text.find("Reproduced: 3 of 3 PSNR figures, 1 of 1 times.") != std::string::npos);
-  CHECK(text.find("Reproduced: 1 of 5 claims; 1 more in direction only.") != std::string::npos);
+  // Section a's net at 5 cm and section c's two sweep points at 3 cm against the paper's numbers;
+  // not section c's record on scene x.
+  CHECK(text.find("| aperture 5 cm | method net, mode sensor | 26.77 | 30.00 | 242 | 10.00 | PSNR "
+                  "yes; time yes (24x faster) |") != std::string::npos);
+  CHECK(text.find("- aperture 3 cm: 2 of 2 PSNR figures, 0 of 0 times\n") != std::string::npos);
+  CHECK(text.find("- aperture 5 cm: 1 of 1 PSNR figures, 1 of 1 times\n") != std::string::npos);
+  CHECK(text.find("- x:") == std::string::npos);
+  CHECK(text.find("- aperture 5 cm: 1 of 5 claims; 1 more in direction only\n") !=
+        std::string::npos);
   CHECK(text.find("| missing | +1.0 |  | not measured (records missing) |") != std::string::npos);
-  // dict is slower and worse than net: off the front; the others are on it.
-  CHECK(text.find("| dict | 5 | 2 |") == std::string::npos);
-  CHECK(text.find("| net | 5 | 2 | 30.00 | 10.00 |") != std::string::npos);
+  // The front page comes first: the paper's scene at 5 cm against end-to-end time. dict is
+  // slower and worse than net: off the front; the stride-9 net has no end-to-end time: listed,
+  // not plotted.
+  const auto front = text.find("## What accuracy costs in time, on the paper's scene");
+  REQUIRE(front != std::string::npos);
+  CHECK(front < text.find("## Held out"));
+  CHECK(text.find("| net |  | 2 | 5 | 30.00 | 0.900 | 10.00 | 12.00 | yes |") != std::string::npos);
+  CHECK(text.find("| dict |  | 2 | 5 | 29.50 | 0.900 | 100.00 | 102.00 |  |") != std::string::npos);
+  CHECK(text.find("| net |  | 2 | 9 | 28.10 | 0.900 | 6.67 |  |  |") != std::string::npos);
+  CHECK(text.find("| net | lfnet | 2 | whole image | 31.50 | 0.900 | 20.00 | 22.00 | yes |") !=
+        std::string::npos);
+  // Records of other scenes and apertures stay off it.
+  CHECK(text.find("| net | finetuned | 2 | 5 |") == std::string::npos);
   // Figures: a PNG and its SVG twin each, drawn from one spec file by scripts/figures.py.
   const fs::path figures = tmp.path() / "docs/images/results";
   for (const char* stem :
@@ -347,6 +377,8 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   // The Pareto points carry method, camera and stride apart; dict is off the front, and so are
   // the stride sweep's nets (slower than the whole-image net and worse).
   REQUIRE(by_stem.count("pareto"));
+  CHECK(by_stem["pareto"]["points"].size() == 6);
+  CHECK(by_stem["pareto"]["xlabel"] == "end-to-end time of the command (s, log scale)");
   int whole_points = 0;
   for (const auto& p : by_stem["pareto"]["points"]) {
     CHECK(p["n"] == 2);
@@ -361,7 +393,6 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     }
   }
   CHECK(whole_points == 1);
-  CHECK(text.find("| net (lfnet) | whole image | 2 | 31.50 | 20.00 |") != std::string::npos);
   CHECK(text.find("| lfnet | whole image |") != std::string::npos);
   // The stride sweep plots the patch nets only: a whole-image record has no stride.
   REQUIRE(by_stem.count("d_sweep"));
@@ -371,12 +402,27 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   REQUIRE(by_stem.count("c_sweep"));
   std::map<std::string, nlohmann::json> series;
   for (const auto& s : by_stem["c_sweep"]["series"]) series[s["label"]] = s;
-  REQUIRE(series.count("net"));
-  CHECK(series["net"]["x"] == nlohmann::json({2, 15}));
-  CHECK(series["net"]["y"] == nlohmann::json({29.0, 30.0}));
-  CHECK(series["pinv"]["kind"] == "baseline");
+  // A series per scene, named by its aperture on the paper's scene.
+  REQUIRE(series.count("net, aperture 3 cm"));
+  CHECK(series["net, aperture 3 cm"]["x"] == nlohmann::json({2, 15}));
+  CHECK(series["net, aperture 3 cm"]["y"] == nlohmann::json({29.0, 30.0}));
+  CHECK(series["pinv, aperture 3 cm"]["kind"] == "baseline");
   CHECK(series["paper: net"]["kind"] == "paper");
   CHECK(series["paper: net"]["y"] == nlohmann::json({26.77, 27.5}));
+  // Against the reconstruction time, the stride-9 net is plotted too.
+  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
+                          (tmp / "recon/RESULTS.md") + " --pareto-time reconstruction",
+                      out) == 0);
+  const auto spec2 = nlohmann::json::parse(
+      read_bytes((tmp.path() / "recon/images/results/figures.json").string()));
+  for (const auto& f : spec2["figures"]) {
+    if (f["kind"] != "pareto") continue;
+    CHECK(f["points"].size() == 7);
+    CHECK(f["xlabel"] == "reconstruction time (s, log scale)");
+  }
+  CHECK(run_command(lfnet_binary() + " report " + (tmp / "results") + " --pareto-time wall", out) !=
+        0);
+  CHECK(out.find("--pareto-time") != std::string::npos);
   // A missing results folder is one clear error.
   CHECK(run_command(lfnet_binary() + " report " + (tmp / "nothing"), out) != 0);
   CHECK(out.find("lfnet: error:") != std::string::npos);

@@ -123,7 +123,8 @@ void mark_pareto_front(std::vector<ParetoPoint>& points) {
   }
 }
 
-nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::string& title) {
+nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::string& title,
+                           const std::string& xlabel) {
   auto list = nlohmann::json::array();
   for (const auto& p : points) {
     list.push_back({{"method", p.method},
@@ -135,7 +136,11 @@ nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::st
                     {"psnr_db", p.psnr_db},
                     {"front", p.front}});
   }
-  return {{"kind", "pareto"}, {"stem", "pareto"}, {"title", title}, {"points", list}};
+  return {{"kind", "pareto"},
+          {"stem", "pareto"},
+          {"title", title},
+          {"xlabel", xlabel},
+          {"points", list}};
 }
 
 std::string figures_script() {

@@ -34,7 +34,8 @@ ParetoPoint pareto_point(const nlohmann::json& record);
 void mark_pareto_front(std::vector<ParetoPoint>& points);
 
 // The points as a "pareto" figure spec.
-nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::string& title);
+nlohmann::json pareto_spec(const std::vector<ParetoPoint>& points, const std::string& title,
+                           const std::string& xlabel = "reconstruction time (s, log scale)");
 
 // Where scripts/figures.py is: $LFNET_SCRIPTS, the source tree the program was built from, or
 // scripts/ under the current folder; "" when none has it.
