@@ -6,12 +6,14 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/version.h"
+#include "lfnet/nn/auto_precision.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/recon/method_registry.h"
 
@@ -205,8 +207,30 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
                   "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "
                   "what a model or acquisition does not say, and it must match the model");
   cmd->add_option("--device", *f.device, "cpu or cuda[:K] for the network (default cpu)");
-  add_enum_option(cmd, "--precision", *f.precision,
-                  "float32 (default) or bfloat16 for the paper net's CNN branch or lfnet's U-Net");
+  // auto is chosen once the command line is read, when the models and the device are known.
+  auto precision_auto = std::make_shared<bool>(true);
+  cmd->add_option_function<std::string>(
+      "--precision",
+      [precision = f.precision, precision_auto](const std::string& text) {
+        *precision_auto = text == "auto";
+        if (*precision_auto) return;
+        try {
+          *precision = nn::parse_precision(text);
+        } catch (const ConfigError&) {
+          throw CLI::ValidationError("--precision",
+                                     "'" + text + "' is unknown (known: auto, float32, bfloat16)");
+        }
+      },
+      "auto (default), float32 or bfloat16 for the paper net's CNN branch or lfnet's U-Net; "
+      "auto: bfloat16 on a CPU with native bfloat16 for models verified in it (bfloat16.json "
+      "beside the model), float32 elsewhere (docs/performance.md)");
+  cmd->parse_complete_callback([f, precision_auto] {
+    if (!*precision_auto) return;
+    std::vector<std::string> models;
+    if (f.models) models = *f.models;
+    if (f.model && !f.model->empty()) models.push_back(*f.model);
+    *f.precision = nn::choose_precision(models, *f.device).precision;
+  });
   cmd->add_option("--tile", *f.tile,
                   "spatial tile of whole-image models (default 256) and of --cnn-mode full "
                   "(default 128)")

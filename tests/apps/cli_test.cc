@@ -72,7 +72,7 @@ TEST_CASE("every reconstructing command takes the shared flags with one meaning"
   for (const auto& command : commands) {
     INFO(command);
     CHECK(run_command(lfnet_binary() + " " + command + " --precision half", out) != 0);
-    CHECK(out.find("--precision: 'half' is unknown (known: float32, bfloat16)") !=
+    CHECK(out.find("--precision: 'half' is unknown (known: auto, float32, bfloat16)") !=
           std::string::npos);
     CHECK(run_command(lfnet_binary() + " " + command + " --tile 0", out) != 0);
     CHECK(out.find("--tile") != std::string::npos);

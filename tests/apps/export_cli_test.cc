@@ -10,6 +10,7 @@
 
 #include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/nn/auto_precision.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
@@ -56,6 +57,41 @@ nlohmann::json read_json(const std::string& path) {
 }
 
 }  // namespace
+
+TEST_CASE(
+    "precision auto runs bfloat16 only where the CPU and the model allow it; the record "
+    "says which ran",
+    "[app]") {
+  lfnet::test::TempDir tmp;
+  const std::string ckpt = tmp / "net.ckpt";
+  write_checkpoint(ckpt);
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  REQUIRE(run_command(lfnet + "render --random 7 --size 40x40 --out " + (tmp / "lf"), out) == 0);
+  // The precision that ran, with the CPU's bfloat16 as `native` says and more arguments.
+  auto ran = [&](const char* native, const std::string& more) {
+    std::string command = std::string("LFNET_NATIVE_BFLOAT16=") + native + " " + lfnet;
+    for (const std::string& part :
+         {std::string("evaluate --model "), ckpt, std::string(" --lf "), tmp / "lf",
+          std::string(" --stride 9 --force --json "), tmp / "r.json", more}) {
+      command += part;
+    }
+    REQUIRE(run_command(command, out) == 0);
+    return read_json(tmp / "r.json").at("precision").get<std::string>();
+  };
+  // By default auto; no bfloat16.json beside the model: float32 even on a native CPU.
+  CHECK(ran("0", "") == "float32");
+  CHECK(ran("1", "") == "float32");
+  // Verified in bfloat16.json: bfloat16 on a native CPU only, and never when told float32.
+  std::ofstream(tmp / "bfloat16.json")
+      << R"({"models": {"net.ckpt": {"fingerprint": ")" << lfnet::nn::file_fingerprint(ckpt)
+      << R"(", "verified": true}}})";
+  CHECK(ran("1", "") == "bfloat16");
+  CHECK(ran("1", " --precision auto") == "bfloat16");
+  CHECK(ran("0", " --precision auto") == "float32");
+  CHECK(ran("1", " --precision float32") == "float32");
+  CHECK(ran("0", " --precision bfloat16") == "bfloat16");
+}
 
 TEST_CASE(
     "export writes a TorchScript file that reconstruct, evaluate, LibTorch and Python "

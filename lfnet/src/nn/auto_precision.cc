@@ -1,0 +1,91 @@
+#include "lfnet/nn/auto_precision.h"
+
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+
+namespace fs = std::filesystem;
+
+namespace lfnet::nn {
+
+bool cpu_has_native_bfloat16() {
+  if (const char* forced = std::getenv("LFNET_NATIVE_BFLOAT16")) {
+    return std::string(forced) == "1";
+  }
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("flags", 0) != 0) continue;
+    std::istringstream flags(line.substr(line.find(':') + 1));
+    std::string flag;
+    while (flags >> flag) {
+      if (flag == "avx512_bf16" || flag == "amx_bf16") return true;
+    }
+    return false;  // every core lists the same flags
+  }
+  return false;
+}
+
+std::string file_fingerprint(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  LFNET_CHECK_AS(IoError, in.good(), "cannot read ", path);
+  uint64_t hash = 14695981039346656037ULL;  // FNV-1a 64
+  char buffer[1 << 16];
+  while (in) {
+    in.read(buffer, sizeof(buffer));
+    for (std::streamsize i = 0; i < in.gcount(); ++i) {
+      hash ^= static_cast<unsigned char>(buffer[i]);
+      hash *= 1099511628211ULL;
+    }
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof(hex), "%016llx", static_cast<unsigned long long>(hash));
+  return hex;
+}
+
+namespace {
+
+// Why `model` may not run in bfloat16 ("" when it is verified): its folder's bfloat16.json
+// must list its fingerprint as verified.
+std::string unverified(const std::string& model) {
+  const fs::path list = fs::path(model).parent_path() / "bfloat16.json";
+  const std::string name = fs::path(model).filename().string();
+  if (!fs::is_regular_file(list)) return name + " has no bfloat16.json beside it";
+  const auto j = read_json_file(list.string());
+  const std::string fingerprint = file_fingerprint(model);
+  if (!j.contains("models") || !j["models"].is_object()) return list.string() + " lists no models";
+  for (const auto& [listed, entry] : j["models"].items()) {
+    if (!entry.is_object() || entry.value("fingerprint", "") != fingerprint) continue;
+    if (entry.value("verified", false)) return "";
+    return name + " loses more than the tolerance in bfloat16 (" + list.string() + ", " + listed +
+           ")";
+  }
+  return name + " is not verified in " + list.string();
+}
+
+}  // namespace
+
+AutoPrecision choose_precision(const std::vector<std::string>& models, const std::string& device) {
+  if (models.empty()) return {Precision::kFloat32, "no network"};
+  if (device != "cpu") return {Precision::kFloat32, "bfloat16 is chosen on CPUs only"};
+  if (!cpu_has_native_bfloat16()) {
+    return {Precision::kFloat32, "this CPU has no native bfloat16 (AVX-512 BF16 or AMX)"};
+  }
+  for (const auto& model : models) {
+    try {
+      const auto why = unverified(model);
+      if (!why.empty()) return {Precision::kFloat32, why};
+    } catch (const std::exception& e) {
+      return {Precision::kFloat32, e.what()};
+    }
+  }
+  return {Precision::kBFloat16, "native bfloat16, and every model verified in bfloat16.json"};
+}
+
+}  // namespace lfnet::nn
