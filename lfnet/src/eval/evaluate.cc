@@ -93,7 +93,9 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
       // Shot and read noise reach a noise-aware method as the Gaussian sigma of the same
       // variance at the sensor image's mean signal.
       estimate = image(sensor, options.effects.equivalent_sigma(signal));
-      if (progress) progress(grid.size(), grid.size());
+      // A whole image has no patches: its progress counts its pixels.
+      const int64_t pixels = truth.height() * truth.width();
+      if (progress) progress(pixels, pixels);
     } else {
       estimate = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
     }

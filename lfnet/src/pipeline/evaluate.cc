@@ -112,7 +112,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   eval::EvalResult result;
   auto prepared =
       prepare_method(method, context, options.reconstruct.patch_h, options.reconstruct.patch_w);
-  // A whole-image model has no stride and no patches: its progress counts tiles.
+  // A whole-image model has no stride and no patches: its progress counts pixels.
   const bool whole_image = static_cast<bool>(prepared.image);
   const std::string label =
       method + " " + truth.name +
@@ -131,7 +131,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
                       : PatchGrid(truth.lf.height(), truth.lf.width(), options.reconstruct.patch_h,
                                   options.reconstruct.patch_w, options.reconstruct.stride)
                             .size(),
-          whole_image ? "tiles" : "patches");
+          whole_image ? "pixels" : "patches");
     }
     int64_t shown = 0;
     result = eval::evaluate(
