@@ -152,6 +152,32 @@ sensor-noise() {
   mv "$tmp" results/sensor-noise/records.jsonl
 }
 
+# Noise-blind (docs/acquisition.md, "Estimating the noise"): on the light fields of the
+# cross-scene benchmark at sigma 0, 0.05, 0.1 and 0.2, the noise-aware model told the true sigma
+# and told the sigma estimated from the sensor image, beside the noise-unaware default, pinv and
+# pinv-nlm (told the sigma) and no-parallax.
+noise-blind() {
+  local tmp i sigma
+  tmp=$(mktemp)
+  need_model models/lfnet-asp-n2-noise.ckpt
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}" --mode sensor)
+    for sigma in 0 0.05 0.1 0.2; do
+      for method in pinv pinv-nlm no-parallax; do
+        record "$tmp" --phi asp:2 "${src[@]}" --method "$method" --noise "$sigma"
+      done
+      VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt "${src[@]}" \
+        --method net --noise "$sigma"
+      VARIANT="lfnet-asp-n2-noise, told" record "$tmp" --model models/lfnet-asp-n2-noise.ckpt \
+        "${src[@]}" --method net --noise "$sigma"
+      VARIANT="lfnet-asp-n2-noise, estimated" record "$tmp" \
+        --model models/lfnet-asp-n2-noise.ckpt "${src[@]}" --method net --noise "$sigma" \
+        --estimate-noise
+    done
+  done
+  mv "$tmp" results/noise-blind/records.jsonl
+}
+
 # Seconds against PSNR over the stride: non-overlapping (9), 5, 2 and 1.
 stride-sweep() {
   local tmp
@@ -467,8 +493,8 @@ pictures() {
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
   sections=(cross-scene self-ensemble other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
-            sensor-noise stride-sweep branch-ablation loss-ablation lytro phi-switching
-            paper-scene)
+            sensor-noise noise-blind stride-sweep branch-ablation loss-ablation lytro
+            phi-switching paper-scene)
 fi
 for s in "${sections[@]}"; do
   echo "== $s"

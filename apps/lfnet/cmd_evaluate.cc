@@ -94,6 +94,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
                   "--noise sets its Gaussian sigma")
       ->check(CLI::ExistingFile);
+  cmd->add_flag("--estimate-noise", q.estimate_noise,
+                "noise-aware models are told the noise estimated from the sensor image, not the "
+                "simulation's: a camera whose noise is unknown (docs/acquisition.md)");
   add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
   cmd->add_option("--method", q.method,
                   recon::method_list() + " (default net with --model, pinv without)");

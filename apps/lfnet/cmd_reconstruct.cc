@@ -89,7 +89,8 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "tiles ('full'; docs/performance.md)");
   cmd->add_option("--noise-sigma", q.noise_sigma,
                   "the sensor's noise sigma (relative to white) for noise-aware models (default: "
-                  "what the acquisition's sensor.json records, else 0)")
+                  "what the acquisition's sensor.json records, else estimated from the sensor "
+                  "image, docs/acquisition.md)")
       ->check(kNoiseSigma);
   cmd->callback([a] { run_reconstruct(*a); });
 }

@@ -297,6 +297,12 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     whole["variant"] = "lfnet";
     whole["whole_image"] = true;
     d << whole.dump() << "\n";
+    // A noise-blind record: the sigma its method was told, estimated from the sensor image.
+    auto blind = nlohmann::json::parse(record("net", 30.5, 20.0, "x"));
+    blind["variant"] = "lfnet, blind";
+    blind["whole_image"] = true;
+    blind["noise_sigma_estimated"] = 0.0987;
+    d << blind.dump() << "\n";
   }
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
@@ -394,6 +400,8 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   }
   CHECK(whole_points == 1);
   CHECK(text.find("| lfnet | whole image |") != std::string::npos);
+  CHECK(text.find("| PSNR dB | SSIM | seconds | estimated sigma |") != std::string::npos);
+  CHECK(text.find("| 30.50 | 0.900 | 20.00 | 0.0987 |") != std::string::npos);
   // The stride sweep plots the patch nets only: a whole-image record has no stride.
   REQUIRE(by_stem.count("d_sweep"));
   REQUIRE(by_stem["d_sweep"]["series"].size() == 1);

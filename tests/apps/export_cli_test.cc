@@ -465,3 +465,55 @@ TEST_CASE("sizes of exported default nets", "[.][export-sizes]") {
         static_cast<double>(fs::file_size(tmp / "m.pt")) / 1e6);
   }
 }
+
+TEST_CASE(
+    "a noise-aware model is told the noise the acquisition records, else the noise "
+    "estimated from the sensor image",
+    "[app][image]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 2 --log-level warn ";
+  std::string out;
+  REQUIRE(run_command(lfnet + "render --random 3 --size 120x120 --out " + (tmp / "lf"), out) == 0);
+  auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
+  lfnet::nn::NetworkOptions o;
+  o.architecture = lfnet::nn::kLfnetArchitecture;
+  o.measurements = phi->measurements();
+  o.patch = {phi->rows(), phi->cols(), 16, 16};
+  o.image.channels = 4;
+  o.image.levels = 2;
+  o.image.blocks = 1;
+  o.image.noise_input = true;
+  lfnet::nn::LightFieldNet net(o);
+  net->set_phi(phi->pixel_weights(0, 0, 1, 1));
+  lfnet::test::randomise_image_net(net, 5);
+  const std::string ckpt = tmp / "aware.ckpt";
+  save_net(net, *phi, "joint_scratch", ckpt);
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --noise 0.1 --out " +
+                          (tmp / "acq"),
+                      out) == 0);
+  auto reconstruct = [&](const std::string& name, const std::string& more) {
+    std::string command = lfnet + "reconstruct --model ";
+    for (const std::string& part :
+         {ckpt, std::string(" --sensor "), tmp / "acq", std::string(" --out "), tmp / name, more})
+      command += part;
+    REQUIRE(run_command(command, out) == 0);
+    return read_json(tmp / (name + "/reconstruction.json"));
+  };
+  // simulate's sensor.json records the noise: the model is told it.
+  auto r = reconstruct("told", "");
+  CHECK(r.at("noise_sigma").get<double>() == Approx(0.1));
+  CHECK_FALSE(r.contains("noise_sigma_estimated"));
+  // A sensor image that records no noise (a real camera's): estimated from the image.
+  const std::string meta_path = tmp / "acq/sensor.json";
+  auto meta = read_json(meta_path);
+  REQUIRE(meta.erase("noise_sigma") == 1);
+  std::ofstream(meta_path, std::ios::trunc) << meta.dump(2);
+  r = reconstruct("estimated", "");
+  CHECK(r.at("noise_sigma_estimated") == true);
+  REQUIRE(r.at("noise_sigma").size() == 1);
+  CHECK(r.at("noise_sigma")[0].get<double>() == Approx(0.1).epsilon(0.1));
+  // --noise-sigma overrides both.
+  r = reconstruct("given", " --noise-sigma 0.05");
+  CHECK(r.at("noise_sigma").get<double>() == Approx(0.05));
+  CHECK_FALSE(r.contains("noise_sigma_estimated"));
+}

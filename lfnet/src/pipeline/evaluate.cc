@@ -245,6 +245,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
 
   auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
   if (effects) o.effects = *effects;
+  o.estimate_noise = a.estimate_noise;
   EvaluateResult result;
   result.record =
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);

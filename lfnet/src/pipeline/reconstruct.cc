@@ -1,5 +1,7 @@
 #include "lfnet/pipeline/reconstruct.h"
 
+#include <spdlog/spdlog.h>
+
 #include <filesystem>
 #include <sstream>
 
@@ -13,6 +15,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/io/viewer.h"
+#include "lfnet/optics/noise_estimate.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
@@ -149,6 +152,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   const int64_t h = lf_meta.at("height").get<int64_t>(), w = lf_meta.at("width").get<int64_t>();
   std::vector<torch::Tensor> channels;
   double scale = 1.0;
+  // A noise-aware model is told the sensor's noise: --noise-sigma, else what the acquisition
+  // records (simulate's sensor.json), else the noise estimated from each sensor image.
+  const bool noise_aware = model && model->network.image.noise_input;
+  const bool noise_told = a.noise_sigma >= 0 || acq.meta.contains("noise_sigma");
+  const double told_sigma = a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
+  nlohmann::json estimated = nlohmann::json::array();  // per colour channel
   Stopwatch clock;
   if (acq.sensor.defined()) {
     const int64_t per_channel = PatchGrid(h, w, o.patch_h, o.patch_w, o.stride).size();
@@ -156,8 +165,11 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
       auto sensor = acq.sensor[ch].clone();
       if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
       if (image) {
-        const double sigma =
-            a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
+        double sigma = told_sigma;
+        if (noise_aware && !noise_told) {
+          sigma = optics::estimate_noise_sigma(*phi, sensor);
+          estimated.push_back(sigma);
+        }
         channels.push_back(image(sensor, sigma));
         if (progress) progress(ch + 1, c);  // whole images: one step a colour channel
         continue;
@@ -223,6 +235,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
   if (!options_used.empty()) r.record["method_options"] = options_used;
+  if (noise_aware) r.record["noise_sigma"] = noise_told ? nlohmann::json(told_sigma) : estimated;
+  if (!estimated.empty()) {
+    r.record["noise_sigma_estimated"] = true;
+    spdlog::info("noise sigma estimated from the sensor image: {} (--noise-sigma overrides)",
+                 estimated.dump());
+  }
   return r;
 }
 

@@ -248,16 +248,20 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   columns.push_back("mode");
   bool has_paper = false, has_training = false;
   for (const auto& r : rows) has_paper |= paper_entry(s, r) != nullptr;
+  bool has_estimate = false;  // noise-blind records: the sigma the method was told
   for (const auto& r : rows) has_training |= r.contains("training_seconds");
+  for (const auto& r : rows) has_estimate |= r.contains("noise_sigma_estimated");
   std::ostringstream md;
   md << "|";
   for (const auto& c : columns)
     md << " " << (c == "n" ? "N" : c == "light_field" ? "light field" : c) << " |";
   md << " PSNR dB | SSIM | seconds |";
+  if (has_estimate) md << " estimated sigma |";
   if (has_training) md << " training s |";
   if (has_paper) md << " paper PSNR dB | paper seconds |";
   md << "\n|";
-  const size_t n_columns = columns.size() + 3 + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
+  const size_t n_columns =
+      columns.size() + 3 + (has_estimate ? 1 : 0) + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
   for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
   md << "\n";
   for (const auto& r : rows) {
@@ -267,6 +271,12 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
                  sec = number(r, "seconds");
     md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
        << " | " << fmt("%.2f", sec) << " |";
+    if (has_estimate) {
+      md << " "
+         << (r.contains("noise_sigma_estimated") ? fmt("%.4f", number(r, "noise_sigma_estimated"))
+                                                 : "")
+         << " |";
+    }
     if (has_training)
       md << " "
          << (r.contains("training_seconds") ? fmt("%.0f", number(r, "training_seconds")) : "")

@@ -22,6 +22,9 @@ struct EvalOptions {
   optics::SensorOptions effects;          // noise and other sensor effects; none by default
   uint64_t seed = 0;                      // noise seed
   recon::ReconstructOptions reconstruct;  // stride, patch size, batch, window
+  // Noise-aware methods are told the noise estimated from the sensor image
+  // (optics/noise_estimate.h) instead of the simulation's: a camera whose noise is unknown.
+  bool estimate_noise = false;
 };
 
 // The outcome of one evaluation, as `lfnet evaluate --json` writes it.
