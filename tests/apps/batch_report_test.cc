@@ -353,6 +353,9 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(text.find("| net |  | 2 | 9 | 28.10 | 0.900 | 6.67 |  |  |") != std::string::npos);
   CHECK(text.find("| net | lfnet | 2 | whole image | 31.50 | 0.900 | 20.00 | 22.00 | yes |") !=
         std::string::npos);
+  // no-parallax sees no camera: one row, without N or stride.
+  CHECK(text.find("| no-parallax |  |  |  | 28.50 | 0.900 | 0.10 | 2.10 | yes |") !=
+        std::string::npos);
   // Records of other scenes and apertures stay off it.
   CHECK(text.find("| net | finetuned | 2 | 5 |") == std::string::npos);
   // Figures: a PNG and its SVG twin each, drawn from one spec file by scripts/figures.py.

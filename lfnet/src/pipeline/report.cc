@@ -466,14 +466,18 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
           noise_level(r) != 0 || !std::isfinite(number(r, "psnr_db")))
         continue;
       // One row per reconstruction: a model measured in two sections (or a baseline of one
-      // camera) is listed once, under the first section's variant.
+      // camera) is listed once, under the first section's variant; no-parallax, which sees no
+      // camera, once.
       const std::string method = r.value("method", "");
-      const std::string key =
-          method + "|" +
-          (recon::is_baseline(method) ? phi_name(r) + setting(r, "n") : r.value("model", "")) +
-          "|" + setting(r, "stride") + "|" +
-          r.value("self_ensemble_passes", nlohmann::json(0)).dump() + "|" +
-          r.value("precision", "");
+      const bool camera_free = recon::find_method(method).needs() == recon::MethodNeeds::kTruth;
+      const std::string key = camera_free
+                                  ? method
+                                  : method + "|" +
+                                        (recon::is_baseline(method) ? phi_name(r) + setting(r, "n")
+                                                                    : r.value("model", "")) +
+                                        "|" + setting(r, "stride") + "|" +
+                                        r.value("self_ensemble_passes", nlohmann::json(0)).dump() +
+                                        "|" + r.value("precision", "");
       if (seen.insert(key).second) rows.push_back(r);
     }
   }
@@ -515,10 +519,14 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
         "|\n|---|---|---:|---|---:|---:|---:|---:|---|\n";
   for (const size_t i : order) {
     const auto& r = rows[i];
-    md << "| " << r.value("method", "") << " | " << r.value("variant", "") << " | "
-       << setting(r, "n") << " | " << setting(r, "stride") << " | "
-       << fmt("%.2f", number(r, "psnr_db")) << " | " << fmt("%.3f", number(r, "ssim")) << " | "
-       << fmt("%.2f", number(r, "seconds")) << " | "
+    // A baseline's variant names the model it was measured beside, not the baseline.
+    const std::string method = r.value("method", "");
+    const bool camera_free = recon::find_method(method).needs() == recon::MethodNeeds::kTruth;
+    md << "| " << method << " | " << (recon::is_baseline(method) ? "" : r.value("variant", ""))
+       << " | " << (camera_free ? "" : setting(r, "n")) << " | "
+       << (camera_free ? "" : setting(r, "stride")) << " | " << fmt("%.2f", number(r, "psnr_db"))
+       << " | " << fmt("%.3f", number(r, "ssim")) << " | " << fmt("%.2f", number(r, "seconds"))
+       << " | "
        << (std::isfinite(number(r, "end_to_end_seconds"))
                ? fmt("%.2f", number(r, "end_to_end_seconds"))
                : "")
