@@ -481,11 +481,11 @@ pictures() {
   for method in net dict pinv no-parallax; do
     "$lfnet" evaluate --model models/asp-n2.ckpt --dictionary models/dictionary.ckpt \
       --lf ../shared/data/hci_antinous --method "$method" --mode sensor --stride 5 \
-      --json "$tmp" --out "$pics/$method"
+      --json "$tmp" --force --out "$pics/$method"
   done
   for method in net pinv no-parallax; do
     "$lfnet" evaluate --model $pq/lytro.ckpt --lf ../shared/data/lytro_Begonia --mode sensor \
-      --stride 5 --method "$method" --json "$tmp" --out "out/results/lytro/$method"
+      --stride 5 --method "$method" --json "$tmp" --force --out "out/results/lytro/$method"
   done
   rm -f "$tmp"
 }
