@@ -56,6 +56,24 @@ nlohmann::json read_json(const std::string& path) {
   return nlohmann::json::parse(std::ifstream(path));
 }
 
+// A small noise-aware net of lfnet's architecture for `phi`, with random weights, in eval mode.
+lfnet::nn::LightFieldNet noise_aware_image_net(const lfnet::optics::Phi& phi) {
+  lfnet::nn::NetworkOptions o;
+  o.architecture = lfnet::nn::kLfnetArchitecture;
+  o.measurements = phi.measurements();
+  o.patch = {phi.rows(), phi.cols(), 16, 16};
+  o.image.channels = 4;
+  o.image.levels = 2;
+  o.image.blocks = 1;
+  o.image.noise_input = true;
+  lfnet::nn::LightFieldNet net(o);
+  const int64_t t = phi.period();
+  net->set_phi(phi.pixel_weights(0, 0, t, t));
+  lfnet::test::randomise_image_net(net, 5);
+  net->eval();
+  return net;
+}
+
 }  // namespace
 
 TEST_CASE(
@@ -302,19 +320,8 @@ TEST_CASE(
   for (const std::string name : {"asp", "mask"}) {
     INFO(name);
     auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(name + ":2"));
-    lfnet::nn::NetworkOptions o;
-    o.architecture = lfnet::nn::kLfnetArchitecture;
-    o.measurements = phi->measurements();
-    o.patch = {phi->rows(), phi->cols(), 16, 16};
-    o.image.channels = 4;
-    o.image.levels = 2;
-    o.image.blocks = 1;
-    o.image.noise_input = true;
-    lfnet::nn::LightFieldNet net(o);
+    auto net = noise_aware_image_net(*phi);
     const int64_t t = phi->period();
-    net->set_phi(phi->pixel_weights(0, 0, t, t));
-    lfnet::test::randomise_image_net(net, 5);
-    net->eval();
     const std::string ckpt = tmp / (name + ".ckpt"), pt = tmp / (name + ".pt");
     save_net(net, *phi, "joint_scratch", ckpt);
     std::string export_command = lfnet;
@@ -352,7 +359,7 @@ TEST_CASE(
     CHECK(max_abs_diff(tiled, whole) <= 1e-4);
     auto simulated = scripted.module.get_method("simulate")({lf}).toTensor();
     CHECK(max_abs_diff(simulated, sensor) <= 1e-5);
-    CHECK_THROWS_WITH(scripted.forward(torch::zeros({1, o.measurements * 81})),
+    CHECK_THROWS_WITH(scripted.forward(torch::zeros({1, phi->measurements() * 81})),
                       Catch::Contains("lfnet architecture"));
 
     // evaluate with the file gives the checkpoint's PSNR.
@@ -475,17 +482,7 @@ TEST_CASE(
   std::string out;
   REQUIRE(run_command(lfnet + "render --random 3 --size 120x120 --out " + (tmp / "lf"), out) == 0);
   auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
-  lfnet::nn::NetworkOptions o;
-  o.architecture = lfnet::nn::kLfnetArchitecture;
-  o.measurements = phi->measurements();
-  o.patch = {phi->rows(), phi->cols(), 16, 16};
-  o.image.channels = 4;
-  o.image.levels = 2;
-  o.image.blocks = 1;
-  o.image.noise_input = true;
-  lfnet::nn::LightFieldNet net(o);
-  net->set_phi(phi->pixel_weights(0, 0, 1, 1));
-  lfnet::test::randomise_image_net(net, 5);
+  auto net = noise_aware_image_net(*phi);
   const std::string ckpt = tmp / "aware.ckpt";
   save_net(net, *phi, "joint_scratch", ckpt);
   REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --noise 0.1 --out " +
