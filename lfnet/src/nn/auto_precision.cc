@@ -63,8 +63,12 @@ std::string unverified(const std::string& model) {
   for (const auto& [listed, entry] : j["models"].items()) {
     if (!entry.is_object() || entry.value("fingerprint", "") != fingerprint) continue;
     if (entry.value("verified", false)) return "";
-    return name + " loses more than the tolerance in bfloat16 (" + list.string() + ", " + listed +
-           ")";
+    std::string why = name + " loses more than the tolerance in bfloat16 (";
+    why += list.string();
+    why += ", ";
+    why += listed;
+    why += ")";
+    return why;
   }
   return name + " is not verified in " + list.string();
 }
