@@ -8,7 +8,9 @@
 #include <sstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/hash.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/machine.h"
 
 namespace fs = std::filesystem;
 
@@ -18,16 +20,10 @@ bool cpu_has_native_bfloat16() {
   if (const char* forced = std::getenv("LFNET_NATIVE_BFLOAT16")) {
     return std::string(forced) == "1";
   }
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("flags", 0) != 0) continue;
-    std::istringstream flags(line.substr(line.find(':') + 1));
-    std::string flag;
-    while (flags >> flag) {
-      if (flag == "avx512_bf16" || flag == "amx_bf16") return true;
-    }
-    return false;  // every core lists the same flags
+  std::istringstream flags(cpu_info("flags"));  // every core lists the same flags
+  std::string flag;
+  while (flags >> flag) {
+    if (flag == "avx512_bf16" || flag == "amx_bf16") return true;
   }
   return false;
 }
@@ -35,14 +31,11 @@ bool cpu_has_native_bfloat16() {
 std::string file_fingerprint(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   LFNET_CHECK_AS(IoError, in.good(), "cannot read ", path);
-  uint64_t hash = 14695981039346656037ULL;  // FNV-1a 64
+  uint64_t hash = kFnv1aBasis;
   char buffer[1 << 16];
   while (in) {
     in.read(buffer, sizeof(buffer));
-    for (std::streamsize i = 0; i < in.gcount(); ++i) {
-      hash ^= static_cast<unsigned char>(buffer[i]);
-      hash *= 1099511628211ULL;
-    }
+    hash = fnv1a(buffer, static_cast<size_t>(in.gcount()), hash);
   }
   char hex[17];
   std::snprintf(hex, sizeof(hex), "%016llx", static_cast<unsigned long long>(hash));

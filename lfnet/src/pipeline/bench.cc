@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/machine.h"
 #include "lfnet/core/metrics.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
@@ -343,12 +344,8 @@ nlohmann::json bench_conv_kernels(const BenchOptions& a, double gemm) {
 namespace {
 
 std::string machine_name() {
-  std::ifstream in("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind("model name", 0) == 0) return line.substr(line.find(':') + 2);
-  }
-  return "unknown";
+  const auto name = cpu_info("model name");
+  return name.empty() ? "unknown" : name;
 }
 
 double load_average() {

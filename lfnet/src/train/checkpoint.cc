@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/hash.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 
@@ -30,15 +31,6 @@ constexpr size_t kTrailerSize = 8 + 8 + 8;  // payload length, checksum, end mag
 constexpr size_t kAlignment = 64;
 // Float tensors at least this large are stored sparse when that halves their size.
 constexpr int64_t kSparseMinNumel = 1024;
-
-uint64_t fnv1a(const char* data, size_t n) {
-  uint64_t h = 14695981039346656037ull;
-  for (size_t i = 0; i < n; ++i) {
-    h ^= static_cast<unsigned char>(data[i]);
-    h *= 1099511628211ull;
-  }
-  return h;
-}
 
 template <typename T>
 void put(std::string& out, T value) {
