@@ -1,6 +1,7 @@
 #include "lfnet/eval/evaluate.h"
 
 #include <cmath>
+#include <optional>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/metrics.h"
@@ -84,8 +85,8 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   ro.validate();
   PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);
   torch::Tensor estimate;
-  double noise_told = -1;  // the sigma a whole-image method was given
-  double signal = 0;       // the measurements' mean
+  std::optional<double> estimated;  // the noise sigma estimated from the sensor image
+  double signal = 0;                // the measurements' mean
   Stopwatch clock;
   if (options.mode == optics::SimulationMode::kSensor) {
     auto sensor = optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed);
@@ -94,10 +95,8 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
     if (image) {
       // Shot and read noise reach a noise-aware method as the Gaussian sigma of the same
       // variance at the sensor image's mean signal.
-      const double told = options.estimate_noise ? optics::estimate_noise_sigma(phi, sensor)
-                                                 : options.effects.equivalent_sigma(signal);
-      estimate = image(sensor, told);
-      noise_told = told;
+      if (options.estimate_noise) estimated = optics::estimate_noise_sigma(phi, sensor);
+      estimate = image(sensor, estimated.value_or(options.effects.equivalent_sigma(signal)));
       // A whole image has no patches: its progress counts its pixels.
       const int64_t pixels = truth.height() * truth.width();
       if (progress) progress(pixels, pixels);
@@ -121,7 +120,7 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   auto record = base_record(phi, method, options, whole_image ? 0 : grid.size(), seconds);
   if (whole_image) record["whole_image"] = true;
   add_equivalent_sigma(record, options, signal);
-  if (options.estimate_noise && noise_told >= 0) record["noise_sigma_estimated"] = noise_told;
+  if (estimated) record["noise_sigma_estimated"] = *estimated;
   record.update(score(est, truth));
   return {estimate, record};
 }

@@ -102,12 +102,18 @@ bool on_paper_scene(const std::string& light_field) {
   return light_field.rfind(kPaperScene, 0) == 0;
 }
 
-// "aperture 5 cm" for the paper's scene at that aperture (its folder name ends in _ap5), the
-// light field's name otherwise.
-std::string scene_label(const std::string& light_field) {
+// The aperture in cm of the paper's scene ("5" of a folder name ending in _ap5), "" for other
+// light fields.
+std::string aperture(const std::string& light_field) {
   const auto at = light_field.rfind("_ap");
-  if (!on_paper_scene(light_field) || at == std::string::npos) return light_field;
-  return "aperture " + light_field.substr(at + 3) + " cm";
+  if (!on_paper_scene(light_field) || at == std::string::npos) return "";
+  return light_field.substr(at + 3);
+}
+
+// "aperture 5 cm" for the paper's scene at that aperture, the light field's name otherwise.
+std::string scene_label(const std::string& light_field) {
+  const auto cm = aperture(light_field);
+  return cm.empty() ? light_field : "aperture " + cm + " cm";
 }
 
 std::vector<Section> read_sections(const std::string& dir) {
@@ -173,9 +179,7 @@ std::vector<std::string> light_fields(const Section& s) {
   std::vector<std::string> out(names.begin(), names.end());
   std::stable_sort(out.begin(), out.end(), [](const std::string& a, const std::string& b) {
     if (on_paper_scene(a) != on_paper_scene(b)) return on_paper_scene(a);
-    return on_paper_scene(a)
-               ? as_number(a.substr(a.rfind("_ap") + 3)) < as_number(b.substr(b.rfind("_ap") + 3))
-               : a < b;
+    return on_paper_scene(a) ? as_number(aperture(a)) < as_number(aperture(b)) : a < b;
   });
   return out;
 }
