@@ -25,13 +25,6 @@ const char* kTinyConfig = R"({
                  "methods": ["net", "pinv", "no-parallax"], "strides": [9]}
 })";
 
-nlohmann::json read_lines(const std::string& path) {
-  nlohmann::json lines = nlohmann::json::array();
-  std::ifstream in(path);
-  std::string line;
-  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
 }  // namespace
 
 TEST_CASE(
@@ -46,7 +39,7 @@ TEST_CASE(
                       out) == 0);
   CHECK(fs::exists(tmp / "run/config.json"));
   CHECK(fs::exists(tmp / "run/models/cnn.ckpt"));
-  auto results = read_lines(tmp / "run/results.jsonl");
+  auto results = lfnet::test::read_json_lines(tmp / "run/results.jsonl");
   REQUIRE(results.size() == 3);
   for (const auto& r : results) {
     for (const char* key :

@@ -31,14 +31,6 @@ std::string tiny_config(int64_t epochs, int64_t train_patches) {
 })";
 }
 
-nlohmann::json read_lines(const std::string& path) {
-  nlohmann::json lines = nlohmann::json::array();
-  std::ifstream in(path);
-  std::string line;
-  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
-  return lines;
-}
-
 std::vector<std::string> csv_rows(const std::string& path) {
   std::vector<std::string> rows;
   std::ifstream in(path);
@@ -81,7 +73,8 @@ TEST_CASE("launch trains on 2 ranks and stops the job when a rank fails", "[app]
   CHECK(out.find("all 2 ranks finished") != std::string::npos);
   CHECK(fs::exists(tmp / "two/config.json"));
   CHECK(fs::exists(tmp / "two/models/cnn.ckpt"));
-  const auto two = read_lines(tmp / "two/training.jsonl");  // rank 0 alone writes it
+  const auto two =
+      lfnet::test::read_json_lines(tmp / "two/training.jsonl");  // rank 0 alone writes it
   REQUIRE(two.size() == 2);
   for (int e = 0; e < 2; ++e) {
     INFO("epoch " << e + 1);

@@ -30,14 +30,7 @@ TEST_CASE("SSIM of identical images is 1 and drops with noise", "[core][metrics]
   CHECK(lfnet::ssim_image(a, b) < 0.9);
 }
 
-namespace {
-void write_f64(const std::string& path, const torch::Tensor& t) {
-  auto d = t.to(torch::kFloat64).contiguous();
-  std::ofstream out(path, std::ios::binary);
-  out.write(reinterpret_cast<const char*>(d.data_ptr<double>()),
-            static_cast<std::streamsize>(d.numel() * sizeof(double)));
-}
-}  // namespace
+namespace {}  // namespace
 
 TEST_CASE("PSNR and SSIM agree with scikit-image", "[core][metrics][reference]") {
   const std::string py = lfnet::test::python_with("skimage");
@@ -50,8 +43,8 @@ TEST_CASE("PSNR and SSIM agree with scikit-image", "[core][metrics][reference]")
     auto truth = torch::rand({c, 3, 2, 23, 30});
     auto est = (0.7 * truth + 0.3 * truth.roll(1, 4) + 0.05 * torch::randn_like(truth)).clamp(0, 1);
     lfnet::test::TempDir tmp;
-    write_f64(tmp / "est.f64", est);
-    write_f64(tmp / "truth.f64", truth);
+    lfnet::test::write_f64(tmp / "est.f64", est);
+    lfnet::test::write_f64(tmp / "truth.f64", truth);
     std::string out;
     const std::string cmd = py + " " + LFNET_SOURCE_DIR + "/tests/support/reference_metrics.py " +
                             (tmp / "est.f64") + " " + (tmp / "truth.f64") + " " +

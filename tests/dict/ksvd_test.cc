@@ -11,8 +11,6 @@ using lfnet::dict::KsvdOptions;
 
 namespace {
 
-torch::Tensor unit_columns(torch::Tensor d) { return d / d.norm(2, 0, /*keepdim=*/true); }
-
 // Rows y = D0 x + noise with `s` random atoms per signal and N(0, 1) coefficients.
 torch::Tensor planted_signals(const torch::Tensor& d0, int64_t n, int64_t s, double noise) {
   const int64_t k = d0.size(1);
@@ -27,7 +25,8 @@ torch::Tensor planted_signals(const torch::Tensor& d0, int64_t n, int64_t s, dou
 // Atoms of `truth` matched by some learned atom with |cosine| > threshold.
 int64_t recovered_atoms(const torch::Tensor& learned, const torch::Tensor& truth,
                         double threshold) {
-  auto cos = unit_columns(truth).t().mm(unit_columns(learned)).abs();  // (K0, K)
+  auto cos =
+      lfnet::test::unit_columns(truth).t().mm(lfnet::test::unit_columns(learned)).abs();  // (K0, K)
   return std::get<0>(cos.max(1)).gt(threshold).sum().item<int64_t>();
 }
 
@@ -39,7 +38,7 @@ TEST_CASE("K-SVD recovers a planted dictionary", "[dict][ksvd]") {
   // over data seeds 5..12 it recovered 43..50 atoms (approximate update) and 46..50 (exact).
   // Seed 11 is one where both recover all 50.
   torch::manual_seed(11);
-  auto d0 = unit_columns(torch::randn({20, 50}, torch::kFloat64));
+  auto d0 = lfnet::test::unit_columns(torch::randn({20, 50}, torch::kFloat64));
   auto y = planted_signals(d0, 3000, 3, 0.01);
   for (auto update : {AtomUpdate::kApproximate, AtomUpdate::kExact}) {
     KsvdOptions o;
@@ -113,10 +112,10 @@ TEST_CASE("K-SVD's representation error does not increase", "[dict][ksvd]") {
 
 TEST_CASE("K-SVD replaces duplicate and unused atoms", "[dict][ksvd]") {
   torch::manual_seed(23);
-  auto d0 = unit_columns(torch::randn({12, 24}, torch::kFloat64));
+  auto d0 = lfnet::test::unit_columns(torch::randn({12, 24}, torch::kFloat64));
   auto y = planted_signals(d0, 800, 2, 0.01);
   // Start with every atom duplicated: half of them must be replaced.
-  auto half = unit_columns(torch::randn({12, 12}, torch::kFloat64));
+  auto half = lfnet::test::unit_columns(torch::randn({12, 12}, torch::kFloat64));
   auto initial = torch::cat({half, half}, 1);
   KsvdOptions o;
   o.atoms = 24;
@@ -140,7 +139,7 @@ TEST_CASE("K-SVD replaces duplicate and unused atoms", "[dict][ksvd]") {
 TEST_CASE("K-SVD stops on the tolerance and on the callback, and is deterministic",
           "[dict][ksvd]") {
   torch::manual_seed(29);
-  auto d0 = unit_columns(torch::randn({10, 20}, torch::kFloat64));
+  auto d0 = lfnet::test::unit_columns(torch::randn({10, 20}, torch::kFloat64));
   auto y = planted_signals(d0, 400, 2, 0.0);
   KsvdOptions o;
   o.atoms = 20;

@@ -15,13 +15,6 @@ using lfnet::dict::OmpStop;
 
 namespace {
 
-void write_f64(const std::string& path, const torch::Tensor& t) {
-  auto d = t.to(torch::kFloat64).contiguous();
-  std::ofstream out(path, std::ios::binary);
-  out.write(reinterpret_cast<const char*>(d.data_ptr<double>()),
-            static_cast<std::streamsize>(d.numel() * sizeof(double)));
-}
-
 torch::Tensor read_f64(const std::string& path, std::vector<int64_t> shape) {
   auto t = torch::empty(shape, torch::kFloat64);
   std::ifstream in(path, std::ios::binary);
@@ -41,8 +34,8 @@ Reference sklearn_omp(const std::string& py, const torch::Tensor& gram, const to
                       const std::string& mode, double param, const torch::Tensor& norms = {}) {
   lfnet::test::TempDir tmp;
   const int64_t k = gram.size(0), b = xy.size(1);
-  write_f64(tmp / "gram.f64", gram);
-  write_f64(tmp / "xy.f64", xy);
+  lfnet::test::write_f64(tmp / "gram.f64", gram);
+  lfnet::test::write_f64(tmp / "xy.f64", xy);
   std::ostringstream cmd;
   cmd.precision(17);
   cmd << py << " " << LFNET_SOURCE_DIR << "/tests/dict/reference_omp.py " << (tmp / "gram.f64")
@@ -50,7 +43,7 @@ Reference sklearn_omp(const std::string& py, const torch::Tensor& gram, const to
   if (mode == "n_nonzero") {
     cmd << static_cast<int64_t>(param) << " " << (tmp / "coef.f64");
   } else {
-    write_f64(tmp / "norms.f64", norms);
+    lfnet::test::write_f64(tmp / "norms.f64", norms);
     cmd << param << " " << (tmp / "norms.f64") << " " << (tmp / "coef.f64");
   }
   std::string out;
@@ -63,8 +56,6 @@ Reference sklearn_omp(const std::string& py, const torch::Tensor& gram, const to
       nlohmann::json::parse(out.substr(out.find('{')))["n_iter"].get<std::vector<int64_t>>();
   return ref;
 }
-
-torch::Tensor unit_columns(torch::Tensor d) { return d / d.norm(2, 0, /*keepdim=*/true); }
 
 // Signals that are sparse combinations of `atoms` columns plus noise, as rows (B, m).
 torch::Tensor sparse_signals(const torch::Tensor& dict, int64_t b, int64_t s, double noise) {
@@ -87,13 +78,13 @@ std::vector<Case> reference_cases() {
   torch::manual_seed(11);
   std::vector<Case> cases;
   {
-    auto d = unit_columns(torch::randn({30, 60}, torch::kFloat64));
+    auto d = lfnet::test::unit_columns(torch::randn({30, 60}, torch::kFloat64));
     cases.push_back({"gaussian unit atoms", d, sparse_signals(d, 40, 4, 0.05)});
   }
   {
     // Strongly correlated atoms: ten clusters of six atoms around shared directions.
     auto base = torch::randn({24, 10}, torch::kFloat64).repeat_interleave(6, 1);
-    auto d = unit_columns(base + 0.3 * torch::randn({24, 60}, torch::kFloat64));
+    auto d = lfnet::test::unit_columns(base + 0.3 * torch::randn({24, 60}, torch::kFloat64));
     cases.push_back({"correlated atoms", d, sparse_signals(d, 40, 5, 0.02)});
   }
   {
@@ -184,7 +175,7 @@ TEST_CASE("Batch-OMP gives the same codes on one thread and on several", "[dict]
   // inputs are computed once: their BLAS products round differently with the thread count
   // and the CPU's kernel (see the next test).
   torch::manual_seed(3);
-  auto d = unit_columns(torch::randn({40, 120}, torch::kFloat64));
+  auto d = lfnet::test::unit_columns(torch::randn({40, 120}, torch::kFloat64));
   auto y = sparse_signals(d, 300, 6, 0.01);
   const auto gram = d.t().mm(d), xy = d.t().mm(y.t());
   OmpOptions o;
@@ -200,7 +191,7 @@ TEST_CASE("OMP end to end agrees across thread counts to BLAS round-off", "[dict
   // agree to round-off: the same atoms (the signals' best and second-best correlations are
   // far apart here) and coefficients within 1e-10 relative, not bit for bit.
   torch::manual_seed(3);
-  auto d = unit_columns(torch::randn({40, 120}, torch::kFloat64));
+  auto d = lfnet::test::unit_columns(torch::randn({40, 120}, torch::kFloat64));
   auto y = sparse_signals(d, 300, 6, 0.01);
   OmpOptions o;
   o.max_atoms = 6;
@@ -211,7 +202,7 @@ TEST_CASE("OMP end to end agrees across thread counts to BLAS round-off", "[dict
 
 TEST_CASE("OMP recovers planted supports and sparse_combine rebuilds the signals", "[dict][omp]") {
   torch::manual_seed(5);
-  auto d = unit_columns(torch::randn({64, 200}, torch::kFloat64));
+  auto d = lfnet::test::unit_columns(torch::randn({64, 200}, torch::kFloat64));
   auto coef = torch::zeros({200, 50}, torch::kFloat64);
   for (int64_t i = 0; i < 50; ++i) {
     auto idx = torch::randperm(200, torch::kInt64).slice(0, 0, 4);
@@ -244,7 +235,7 @@ TEST_CASE("Batch-OMP stops early and stays finite on degenerate input", "[dict][
   o.max_atoms = 6;
 
   SECTION("all-zero signals") {
-    auto d = unit_columns(torch::randn({10, 20}, torch::kFloat64));
+    auto d = lfnet::test::unit_columns(torch::randn({10, 20}, torch::kFloat64));
     auto xy = torch::zeros({20, 3}, torch::kFloat64);
     auto r = batch_omp(d.t().mm(d), xy, o, torch::zeros({3}, torch::kFloat64));
     CHECK(r.counts.eq(0).all().item<bool>());
@@ -253,7 +244,7 @@ TEST_CASE("Batch-OMP stops early and stays finite on degenerate input", "[dict][
     CHECK(r.residual_sq.eq(0).all().item<bool>());
   }
   SECTION("zero atoms") {
-    auto d = unit_columns(torch::randn({10, 20}, torch::kFloat64));
+    auto d = lfnet::test::unit_columns(torch::randn({10, 20}, torch::kFloat64));
     d.slice(1, 0, 5).zero_();
     auto y = torch::randn({4, 10}, torch::kFloat64);
     auto r = batch_omp(d.t().mm(d), d.t().mm(y.t()), o);
@@ -272,7 +263,7 @@ TEST_CASE("Batch-OMP stops early and stays finite on degenerate input", "[dict][
   }
   SECTION("linearly dependent atoms: 12 atoms in 3 dimensions, duplicates included") {
     auto base = torch::randn({3, 6}, torch::kFloat64);
-    auto d = unit_columns(torch::cat({base, base}, 1));
+    auto d = lfnet::test::unit_columns(torch::cat({base, base}, 1));
     auto y = torch::randn({5, 3}, torch::kFloat64);
     auto r = batch_omp(d.t().mm(d), d.t().mm(y.t()), o, y.pow(2).sum(1));
     CHECK(torch::isfinite(r.values).all().item<bool>());
@@ -288,7 +279,7 @@ TEST_CASE("Batch-OMP stops early and stays finite on degenerate input", "[dict][
     }
   }
   SECTION("more atoms asked for than exist") {
-    auto d = unit_columns(torch::randn({8, 4}, torch::kFloat64));
+    auto d = lfnet::test::unit_columns(torch::randn({8, 4}, torch::kFloat64));
     auto y = torch::randn({2, 8}, torch::kFloat64);
     auto r = batch_omp(d.t().mm(d), d.t().mm(y.t()), o);
     CHECK(r.counts.eq(4).all().item<bool>());
@@ -321,7 +312,7 @@ TEST_CASE("Batch-OMP rejects bad input and options", "[dict][omp]") {
 
 TEST_CASE("Batch-OMP in float32 agrees with float64 on well-conditioned input", "[dict][omp]") {
   torch::manual_seed(21);
-  auto d = unit_columns(torch::randn({50, 100}, torch::kFloat64));
+  auto d = lfnet::test::unit_columns(torch::randn({50, 100}, torch::kFloat64));
   auto y = sparse_signals(d, 30, 3, 0.0);
   OmpOptions o;
   o.max_atoms = 3;

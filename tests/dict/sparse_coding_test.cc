@@ -13,8 +13,6 @@ using lfnet::dict::SparseCodingResult;
 
 namespace {
 
-torch::Tensor unit_columns(torch::Tensor d) { return d / d.norm(2, 0, /*keepdim=*/true); }
-
 // A light-field-sized problem: a random dictionary of 2025-value patches and a Gaussian
 // patch matrix with 162 = 81 N rows (N = 2), as for 5 x 5 x 9 x 9 patches.
 struct Problem {
@@ -28,7 +26,7 @@ struct Problem {
 Problem make_problem(int64_t k, int64_t b, int64_t s, uint64_t seed) {
   torch::manual_seed(seed);
   Problem p;
-  p.dict = unit_columns(torch::randn({2025, k}, torch::kFloat64));
+  p.dict = lfnet::test::unit_columns(torch::randn({2025, k}, torch::kFloat64));
   p.a = torch::randn({162, 2025}, torch::kFloat64) / std::sqrt(162.0);
   p.coef = torch::zeros({k, b}, torch::kFloat64);
   for (int64_t i = 0; i < b; ++i) {
@@ -39,13 +37,6 @@ Problem make_problem(int64_t k, int64_t b, int64_t s, uint64_t seed) {
   p.patches = p.dict.mm(p.coef).t();
   p.y = p.patches.mm(p.a.t());
   return p;
-}
-
-void write_f64(const std::string& path, const torch::Tensor& t) {
-  auto d = t.to(torch::kFloat64).contiguous();
-  std::ofstream out(path, std::ios::binary);
-  out.write(reinterpret_cast<const char*>(d.data_ptr<double>()),
-            static_cast<std::streamsize>(d.numel() * sizeof(double)));
 }
 
 void require_finite(const SparseCodingResult& r) {
@@ -158,8 +149,8 @@ TEST_CASE("ADMM solves the LASSO that scikit-learn solves", "[dict][sparse_codin
   CHECK(r.converged.all().item<bool>());
 
   lfnet::test::TempDir tmp;
-  write_f64(tmp / "theta.f64", theta);
-  write_f64(tmp / "y.f64", y);
+  lfnet::test::write_f64(tmp / "theta.f64", theta);
+  lfnet::test::write_f64(tmp / "y.f64", y);
   std::ostringstream cmd;
   cmd << py << " " << LFNET_SOURCE_DIR << "/tests/dict/reference_lasso.py " << (tmp / "theta.f64")
       << " " << (tmp / "y.f64") << " " << m << " " << k << " " << b << " " << lambda << " "
@@ -277,7 +268,8 @@ TEST_CASE("Sparse coding options are strict and input is checked", "[dict][spars
   CHECK_THROWS_AS(SparseCodingOptions::from_json({{"admm", {{"relaxation", 2.0}}}}),
                   lfnet::ConfigError);
 
-  SparseCoder coder(unit_columns(torch::randn({50, 20}, torch::kFloat64)), SparseCodingOptions{});
+  SparseCoder coder(lfnet::test::unit_columns(torch::randn({50, 20}, torch::kFloat64)),
+                    SparseCodingOptions{});
   CHECK_THROWS_WITH(coder.code(torch::randn({10, 49}), torch::randn({3, 10})),
                     Catch::Contains("(m, 50)"));
   CHECK_THROWS_WITH(coder.code(torch::randn({10, 50}), torch::randn({3, 11})),

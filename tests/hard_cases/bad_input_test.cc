@@ -44,7 +44,7 @@ int count_lines(const std::string& text) {
 }
 
 // The program with quiet logs, so its only output on failure is the error line.
-std::string program(const std::string& args) {
+std::string quiet_program(const std::string& args) {
   return lfnet_binary() + " --threads 1 --log-level off " + args;
 }
 
@@ -53,7 +53,7 @@ std::string program(const std::string& args) {
 void expect_error(const std::string& args, const std::string& what, const fs::path& watched) {
   const auto before = snapshot(watched);
   std::string out;
-  const int rc = run_command(program(args), out);
+  const int rc = run_command(quiet_program(args), out);
   INFO("lfnet " << args << "\n-> " << out);
   CHECK(rc != 0);
   CHECK(out.rfind("lfnet: error: ", 0) == 0);
@@ -323,7 +323,7 @@ TEST_CASE("sensor images, calibrated Phis and export checks name the file and th
                "sensor.tif holds NaN", root);
   // A calibrated Phi whose response images are zero: the file is named.
   std::string out;
-  REQUIRE(run_command(program("phi export --phi mask:2 --out " + (tmp / "cam")), out) == 0);
+  REQUIRE(run_command(quiet_program("phi export --phi mask:2 --out " + (tmp / "cam")), out) == 0);
   lfnet::io::write_image(tmp / "cam/response_2.tif", torch::zeros({45, 45}), 32);
   write_light_field(tmp / "lf");
   expect_error(
@@ -352,15 +352,15 @@ TEST_CASE("truncated and foreign checkpoints, and another Phi's measurements, ar
   write_light_field(tmp / "lf");
   write_model(tmp / "asp.ckpt", "asp:2");
   std::string out;
-  REQUIRE(
-      run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")),
-                  out) == 0);
-  REQUIRE(run_command(
-              program("simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " + (tmp / "acqm")),
-              out) == 0);
+  REQUIRE(run_command(quiet_program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " +
+                                    (tmp / "acq")),
+                      out) == 0);
+  REQUIRE(run_command(quiet_program("simulate --lf " + (tmp / "lf") + " --phi mask:2 --out " +
+                                    (tmp / "acqm")),
+                      out) == 0);
   // The model works on its own Phi's measurements (so the failures below are the input's).
-  REQUIRE(run_command(program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
-                              (tmp / "acq") + " --out " + (tmp / "ok")),
+  REQUIRE(run_command(quiet_program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
+                                    (tmp / "acq") + " --out " + (tmp / "ok")),
                       out) == 0);
   auto reconstruct = [&](const std::string& model, const std::string& sensor) {
     return "reconstruct --model " + model + " --sensor " + sensor + " --out " + (tmp / "rec");
@@ -414,9 +414,9 @@ TEST_CASE("existing and unwritable output folders are never overwritten without 
   write_light_field(tmp / "lf");
   write_model(tmp / "asp.ckpt", "asp:2");
   std::string out;
-  REQUIRE(
-      run_command(program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "acq")),
-                  out) == 0);
+  REQUIRE(run_command(quiet_program("simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " +
+                                    (tmp / "acq")),
+                      out) == 0);
   fs::create_directories(tmp / "taken");
   write_bytes(tmp / "taken/notes.txt", "keep me");
   write_bytes(tmp / "file", "a file, not a folder");
@@ -436,7 +436,7 @@ TEST_CASE("existing and unwritable output folders are never overwritten without 
                root);
   expect_error(rec + (tmp / "taken") + " --force --method nosuch", "nosuch", root);
   // With --force the folder is replaced.
-  REQUIRE(run_command(program(sim + (tmp / "taken") + " --force"), out) == 0);
+  REQUIRE(run_command(quiet_program(sim + (tmp / "taken") + " --force"), out) == 0);
   CHECK_FALSE(fs::exists(tmp / "taken/notes.txt"));
   CHECK(fs::exists(tmp / "taken/sensor.json"));
 }
@@ -489,16 +489,19 @@ TEST_CASE("on a full disk every command that writes fails with the reason and le
   write_model(tmp / "asp.ckpt", "asp:2");
   write_bytes(tmp / "c.json", kTinyConfig);
   std::string out;
-  REQUIRE(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "in/acq")),
+  REQUIRE(
+      run_command(quiet_program("simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "in/acq")),
+                  out) == 0);
+  REQUIRE(run_command(quiet_program("train " + (tmp / "c.json") + " --out " + (tmp / "run")),
                       out) == 0);
-  REQUIRE(run_command(program("train " + (tmp / "c.json") + " --out " + (tmp / "run")), out) == 0);
   // Existing outputs on the full disk, which no failing command may touch: a record, a run, a
   // reconstruction, a model, a report with its figures.
   write_bytes((full / "old.json").string(), "{\"old\": true}\n");
-  REQUIRE(run_command(program("train " + (tmp / "c.json") + " --out " + (full / "oldrun").string()),
-                      out) == 0);
-  REQUIRE(run_command(program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
-                              (tmp / "in/acq") + " --out " + (full / "oldrec").string()),
+  REQUIRE(run_command(
+              quiet_program("train " + (tmp / "c.json") + " --out " + (full / "oldrun").string()),
+              out) == 0);
+  REQUIRE(run_command(quiet_program("reconstruct --model " + (tmp / "asp.ckpt") + " --sensor " +
+                                    (tmp / "in/acq") + " --out " + (full / "oldrec").string()),
                       out) == 0);
   write_bytes((full / "old.pt").string(), "an older export");
   fs::copy(tmp / "run", full / "report_run", fs::copy_options::recursive);
@@ -527,7 +530,7 @@ TEST_CASE("on a full disk every command that writes fails with the reason and le
   // table); the error is one line with the reason, and nothing changed.
   const auto before = snapshot(full);
   for (const auto& command : commands) {
-    const int rc = run_command(program(command), out);
+    const int rc = run_command(quiet_program(command), out);
     INFO("lfnet " << command << "\n-> " << out);
     CHECK(rc != 0);
     const size_t error = out.find("lfnet: error: ");

@@ -26,8 +26,6 @@ using lfnet::test::run_command;
 
 namespace {
 
-std::string program(const std::string& args) { return lfnet::test::lfnet_program(args); }
-
 // A config of two quick stages.
 nlohmann::json two_stage_config(double lr = 1e-3) {
   return {{"name", "two"},
@@ -48,9 +46,9 @@ nlohmann::json two_stage_config(double lr = 1e-3) {
 void train_first_stage(const lfnet::test::TempDir& tmp) {
   std::string out;
   lfnet::write_json_file(tmp / "two.json", two_stage_config());
-  REQUIRE(run_command(
-              program("train " + (tmp / "two.json") + " --out " + (tmp / "run") + " --stage ae"),
-              out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train " + (tmp / "two.json") + " --out " +
+                                                 (tmp / "run") + " --stage ae"),
+                      out) == 0);
 }
 
 // One lfnet: error line, naming `needle`.
@@ -74,51 +72,58 @@ TEST_CASE("no command writes over its inputs, even with --force", "[app][bad_inp
   lfnet::test::TempDir tmp;
   std::string out;
   const std::string lf = tmp / "lf";
-  REQUIRE(run_command(program("render --random 1 --size 24x24 --grey --out " + lf), out) == 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("render --random 1 --size 24x24 --grey --out " + lf),
+                  out) == 0);
   const std::string view = read_bytes(lf + "/lf_1_1.png");
   // evaluate --out into its own light field, or into a folder inside it.
-  CHECK(run_command(
-            program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + lf + " --force"),
-            out) != 0);
+  CHECK(
+      run_command(lfnet::test::lfnet_program("evaluate --lf " + lf +
+                                             " --phi asp:2 --method pinv --out " + lf + " --force"),
+                  out) != 0);
   expect_one_error(out, "is the input");
-  CHECK(run_command(
-            program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + lf + "/rec"),
-            out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("evaluate --lf " + lf +
+                                               " --phi asp:2 --method pinv --out " + lf + "/rec"),
+                    out) != 0);
   expect_one_error(out, "lies inside the input");
   CHECK(read_bytes(lf + "/lf_1_1.png") == view);
   CHECK_FALSE(fs::exists(lf + "/rec"));
   // evaluate --out: an existing non-empty folder only with --force, and then replaced whole.
   fs::create_directories(tmp.path() / "ev");
   std::ofstream(tmp / "ev/old.txt") << "old";
-  CHECK(run_command(
-            program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " + (tmp / "ev")),
-            out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("evaluate --lf " + lf +
+                                               " --phi asp:2 --method pinv --out " + (tmp / "ev")),
+                    out) != 0);
   expect_one_error(out, "--force");
-  REQUIRE(run_command(program("evaluate --lf " + lf + " --phi asp:2 --method pinv --out " +
-                              (tmp / "ev") + " --force"),
+  REQUIRE(run_command(lfnet::test::lfnet_program("evaluate --lf " + lf +
+                                                 " --phi asp:2 --method pinv --out " +
+                                                 (tmp / "ev") + " --force"),
                       out) == 0);
   CHECK_FALSE(fs::exists(tmp.path() / "ev/old.txt"));
   CHECK(fs::exists(tmp.path() / "ev/evaluation.json"));
   // reconstruct --out its own acquisition keeps sensor.tif and sensor.json.
   const std::string acq = tmp / "acq";
-  REQUIRE(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + acq), out) == 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("simulate --lf " + lf + " --phi asp:2 --out " + acq),
+                  out) == 0);
   const std::string sidecar = read_bytes(acq + "/sensor.json");
-  CHECK(run_command(
-            program("reconstruct --sensor " + acq + " --method pinv --out " + acq + " --force"),
-            out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("reconstruct --sensor " + acq +
+                                               " --method pinv --out " + acq + " --force"),
+                    out) != 0);
   expect_one_error(out, "is the input");
   CHECK(read_bytes(acq + "/sensor.json") == sidecar);
   CHECK(fs::exists(acq + "/sensor.tif"));
   // simulate into the light field it reads; export over its checkpoint.
-  CHECK(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + lf + " --force"),
+  CHECK(run_command(lfnet::test::lfnet_program("simulate --lf " + lf + " --phi asp:2 --out " + lf +
+                                               " --force"),
                     out) != 0);
   expect_one_error(out, "is the input");
   // A dead writer's half-written output is removed by the next writer of that output.
   const fs::path stale = tmp.path() / (".rec.tmp" + std::to_string(dead_pid()));
   fs::create_directories(stale);
-  REQUIRE(
-      run_command(program("reconstruct --sensor " + acq + " --method pinv --out " + (tmp / "rec")),
-                  out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("reconstruct --sensor " + acq +
+                                                 " --method pinv --out " + (tmp / "rec")),
+                      out) == 0);
   CHECK_FALSE(fs::exists(stale));
   CHECK(fs::exists(tmp.path() / "rec/reconstruction.json"));
 }
@@ -128,26 +133,28 @@ TEST_CASE("a training run that fails before its first checkpoint leaves nothing 
   lfnet::test::TempDir tmp;
   std::string out;
   lfnet::write_json_file(tmp / "wild.json", two_stage_config(1e308));
-  CHECK(run_command(program("train " + (tmp / "wild.json") + " --out " + (tmp / "run")), out) != 0);
+  CHECK(run_command(
+            lfnet::test::lfnet_program("train " + (tmp / "wild.json") + " --out " + (tmp / "run")),
+            out) != 0);
   CHECK(out.find("lfnet: error: ") != std::string::npos);
   CHECK_FALSE(fs::exists(tmp.path() / "run"));
   // The same command with a sane config then runs: nothing was left to refuse it.
   lfnet::write_json_file(tmp / "good.json", two_stage_config());
-  REQUIRE(run_command(
-              program("train " + (tmp / "good.json") + " --out " + (tmp / "run") + " --stage ae"),
-              out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train " + (tmp / "good.json") + " --out " +
+                                                 (tmp / "run") + " --stage ae"),
+                      out) == 0);
   // --resume of something that does not exist fails before any data is loaded, and creates
   // nothing.
-  CHECK(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "new") +
-                            " --resume " + (tmp / "nosuch")),
+  CHECK(run_command(lfnet::test::lfnet_program("train " + (tmp / "good.json") + " --out " +
+                                               (tmp / "new") + " --resume " + (tmp / "nosuch")),
                     out) != 0);
   expect_one_error(out, "--resume");
   CHECK_FALSE(fs::exists(tmp.path() / "new"));
   // --force with a failing config keeps the old run as it was.
   const std::string ae = read_bytes(tmp / "run/models/ae.ckpt");
-  CHECK(
-      run_command(program("train " + (tmp / "wild.json") + " --out " + (tmp / "run") + " --force"),
-                  out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("train " + (tmp / "wild.json") + " --out " +
+                                               (tmp / "run") + " --force"),
+                    out) != 0);
   CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
 }
 
@@ -159,18 +166,21 @@ TEST_CASE(
   std::string out;
   lfnet::write_json_file(tmp / "two.json", two_stage_config());
   // Only the first stage, as an interrupted run would have done, with an override.
-  REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
-                              " --stage ae --set training.epochs=2"),
-                      out) == 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("train " + (tmp / "two.json") + " --out " +
+                                             (tmp / "run") + " --stage ae --set training.epochs=2"),
+                  out) == 0);
   const auto config = lfnet::read_json_file(tmp / "run/config.json");
   CHECK(config["training"]["epochs"] == 2);
   const std::string ae = read_bytes(tmp / "run/models/ae.ckpt");
   // Running the config again into it says how to continue, not only how to discard.
-  CHECK(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run")), out) != 0);
+  CHECK(run_command(
+            lfnet::test::lfnet_program("train " + (tmp / "two.json") + " --out " + (tmp / "run")),
+            out) != 0);
   CHECK(out.find("holds a run (its config.json); continue it with --resume") != std::string::npos);
   CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
   // Resuming the folder keeps the finished stage and trains the other, with the run's config.
-  REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train --resume " + (tmp / "run")), out) == 0);
   CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
   REQUIRE(fs::exists(tmp.path() / "run/models/cnn.ckpt"));
   size_t cnn_epochs = 0;
@@ -181,19 +191,20 @@ TEST_CASE(
   CHECK(cnn_epochs == 2);  // the recorded override, not the file's 1
   // Nothing left to do: a second resume changes nothing.
   const std::string cnn = read_bytes(tmp / "run/models/cnn.ckpt");
-  REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train --resume " + (tmp / "run")), out) == 0);
   CHECK(read_bytes(tmp / "run/models/cnn.ckpt") == cnn);
   // --set values are validated like the file; --force and --resume exclude each other.
-  CHECK(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "x") +
-                            " --set training.epochs=1.5"),
+  CHECK(run_command(lfnet::test::lfnet_program("train " + (tmp / "two.json") + " --out " +
+                                               (tmp / "x") + " --set training.epochs=1.5"),
                     out) != 0);
   expect_one_error(out, "$.training.epochs");
   CHECK_FALSE(fs::exists(tmp.path() / "x"));
-  CHECK(run_command(program("train --resume " + (tmp / "run") + " --force"), out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("train --resume " + (tmp / "run") + " --force"),
+                    out) != 0);
   expect_one_error(out, "--force");
   // --force starts the run afresh: the old models and log are gone once it trains.
-  REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
-                              " --stage ae --force"),
+  REQUIRE(run_command(lfnet::test::lfnet_program("train " + (tmp / "two.json") + " --out " +
+                                                 (tmp / "run") + " --stage ae --force"),
                       out) == 0);
   CHECK_FALSE(fs::exists(tmp.path() / "run/models/cnn.ckpt"));
   size_t lines = 0;
@@ -226,8 +237,8 @@ TEST_CASE("a run snapshot carries an interrupted run to another folder, which re
   fs::remove_all(tmp.path() / "run/models/cnn");
   fs::remove_all(tmp.path() / "snap/models/cnn");
   REQUIRE(run_command(script + " restore " + (tmp / "snap") + " " + (tmp / "moved"), out) == 0);
-  REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
-  REQUIRE(run_command(program("train --resume " + (tmp / "moved")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train --resume " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train --resume " + (tmp / "moved")), out) == 0);
   auto cnn_losses = [](const std::string& log_path) {
     std::vector<double> losses;
     std::ifstream log(log_path);
@@ -247,9 +258,9 @@ TEST_CASE("batch records unreadable entries as failed items and goes on", "[app]
   std::string out;
   const fs::path in = tmp.path() / "in";
   fs::create_directories(in);
-  REQUIRE(
-      run_command(program("render --random 2 --size 24x24 --grey --out " + (in / "good").string()),
-                  out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("render --random 2 --size 24x24 --grey --out " +
+                                                 (in / "good").string()),
+                      out) == 0);
   fs::create_symlink(in / "nowhere", in / "broken");
   fs::create_symlink(in, in / "loop");           // a link back to the root
   fs::create_symlink(in / "self", in / "self");  // a link to itself
@@ -264,9 +275,10 @@ TEST_CASE("batch records unreadable entries as failed items and goes on", "[app]
   for (const auto& e : fs::directory_iterator(in / "good")) {
     lfnet::test::write_bytes((in / "mac" / ("._" + e.path().filename().string())).string(), "x");
   }
-  REQUIRE(run_command(program("batch --input " + in.string() +
-                              " --phi asp:2 --methods pinv --out " + (tmp / "b")),
-                      out) != 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("batch --input " + in.string() +
+                                             " --phi asp:2 --methods pinv --out " + (tmp / "b")),
+                  out) != 0);
   CHECK(out.find("5 of 7 item-method pair(s) failed") != std::string::npos);
   const auto summary = lfnet::read_json_file(tmp / "b/summary.json");
   REQUIRE(summary.size() == 7);
@@ -284,9 +296,9 @@ TEST_CASE("batch records unreadable entries as failed items and goes on", "[app]
   CHECK(status["broken"] == "error");
   CHECK(status["loop"] == "error");
   // The output may not lie inside the input (the batch would find its own outputs).
-  CHECK(run_command(
-            program("batch --input " + in.string() + " --phi asp:2 --out " + (in / "out").string()),
-            out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("batch --input " + in.string() +
+                                               " --phi asp:2 --out " + (in / "out").string()),
+                    out) != 0);
   expect_one_error(out, "lies inside the input");
 }
 
@@ -305,12 +317,12 @@ TEST_CASE("batch records a folder it may not read as a failed item and goes on",
   lfnet::test::TempDir tmp;
   const fs::path in = tmp.path() / "in";
   fs::create_directories(in);
-  REQUIRE(
-      run_command(program("render --random 2 --size 24x24 --grey --out " + (in / "good").string()),
-                  out) == 0);
-  REQUIRE(run_command(
-              program("render --random 3 --size 24x24 --grey --out " + (in / "secret").string()),
-              out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("render --random 2 --size 24x24 --grey --out " +
+                                                 (in / "good").string()),
+                      out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("render --random 3 --size 24x24 --grey --out " +
+                                                 (in / "secret").string()),
+                      out) == 0);
   fs::permissions(in / "secret", fs::perms::none);
   // nobody must reach the input and write the output.
   fs::permissions(tmp.path(), fs::perms::all);
@@ -320,8 +332,9 @@ TEST_CASE("batch records a folder it may not read as a failed item and goes on",
                     fs::perms::owner_read | fs::perms::group_read | fs::perms::others_read);
   }
   fs::permissions(in / "good", fs::perms::all);
-  CHECK(run_command(as_user + program("batch --input " + in.string() +
-                                      " --phi asp:2 --methods pinv --out " + (tmp / "b")),
+  CHECK(run_command(as_user + lfnet::test::lfnet_program("batch --input " + in.string() +
+                                                         " --phi asp:2 --methods pinv --out " +
+                                                         (tmp / "b")),
                     out) != 0);
   INFO(out);
   CHECK(out.find("1 of 2 item-method pair(s) failed") != std::string::npos);
@@ -340,46 +353,56 @@ TEST_CASE("files named by --json and --plot-weights go through the output policy
   lfnet::test::TempDir tmp;
   std::string out;
   const std::string lf = tmp / "lf";
-  REQUIRE(run_command(program("render --random 1 --size 24x24 --grey --out " + lf), out) == 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("render --random 1 --size 24x24 --grey --out " + lf),
+                  out) == 0);
   const std::string eval = "evaluate --lf " + lf + " --phi asp:2 --method pinv --json ";
   // An existing record is replaced only with --force; an empty file (mktemp's) is written.
   lfnet::test::write_bytes(tmp / "r.json", "{\"kept\": true}\n");
-  CHECK(run_command(program(eval + (tmp / "r.json")), out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program(eval + (tmp / "r.json")), out) != 0);
   expect_one_error(out, "--json");
   CHECK(read_bytes(tmp / "r.json") == "{\"kept\": true}\n");
   lfnet::test::write_bytes(tmp / "empty.json", "");
-  REQUIRE(run_command(program(eval + (tmp / "empty.json")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program(eval + (tmp / "empty.json")), out) == 0);
   CHECK(lfnet::read_json_file(tmp / "empty.json")["method"] == "pinv");
-  REQUIRE(run_command(program(eval + (tmp / "r.json") + " --force"), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program(eval + (tmp / "r.json") + " --force"), out) == 0);
   CHECK(lfnet::read_json_file(tmp / "r.json")["method"] == "pinv");
-  CHECK(run_command(program("bench --phi asp:2 --methods pinv --reps 1 --strides 9 --height 24 "
-                            "--width 24 --skip-kernels --json " +
-                            (tmp / "r.json")),
+  CHECK(run_command(lfnet::test::lfnet_program(
+                        "bench --phi asp:2 --methods pinv --reps 1 --strides 9 --height 24 "
+                        "--width 24 --skip-kernels --json " +
+                        (tmp / "r.json")),
                     out) != 0);
   expect_one_error(out, "--force");
   // --plot-weights: never into what the command reads, existing drawings only with --force,
   // several cameras side by side in one folder.
-  CHECK(run_command(program("simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "acq") +
-                            " --plot-weights " + lf),
+  CHECK(run_command(lfnet::test::lfnet_program("simulate --lf " + lf + " --phi asp:2 --out " +
+                                               (tmp / "acq") + " --plot-weights " + lf),
                     out) != 0);
   expect_one_error(out, "--plot-weights");
   CHECK_FALSE(fs::exists(tmp / "acq"));
   fs::create_directories(tmp / "specs");
   lfnet::write_json_file(tmp / "specs/asp-n2.json", {{"name", "asp"}, {"n", 2}});
   const std::string spec = read_bytes(tmp / "specs/asp-n2.json");
-  CHECK(run_command(program("simulate --phi " + (tmp / "specs/asp-n2.json") + " --plot-weights " +
-                            (tmp / "specs") + " --force"),
+  CHECK(run_command(lfnet::test::lfnet_program("simulate --phi " + (tmp / "specs/asp-n2.json") +
+                                               " --plot-weights " + (tmp / "specs") + " --force"),
                     out) != 0);
   expect_one_error(out, "contains the input");
   CHECK(read_bytes(tmp / "specs/asp-n2.json") == spec);
   if (run_command("/usr/bin/python3 -c 'import matplotlib'", out) != 0) return;  // no plotter
-  REQUIRE(run_command(program("simulate --phi asp:2 --plot-weights " + (tmp / "w")), out) == 0);
-  REQUIRE(run_command(program("simulate --phi mask:2 --plot-weights " + (tmp / "w")), out) == 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("simulate --phi asp:2 --plot-weights " + (tmp / "w")),
+                  out) == 0);
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("simulate --phi mask:2 --plot-weights " + (tmp / "w")),
+                  out) == 0);
   CHECK(fs::exists(tmp / "w/asp-n2.png"));
   CHECK(fs::exists(tmp / "w/mask-n2.svg"));
-  CHECK(run_command(program("simulate --phi asp:2 --plot-weights " + (tmp / "w")), out) != 0);
+  CHECK(
+      run_command(lfnet::test::lfnet_program("simulate --phi asp:2 --plot-weights " + (tmp / "w")),
+                  out) != 0);
   expect_one_error(out, "--force");
-  REQUIRE(run_command(program("simulate --phi asp:2 --plot-weights " + (tmp / "w") + " --force"),
+  REQUIRE(run_command(lfnet::test::lfnet_program("simulate --phi asp:2 --plot-weights " +
+                                                 (tmp / "w") + " --force"),
                       out) == 0);
   size_t files = 0;
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(tmp / "w")) ++files;
@@ -393,16 +416,17 @@ TEST_CASE("train --force killed before its first checkpoint: the old run comes b
   auto config = two_stage_config();
   config["stages"] = {"ae"};
   lfnet::write_json_file(tmp / "one.json", config);
-  REQUIRE(run_command(program("train " + (tmp / "one.json") + " --out " + (tmp / "run")), out) ==
-          0);
+  REQUIRE(run_command(
+              lfnet::test::lfnet_program("train " + (tmp / "one.json") + " --out " + (tmp / "run")),
+              out) == 0);
   const std::string ae = read_bytes(tmp / "run/models/ae.ckpt");
   // A replacement whose data take a while to make, killed while they are made (its old run is
   // aside, its new folder holds only config.json).
   config["data"]["random_scenes"] = 24;
   config["data"]["random_options"] = {{"height", 256}, {"width", 256}};
   lfnet::write_json_file(tmp / "slow.json", config);
-  const pid_t pid = lfnet::test::spawn_command(
-      program("train " + (tmp / "slow.json") + " --out " + (tmp / "run") + " --force"));
+  const pid_t pid = lfnet::test::spawn_command(lfnet::test::lfnet_program(
+      "train " + (tmp / "slow.json") + " --out " + (tmp / "run") + " --force"));
   const fs::path aside = tmp.path() / (".run.tmp" + std::to_string(pid) + ".replaced");
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   bool caught = false;
@@ -416,7 +440,7 @@ TEST_CASE("train --force killed before its first checkpoint: the old run comes b
   REQUIRE(caught);
   CHECK_FALSE(fs::exists(tmp.path() / "run/models/ae.ckpt"));  // the new run's folder
   // Whoever opens the run next (here a resume) finds the old run, whole.
-  REQUIRE(run_command(program("train --resume " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train --resume " + (tmp / "run")), out) == 0);
   CHECK(out.find("put back the run that an interrupted --force had replaced") != std::string::npos);
   CHECK(read_bytes(tmp / "run/models/ae.ckpt") == ae);
   CHECK(lfnet::read_json_file(tmp / "run/config.json")["data"]["random_scenes"] == 1);
@@ -433,8 +457,9 @@ TEST_CASE("report: its plotter dies with it, and a failed report leaves the old 
   lfnet::test::write_bytes(tmp / "slow/figures.py",
                            "import os, sys, time\nopen('" + (tmp / "plotter.pid") +
                                "', 'w').write(str(os.getpid()))\ntime.sleep(60)\n");
-  const pid_t pid = lfnet::test::spawn_command("env LFNET_SCRIPTS=" + (tmp / "slow") + " " +
-                                               program("report " + (tmp / "run")));
+  const pid_t pid =
+      lfnet::test::spawn_command("env LFNET_SCRIPTS=" + (tmp / "slow") + " " +
+                                 lfnet::test::lfnet_program("report " + (tmp / "run")));
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (std::chrono::steady_clock::now() < deadline && !fs::exists(tmp / "plotter.pid")) {
     usleep(20000);
@@ -458,10 +483,10 @@ TEST_CASE("report: its plotter dies with it, and a failed report leaves the old 
   CHECK_FALSE(fs::exists(tmp / "run/report.md"));
   CHECK_FALSE(fs::exists(tmp / "run/figures"));
   // A report, then a damaged training log: the second report fails and the first stays.
-  REQUIRE(run_command(program("report " + (tmp / "run")), out) == 0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("report " + (tmp / "run")), out) == 0);
   const std::string report = read_bytes(tmp / "run/report.md");
   std::ofstream(tmp / "run/training.jsonl", std::ios::app) << "{not json\n";
-  CHECK(run_command(program("report " + (tmp / "run")), out) != 0);
+  CHECK(run_command(lfnet::test::lfnet_program("report " + (tmp / "run")), out) != 0);
   expect_one_error(out, "training.jsonl");
   CHECK(read_bytes(tmp / "run/report.md") == report);
   size_t entries = 0;

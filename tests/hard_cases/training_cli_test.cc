@@ -28,8 +28,6 @@ using lfnet::test::run_command;
 
 namespace {
 
-std::string program(const std::string& args) { return lfnet::test::lfnet_program(args); }
-
 // A tiny config; `ae_width` sets the autoencoder's widths (wide ones make checkpoint writes
 // take long enough to be interrupted).
 nlohmann::json tiny_config(int64_t epochs, int64_t ae_width, double lr = 1e-3) {
@@ -73,7 +71,7 @@ TEST_CASE("training killed while writing a checkpoint resumes from the previous 
   const fs::path stage_dir = tmp.path() / "run/models/ae";
   const fs::path last = stage_dir / "last.ckpt";
   const pid_t pid = lfnet::test::spawn_command(
-      program("train " + (tmp / "long.json") + " --out " + (tmp / "run")));
+      lfnet::test::lfnet_program("train " + (tmp / "long.json") + " --out " + (tmp / "run")));
   REQUIRE(pid > 0);
   // Wait for a first complete checkpoint, then for the next write to start, and kill then.
   bool caught = false;
@@ -99,9 +97,10 @@ TEST_CASE("training killed while writing a checkpoint resumes from the previous 
   // Resuming continues from it to one more epoch.
   write_config(tmp / "resume.json", tiny_config(epoch + 1, 1024));
   std::string out;
-  REQUIRE(run_command(program("train " + (tmp / "resume.json") + " --out " + (tmp / "run") +
-                              " --stage ae --resume " + last.string()),
-                      out) == 0);
+  REQUIRE(run_command(
+              lfnet::test::lfnet_program("train " + (tmp / "resume.json") + " --out " +
+                                         (tmp / "run") + " --stage ae --resume " + last.string()),
+              out) == 0);
   CHECK(lfnet::train::load_checkpoint(last.string()).training.epoch == epoch + 1);
   CHECK(fs::exists(tmp.path() / "run/models/ae.ckpt"));
   // The killed writer's temporary file is gone: the next write of last.ckpt removed it.
@@ -113,8 +112,9 @@ TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live o
   lfnet::test::TempDir tmp;
   write_config(tmp / "one.json", tiny_config(1, 64));
   std::string out;
-  REQUIRE(run_command(program("train " + (tmp / "one.json") + " --out " + (tmp / "run")), out) ==
-          0);
+  REQUIRE(run_command(
+              lfnet::test::lfnet_program("train " + (tmp / "one.json") + " --out " + (tmp / "run")),
+              out) == 0);
   const fs::path dir = tmp.path() / "run/models/ae";
   // A dead writer (a child that has exited and been reaped) and a live one (this process).
   const pid_t dead = fork();
@@ -125,9 +125,10 @@ TEST_CASE("a checkpoint write removes temporaries of dead writers, not of live o
   const fs::path other = dir / "notes.tmp123";
   for (const auto& p : {stale, live, other}) std::ofstream(p) << "partial";
   write_config(tmp / "two.json", tiny_config(2, 64));
-  REQUIRE(run_command(program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
-                              " --stage ae --resume " + (dir / "last.ckpt").string()),
-                      out) == 0);
+  REQUIRE(run_command(
+              lfnet::test::lfnet_program("train " + (tmp / "two.json") + " --out " + (tmp / "run") +
+                                         " --stage ae --resume " + (dir / "last.ckpt").string()),
+              out) == 0);
   CHECK_FALSE(fs::exists(stale));
   CHECK(fs::exists(live));
   CHECK(fs::exists(other));
@@ -139,8 +140,9 @@ TEST_CASE(
   lfnet::test::TempDir tmp;
   write_config(tmp / "good.json", tiny_config(1, 64));
   std::string out;
-  REQUIRE(run_command(program("train " + (tmp / "good.json") + " --out " + (tmp / "run")), out) ==
-          0);
+  REQUIRE(run_command(lfnet::test::lfnet_program("train " + (tmp / "good.json") + " --out " +
+                                                 (tmp / "run")),
+                      out) == 0);
   const std::string last = tmp / "run/models/ae/last.ckpt";
   const std::string good = read_bytes(last);
   // Three more epochs at a learning rate of 1e12: diverges, and says so on one line.
@@ -157,8 +159,8 @@ TEST_CASE(
   // The last good checkpoint is intact, and resuming from it with a sane rate works.
   CHECK(read_bytes(last) == good);
   write_config(tmp / "sane.json", tiny_config(2, 64));
-  REQUIRE(run_command(program("train " + (tmp / "sane.json") + " --out " + (tmp / "run") +
-                              " --stage ae --resume " + last),
+  REQUIRE(run_command(lfnet::test::lfnet_program("train " + (tmp / "sane.json") + " --out " +
+                                                 (tmp / "run") + " --stage ae --resume " + last),
                       out) == 0);
   CHECK(lfnet::train::load_checkpoint(last).training.epoch == 2);
 }
@@ -173,7 +175,9 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
   lfnet::test::TempDir tmp;
   write_config(tmp / "c.json", tiny_config(1, 64));
   std::string out;
-  REQUIRE(run_command(program("render --random 4 --size 30x30 --out " + (tmp / "lf")), out) == 0);
+  REQUIRE(run_command(
+              lfnet::test::lfnet_program("render --random 4 --size 30x30 --out " + (tmp / "lf")),
+              out) == 0);
   for (const char* threads : {"1", "2"}) {
     for (const char* run : {"a", "b"}) {
       const std::string dir = tmp / (std::string(run) + threads);
@@ -232,8 +236,9 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
   // 16-bit views: a rounding flip moves a value by one code.
   lfnet::test::require_close(rec2, rec1, 2.0 / 65535);
   // A different seed gives a different sensor image (the comparison can fail).
-  REQUIRE(run_command(program("simulate --lf " + (tmp / "lf") +
-                              " --phi asp:2 --noise 0.05 --seed 10 --out " + (tmp / "c/acq")),
+  REQUIRE(run_command(lfnet::test::lfnet_program("simulate --lf " + (tmp / "lf") +
+                                                 " --phi asp:2 --noise 0.05 --seed 10 --out " +
+                                                 (tmp / "c/acq")),
                       out) == 0);
   CHECK_FALSE(torch::equal(lfnet::io::read_image_channels(one + "/acq/sensor.tif"),
                            lfnet::io::read_image_channels(tmp / "c/acq/sensor.tif")));

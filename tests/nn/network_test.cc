@@ -6,6 +6,7 @@
 #include <set>
 
 #include "lfnet/core/error.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 using lfnet::nn::LightFieldNet;
@@ -14,17 +15,6 @@ using lfnet::nn::NetworkOptions;
 namespace {
 
 // A small geometry that keeps the tests fast: 3 x 3 views of 5 x 5 pixels, N = 2.
-NetworkOptions small_options(const std::string& branches = "net") {
-  NetworkOptions o;
-  o.patch = {3, 3, 5, 5};
-  o.measurements = 2;
-  o.branches = lfnet::nn::from_string(branches, o.branches);
-  o.ae.hidden = {40, 20, 40, 20, 40};
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
-  return o;
-}
-
 torch::Tensor random_phi(const NetworkOptions& o, int64_t phases, uint64_t seed) {
   auto gen = torch::make_generator<at::CPUGeneratorImpl>(seed);
   return torch::rand({phases, o.measurement_size(), o.patch.size()}, gen) /
@@ -78,7 +68,7 @@ TEST_CASE("the head averages the branch outputs with the configured weights", "[
   for (auto weights : std::vector<std::vector<double>>{{0.5, 0.5}, {0.3, 0.9}, {1.0, 0.0}}) {
     INFO(weights[0] << ", " << weights[1]);
     torch::manual_seed(1);
-    auto o = small_options("net");
+    auto o = lfnet::test::small_network_options("net");
     o.head_weights = weights;
     LightFieldNet net(o);
     net->set_phi(random_phi(o, 1, 2));
@@ -96,7 +86,7 @@ TEST_CASE("the head averages the branch outputs with the configured weights", "[
 
 TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it", "[nn][network]") {
   torch::manual_seed(2);
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   LightFieldNet net(o);
   auto y = torch::rand({5, o.measurement_size()});
   net->set_phi(random_phi(o, 1, 3));
@@ -116,7 +106,7 @@ TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it",
 
 TEST_CASE("the scaled adjoint is s_p Phi_p^T y for each patch's phase", "[nn][network]") {
   torch::manual_seed(3);
-  auto o = small_options("cnn");
+  auto o = lfnet::test::small_network_options("cnn");
   LightFieldNet net(o);
   auto stack = random_phi(o, 4, 5);
   net->set_phi(stack);
@@ -137,7 +127,7 @@ TEST_CASE("the scaled adjoint is s_p Phi_p^T y for each patch's phase", "[nn][ne
 
 TEST_CASE("the adjoint of a flat patch under a view-averaging Phi is the flat patch",
           "[nn][network]") {
-  auto o = small_options("cnn");
+  auto o = lfnet::test::small_network_options("cnn");
   o.measurements = 1;
   // One measurement per pixel: the mean of its 9 views.
   const int64_t views = 9, pixels = 25;
@@ -154,7 +144,7 @@ TEST_CASE("the adjoint of a flat patch under a view-averaging Phi is the flat pa
 
 TEST_CASE("the pinv residual adds the Tikhonov pseudo-inverse estimate", "[nn][network]") {
   torch::manual_seed(4);
-  auto o = small_options("ae");
+  auto o = lfnet::test::small_network_options("ae");
   o.residual = lfnet::nn::Residual::kPinv;
   o.pinv_lambda = 1e-2;
   LightFieldNet net(o);
@@ -220,7 +210,7 @@ TEST_CASE("network options parse strictly, round-trip and validate", "[nn][netwo
 }
 
 TEST_CASE("the net rejects measurement vectors and Phi stacks of the wrong size", "[nn][network]") {
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   LightFieldNet net(o);
   CHECK_THROWS_WITH(net->forward(torch::rand({2, 7})), Catch::Contains("(B, 50)"));
   CHECK_THROWS_WITH(net->set_phi(torch::rand({1, 50, 80})), Catch::Contains("(P, 50, 225)"));
@@ -231,7 +221,7 @@ TEST_CASE("the net rejects measurement vectors and Phi stacks of the wrong size"
 
 TEST_CASE("the net trains: gradients reach every parameter", "[nn][network]") {
   torch::manual_seed(6);
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   LightFieldNet net(o);
   net->set_phi(random_phi(o, 1, 7));
   auto y = torch::rand({4, o.measurement_size()});
@@ -245,7 +235,7 @@ TEST_CASE("the net trains: gradients reach every parameter", "[nn][network]") {
 }
 
 TEST_CASE("forward_all runs only the selected branches", "[nn][network]") {
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   o.residual = lfnet::nn::Residual::kPinv;
   torch::manual_seed(5);
   LightFieldNet net(o);
@@ -278,7 +268,7 @@ TEST_CASE("forward_all runs only the selected branches", "[nn][network]") {
 
 TEST_CASE("the CNN branch in bfloat16 stays close to float32 and keeps float32 outside",
           "[nn][network]") {
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   torch::manual_seed(6);
   LightFieldNet net(o);
   net->set_phi(random_phi(o, 1, 12));

@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "lfnet/core/error.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 using lfnet::nn::LightFieldNet;
@@ -15,17 +16,6 @@ using lfnet::nn::NetworkOptions;
 using lfnet::nn::ScriptMetadata;
 
 namespace {
-
-NetworkOptions small_options(const std::string& branches) {
-  NetworkOptions o;
-  o.patch = {3, 3, 5, 5};
-  o.measurements = 2;
-  o.branches = lfnet::nn::from_string(branches, o.branches);
-  o.ae.hidden = {40, 20, 40, 20, 40};
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
-  return o;
-}
 
 // Per-pixel patch matrices (sparse, like asp or a mask) or dense Gaussian ones.
 torch::Tensor make_stack(const NetworkOptions& o, int64_t phases, bool per_pixel, uint64_t seed) {
@@ -49,29 +39,32 @@ struct Variant {
 
 std::vector<Variant> variants() {
   std::vector<Variant> v;
-  v.push_back({"net, per-pixel Phi, auto", small_options("net")});
+  v.push_back({"net, per-pixel Phi, auto", lfnet::test::small_network_options("net")});
   {
-    Variant x{"net, 4 phases, pinv residual, stacked", small_options("net"), 2};
+    Variant x{"net, 4 phases, pinv residual, stacked", lfnet::test::small_network_options("net"),
+              2};
     x.options.residual = lfnet::nn::Residual::kPinv;
     x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kStacked;
     v.push_back(x);
   }
   {
     Variant x{"net, dense Phi, adjoint residual, fused_input, weights not summing to 1",
-              small_options("net"), 1, false};
+              lfnet::test::small_network_options("net"), 1, false};
     x.options.residual = lfnet::nn::Residual::kAdjoint;
     x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedInput;
     x.options.head_weights = {0.7, 0.6};
     v.push_back(x);
   }
   {
-    Variant x{"ae on the adjoint, 4 phases, fused_output", small_options("ae"), 2};
+    Variant x{"ae on the adjoint, 4 phases, fused_output", lfnet::test::small_network_options("ae"),
+              2};
     x.options.ae.input = lfnet::nn::AeInput::kAdjoint;
     x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedOutput;
     v.push_back(x);
   }
   {
-    Variant x{"cnn, 9 phases, dense Phi, pinv residual, kernel 5", small_options("cnn"), 3, false};
+    Variant x{"cnn, 9 phases, dense Phi, pinv residual, kernel 5",
+              lfnet::test::small_network_options("cnn"), 3, false};
     x.options.residual = lfnet::nn::Residual::kPinv;
     x.options.kernel = 5;
     v.push_back(x);
@@ -166,7 +159,7 @@ TEST_CASE("an exported net gives the C++ net's outputs, in memory and after a ro
 
 TEST_CASE("an exported net differs from another net's export", "[nn][script]") {
   // The comparisons above are not vacuous: two random nets differ by far more than 1e-5.
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   torch::manual_seed(1);
   LightFieldNet a(o);
   torch::manual_seed(2);
@@ -183,7 +176,7 @@ TEST_CASE("an exported net differs from another net's export", "[nn][script]") {
 TEST_CASE("exported files store sparse Phi stacks compactly and carry their metadata",
           "[nn][script]") {
   lfnet::test::TempDir tmp;
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   LightFieldNet net(o);
   net->set_phi(make_stack(o, 4, true, 1));
   auto m = lfnet::nn::script_network(net, metadata_for(2));
@@ -220,7 +213,7 @@ TEST_CASE("exported files store sparse Phi stacks compactly and carry their meta
 
 TEST_CASE("exported nets report bad inputs, and bad files are clear errors", "[nn][script]") {
   lfnet::test::TempDir tmp;
-  auto o = small_options("net");
+  auto o = lfnet::test::small_network_options("net");
   LightFieldNet net(o);
   net->set_phi(make_stack(o, 4, true, 1));
   // Metadata that does not fit the net.

@@ -6,6 +6,17 @@
 
 namespace lfnet::test {
 
+nn::NetworkOptions small_network_options(const std::string& branches) {
+  nn::NetworkOptions o;
+  o.patch = {3, 3, 5, 5};
+  o.measurements = 2;
+  o.branches = nn::from_string(branches, o.branches);
+  o.ae.hidden = {40, 20, 40, 20, 40};
+  o.cnn.channels = 4;
+  o.cnn.depth = 3;
+  return o;
+}
+
 void randomise_image_net(nn::LightFieldNet& net, uint64_t seed) {
   torch::manual_seed(seed);
   torch::NoGradGuard no_grad;

@@ -9,6 +9,10 @@
 
 namespace lfnet::test {
 
+// The paper's two-branch network at toy size: 3 x 3 x 5 x 5 patches, N = 2, a 40-20-40-20-40
+// autoencoder and a 3-layer CNN of 4 channels; `branches` "net", "ae" or "cnn".
+nn::NetworkOptions small_network_options(const std::string& branches = "net");
+
 // Random weights (N(0, 0.2^2)) everywhere in the U-Net of lfnet's architecture, its last
 // convolution included, so the net is not the identity on its pseudo-inverse.
 void randomise_image_net(nn::LightFieldNet& net, uint64_t seed);

@@ -89,6 +89,23 @@ std::string lfnet_program(const std::string& args) {
   return lfnet_binary() + " --threads 2 --log-level warn " + args;
 }
 
+nlohmann::json read_json_lines(const std::string& path) {
+  nlohmann::json lines = nlohmann::json::array();
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) lines.push_back(nlohmann::json::parse(line));
+  return lines;
+}
+
+void write_f64(const std::string& path, const torch::Tensor& t) {
+  auto d = t.to(torch::kFloat64).contiguous();
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(d.data_ptr<double>()),
+            static_cast<std::streamsize>(d.numel() * sizeof(double)));
+}
+
+torch::Tensor unit_columns(const torch::Tensor& d) { return d / d.norm(2, 0, /*keepdim=*/true); }
+
 void write_bytes(const std::string& path, const std::string& bytes) {
   std::ofstream(path, std::ios::binary) << bytes;
 }

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <torch/torch.h>
+#include <nlohmann/json.hpp>
 
 #include <sys/types.h>
 
@@ -58,6 +59,15 @@ std::string lfnet_binary();
 
 // The program with two threads and warnings only, followed by `args`: a command line.
 std::string lfnet_program(const std::string& args);
+
+// Each line of a JSON Lines file, parsed, as one array.
+nlohmann::json read_json_lines(const std::string& path);
+
+// A tensor's values as raw float64 (native byte order), for the Python reference scripts.
+void write_f64(const std::string& path, const torch::Tensor& t);
+
+// The columns of `d` scaled to unit L2 norm.
+torch::Tensor unit_columns(const torch::Tensor& d);
 
 // The whole content of a file, byte for byte ("" when it cannot be read).
 std::string read_bytes(const std::string& path);

@@ -59,6 +59,14 @@ void JsonReader::finish() const {
   }
 }
 
+nlohmann::json finite_or_null(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
+}
+
+double number_or(const nlohmann::json& j, double fallback) {
+  return j.is_number() ? j.get<double>() : fallback;
+}
+
 nlohmann::json parse_json(const std::string& text, const std::string& source) {
   // A key that appears twice in one object is refused: the parser would keep the last and
   // drop the first without a word. Each frame is an open object or list; its name is the key

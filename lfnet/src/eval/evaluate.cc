@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/metrics.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
@@ -12,11 +13,6 @@
 namespace lfnet::eval {
 
 namespace {
-// PSNR may be +inf for a perfect view; JSON has no inf, so such values are written as null.
-nlohmann::json finite_or_null(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json();
-}
-
 nlohmann::json base_record(const optics::Phi& phi, const std::string& method, const EvalOptions& o,
                            int64_t patches, double seconds) {
   return {{"method", method},
@@ -64,6 +60,7 @@ void add_equivalent_sigma(nlohmann::json& record, const EvalOptions& o, double s
 }
 }  // namespace
 
+// PSNR may be +inf for a perfect view; JSON has no inf, so such values are written as null.
 nlohmann::json score(const LightField& estimate, const LightField& truth) {
   auto pv = per_view_psnr(estimate, truth);
   nlohmann::json table = nlohmann::json::array();

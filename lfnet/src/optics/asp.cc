@@ -5,14 +5,13 @@
 #include <cmath>
 #include <cstdlib>
 
+#include "lfnet/core/constants.h"
 #include "lfnet/core/error.h"
 #include "models.h"
 
 namespace lfnet::optics {
 
 namespace {
-
-constexpr double kPi = 3.141592653589793;
 
 // The representative of k modulo n in (-n/2, n/2].
 int64_t centred(int64_t k, int64_t n) {

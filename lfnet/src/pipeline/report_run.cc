@@ -24,7 +24,7 @@ namespace lfnet::pipeline {
 
 namespace {
 
-std::string number(const nlohmann::json& v, const char* format) {
+std::string formatted(const nlohmann::json& v, const char* format) {
   if (!v.is_number()) return v.is_null() ? "inf" : "";
   char buf[64];
   std::snprintf(buf, sizeof(buf), format, v.get<double>());
@@ -94,9 +94,10 @@ void write_run_report(const std::string& run_dir, std::string out, std::string f
         }
         const auto& last = records.back();
         md << "| " << stage << " | " << records.size() << " | "
-           << number(last.value("train_loss", last.value("coding_rmse", nlohmann::json())), "%.5f")
-           << " | " << (std::isfinite(best) ? number(best, "%.2f") : std::string("")) << " | "
-           << number(seconds, "%.0f") << " |\n";
+           << formatted(last.value("train_loss", last.value("coding_rmse", nlohmann::json())),
+                        "%.5f")
+           << " | " << (std::isfinite(best) ? formatted(best, "%.2f") : std::string("")) << " | "
+           << formatted(seconds, "%.0f") << " |\n";
       }
       const std::string note = figure_set.training(log.string(), "training");
       if (note.empty()) {
@@ -147,11 +148,11 @@ void write_run_report(const std::string& run_dir, std::string out, std::string f
         const auto it = baseline.find(key(r));
         const bool has_margin = it != baseline.end() && r["psnr_db"].is_number();
         md << "| " << r.value("light_field", "") << " | " << r.value("mode", "") << " | "
-           << number(r.value("noise_sigma", 0.0), "%.3g") << " | " << r.value("stride", 0) << " | "
-           << r.value("method", "") << " | " << number(r["psnr_db"], "%.2f") << " | "
-           << (has_margin ? number(r["psnr_db"].get<double>() - it->second, "%+.2f") : "") << " | "
-           << number(r.value("ssim", nlohmann::json()), "%.4f") << " | "
-           << number(r.value("seconds", nlohmann::json()), "%.2f") << " |\n";
+           << formatted(r.value("noise_sigma", 0.0), "%.3g") << " | " << r.value("stride", 0)
+           << " | " << r.value("method", "") << " | " << formatted(r["psnr_db"], "%.2f") << " | "
+           << (has_margin ? formatted(r["psnr_db"].get<double>() - it->second, "%+.2f") : "")
+           << " | " << formatted(r.value("ssim", nlohmann::json()), "%.4f") << " | "
+           << formatted(r.value("seconds", nlohmann::json()), "%.2f") << " |\n";
         if (r["psnr_db"].is_number() && r.value("method", "") != "no-parallax") {
           points.push_back(pareto_point(r));
         }

@@ -72,7 +72,7 @@ class NlmDenoiser : public DenoiserWithOptions<NlmOptions> {
   }
 };
 
-NamedRegistry<Denoiser>& registry() {
+NamedRegistry<Denoiser>& denoisers() {
   static NamedRegistry<Denoiser> r(
       [](NamedRegistry<Denoiser>& builtins) { builtins.add(std::make_unique<NlmDenoiser>()); });
   return r;
@@ -82,20 +82,20 @@ NamedRegistry<Denoiser>& registry() {
 
 void register_denoiser(std::unique_ptr<Denoiser> denoiser) {
   LFNET_CHECK(denoiser != nullptr, "register_denoiser: no denoiser");
-  registry().add(std::move(denoiser));
+  denoisers().add(std::move(denoiser));
 }
 
 const Denoiser& find_denoiser(const std::string& name) {
-  if (const Denoiser* d = registry().find(name)) return *d;
+  if (const Denoiser* d = denoisers().find(name)) return *d;
   std::string hint;
   if (name.rfind("opencv", 0) == 0) {
     hint =
         "; OpenCV's denoisers are registered by lfnet's program (built with OpenCV), not by "
         "the numerical core alone";
   }
-  throw ConfigError("unknown denoiser '" + name + "' (known: " + registry().list() + ")" + hint);
+  throw ConfigError("unknown denoiser '" + name + "' (known: " + denoisers().list() + ")" + hint);
 }
 
-std::vector<std::string> registered_denoisers() { return registry().names(); }
+std::vector<std::string> registered_denoisers() { return denoisers().names(); }
 
 }  // namespace lfnet::recon

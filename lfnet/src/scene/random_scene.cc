@@ -10,14 +10,13 @@
 #include <vector>
 
 #include "json_read.h"
+#include "lfnet/core/constants.h"
 #include "rng.h"
 
 namespace lfnet::scene {
 namespace {
 
 using detail::Rng;
-constexpr double kPi = 3.14159265358979323846;
-
 Rgb hsv_to_rgb(double h, double s, double v) {
   h = std::fmod(h, 1.0) * 6.0;
   const double c = v * s;

@@ -8,12 +8,11 @@
 #include <limits>
 #include <vector>
 
+#include "lfnet/core/constants.h"
 #include "raster.h"
 
 namespace lfnet::scene::detail {
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 inline float coverage(double signed_distance, double softness, bool invert) {
   const double a = std::clamp(0.5 - signed_distance / softness, 0.0, 1.0);

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <vector>
 
+#include "lfnet/core/constants.h"
 #include "lfnet/core/error.h"
 #include "raster.h"
 #include "rng.h"
@@ -15,7 +16,6 @@
 namespace lfnet::scene::detail {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 // Mean over positions of the sum of squared cubic B-spline weights, 1D: the integral of B^2.
 constexpr double kBsplineEnergy1d = 151.0 / 315.0;
 constexpr double kBsplineEnergy2d = kBsplineEnergy1d * kBsplineEnergy1d;

@@ -71,12 +71,6 @@ torch::ScalarType dtype_of(const std::string& name) {
   throw CheckpointError("unknown tensor type '" + name + "'");
 }
 
-// JSON has no inf or NaN: non-finite numbers are written as null.
-nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
-double number_or(const nlohmann::json& j, double fallback) {
-  return j.is_number() ? j.get<double>() : fallback;
-}
-
 void append_bytes(std::string& payload, const torch::Tensor& t, nlohmann::json& record,
                   const std::string& key) {
   while (payload.size() % kAlignment) payload.push_back('\0');
@@ -171,7 +165,7 @@ nlohmann::json TrainingState::to_json() const {
   return {{"stage", stage},
           {"epoch", epoch},
           {"step", step},
-          {"best_metric", number(best_metric)},
+          {"best_metric", finite_or_null(best_metric)},
           {"best_epoch", best_epoch},
           {"history", history},
           {"origin", origin}};

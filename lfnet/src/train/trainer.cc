@@ -12,17 +12,13 @@
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 
 namespace lfnet::train {
 
 namespace {
-
-nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
-double number_or(const nlohmann::json& j, double fallback) {
-  return j.is_number() ? j.get<double>() : fallback;
-}
 
 std::string param_key(const torch::Tensor& p) {
   return c10::guts::to_string(p.unsafeGetTensorImpl());
@@ -160,9 +156,9 @@ nlohmann::json EpochRecord::to_json() const {
   return {{"epoch", epoch},
           {"step", step},
           {"lr", lr},
-          {"train_loss", number(train_loss)},
-          {"val_loss", number(val_loss)},
-          {"val_psnr_db", number(val_psnr_db)},
+          {"train_loss", finite_or_null(train_loss)},
+          {"val_loss", finite_or_null(val_loss)},
+          {"val_psnr_db", finite_or_null(val_psnr_db)},
           {"seconds", seconds},
           {"patches_per_s", patches_per_s},
           {"communication_s", communication_s},

@@ -95,6 +95,11 @@ class JsonReader {
   std::set<std::string> seen_;
 };
 
+// JSON has no inf or NaN: a non-finite number is written as null.
+nlohmann::json finite_or_null(double v);
+// The number `j` holds, or `fallback` where it holds none (null, a string).
+double number_or(const nlohmann::json& j, double fallback);
+
 // Parses JSON text; a syntax error is a ConfigError naming `source` and the byte offset.
 nlohmann::json parse_json(const std::string& text, const std::string& source);
 
