@@ -66,6 +66,26 @@ TEST_CASE("stitching in bands equals stitching at once", "[core][patches]") {
   CHECK_FALSE(torch::allclose(whole.result(), data, 0, 1e-4));
 }
 
+TEST_CASE("stitching takes patch rows in order and refuses rows left without estimates",
+          "[core][patches]") {
+  auto data = torch::rand({1, 1, 1, 31, 17});
+  PatchGrid grid(31, 17, 9, 9, 2);  // 12 patch rows
+  Stitcher s(grid, 1, 1, 1);
+  s.add(grid.extract(data, 0, 4), 0, 4);
+  s.add(grid.extract(data, 4, 8), 4, 8);
+  CHECK_THROWS_WITH(s.add(grid.extract(data, 0, 4), 0, 4), Catch::Contains("in order"));
+  // Starting at patch row 4 leaves image rows 0..7 without an estimate.
+  Stitcher late(grid, 1, 1, 1);
+  CHECK_THROWS_WITH(late.add(grid.extract(data, 4, 8), 4, 8),
+                    Catch::Contains("without any estimate"));
+  Stitcher top(grid, 1, 1, 1);
+  top.add(grid.extract(data, 0, 6), 0, 6);
+  CHECK_THROWS_WITH(top.result(), Catch::Contains("without any estimate"));  // the bottom rows
+  Stitcher all(grid, 1, 1, 1);
+  for (int64_t r = 0; r < grid.rows(); ++r) all.add(grid.extract(data, r, r + 1), r, r + 1);
+  CHECK(torch::equal(all.result(), data));
+}
+
 TEST_CASE("a stitching window weights the estimates", "[core][patches]") {
   auto data = torch::rand({1, 1, 1, 12, 12});
   PatchGrid grid(12, 12, 9, 9, 3);

@@ -205,6 +205,22 @@ TEST_CASE("grid images and EPIs place the views", "[io]") {
   lfnet::test::require_close(vepi[0][2], lf.data()[0][2][2].select(1, 6), 0.0);
 }
 
+TEST_CASE("a preview grid wider than its limit shows block averages of the views", "[io]") {
+  LightField lf(torch::rand({1, 2, 3, 12, 20}));
+  // 3 x (20 + 2) - 2 = 64 columns fit 64: the light field itself.
+  CHECK(io::preview_light_field(lf, 64).data().data_ptr() == lf.data().data_ptr());
+  // 63 do not: f = 2 gives 3 x (10 + 2) - 2 = 34 columns and 2 x (6 + 2) - 2 = 14 rows.
+  const auto small = io::preview_light_field(lf, 63);
+  REQUIRE(small.data().sizes() == torch::IntArrayRef({1, 2, 3, 6, 10}));
+  const auto block = lf.view(1, 2).slice(1, 4, 6).slice(2, 8, 10).mean().item<float>();
+  CHECK(small.view(1, 2)[0][2][4].item<float>() == Approx(block).epsilon(1e-6));
+  // 30 columns need f = 3 for the width (3 x (6 + 2) - 2 = 22), whatever the rows allow.
+  CHECK(io::preview_light_field(lf, 30).width() == 6);
+  // A factor that does not divide the views drops the last rows and columns.
+  CHECK(io::downscale_views(lf, 7).data().sizes() == torch::IntArrayRef({1, 2, 3, 1, 2}));
+  CHECK_THROWS(io::downscale_views(lf, 13));
+}
+
 TEST_CASE("writing never leaves partial files behind", "[io]") {
   lfnet::test::TempDir tmp;
   CHECK_THROWS_AS(io::write_image(tmp / "x.unknownformat", torch::rand({1, 4, 4})), lfnet::IoError);

@@ -94,6 +94,36 @@ TEST_CASE("the viewer page embeds every view, the truth and the per-view PSNR", 
   }
 }
 
+TEST_CASE("views larger than the viewer's limit are shown averaged, and the page says so",
+          "[io][viewer]") {
+  CHECK(io::viewer_scale(io::kViewerMaxSide, 10) == 1);
+  CHECK(io::viewer_scale(10, io::kViewerMaxSide + 1) == 2);
+  // The shown side is the whole blocks: 6146 / 3 = 2048 fits, 6147 / 3 = 2049 does not.
+  CHECK(io::viewer_scale(3 * io::kViewerMaxSide + 2, 10) == 3);
+  CHECK(io::viewer_scale(3 * io::kViewerMaxSide + 3, 10) == 4);
+  // 2 x 2 views of 8 x 4100 pixels: shown at 1/3, 2 x 1366 (the last 2 columns dropped).
+  const LightField lf(torch::rand({1, 2, 2, 8, 2 * io::kViewerMaxSide + 4}));
+  io::ViewerPage page;
+  page.max_disparity = 6;
+  page.truth = lf;
+  const auto data = page_data(io::viewer_html(lf, page));
+  CHECK(data["scale"] == 3);
+  CHECK(data["height"] == 2);
+  CHECK(data["width"] == (2 * io::kViewerMaxSide + 4) / 3);
+  CHECK(data["full_width"] == 2 * io::kViewerMaxSide + 4);
+  CHECK(data["max_disparity"].get<double>() == Approx(2.0));
+  test::TempDir dir;
+  for (const auto* which : {"views", "truth"}) {
+    const std::string uri = data[which][3];
+    test::write_bytes(dir / "view.png",
+                      from_base64(uri.substr(std::string("data:image/png;base64,").size())));
+    const auto decoded = io::read_image(dir / "view.png");
+    CHECK(decoded.sizes() == torch::IntArrayRef({1, 2, (2 * io::kViewerMaxSide + 4) / 3}));
+    const auto block = lf.view(1, 1).slice(1, 3, 6).slice(2, 30, 33).mean().item<float>();
+    CHECK(decoded[0][1][10].item<float>() == Approx(block).margin(0.5 / 255 + 1e-6));
+  }
+}
+
 TEST_CASE("the viewer refuses a truth of another shape", "[io][viewer]") {
   io::ViewerPage page;
   page.truth = test::parallax_light_field(3, 3, 24, 32, 1, 1);

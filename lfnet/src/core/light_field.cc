@@ -23,8 +23,11 @@ torch::Tensor LightField::view(int64_t u, int64_t v) const {
 
 LightField LightField::grey() const {
   if (channels() == 1) return *this;
-  auto weights = torch::tensor({0.299f, 0.587f, 0.114f}).view({3, 1, 1, 1, 1});
-  return LightField((data_ * weights).sum(axis::kC, /*keepdim=*/true));
+  // Channel by channel: the temporaries are a third of the light field, not all of it.
+  auto y = data_[0] * 0.299f;
+  y.add_(data_[1] * 0.587f);
+  y.add_(data_[2] * 0.114f);
+  return LightField(y.unsqueeze(axis::kC));
 }
 
 LightField LightField::window(AngularRange u, AngularRange v) const {

@@ -1,5 +1,6 @@
 #include "lfnet/core/metrics.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -18,30 +19,16 @@ double psnr_from_mse(double mse) {
   return -10.0 * std::log10(mse);
 }
 
-// Indices of a symmetric ("reflect" in scipy.ndimage) extension of n samples by r each side.
-torch::Tensor symmetric_indices(int64_t n, int64_t r) {
-  std::vector<int64_t> idx;
-  idx.reserve(n + 2 * r);
-  for (int64_t i = -r; i < n + r; ++i) {
-    int64_t m = ((i % (2 * n)) + 2 * n) % (2 * n);
-    idx.push_back(m < n ? m : 2 * n - 1 - m);
-  }
-  return torch::tensor(idx);
-}
-
-// Separable Gaussian filter of a batch of images (B, H, W), float64, as
-// scipy.ndimage.gaussian_filter(mode="reflect") computes it.
-torch::Tensor gaussian_filter(const torch::Tensor& images, double sigma, int64_t radius) {
+// Separable Gaussian filter of a batch of images (B, H, W), float64, over the pixels whose
+// window lies inside the image: (B, H - 2 r, W - 2 r). There it equals what
+// scipy.ndimage.gaussian_filter computes (its border mode never reaches them).
+torch::Tensor gaussian_filter_valid(const torch::Tensor& images, double sigma, int64_t radius) {
   auto x = torch::arange(-radius, radius + 1, torch::kFloat64);
   auto kernel = torch::exp(-0.5 * x * x / (sigma * sigma));
   kernel = kernel / kernel.sum();
   const int64_t k = 2 * radius + 1;
-  auto img = images.unsqueeze(1);  // (B, 1, H, W)
-  img = img.index_select(2, symmetric_indices(images.size(1), radius));
-  img = torch::conv2d(img, kernel.view({1, 1, k, 1}));
-  img = img.index_select(3, symmetric_indices(images.size(2), radius));
-  img = torch::conv2d(img, kernel.view({1, 1, 1, k}));
-  return img.squeeze(1);
+  auto img = torch::conv2d(images.unsqueeze(1), kernel.view({1, 1, k, 1}));
+  return torch::conv2d(img, kernel.view({1, 1, 1, k})).squeeze(1);
 }
 }  // namespace
 
@@ -51,23 +38,38 @@ double psnr(const torch::Tensor& estimate, const torch::Tensor& truth) {
   return psnr_from_mse(diff.pow(2).mean().item<double>());
 }
 
+namespace {
+// The mean squared error of each view (U, V) in float64, one view at a time: float64 copies of a
+// whole light field would take four times its memory.
+torch::Tensor per_view_mse(const LightField& estimate, const LightField& truth) {
+  check_same(estimate.data(), truth.data());
+  auto mse = torch::empty({truth.rows(), truth.cols()}, torch::kFloat64);
+  auto out = mse.accessor<double, 2>();
+  for (int64_t u = 0; u < truth.rows(); ++u) {
+    for (int64_t v = 0; v < truth.cols(); ++v) {
+      auto diff = estimate.view(u, v).to(torch::kFloat64) - truth.view(u, v).to(torch::kFloat64);
+      out[u][v] = diff.pow_(2).mean().item<double>();
+    }
+  }
+  return mse;
+}
+}  // namespace
+
 double psnr(const LightField& estimate, const LightField& truth) {
-  return psnr(estimate.data(), truth.data());
+  // Every view has as many pixels, so the mean of the views' errors is the light field's.
+  return psnr_from_mse(per_view_mse(estimate, truth).mean().item<double>());
 }
 
 torch::Tensor per_view_psnr(const LightField& estimate, const LightField& truth) {
-  check_same(estimate.data(), truth.data());
-  auto diff = estimate.data().to(torch::kFloat64) - truth.data().to(torch::kFloat64);
-  auto mse = diff.pow(2).mean({axis::kC, axis::kH, axis::kW});
   // A view that matches exactly has infinite PSNR, as the whole-field PSNR does.
-  return -10.0 * torch::log10(mse);
+  return -10.0 * torch::log10(per_view_mse(estimate, truth));
 }
 
 double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOptions& options) {
   check_same(a, b);
   LFNET_CHECK(a.dim() == 2 || a.dim() == 3, "SSIM takes (H, W) or (C, H, W) images");
-  auto x = (a.dim() == 2 ? a.unsqueeze(0) : a).to(torch::kFloat64);
-  auto y = (b.dim() == 2 ? b.unsqueeze(0) : b).to(torch::kFloat64);
+  const auto x = a.dim() == 2 ? a.unsqueeze(0) : a;
+  const auto y = b.dim() == 2 ? b.unsqueeze(0) : b;
   const auto radius = static_cast<int64_t>(options.truncate * options.sigma + 0.5);
   const int64_t win = 2 * radius + 1;
   LFNET_CHECK(x.size(1) >= win && x.size(2) >= win, "SSIM needs images of at least ", win, "x", win,
@@ -77,17 +79,28 @@ double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOpti
   const double c1 = std::pow(options.k1 * options.data_range, 2);
   const double c2 = std::pow(options.k2 * options.data_range, 2);
 
-  const int64_t c = x.size(0);
-  auto stack = torch::cat({x, y, x * x, y * y, x * y}, 0);  // (5C, H, W)
-  auto f = gaussian_filter(stack, options.sigma, radius).split(c, 0);
-  const auto &ux = f[0], &uy = f[1];
-  auto vx = cov_norm * (f[2] - ux * ux);
-  auto vy = cov_norm * (f[3] - uy * uy);
-  auto vxy = cov_norm * (f[4] - ux * uy);
-  auto s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
-  auto cropped = s.slice(1, radius, s.size(1) - radius).slice(2, radius, s.size(2) - radius);
+  // Scikit-image averages the SSIM map over the pixels at least `radius` from the border, so
+  // only windows inside the image count: rows are taken a band at a time (with the radius
+  // above and below), which keeps the float64 maps a band high.
+  const int64_t c = x.size(0), h = x.size(1), w = x.size(2);
+  constexpr int64_t kBand = 128;
+  auto total = torch::zeros({c}, torch::kFloat64);
+  for (int64_t y0 = radius; y0 < h - radius; y0 += kBand) {
+    const int64_t rows = std::min(kBand, h - radius - y0);
+    auto xb = x.narrow(1, y0 - radius, rows + 2 * radius).to(torch::kFloat64);
+    auto yb = y.narrow(1, y0 - radius, rows + 2 * radius).to(torch::kFloat64);
+    auto stack = torch::cat({xb, yb, xb * xb, yb * yb, xb * yb}, 0);  // (5C, rows + 2r, W)
+    auto f = gaussian_filter_valid(stack, options.sigma, radius).split(c, 0);
+    const auto &ux = f[0], &uy = f[1];
+    auto vx = cov_norm * (f[2] - ux * ux);
+    auto vy = cov_norm * (f[3] - uy * uy);
+    auto vxy = cov_norm * (f[4] - ux * uy);
+    auto s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
+    total += s.sum({1, 2});
+  }
   // Mean per channel, then over channels, as scikit-image does with channel_axis.
-  return cropped.mean({1, 2}).mean().item<double>();
+  const auto interior = static_cast<double>((h - 2 * radius) * (w - 2 * radius));
+  return (total / interior).mean().item<double>();
 }
 
 double ssim(const LightField& estimate, const LightField& truth, const SsimOptions& options) {

@@ -45,10 +45,11 @@ std::string ParallaxCheck::summary() const {
 namespace {
 
 // Per-block matching cost of the views of one axis against the central view, for every
-// candidate disparity: (candidates, blocks_y, blocks_x). `views` (K, H, W) lie at angular
+// candidate disparity: (candidates, blocks_y, blocks_x). `views` (each H, W) lie at angular
 // offsets `offsets` from the centre along the axis; `along_x` says whether that axis moves
-// the scene in x (the row of views) or in y (the column).
-torch::Tensor matching_cost(const torch::Tensor& centre, const torch::Tensor& views,
+// the scene in x (the row of views) or in y (the column). Each candidate's cost map is pooled
+// into blocks at once, so only one full-size map is held at a time.
+torch::Tensor matching_cost(const torch::Tensor& centre, const std::vector<torch::Tensor>& views,
                             const std::vector<int64_t>& offsets, bool along_x,
                             const std::vector<double>& candidates, int64_t margin, int64_t block) {
   const int64_t h = centre.size(0) - 2 * margin, w = centre.size(1) - 2 * margin;
@@ -64,7 +65,7 @@ torch::Tensor matching_cost(const torch::Tensor& centre, const torch::Tensor& vi
       const double s = d * static_cast<double>(offsets[i]);
       const auto i0 = static_cast<int64_t>(std::floor(s));
       const double f = s - static_cast<double>(i0);
-      const auto view = views[static_cast<int64_t>(i)];
+      const auto& view = views[i];
       auto crop = [&](int64_t shift) {
         auto c = view.narrow(dim, margin + shift, along_x ? w : h);
         return c.narrow(1 - dim, margin, along_x ? h : w);
@@ -72,10 +73,9 @@ torch::Tensor matching_cost(const torch::Tensor& centre, const torch::Tensor& vi
       auto warped = crop(i0) * (1.0 - f) + crop(i0 + 1) * f;
       cost.add_((warped - target).abs());
     }
-    costs.push_back(cost);
+    costs.push_back(torch::avg_pool2d(cost.unsqueeze(0), {block, block}).squeeze(0));
   }
-  auto stacked = torch::stack(costs).unsqueeze(1);  // (D, 1, h, w)
-  return torch::avg_pool2d(stacked, {block, block}).squeeze(1);
+  return torch::stack(costs);
 }
 
 }  // namespace
@@ -93,8 +93,22 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
                         std::min(lf.rows(), lf.rows() / 2 + reach + 1)};
   const AngularRange rv{std::max<int64_t>(0, lf.cols() / 2 - reach),
                         std::min(lf.cols(), lf.cols() / 2 + reach + 1)};
-  const auto g = lf.window(ru, rv).grey().data()[0];  // (U', V', H, W) around the centre
   const int64_t cu = lf.rows() / 2 - ru.begin, cv = lf.cols() / 2 - rv.begin;
+  int64_t max_offset = 0;
+  for (int64_t k : {cu, ru.size() - 1 - cu, cv, rv.size() - 1 - cv}) {
+    max_offset = std::max(max_offset, k);
+  }
+  const auto margin =
+      static_cast<int64_t>(std::ceil(o.max_disparity * static_cast<double>(max_offset))) + 1;
+  // The central max_side x max_side pixels (and the margin around them) of those views.
+  const int64_t crop_h = std::min(lf.height(), o.max_side + 2 * margin);
+  const int64_t crop_w = std::min(lf.width(), o.max_side + 2 * margin);
+  const auto crop = lf.data()
+                        .slice(axis::kU, ru.begin, ru.end)
+                        .slice(axis::kV, rv.begin, rv.end)
+                        .narrow(axis::kH, (lf.height() - crop_h) / 2, crop_h)
+                        .narrow(axis::kW, (lf.width() - crop_w) / 2, crop_w);
+  const auto g = LightField(crop).grey().data()[0];  // (U', V', h, w) around the centre
   std::vector<int64_t> off_h, off_v;
   std::vector<torch::Tensor> row_views, col_views;
   for (int64_t v = 0; v < g.size(1); ++v) {
@@ -107,11 +121,6 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
     off_v.push_back(u - cu);
     col_views.push_back(g[u][cv]);
   }
-  int64_t max_offset = 0;
-  for (auto k : off_h) max_offset = std::max(max_offset, std::abs(k));
-  for (auto k : off_v) max_offset = std::max(max_offset, std::abs(k));
-  const auto margin =
-      static_cast<int64_t>(std::ceil(o.max_disparity * static_cast<double>(max_offset))) + 1;
   const auto centre = g[cu][cv];
   if (centre.size(0) - 2 * margin < o.block || centre.size(1) - 2 * margin < o.block) return out;
 
@@ -120,10 +129,8 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
   for (int64_t i = -steps; i <= steps; ++i) candidates.push_back(static_cast<double>(i) * o.step);
   auto cand = torch::tensor(candidates, torch::kFloat64);
 
-  auto cost_h =
-      matching_cost(centre, torch::stack(row_views), off_h, true, candidates, margin, o.block);
-  auto cost_v =
-      matching_cost(centre, torch::stack(col_views), off_v, false, candidates, margin, o.block);
+  auto cost_h = matching_cost(centre, row_views, off_h, true, candidates, margin, o.block);
+  auto cost_v = matching_cost(centre, col_views, off_v, false, candidates, margin, o.block);
   auto d_h = cand.index_select(0, cost_h.argmin(0).flatten());
   auto d_v = cand.index_select(0, cost_v.argmin(0).flatten());
   // Texture of the central view per block, over the same interior.

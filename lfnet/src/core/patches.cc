@@ -64,33 +64,58 @@ Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_
   } else {
     weight_ = torch::ones({grid.patch_h() * grid.patch_w()}, opts);
   }
-  sum_ = torch::zeros({channels, rows, cols, grid.height() * grid.width()}, opts);
-  count_ = torch::zeros({grid.height() * grid.width()}, opts);
+  out_ = torch::empty({channels, rows, cols, grid.height(), grid.width()}, torch::kFloat32);
+  sum_ = torch::zeros({channels, rows, cols, 0}, opts);
+  count_ = torch::zeros({0}, opts);
 }
 
-torch::Tensor Stitcher::flat_indices(int64_t row_begin, int64_t row_end) const {
-  const int64_t h = grid_.patch_h(), w = grid_.patch_w();
-  auto ys = torch::tensor(
-      std::vector<int64_t>(grid_.ys().begin() + row_begin, grid_.ys().begin() + row_end));
-  auto xs = torch::tensor(grid_.xs());
-  // (ny, nx, h, w) flat pixel indices y * W + x
-  auto y = ys.view({-1, 1, 1, 1}) + torch::arange(h).view({1, 1, h, 1});
-  auto x = xs.view({1, -1, 1, 1}) + torch::arange(w).view({1, 1, 1, w});
-  return (y * grid_.width() + x).reshape({-1});
+void Stitcher::flush(int64_t until) {
+  const int64_t w = grid_.width(), n = until - top_;
+  if (n <= 0) return;
+  LFNET_CHECK(count_.size(0) >= n * w, "stitching left pixels without any estimate");
+  auto count = count_.slice(0, 0, n * w);
+  LFNET_CHECK(count.min().item<double>() > 0, "stitching left pixels without any estimate");
+  out_.slice(3, top_, until)
+      .copy_((sum_.slice(3, 0, n * w) / count).reshape({channels_, rows_, cols_, n, w}));
+  sum_ = sum_.slice(3, n * w);
+  count_ = count_.slice(0, n * w);
+  top_ = until;
 }
 
 void Stitcher::add(const torch::Tensor& patches, int64_t row_begin, int64_t row_end) {
   const int64_t ny = row_end - row_begin, nx = grid_.cols();
-  const int64_t h = grid_.patch_h(), w = grid_.patch_w();
+  const int64_t h = grid_.patch_h(), w = grid_.patch_w(), width = grid_.width();
   LFNET_CHECK(patches.dim() == 5 && patches.size(0) == channels_ * ny * nx &&
                   patches.size(1) == rows_ && patches.size(2) == cols_ && patches.size(3) == h &&
                   patches.size(4) == w,
               "stitching expected ", channels_ * ny * nx, " patches of ", rows_, "x", cols_, "x", h,
               "x", w);
-  auto idx = flat_indices(row_begin, row_end);
+  LFNET_CHECK(row_begin >= next_row_ && row_end <= grid_.rows() && ny > 0,
+              "stitching adds patch rows in order: rows ", row_begin, "..", row_end - 1,
+              " after rows up to ", next_row_ - 1);
+  next_row_ = row_end;
+  // Image rows above this band's first patch are final: no later patch reaches them.
+  const auto& ys = grid_.ys();
+  flush(ys[static_cast<size_t>(row_begin)]);
+  // Grow the buffer down to the band's last image row.
+  const int64_t bottom = ys[static_cast<size_t>(row_end - 1)] + h;
+  const int64_t held = sum_.size(3) / width, wanted = bottom - top_;
+  if (wanted > held) {
+    auto opts = torch::TensorOptions().dtype(torch::kFloat64);
+    sum_ = torch::cat(
+        {sum_, torch::zeros({channels_, rows_, cols_, (wanted - held) * width}, opts)}, 3);
+    count_ = torch::cat({count_, torch::zeros({(wanted - held) * width}, opts)}, 0);
+  }
+  // Flat indices into the buffer, whose first row is image row top_.
+  auto yb =
+      torch::tensor(std::vector<int64_t>(ys.begin() + row_begin, ys.begin() + row_end)) - top_;
+  auto xs = torch::tensor(grid_.xs());
+  auto y = yb.view({-1, 1, 1, 1}) + torch::arange(h).view({1, 1, h, 1});
+  auto x = xs.view({1, -1, 1, 1}) + torch::arange(w).view({1, 1, 1, w});
+  auto idx = (y * width + x).reshape({-1});
   // (C, ny, nx, U, V, h, w) -> (C, U, V, ny * nx * h * w), weighted
   auto src = patches.to(torch::kFloat64)
-                 .view({channels_, ny * nx, rows_, cols_, h * w})
+                 .reshape({channels_, ny * nx, rows_, cols_, h * w})
                  .mul(weight_)
                  .permute({0, 2, 3, 1, 4})
                  .reshape({channels_, rows_, cols_, -1});
@@ -98,11 +123,10 @@ void Stitcher::add(const torch::Tensor& patches, int64_t row_begin, int64_t row_
   count_.index_add_(0, idx, weight_.repeat({ny * nx}));
 }
 
-torch::Tensor Stitcher::result() const {
-  LFNET_CHECK(count_.min().item<double>() > 0, "stitching left pixels without any estimate");
-  return (sum_ / count_)
-      .to(torch::kFloat32)
-      .view({channels_, rows_, cols_, grid_.height(), grid_.width()});
+torch::Tensor Stitcher::result() {
+  flush(grid_.height());
+  LFNET_CHECK(top_ == grid_.height(), "stitching left pixels without any estimate");
+  return out_;
 }
 
 }  // namespace lfnet

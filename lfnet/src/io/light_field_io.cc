@@ -3,6 +3,7 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <spdlog/spdlog.h>
+#include <torch/torch.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -379,13 +380,14 @@ FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
 namespace {
 
 // One warning per light field whose values leave [0, 1] by more than rounding (an HDR highlight,
-// a float pipeline's negative noise), naming the first such view.
-void warn_view_range(const std::vector<torch::Tensor>& images, const FolderLayout& layout) {
+// a float pipeline's negative noise), naming the first such view; `range` holds each view's
+// (min, max).
+void warn_view_range(const std::vector<std::pair<double, double>>& range,
+                     const FolderLayout& layout) {
   double min = 0, max = 1;
   std::string first;
-  for (size_t i = 0; i < images.size(); ++i) {
-    const auto [lo, hi] = torch::aminmax(images[i]);
-    const double a = lo.item<double>(), b = hi.item<double>();
+  for (size_t i = 0; i < range.size(); ++i) {
+    const auto [a, b] = range[i];
     if ((a < -kViewValueSlack || b > 1 + kViewValueSlack) && first.empty()) {
       first = layout.views[i].path;
     }
@@ -397,6 +399,11 @@ void warn_view_range(const std::vector<torch::Tensor>& images, const FolderLayou
       "light field views hold values from {:.4g} to {:.4g} (first: {}); lfnet reads radiance in "
       "[0, 1], clamps what it writes to it and scores against it",
       min, max, first);
+}
+
+std::string size_text(const torch::Tensor& chw) {
+  return std::to_string(chw.size(2)) + "x" + std::to_string(chw.size(1)) + " with " +
+         std::to_string(chw.size(0)) + " channels";
 }
 
 }  // namespace
@@ -411,6 +418,19 @@ bool holds_view_names(const std::string& dir) {
   return false;
 }
 
+namespace {
+
+// A view is radiance relative to white, in [0, 1]; a float file far outside that holds another
+// unit (docs/conventions.md, "Value range").
+void check_view_values(const std::string& path, double min, double max) {
+  LFNET_CHECK_AS(IoError, min >= kViewValueRefused.first && max <= kViewValueRefused.second,
+                 "image ", path, " holds values from ", min, " to ", max,
+                 "; lfnet reads views as radiance in [0, 1] (white = 1): scale the files (e.g. "
+                 "divide by their largest value)");
+}
+
+}  // namespace
+
 torch::Tensor read_image(const std::string& path) {
   auto chw = read_image_channels(path);
   const int64_t nc = chw.size(0);
@@ -421,44 +441,56 @@ torch::Tensor read_image(const std::string& path) {
   LFNET_CHECK_AS(IoError, keep == 1 || keep == 3, "image ", path, " has ", nc,
                  " channels; lfnet reads grey, grey+alpha, RGB and RGBA");
   chw = chw.slice(0, 0, keep).contiguous();
-  // Non-finite values were refused by read_image_channels. A view is radiance relative to white,
-  // in [0, 1]; a float file far outside that holds another unit (docs/conventions.md, "Value
-  // range").
+  // Non-finite values were refused by read_image_channels.
   const auto [lo, hi] = torch::aminmax(chw);
-  const double min = lo.item<double>(), max = hi.item<double>();
-  LFNET_CHECK_AS(IoError, min >= kViewValueRefused.first && max <= kViewValueRefused.second,
-                 "image ", path, " holds values from ", min, " to ", max,
-                 "; lfnet reads views as radiance in [0, 1] (white = 1): scale the files (e.g. "
-                 "divide by their largest value)");
+  check_view_values(path, lo.item<double>(), hi.item<double>());
   return chw;
 }
 
 LightField read_light_field(const std::string& dir, int threads, const std::string& naming) {
   const FolderLayout layout = scan_folder(dir, naming);
   const int64_t n = static_cast<int64_t>(layout.views.size());
-  std::vector<torch::Tensor> images(n);
+  // The first view gives the size; every view is then read straight into its place, so the
+  // light field is held once (not as a list of views and a stacked copy).
+  const auto first = read_image(layout.views[0].path);
+  const int64_t c = first.size(0), h = first.size(1), w = first.size(2);
+  auto data = torch::empty({c, layout.rows, layout.cols, h, w}, torch::kFloat32);
+  std::vector<std::pair<double, double>> range(static_cast<size_t>(n));
+  auto slot = [&](int64_t i) {  // view i's (C, H, W) in place
+    const auto& view = layout.views[static_cast<size_t>(i)];
+    return data.index({torch::indexing::Slice(), view.u, view.v});
+  };
+  auto place = [&](int64_t i, const torch::Tensor& image) {
+    const auto [lo, hi] = torch::aminmax(image);
+    range[static_cast<size_t>(i)] = {lo.item<double>(), hi.item<double>()};
+    slot(i).copy_(image);
+  };
+  place(0, first);
   parallel_chunks(
-      n, 1,
+      n - 1, 1,
       [&](int64_t begin, int64_t end) {
-        for (int64_t i = begin; i < end; ++i) images[i] = read_image(layout.views[i].path);
+        for (int64_t i = begin + 1; i < end + 1; ++i) {
+          const auto& path = layout.views[static_cast<size_t>(i)].path;
+          // A grey file of the first view's size is decoded straight into its place.
+          if (c == 1) {
+            if (auto r = read_grey_image_into(path, slot(i)[0])) {
+              check_view_values(path, r->first, r->second);
+              range[static_cast<size_t>(i)] = *r;
+              continue;
+            }
+          }
+          auto image = read_image(path);
+          if (image.sizes() != first.sizes()) {
+            throw IoError("view " + path + " is " + size_text(image) + ", but " +
+                          layout.views[0].path + " is " + size_text(first) +
+                          ": every view must have the same size and channels");
+          }
+          place(i, image);
+        }
       },
       threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency()));
-  warn_view_range(images, layout);
-
-  const auto ref = images[0].sizes().vec();
-  for (int64_t i = 1; i < n; ++i) {
-    if (images[i].sizes().vec() != ref) {
-      auto s = images[i].sizes();
-      throw IoError("view " + layout.views[i].path + " is " + std::to_string(s[2]) + "x" +
-                    std::to_string(s[1]) + " with " + std::to_string(s[0]) + " channels, but " +
-                    layout.views[0].path + " is " + std::to_string(ref[2]) + "x" +
-                    std::to_string(ref[1]) + " with " + std::to_string(ref[0]) +
-                    ": every view must have the same size and channels");
-    }
-  }
-  // (U * V, C, H, W) -> (C, U, V, H, W)
-  auto stacked = torch::stack(images, 0).view({layout.rows, layout.cols, ref[0], ref[1], ref[2]});
-  return LightField(stacked.permute({2, 0, 1, 3, 4}).contiguous());
+  warn_view_range(range, layout);
+  return LightField(data);
 }
 
 void write_image(const std::string& path, const torch::Tensor& image, int bits) {
@@ -594,10 +626,32 @@ torch::Tensor vertical_epi(const LightField& lf, int64_t x, int64_t scale) {
   return epi.repeat_interleave(scale, 1);
 }
 
+LightField downscale_views(const LightField& lf, int64_t f) {
+  LFNET_CHECK(f >= 1 && f <= lf.height() && f <= lf.width(), "downscale_views: factor ", f,
+              " for views of ", lf.height(), "x", lf.width());
+  if (f == 1) return lf;
+  // Area averages of f x f pixels (the last rows and columns that do not fill a block dropped).
+  auto planes = lf.data().reshape({-1, 1, lf.height(), lf.width()});
+  auto small = torch::avg_pool2d(planes, {f, f}, {f, f});
+  return LightField(
+      small.reshape({lf.channels(), lf.rows(), lf.cols(), small.size(2), small.size(3)}));
+}
+
+LightField preview_light_field(const LightField& lf, int64_t max_side, int64_t gap) {
+  LFNET_CHECK(max_side >= 1, "preview_light_field: max_side must be positive");
+  const int64_t u = lf.rows(), v = lf.cols(), h = lf.height(), w = lf.width();
+  int64_t f = 1;
+  while ((u * (h / f + gap) - gap > max_side || v * (w / f + gap) - gap > max_side) &&
+         f < std::min(h, w)) {
+    ++f;
+  }
+  return downscale_views(lf, f);
+}
+
 void write_previews(const LightField& lf, const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
-  write_image((fs::path(dir) / "grid.png").string(), grid_image(lf));
+  write_image((fs::path(dir) / "grid.png").string(), grid_image(preview_light_field(lf)));
   write_image((fs::path(dir) / "epi_h.png").string(), horizontal_epi(lf));
   write_image((fs::path(dir) / "epi_v.png").string(), vertical_epi(lf));
 }

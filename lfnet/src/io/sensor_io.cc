@@ -4,9 +4,12 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <optional>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -75,7 +78,11 @@ void write_sensor_images(const std::string& dir, const torch::Tensor& sensor) {
   write_image((fs::path(dir) / "preview.png").string(), sensor[0][0].clamp(0, 1), 8);
 }
 
-torch::Tensor read_image_channels(const std::string& path) {
+namespace {
+
+// Opens an image and checks its header: a corrupt one can claim any size, so what no light
+// field view needs is refused before anything is allocated.
+std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
   // Keep alpha as stored: colour channels are read as they are, never premultiplied.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
@@ -85,21 +92,52 @@ torch::Tensor read_image_channels(const std::string& path) {
   const OIIO::ImageSpec& spec = input->spec();
   const int64_t h = spec.height, w = spec.width, nc = spec.nchannels;
   LFNET_CHECK_AS(IoError, h > 0 && w > 0 && nc > 0, "image ", path, " is empty");
-  // A corrupt header can claim any size: refuse what no light field view needs before
-  // allocating it.
   LFNET_CHECK_AS(IoError, nc <= 64 && h * w <= image_value_limit() / nc, "image ", path, " claims ",
                  w, "x", h, " pixels with ", nc,
                  " channels, more than lfnet reads (corrupt header?)");
-  auto pixels = torch::empty({h, w, nc}, torch::kFloat32);
-  if (!input->read_image(0, 0, 0, static_cast<int>(nc), OIIO::TypeDesc::FLOAT,
-                         pixels.data_ptr<float>())) {
-    std::string err = input->geterror();
+  return input;
+}
+
+// Decodes every channel of an open image as float32 into `pixels` (H * W * C, interleaved).
+void decode(OIIO::ImageInput& input, const std::string& path, float* pixels) {
+  if (!input.read_image(0, 0, 0, input.spec().nchannels, OIIO::TypeDesc::FLOAT, pixels)) {
+    std::string err = input.geterror();
     throw IoError("cannot decode image " + path + " (truncated or corrupt?): " + err);
   }
-  input->close();
-  LFNET_CHECK_AS(IoError, torch::isfinite(pixels).all().item<bool>(), "image ", path,
+  input.close();
+}
+
+// Refuses NaN and infinite values; aminmax propagates them, and needs no mask of the image.
+std::pair<double, double> finite_range(const torch::Tensor& pixels, const std::string& path) {
+  const auto [lo, hi] = torch::aminmax(pixels);
+  const double min = lo.item<double>(), max = hi.item<double>();
+  LFNET_CHECK_AS(IoError, std::isfinite(min) && std::isfinite(max), "image ", path,
                  " holds NaN or infinite values");
+  return {min, max};
+}
+
+}  // namespace
+
+torch::Tensor read_image_channels(const std::string& path) {
+  auto input = open_image(path);
+  const OIIO::ImageSpec& spec = input->spec();
+  auto pixels = torch::empty({spec.height, spec.width, spec.nchannels}, torch::kFloat32);
+  decode(*input, path, pixels.data_ptr<float>());
+  finite_range(pixels, path);
   return pixels.permute({2, 0, 1}).contiguous();
+}
+
+std::optional<std::pair<double, double>> read_grey_image_into(const std::string& path,
+                                                              torch::Tensor plane) {
+  LFNET_CHECK(plane.dim() == 2 && plane.is_contiguous() && plane.scalar_type() == torch::kFloat32,
+              "read_grey_image_into: expected a contiguous (H, W) float32 plane");
+  auto input = open_image(path);
+  const OIIO::ImageSpec& spec = input->spec();
+  if (spec.nchannels != 1 || spec.height != plane.size(0) || spec.width != plane.size(1)) {
+    return std::nullopt;
+  }
+  decode(*input, path, plane.data_ptr<float>());
+  return finite_range(plane, path);
 }
 
 MeasurementWriter::MeasurementWriter(const std::string& path, int64_t channels, int64_t patches,
@@ -195,7 +233,8 @@ Acquisition read_acquisition(const std::string& dir) {
                        " (N x H x W), but ", kSidecarName, " says ", n, " x ", h, " x ", w);
         images.push_back(image);
       }
-      a.sensor = torch::stack(images);
+      // One colour channel needs no stacked copy.
+      a.sensor = images.size() == 1 ? images[0].unsqueeze(0) : torch::stack(images);
     } else if (mode == "per_patch") {
       auto shape = shape_field(a.meta, "measurements", sidecar);
       LFNET_CHECK_AS(IoError, shape.size() == 3 && shape[0] == c, sidecar,

@@ -1,5 +1,6 @@
 #include "lfnet/io/viewer.h"
 
+#include <algorithm>
 #include <string_view>
 #include <vector>
 
@@ -78,18 +79,31 @@ std::string base64(const std::string& bytes) {
   return out;
 }
 
+int64_t viewer_scale(int64_t height, int64_t width) {
+  int64_t f = 1;
+  while (std::max(height, width) / f > kViewerMaxSide) ++f;
+  return f;
+}
+
 std::string viewer_html(const LightField& lf, const ViewerPage& page) {
   LFNET_CHECK(lf.defined(), "the viewer needs a light field");
+  // Views larger than kViewerMaxSide are shown averaged over f x f pixels: the page stays a size
+  // a browser opens, and its disparities are in the pixels shown.
+  const int64_t f = viewer_scale(lf.height(), lf.width());
+  const auto shown = downscale_views(lf, f);
   nlohmann::json data = {{"title", page.title.empty() ? "light field" : page.title},
                          {"rows", lf.rows()},
                          {"cols", lf.cols()},
-                         {"height", lf.height()},
-                         {"width", lf.width()},
+                         {"height", shown.height()},
+                         {"width", shown.width()},
+                         {"scale", f},
+                         {"full_height", lf.height()},
+                         {"full_width", lf.width()},
                          {"channels", lf.channels()},
-                         {"max_disparity", page.max_disparity},
+                         {"max_disparity", page.max_disparity / static_cast<double>(f)},
                          {"record", page.record},
                          {"viridis", viridis_table()},
-                         {"views", view_uris(lf)},
+                         {"views", view_uris(shown)},
                          {"truth", nullptr},
                          {"per_view_psnr_db", nullptr}};
   if (page.truth) {
@@ -98,7 +112,7 @@ std::string viewer_html(const LightField& lf, const ViewerPage& page) {
                     t.width() == lf.width(),
                 "the viewer's truth (", t.shape_string(), ") and light field (", lf.shape_string(),
                 ") differ in shape");
-    data["truth"] = view_uris(t);
+    data["truth"] = view_uris(downscale_views(t, f));
     if (page.record.contains("per_view_psnr_db"))
       data["per_view_psnr_db"] = page.record["per_view_psnr_db"];
   }

@@ -1,6 +1,9 @@
 // LocalPhi: forward and adjoint as one batched matrix product per pixel phase of the period.
 #include <torch/linalg.h>
 
+#include <algorithm>
+#include <vector>
+
 #include "lfnet/core/error.h"
 #include "models.h"
 
@@ -53,6 +56,29 @@ torch::Tensor from_phases(const torch::Tensor& p, int64_t t, int64_t b, int64_t 
   auto x = p.view({t, t, c, b, hb, wb}).permute({3, 2, 4, 0, 5, 1}).reshape({b, c, hb * t, wb * t});
   if (hb * t != h || wb * t != w) x = x.slice(2, 0, h).slice(3, 0, w);
   return x;
+}
+
+// Rows per band of a banded forward or adjoint: a multiple of the period T (so each band
+// starts at phase 0) holding about 2^23 values of the wider side, or every row when they fit.
+int64_t band_rows(int64_t values_per_row, int64_t t, int64_t h) {
+  constexpr int64_t kBandValues = int64_t{1} << 23;
+  const int64_t rows = std::max<int64_t>(1, kBandValues / std::max<int64_t>(1, values_per_row));
+  return std::min(h, std::max(t, rows / t * t));
+}
+
+// Applies `op` (a forward or adjoint of whole rows) to bands of rows of `x` (..., H, W) into a
+// tensor of `out_shape`: the phase-major copies then hold one band at a time, not the image.
+template <typename Op>
+torch::Tensor banded(const torch::Tensor& x, int64_t rows, std::vector<int64_t> out_shape,
+                     const Op& op) {
+  const int64_t h = x.size(-2);
+  if (rows >= h) return op(x);
+  auto out = torch::empty(out_shape, x.options());
+  for (int64_t y0 = 0; y0 < h; y0 += rows) {
+    const int64_t n = std::min(rows, h - y0);
+    out.narrow(-2, y0, n).copy_(op(x.narrow(-2, y0, n)));
+  }
+  return out;
 }
 
 }  // namespace
@@ -120,27 +146,36 @@ torch::Tensor LocalPhi::forward(const torch::Tensor& lf) const {
   const int64_t n = spec_.n, uv = spec_.rows * spec_.cols, t = period();
   const int64_t h = lf.size(-2), w = lf.size(-1), b = lead_size(lf, 4);
   auto mats = phase_matrices(lf.scalar_type());
-  torch::Tensor y;
-  if (t == 1) {
-    y = batched_mm(mats[0], lf.reshape({b, uv, h * w}));
-  } else {
-    y = from_phases(torch::bmm(mats, to_phases(lf.reshape({b, uv, h, w}), t)), t, b, h, w);
-  }
-  return y.reshape(lead_shape(lf, 4, {n, h, w})).contiguous();
+  auto op = [&](const torch::Tensor& x) {
+    const int64_t xh = x.size(-2);
+    torch::Tensor y;
+    if (t == 1) {
+      y = batched_mm(mats[0], x.reshape({b, uv, xh * w}));
+    } else {
+      y = from_phases(torch::bmm(mats, to_phases(x.reshape({b, uv, xh, w}), t)), t, b, xh, w);
+    }
+    return y.reshape(lead_shape(x, 4, {n, xh, w})).contiguous();
+  };
+  return banded(lf, band_rows(b * uv * w, t, h), lead_shape(lf, 4, {n, h, w}), op);
 }
 
 torch::Tensor LocalPhi::adjoint(const torch::Tensor& y) const {
   check_sensor(y, spec_);
-  const int64_t n = spec_.n, t = period();
+  const int64_t n = spec_.n, uv = spec_.rows * spec_.cols, t = period();
   const int64_t h = y.size(-2), w = y.size(-1), b = lead_size(y, 3);
   auto mats = phase_matrices(y.scalar_type()).transpose(1, 2).contiguous();
-  torch::Tensor x;
-  if (t == 1) {
-    x = batched_mm(mats[0], y.reshape({b, n, h * w}));
-  } else {
-    x = from_phases(torch::bmm(mats, to_phases(y.reshape({b, n, h, w}), t)), t, b, h, w);
-  }
-  return x.reshape(lead_shape(y, 3, {spec_.rows, spec_.cols, h, w})).contiguous();
+  auto op = [&](const torch::Tensor& s) {
+    const int64_t sh = s.size(-2);
+    torch::Tensor x;
+    if (t == 1) {
+      x = batched_mm(mats[0], s.reshape({b, n, sh * w}));
+    } else {
+      x = from_phases(torch::bmm(mats, to_phases(s.reshape({b, n, sh, w}), t)), t, b, sh, w);
+    }
+    return x.reshape(lead_shape(s, 3, {spec_.rows, spec_.cols, sh, w})).contiguous();
+  };
+  return banded(y, band_rows(b * uv * w, t, h), lead_shape(y, 3, {spec_.rows, spec_.cols, h, w}),
+                op);
 }
 
 torch::Tensor LocalPhi::pixel_weights(int64_t y0, int64_t x0, int64_t h, int64_t w,

@@ -162,7 +162,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   if (acq.sensor.defined()) {
     const int64_t per_channel = PatchGrid(h, w, o.patch_h, o.patch_w, o.stride).size();
     for (int64_t ch = 0; ch < c; ++ch) {
-      auto sensor = acq.sensor[ch].clone();
+      // --match-mean scales a copy; otherwise the sensor image is used as read.
+      auto sensor = a.match_mean ? acq.sensor[ch].clone() : acq.sensor[ch];
       if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
       if (image) {
         double sigma = told_sigma;
@@ -209,7 +210,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
           }));
     }
   }
-  torch::Tensor lf = torch::cat(channels, 0);
+  // One colour channel is the light field itself: no copy of it.
+  torch::Tensor lf = channels.size() == 1 ? channels[0] : torch::cat(channels, 0);
   if (a.post_filter) {
     lf = recon::suppress_periodic(lf, o.stride);
     if (o.clamp) lf.clamp_(0.0, 1.0);

@@ -124,12 +124,19 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   const int64_t m = tiling.multiple, h = sensor.size(1), w = sensor.size(2);
   const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->period();
   const auto device = net->phi.device();
-  auto padded = torch::constant_pad_nd(sensor.to(torch::kFloat32), {0, wp - w, 0, hp - h});
+  // The image is zero-padded to (hp, wp) tile by tile: crops that reach past it are padded,
+  // the image itself is not copied.
+  const auto image = sensor.to(torch::kFloat32);
   auto out = torch::empty({1, o.patch.rows, o.patch.cols, h, w}, torch::kFloat32);
   int64_t step = 0, done = 0;
   const auto tiles = nn::image_tiles(tiling, h, w, tile, &step);
   for (const auto& c : tiles) {
-    auto crop = padded.slice(1, c.a0, c.a1).slice(2, c.b0, c.b1).unsqueeze(0).to(device);
+    LFNET_CHECK(c.a1 <= hp && c.b1 <= wp, "internal: a tile reaches past the padded image");
+    auto inside = image.slice(1, c.a0, std::min(c.a1, h)).slice(2, c.b0, std::min(c.b1, w));
+    auto crop = torch::constant_pad_nd(
+                    inside, {0, c.b1 - c.b0 - inside.size(2), 0, c.a1 - c.a0 - inside.size(1)})
+                    .unsqueeze(0)
+                    .to(device);
     auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma).to(torch::kCPU);
     const int64_t th = std::min(c.y0 + step, h) - c.y0, tw = std::min(c.x0 + step, w) - c.x0;
     if (th > 0 && tw > 0) {

@@ -79,7 +79,7 @@ torch::Tensor reconstruct_patches(const optics::Phi& phi, const PatchGrid& grid,
     if (progress) progress(done, grid.size());
   }
   auto out = stitcher.result();
-  return options.clamp ? out.clamp(0, 1) : out;
+  return options.clamp ? out.clamp_(0, 1) : out;
 }
 
 torch::Tensor reconstruct_sensor(const optics::Phi& phi, const torch::Tensor& sensor,

@@ -21,6 +21,8 @@ struct ParallaxCheckOptions {
   double min_contrast = 0.01;   // and its central view's standard deviation does (values 0..1;
                                 // Lytro views are dark)
   int64_t min_blocks = 8;       // fewer usable blocks: the verdict is kUndetermined
+  int64_t max_side = 1024;      // blocks are taken from the central max_side x max_side pixels
+                                // at most: time and memory stay bounded for any view size
 };
 
 // What the check found.

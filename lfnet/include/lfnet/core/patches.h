@@ -42,7 +42,10 @@ class PatchGrid {
 };
 
 // Accumulates patch estimates and averages every estimate of a pixel. Sums are kept in
-// float64, so stitching identical copies reproduces the values exactly.
+// float64, so stitching identical copies reproduces the values exactly. Patch rows are added in
+// order; the sums are held only for the image rows that later patch rows may still reach, and
+// each finished row goes straight into the float32 result, so stitching holds the light field
+// about once, not three times.
 class Stitcher {
  public:
   // `channels`, `rows`, `cols`: the light field's C, U, V. `weight` (h, w), optional: a
@@ -51,19 +54,25 @@ class Stitcher {
            torch::Tensor weight = {});
 
   // Adds patches of patch rows [row_begin, row_end) in the layout `PatchGrid::extract` gives.
+  // row_begin must not be below the row_end of an earlier call.
   void add(const torch::Tensor& patches, int64_t row_begin, int64_t row_end);
 
   // The averaged light field (C, U, V, H, W), float32. Every pixel must have been covered.
-  torch::Tensor result() const;
+  // Nothing may be added after it.
+  torch::Tensor result();
 
  private:
-  torch::Tensor flat_indices(int64_t row_begin, int64_t row_end) const;
+  // Averages the buffered image rows [top_, until) into out_ and drops them from the buffer.
+  void flush(int64_t until);
 
   const PatchGrid grid_;
   int64_t channels_, rows_, cols_;
   torch::Tensor weight_;  // (h * w) float64
-  torch::Tensor sum_;     // (C, U, V, H * W) float64
-  torch::Tensor count_;   // (H * W) float64
+  torch::Tensor out_;     // (C, U, V, H, W) float32
+  int64_t next_row_ = 0;  // the first patch row not added yet
+  int64_t top_ = 0;       // the first image row not in out_ yet: the buffer's first row
+  torch::Tensor sum_;     // (C, U, V, buffer rows * W) float64
+  torch::Tensor count_;   // (buffer rows * W) float64
 };
 
 }  // namespace lfnet

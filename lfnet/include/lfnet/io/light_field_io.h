@@ -116,7 +116,19 @@ torch::Tensor grid_image(const LightField& lf, int64_t gap = 2);
 torch::Tensor horizontal_epi(const LightField& lf, int64_t y = -1, int64_t scale = 8);
 torch::Tensor vertical_epi(const LightField& lf, int64_t x = -1, int64_t scale = 8);
 
-// Writes grid.png, epi_h.png and epi_v.png into `dir`, for looking at a result.
+// The views averaged over f x f pixel blocks (the rows and columns that do not fill a block
+// dropped); `lf` itself for f = 1.
+LightField downscale_views(const LightField& lf, int64_t f);
+
+// The light field to tile into a preview grid of at most `max_side` pixels a side: `lf` itself
+// when its grid fits, else its views averaged over f x f pixel blocks with the smallest f that
+// fits (a 5 x 5 grid of 12-megapixel views is 21,000 pixels wide at full size).
+inline constexpr int64_t kPreviewMaxSide = 8192;
+LightField preview_light_field(const LightField& lf, int64_t max_side = kPreviewMaxSide,
+                               int64_t gap = 2);
+
+// Writes grid.png (of preview_light_field: at most kPreviewMaxSide pixels a side), epi_h.png and
+// epi_v.png (full resolution) into `dir`, for looking at a result.
 void write_previews(const LightField& lf, const std::string& dir);
 
 // PFM by hand: OpenImageIO 2.4 (Debian bookworm) reads PFM but has no PFM writer ("could not

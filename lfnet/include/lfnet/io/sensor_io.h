@@ -7,7 +7,9 @@
 
 #include <cstdint>
 #include <fstream>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace lfnet::io {
@@ -34,6 +36,13 @@ void write_sensor_images(const std::string& dir, const torch::Tensor& sensor);
 
 // Reads every channel of an image as stored: (C, H, W) float32 (no alpha is dropped).
 torch::Tensor read_image_channels(const std::string& path);
+
+// Decodes a one-channel image straight into `plane`, a contiguous (H, W) float32 tensor of
+// its size (e.g. one view of a light field being read: no copy of it is made), and returns its
+// (min, max). Returns nothing, having decoded nothing, when the file has other channels or
+// another size. Refuses what read_image_channels refuses.
+std::optional<std::pair<double, double>> read_grey_image_into(const std::string& path,
+                                                              torch::Tensor plane);
 
 // A raw little-endian float32 file of shape (C, P, M) written in bands of patches, so per-patch
 // measurements never need to be in memory at once.

@@ -20,8 +20,14 @@ struct ViewerPage {
   double max_disparity = 4;  // the refocus slider spans +-max(4, this) px per view step
 };
 
+// The longest side of a view the page shows at full resolution; larger views are averaged over
+// f x f pixels, f = viewer_scale(H, W), the smallest factor that brings them within it.
+inline constexpr int64_t kViewerMaxSide = 2048;
+int64_t viewer_scale(int64_t height, int64_t width);
+
 // The page as text: viewer.html with viewer.js and the views (8-bit PNG data URIs, row-major)
-// embedded, so it opens from a file in any browser without a network.
+// embedded, so it opens from a file in any browser without a network. The page data says the
+// views' shown size (height, width), their full size and the factor between (scale).
 std::string viewer_html(const LightField& lf, const ViewerPage& page = {});
 
 // Writes viewer_html to `path` (usually DIR/index.html) through a temporary file.

@@ -250,7 +250,9 @@
 
   function describe() {
     document.title = `lfnet viewer: ${data.title}`;
-    $('title').textContent = data.title;
+    $('title').textContent = data.scale > 1
+      ? `${data.title} (views of ${data.full_width}x${data.full_height} shown at 1/${data.scale})`
+      : data.title;
     const r = data.record || {};
     const facts = [];
     if (r.method) facts.push(`method ${r.method}`);
