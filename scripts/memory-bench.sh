@@ -6,7 +6,8 @@
 # command and size: peak resident set in MB from wait4's ru_maxrss, wall seconds) and prints
 # the table that docs/performance.md ("Peak memory against size") holds, and draws
 # docs/images/memory.png.
-# Usage: scripts/memory-bench.sh [BINARY]   (SIZES="0.5 2" to measure fewer sizes)
+# Usage: scripts/memory-bench.sh [BINARY]   (SIZES="0.5 2" to measure fewer sizes; RECORDS=FILE
+# to write the records elsewhere and draw no figure, e.g. for an older build)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 lfnet=$(realpath "${1:-build/apps/lfnet}")
@@ -16,8 +17,10 @@ model=models/lfnet-asp-n2.ckpt
 py=/usr/bin/python3
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-mkdir -p "$data" results/memory
-records=results/memory/records.jsonl
+records=${RECORDS:-results/memory/records.jsonl}
+plot=docs/images/memory.png
+[[ -n ${RECORDS:-} ]] && plot=""
+mkdir -p "$data" "$(dirname "$records")"
 : > "$work/records.jsonl"
 
 # A 5 x 5 light field of MP megapixels per view: a random texture (smooth and fine detail) seen
@@ -55,7 +58,7 @@ _, status, usage = os.wait4(proc.pid, 0)
 seconds = time.monotonic() - start
 rc = os.waitstatus_to_exitcode(status)
 rec = {"command": name, "megapixels": mp, "peak_mb": round(usage.ru_maxrss / 1024, 1),
-       "seconds": round(seconds, 2), "exit": rc, "args": " ".join(cmd[4:])}
+       "seconds": round(seconds, 2), "exit": rc, "args": " ".join(cmd[5:])}
 print(f"{name:<22} {mp:>5} MP  {rec['peak_mb']:>8.0f} MB  {seconds:>7.1f} s" +
       ("" if rc == 0 else f"  FAILED ({rc})"), flush=True)
 open(out, "a").write(json.dumps(rec) + "\n")
@@ -81,7 +84,7 @@ for mp in "${sizes[@]}"; do
 done
 mv "$work/records.jsonl" "$records"
 
-"$py" - "$records" <<'PY'
+"$py" - "$records" "$plot" <<'PY'
 import json, sys
 import matplotlib
 matplotlib.use("Agg")
@@ -99,6 +102,8 @@ for c in commands:
         cells.append("" if r is None else
                      (f"{r['peak_mb']:.0f} MB, {r['seconds']:.1f} s" if r["exit"] == 0 else "failed"))
     print(f"| {c} | " + " | ".join(cells) + " |")
+if not sys.argv[2]:
+    sys.exit(0)
 fig, ax = plt.subplots(figsize=(6.4, 4))
 for c in commands:
     pts = [(s, by[(c, s)]["peak_mb"]) for s in sizes if (c, s) in by and by[(c, s)]["exit"] == 0]
@@ -111,5 +116,5 @@ ax.set_title("Peak memory against light-field size")
 ax.legend(fontsize=8)
 ax.grid(alpha=0.3)
 fig.tight_layout()
-fig.savefig("docs/images/memory.png", dpi=110)
+fig.savefig(sys.argv[2], dpi=110)
 PY
