@@ -31,12 +31,27 @@ if [[ ${#changed[@]} -eq 0 ]]; then
   exit 0
 fi
 # The build's precompiled headers are GCC's: clang-tidy reads the same commands without them.
+# A unity build compiles generated files that include the sources; each source gets its
+# batch's command, so clang-tidy finds every one of them.
 db=$(mktemp -d)
 trap 'rm -rf "$db"' EXIT
 /usr/bin/python3 - build/compile_commands.json "$db/compile_commands.json" <<'PY'
-import json, shlex, sys
+import json, os, re, shlex, sys
 out = []
+commands = []
 for c in json.load(open(sys.argv[1])):
+    if "/Unity/unity_" not in c["file"]:
+        commands.append(c)
+        continue
+    unity = os.path.join(c["directory"], c["file"])
+    for source in re.findall(r'^#include "([^"]+)"', open(unity).read(), re.M):
+        entry = dict(c, file=source)
+        if "command" in c:
+            entry["command"] = c["command"].replace(c["file"], source)
+        else:
+            entry["arguments"] = [source if a == c["file"] else a for a in c["arguments"]]
+        commands.append(entry)
+for c in commands:
     args = shlex.split(c["command"]) if "command" in c else c["arguments"]
     kept, skip = [], False
     for a in args:

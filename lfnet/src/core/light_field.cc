@@ -7,7 +7,7 @@
 
 namespace lfnet {
 
-LightField::LightField(torch::Tensor data) {
+LightField::LightField(const torch::Tensor& data) {
   LFNET_CHECK(data.defined() && data.dim() == axis::kRank,
               "a light field needs a tensor of shape (C, U, V, H, W)");
   LFNET_CHECK(data.size(axis::kC) == 1 || data.size(axis::kC) == 3,

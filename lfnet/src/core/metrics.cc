@@ -83,7 +83,7 @@ double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOpti
   LFNET_CHECK(a.dim() == 2 || a.dim() == 3, "SSIM takes (H, W) or (C, H, W) images");
   const auto x = a.dim() == 2 ? a.unsqueeze(0) : a;
   const auto y = b.dim() == 2 ? b.unsqueeze(0) : b;
-  const auto radius = static_cast<int64_t>(options.truncate * options.sigma + 0.5);
+  const int64_t radius = std::lround(options.truncate * options.sigma);
   const int64_t win = 2 * radius + 1;
   LFNET_CHECK(x.size(1) >= win && x.size(2) >= win, "SSIM needs images of at least ", win, "x", win,
               " pixels, got ", x.size(1), "x", x.size(2));

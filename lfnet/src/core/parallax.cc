@@ -182,8 +182,11 @@ AngularOrientation AngularOrientation::parse(const std::string& text, const std:
     } else if (word == "flip-v") {
       o.flip_v = true;
     } else {
-      throw ConfigError(what + ": unknown angular reorientation '" + word +
-                        "'; use a comma-separated list of flip-u, flip-v, transpose (or none)");
+      std::string message = what;
+      message += ": unknown angular reorientation '";
+      message += word;
+      message += "'; use a comma-separated list of flip-u, flip-v, transpose (or none)";
+      throw ConfigError(message);
     }
   }
   return o;

@@ -53,7 +53,7 @@ torch::Tensor PatchGrid::extract(const torch::Tensor& lf, int64_t row_begin,
 }
 
 Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_t cols,
-                   torch::Tensor weight)
+                   const torch::Tensor& weight)
     : grid_(grid), channels_(channels), rows_(rows), cols_(cols) {
   auto opts = torch::TensorOptions().dtype(torch::kFloat64);
   if (weight.defined()) {

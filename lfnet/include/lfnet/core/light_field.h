@@ -32,7 +32,7 @@ class LightField {
  public:
   LightField() = default;
   // Takes a tensor of shape (C, U, V, H, W); converts it to contiguous float32.
-  explicit LightField(torch::Tensor data);
+  explicit LightField(const torch::Tensor& data);
 
   const torch::Tensor& data() const { return data_; }
   torch::Tensor& data() { return data_; }

@@ -51,7 +51,7 @@ class Stitcher {
   // `channels`, `rows`, `cols`: the light field's C, U, V. `weight` (h, w), optional: a
   // spatial window applied to every patch estimate (e.g. to soften patch seams).
   Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_t cols,
-           torch::Tensor weight = {});
+           const torch::Tensor& weight = {});
 
   // Adds patches of patch rows [row_begin, row_end) in the layout `PatchGrid::extract` gives.
   // row_begin must not be below the row_end of an earlier call.
