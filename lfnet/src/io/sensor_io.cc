@@ -128,7 +128,7 @@ torch::Tensor read_image_channels(const std::string& path) {
 }
 
 std::optional<std::pair<double, double>> read_grey_image_into(const std::string& path,
-                                                              torch::Tensor plane) {
+                                                              const torch::Tensor& plane) {
   LFNET_CHECK(plane.dim() == 2 && plane.is_contiguous() && plane.scalar_type() == torch::kFloat32,
               "read_grey_image_into: expected a contiguous (H, W) float32 plane");
   auto input = open_image(path);

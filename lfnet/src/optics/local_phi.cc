@@ -69,7 +69,7 @@ int64_t band_rows(int64_t values_per_row, int64_t t, int64_t h) {
 // Applies `op` (a forward or adjoint of whole rows) to bands of rows of `x` (..., H, W) into a
 // tensor of `out_shape`: the phase-major copies then hold one band at a time, not the image.
 template <typename Op>
-torch::Tensor banded(const torch::Tensor& x, int64_t rows, std::vector<int64_t> out_shape,
+torch::Tensor banded(const torch::Tensor& x, int64_t rows, const std::vector<int64_t>& out_shape,
                      const Op& op) {
   const int64_t h = x.size(-2);
   if (rows >= h) return op(x);
@@ -127,7 +127,7 @@ torch::Tensor normalise_white(const torch::Tensor& code) {
   return code / white;
 }
 
-LocalPhi::LocalPhi(PhiSpec spec, torch::Tensor code) : Phi(std::move(spec)) {
+LocalPhi::LocalPhi(PhiSpec spec, const torch::Tensor& code) : Phi(std::move(spec)) {
   LFNET_CHECK(code.dim() == 5 && code.size(0) == spec_.n && code.size(1) == spec_.rows &&
                   code.size(2) == spec_.cols && code.size(3) == code.size(4),
               "internal: a local Phi code must be (N, U, V, T, T)");

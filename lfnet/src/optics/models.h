@@ -15,7 +15,7 @@ namespace lfnet::optics::detail {
 class LocalPhi : public Phi {
  public:
   // `code`: (N, U, V, T, T) float64, already normalised.
-  LocalPhi(PhiSpec spec, torch::Tensor code);
+  LocalPhi(PhiSpec spec, const torch::Tensor& code);
 
   torch::Tensor forward(const torch::Tensor& lf) const override;
   torch::Tensor adjoint(const torch::Tensor& y) const override;

@@ -42,7 +42,7 @@ torch::Tensor read_image_channels(const std::string& path);
 // (min, max). Returns nothing, having decoded nothing, when the file has other channels or
 // another size. Refuses what read_image_channels refuses.
 std::optional<std::pair<double, double>> read_grey_image_into(const std::string& path,
-                                                              torch::Tensor plane);
+                                                              const torch::Tensor& plane);
 
 // A raw little-endian float32 file of shape (C, P, M) written in bands of patches, so per-patch
 // measurements never need to be in memory at once.
