@@ -140,7 +140,11 @@ torch::Tensor noise_field(const TextureSpec& t, const Canvas& canvas, uint64_t s
     // Octaves at halving spacings with amplitude spacing^((beta - 2) / 2): the low-frequency
     // density of an octave is amplitude^2 spacing^2, so the sum has power ~ 1 / f^beta.
     std::vector<double> spacings;
-    for (double s = t.scale; s >= 1.0; s *= 0.5) spacings.push_back(s);
+    for (int k = 0;; ++k) {
+      const double s = std::ldexp(t.scale, -k);  // t.scale / 2^k: halving is exact
+      if (!(s >= 1.0)) break;
+      spacings.push_back(s);
+    }
     if (spacings.empty()) spacings.push_back(t.scale);
     double energy = 0.0;
     for (double s : spacings) energy += std::pow(s, t.beta - 2.0);
