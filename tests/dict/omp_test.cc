@@ -15,7 +15,7 @@ using lfnet::dict::OmpStop;
 
 namespace {
 
-torch::Tensor read_f64(const std::string& path, std::vector<int64_t> shape) {
+torch::Tensor read_f64(const std::string& path, const std::vector<int64_t>& shape) {
   auto t = torch::empty(shape, torch::kFloat64);
   std::ifstream in(path, std::ios::binary);
   in.read(reinterpret_cast<char*>(t.data_ptr<double>()),

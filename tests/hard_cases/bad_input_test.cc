@@ -254,7 +254,7 @@ TEST_CASE("missing, mismatched, truncated and foreign image files are one-line e
   lfnet::test::TempDir tmp;
   const fs::path root = tmp.path();
   auto fresh = [&](const std::string& name) {
-    const std::string dir = tmp / name;
+    std::string dir = tmp / name;
     write_light_field(dir);
     return dir;
   };
@@ -313,7 +313,7 @@ TEST_CASE("missing, mismatched, truncated and foreign image files are one-line e
 TEST_CASE("sensor images, calibrated Phis and export checks name the file and the flag",
           "[app][bad_input]") {
   lfnet::test::TempDir tmp;
-  const fs::path root = tmp.path();
+  const fs::path& root = tmp.path();
   // A camera's plain sensor image with a NaN: the file is named.
   auto sensor = torch::rand({2, 20, 20});
   sensor[1][3][4] = std::nanf("");
@@ -410,7 +410,7 @@ TEST_CASE("truncated and foreign checkpoints, and another Phi's measurements, ar
 TEST_CASE("existing and unwritable output folders are never overwritten without --force",
           "[app][bad_input]") {
   lfnet::test::TempDir tmp;
-  const fs::path root = tmp.path();
+  const fs::path& root = tmp.path();
   write_light_field(tmp / "lf");
   write_model(tmp / "asp.ckpt", "asp:2");
   std::string out;
