@@ -8,8 +8,10 @@
 
 #include "command.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/figures.h"
 #include "lfnet/pipeline/simulate.h"
@@ -25,7 +27,8 @@ struct SimulateArgs {
   double noise = -1;  // < 0: not given
   uint64_t seed = 0;
   std::string out;
-  std::string effects;  // EFFECTS.json
+  std::string effects;       // EFFECTS.json
+  std::string camera_error;  // JSON or a file (optics/calibration.h)
   int64_t stride = 5;
   int64_t patch = 9;
   bool force = false;
@@ -47,6 +50,14 @@ void run_simulate(const SimulateArgs& args) {
   LFNET_CHECK_AS(ConfigError, !simulate || !source.lf.empty() || !source.scene.empty(),
                  "--lf DIR or --scene SCENE.json is required to simulate");
   LFNET_CHECK_AS(ConfigError, !simulate || !args.out.empty(), "--out DIR is required to simulate");
+  optics::CalibrationError camera_error;  // read before any work
+  if (!args.camera_error.empty()) {
+    camera_error = optics::CalibrationError::from_json(
+        read_json_argument(args.camera_error, "--camera-error"),
+        json_argument_source(args.camera_error, "--camera-error"));
+    LFNET_CHECK_AS(ConfigError, mode == optics::SimulationMode::kSensor,
+                   "--camera-error is simulated in sensor mode only");
+  }
 
   OutputFolderPolicy policy;
   policy.force = args.force;
@@ -83,6 +94,7 @@ void run_simulate(const SimulateArgs& args) {
   request.lf = input.lf;
   request.phi = phi.get();
   request.effects = pipeline::simulation_effects(args.effects, args.noise, input, source.scene);
+  request.camera_error = camera_error;
   request.mode = mode;
   request.seed = args.seed;
   request.patch = args.patch;
@@ -126,6 +138,10 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_flag("--color", args->source.color,
                 "simulate every colour channel (default: grey luma)");
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
+  cmd->add_option("--camera-error", args->camera_error,
+                  "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "
+                  "'{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
+                  "vignetting; docs/acquisition.md)");
   cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")
       ->check(kStride)
       ->capture_default_str();

@@ -159,3 +159,48 @@ TEST_CASE("simulate describes a Phi and plots its weights", "[app][simulate]") {
   CHECK(run_command(simulate("--phi asp:2"), out) != 0);
   CHECK(out.find("nothing to do") != std::string::npos);
 }
+
+TEST_CASE("simulate and evaluate take a camera whose Phi is off", "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  write_test_light_field(tmp / "lf");
+  std::string out;
+  const std::string lf = " --lf " + (tmp / "lf") + " --phi asp:2";
+  REQUIRE(run_command(simulate(lf + " --out " + (tmp / "nominal")), out) == 0);
+  REQUIRE(run_command(simulate(lf + " --out " + (tmp / "off") +
+                               " --camera-error '{\"depth\": -0.2}'"),
+                      out) == 0);
+  const auto nominal = lfnet::io::read_acquisition(tmp / "nominal");
+  const auto off = lfnet::io::read_acquisition(tmp / "off");
+  CHECK(off.meta["camera_error"]["depth"].get<double>() == Approx(-0.2));
+  CHECK_FALSE(nominal.meta.contains("camera_error"));
+  // A shallower ASP pair: the same sum of the two channels, less difference between them.
+  lfnet::test::require_close(off.sensor.sum(1), nominal.sensor.sum(1), 1e-4, 1e-4);
+  const auto diff = [](const torch::Tensor& s) {
+    return (s.select(1, 0) - s.select(1, 1)).abs().sum().item<double>();
+  };
+  CHECK(diff(off.sensor) == Approx(0.8 * diff(nominal.sensor)).epsilon(0.02));
+
+  // A flat grey light field, which pinv recovers well from the nominal camera.
+  lfnet::io::write_light_field(lfnet::LightField(torch::full({1, 5, 5, 20, 24}, 0.5)),
+                               tmp / "flat", {"png", 16});
+  const std::string evaluate = lfnet_binary() + " --threads 1 --log-level warn evaluate --lf " +
+                               (tmp / "flat") + " --phi asp:2 --method pinv --stride 3";
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "a.json"), out) == 0);
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "b.json") +
+                          " --camera-error '{\"vignetting\": 0.3}'",
+                      out) == 0);
+  const auto a = lfnet::read_json_file(tmp / "a.json");
+  const auto b = lfnet::read_json_file(tmp / "b.json");
+  CHECK(b["camera_error"]["vignetting"].get<double>() == Approx(0.3));
+  CHECK(b["psnr_db"].get<double>() < a["psnr_db"].get<double>() - 3);
+  // Bad errors: one line naming the key, before any work.
+  CHECK(run_command(evaluate + " --camera-error '{\"dpeth\": 0.1}'", out) != 0);
+  CHECK(out.find("dpeth") != std::string::npos);
+  CHECK(std::count(out.begin(), out.end(), '\n') == 1);
+  CHECK(run_command(evaluate + " --mode per_patch --camera-error '{\"depth\": 0.1}'", out) != 0);
+  CHECK(out.find("sensor mode") != std::string::npos);
+  CHECK(run_command(simulate(lf + " --out " + (tmp / "pp") +
+                             " --mode per_patch --camera-error '{\"depth\": 0.1}'"),
+                    out) != 0);
+  CHECK_FALSE(fs::exists(tmp / "pp"));
+}

@@ -303,3 +303,77 @@ TEST_CASE("shot and read noise patches carry their equivalent sigma", "[data]") 
   o.shot_photons_range = {0, 10};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("shot_photons_range"));
 }
+
+TEST_CASE("a clean fraction measures that share of noise-aware patches without noise", "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.augment = false;
+  o.train_patches = 400;
+  o.noise_range = {0.05, 0.2};
+  auto batch = [&](double clean_fraction) {
+    o.clean_fraction = clean_fraction;
+    data::PatchDataset ds(fields(), *phi, o, 64);
+    ds.start_epoch(0, 400);
+    return ds.next_train();
+  };
+  const auto noisy = batch(0), mixed = batch(0.4);
+  o.noise_range.clear();
+  const auto clean = batch(0);
+  REQUIRE(torch::equal(mixed.target, clean.target));
+  const auto zero = mixed.noise == 0;
+  const double share = zero.to(torch::kFloat64).mean().item<double>();
+  CHECK(share > 0.3);
+  CHECK(share < 0.5);
+  // A clean patch's measurements are the noiseless ones; the others keep their noise.
+  const auto rows = zero.nonzero().squeeze(1), kept = (~zero).nonzero().squeeze(1);
+  CHECK(torch::equal(mixed.y.index_select(0, rows), clean.y.index_select(0, rows)));
+  CHECK(torch::equal(mixed.y.index_select(0, kept), noisy.y.index_select(0, kept)));
+  CHECK(torch::equal(mixed.noise.index_select(0, kept), noisy.noise.index_select(0, kept)));
+  o.clean_fraction = 0.5;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("needs a noise_range"));
+  o.noise_range = {0, 0.1};
+  o.clean_fraction = 1.5;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("clean_fraction"));
+}
+
+TEST_CASE("calibration ranges give every patch its own camera", "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.augment = false;
+  auto batch = [&](const optics::CalibrationRanges& ranges) {
+    o.calibration = ranges;
+    data::PatchDataset ds(fields(), *phi, o, 64);
+    ds.start_epoch(0, 200);
+    return ds.next_train();
+  };
+  const auto nominal = batch({});
+  optics::CalibrationRanges depth;
+  depth.depth = 0.2;
+  const auto perturbed = batch(depth);
+  REQUIRE(torch::equal(perturbed.target, nominal.target));  // the same patches
+  // Each patch's measurements are those of an ASP whose depth is off by at most 20 %: the
+  // error grows with its modulation (measurements minus their channels' mean), by one factor
+  // per patch that differs between patches.
+  const auto b = nominal.y.size(0);
+  const auto y0 = nominal.y.view({b, 2, -1}), y1 = perturbed.y.view({b, 2, -1});
+  const auto mod0 = y0 - y0.mean(1, true), mod1 = y1 - y1.mean(1, true);
+  CHECK(torch::allclose(y1.mean(1), y0.mean(1), 1e-4, 1e-5));  // the channels' sum is kept
+  const auto factor = (mod1 * mod0).sum({1, 2}) / mod0.square().sum({1, 2});
+  CHECK(factor.min().item<double>() >= 0.8 - 1e-4);
+  CHECK(factor.max().item<double>() <= 1.2 + 1e-4);
+  CHECK(factor.std().item<double>() > 0.05);
+  CHECK(torch::allclose(mod1, mod0 * factor.view({b, 1, 1}), 1e-4, 1e-5));
+  // Validation patches are measured by perturbed cameras too.
+  o.calibration = depth;
+  data::PatchDataset ds(fields(), *phi, o, 64);
+  o.calibration = {};
+  data::PatchDataset plain(fields(), *phi, o, 64);
+  CHECK_FALSE(torch::allclose(ds.validation()[0].y, plain.validation()[0].y, 1e-4, 1e-5));
+  // Only local codes can be perturbed pixel by pixel.
+  auto random = optics::make_phi(optics::PhiSpec::parse("random:2"));
+  o.calibration = depth;
+  o.patch_h = o.patch_w = 9;
+  CHECK_THROWS_WITH(data::PatchDataset(fields(), *random, o, 64), Catch::Contains("local Phi"));
+  o.calibration.depth = 1.5;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("depth"));
+}

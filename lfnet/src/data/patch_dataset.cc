@@ -77,6 +77,13 @@ void DatasetOptions::validate() const {
         std::isfinite(read_electrons_range[1]))) {
     throw ConfigError("read_electrons_range must be [lo, hi] with 0 <= lo <= hi");
   }
+  if (!(clean_fraction >= 0 && clean_fraction <= 1)) {
+    throw ConfigError("clean_fraction must lie in [0, 1]");
+  }
+  if (clean_fraction > 0 && noise_range.empty()) {
+    throw ConfigError("clean_fraction needs a noise_range: it is the share of noiseless patches");
+  }
+  calibration.validate();
   if (angular_steps.empty()) throw ConfigError("angular_steps must list at least one step");
   for (int64_t step : angular_steps) {
     if (step < 1 || step > 8) throw ConfigError("angular_steps must lie in 1..8");
@@ -139,6 +146,8 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
     train_weight_.push_back(
         static_cast<double>((split - options_.patch_h + 1) * (lf.width() - options_.patch_w + 1)));
   }
+  LFNET_CHECK_AS(ConfigError, options_.calibration.empty() || phi_.local(),
+                 "dataset.calibration needs a local Phi; '", phi_.spec().label(), "' is not");
   if (phi_.local()) {
     weights_ = optics::pixel_weight_stack(phi_, options_.patch_h, options_.patch_w);
   } else {
@@ -173,7 +182,9 @@ PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
           part(brightness),
           part(sigma),
           part(photons),
-          part(read_electrons)};
+          part(read_electrons),
+          part(calibration),
+          part(placement)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
@@ -241,6 +252,34 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
         d.read_electrons.push_back(static_cast<float>(electrons));
       }
     }
+    if (options_.clean_fraction > 0) {
+      for (int64_t i = 0; i < count; ++i) {
+        if (0.5 * (unit(rng) + 1.0) >= options_.clean_fraction) continue;
+        d.sigma[i] = 0.0f;
+        if (!d.photons.empty()) d.photons[i] = 0.0f;  // Gaussian of sigma 0: no noise at all
+      }
+    }
+  }
+  // Last, so that configs without calibration ranges draw what they always drew.
+  const auto& cal = options_.calibration;
+  if (!cal.empty()) {
+    const auto h = options_.patch_h, w = options_.patch_w;
+    const auto sensor_h = static_cast<int64_t>(std::ceil(cal.vignetting_sensor * h));
+    const auto sensor_w = static_cast<int64_t>(std::ceil(cal.vignetting_sensor * w));
+    for (int64_t i = 0; i < count; ++i) {
+      optics::CalibrationError e;
+      e.depth = cal.depth * unit(rng);
+      e.angular_shift_u = cal.angular_shift * unit(rng);
+      e.angular_shift_v = cal.angular_shift * unit(rng);
+      e.shift_y = cal.shift * unit(rng);
+      e.shift_x = cal.shift * unit(rng);
+      e.period = cal.period * unit(rng);
+      e.vignetting = cal.vignetting * 0.5 * (unit(rng) + 1.0);
+      const auto y0 = std::uniform_int_distribution<int64_t>(0, sensor_h - h)(rng);
+      const auto x0 = std::uniform_int_distribution<int64_t>(0, sensor_w - w)(rng);
+      d.calibration.push_back(e);
+      d.placement.push_back({y0, x0, sensor_h, sensor_w});
+    }
   }
   return d;
 }
@@ -274,7 +313,19 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
   if (phi_.local()) {
     // Each sensor pixel sums its own rays: y[b, n, y, x] = sum_uv W[phase_b, n, u, v, y, x] L[b, u,
     // v, y, x].
-    auto weights = weights_.index_select(0, phase);  // (B, N, U, V, h, w)
+    torch::Tensor weights;
+    if (d.calibration.empty()) {
+      weights = weights_.index_select(0, phase);  // (B, N, U, V, h, w)
+    } else {
+      // Each patch's own camera: the code at the patch's origin, the vignetting at its place.
+      std::vector<torch::Tensor> own;
+      own.reserve(b);
+      for (int64_t i = 0; i < b; ++i) {
+        own.push_back(optics::perturbed_pixel_weights(phi_, d.calibration[i], d.y0[i], d.x0[i], h, w,
+                                                        d.placement[i]));
+      }
+      weights = torch::stack(own);
+    }
     y = (weights * target.unsqueeze(1)).sum({2, 3}).reshape({b, -1});
   } else {
     y = torch::matmul(target.reshape({b, -1}), matrix_.t());

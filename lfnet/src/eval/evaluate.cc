@@ -85,8 +85,15 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   std::optional<double> estimated;  // the noise sigma estimated from the sensor image
   double signal = 0;                // the measurements' mean
   Stopwatch clock;
+  LFNET_CHECK_AS(ConfigError,
+                 options.camera_error.empty() || options.mode == optics::SimulationMode::kSensor,
+                 "a camera error is simulated in sensor mode only");
   if (options.mode == optics::SimulationMode::kSensor) {
-    auto sensor = optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed);
+    auto sensor = options.camera_error.empty()
+                      ? optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed)
+                      : optics::apply_sensor_effects(
+                            optics::perturbed_forward(phi, options.camera_error, truth.data()[0]),
+                            options.effects, options.seed);
     signal = sensor.mean().item<double>();
     clock.reset();  // time the reconstruction, not the simulation
     if (image) {
@@ -118,6 +125,7 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   if (whole_image) record["whole_image"] = true;
   add_equivalent_sigma(record, options, signal);
   if (estimated) record["noise_sigma_estimated"] = *estimated;
+  if (!options.camera_error.empty()) record["camera_error"] = options.camera_error.to_json();
   record.update(score(est, truth));
   return {estimate, record};
 }

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
@@ -196,6 +197,14 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     // As lfnet simulate reads them: the file, then --noise as its Gaussian sigma.
     effects = simulation_effects(a.effects, a.noise > 0 ? a.noise : -1, SimulateInput{}, "");
   }
+  optics::CalibrationError camera_error;  // read before any work
+  if (!a.camera_error.empty()) {
+    camera_error = optics::CalibrationError::from_json(
+        read_json_argument(a.camera_error, "--camera-error"),
+        json_argument_source(a.camera_error, "--camera-error"));
+    LFNET_CHECK_AS(ConfigError, camera_error.empty() || a.mode == optics::SimulationMode::kSensor,
+                   "--camera-error is simulated in sensor mode only");
+  }
   parse_device(a.device);  // a clear error before any work
   MethodContext context;
   optics::PhiSpec spec;
@@ -246,6 +255,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
   if (effects) o.effects = *effects;
   o.estimate_noise = a.estimate_noise;
+  o.camera_error = camera_error;
   EvaluateResult result;
   result.record =
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);

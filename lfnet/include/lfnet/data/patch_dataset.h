@@ -15,6 +15,7 @@
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
 #include "lfnet/train/batch_source.h"
@@ -60,6 +61,13 @@ struct DatasetOptions {
   double shot_read_fraction = 0.0;
   std::vector<double> shot_photons_range = {20, 2000};
   std::vector<double> read_electrons_range = {0, 10};
+  // With noise_range, the share of patches measured without noise (sigma 0), so that a
+  // noise-aware net keeps its noiseless accuracy. 0: none beyond the range's own draws.
+  double clean_fraction = 0.0;
+  // Calibration-robust training: each patch (training and validation) is measured by a camera
+  // whose Phi has its own small error drawn from these ranges (optics/calibration.h); the net
+  // is told the nominal Phi. Empty (all 0): every patch is measured by the nominal Phi.
+  optics::CalibrationRanges calibration;
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
 
@@ -87,6 +95,8 @@ struct DatasetOptions {
     f("shot_read_fraction", shot_read_fraction);
     f("shot_photons_range", shot_photons_range);
     f("read_electrons_range", read_electrons_range);
+    f("clean_fraction", clean_fraction);
+    f("calibration", calibration);
     f("seed", seed);
     f("effects", effects);
   }
@@ -129,6 +139,10 @@ class PatchDataset : public train::BatchSource {
     // Per patch with shot_read_fraction: photons at white (0: Gaussian noise) and read
     // electrons; else empty.
     std::vector<float> photons, read_electrons;
+    // Per patch with calibration ranges: its camera's error and its place on that camera's
+    // sensor; else empty.
+    std::vector<optics::CalibrationError> calibration;
+    std::vector<optics::SensorPlacement> placement;
     Draw slice(int64_t begin, int64_t end) const;
   };
   // An angular window: views u0, u0 + step, ... (U of them), and likewise v.

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "lfnet/core/light_field.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
@@ -25,6 +26,10 @@ struct EvalOptions {
   // Noise-aware methods are told the noise estimated from the sensor image
   // (optics/noise_estimate.h) instead of the simulation's: a camera whose noise is unknown.
   bool estimate_noise = false;
+  // The camera's error against the Phi the method is told (sensor mode; optics/calibration.h):
+  // the sensor is simulated by the perturbed camera, the method reconstructs with the nominal
+  // Phi. Empty: the camera is the Phi.
+  optics::CalibrationError camera_error;
 };
 
 // The outcome of one evaluation, as `lfnet evaluate --json` writes it.

@@ -106,6 +106,7 @@ struct EvaluateRequest {
   double noise = 0;             // Gaussian noise sigma, relative to a white scene's mean
   std::string effects;          // sensor effects JSON file (shot, read, ...); noise on top
   bool estimate_noise = false;  // noise-aware methods are told the noise estimated, not the truth
+  std::string camera_error;     // --camera-error: JSON or file (optics/calibration.h); "" none
   uint64_t seed = 0;            // noise seed
   int64_t stride = 5;           // patch stride
   int64_t batch = 1024;         // patches per forward pass

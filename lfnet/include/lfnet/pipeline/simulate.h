@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "lfnet/core/light_field.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
@@ -21,6 +22,9 @@ struct SimulateRequest {
   LightField lf;  // (C, U, V, H, W): the window the Phi codes, grey or colour
   const optics::Phi* phi = nullptr;
   optics::SensorOptions effects;  // noise and the rest (validated by the caller)
+  // The camera's error against `phi` (sensor mode only): the image it takes, recorded as
+  // sensor.json's camera_error; a reconstruction is told `phi`.
+  optics::CalibrationError camera_error;
   optics::SimulationMode mode = optics::SimulationMode::kSensor;
   uint64_t seed = 0;                // noise seed
   int64_t patch = 9;                // per_patch mode: the patch grid's side

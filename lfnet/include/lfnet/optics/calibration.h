@@ -1,0 +1,105 @@
+// Calibration error: a camera whose Phi differs from the one its model was made for
+// (docs/acquisition.md, "Calibration error"). A local Phi is described by its pixel weights
+// M_n(u, v) at every sensor pixel; a calibration error changes them in four ways, each 0 when
+// absent:
+//   - modulation depth: each measurement's weights about their mean over the views are scaled
+//     by 1 + depth (for the ASP model exactly its m, since the means over the views of its
+//     cosines vanish on the view grid);
+//   - angular shift: the angular response displaced by (angular_shift_u, angular_shift_v)
+//     views, linearly interpolated between views and held at the grid's edge (a grating or
+//     mask displaced against the photodiode or microlens shifts which rays a pixel favours);
+//   - code shift and period: pixel (y, x) of the sensor takes the code's weights at code
+//     position ((y + shift_y) (1 + period), (x + shift_x) (1 + period)), bilinear between the
+//     pixels of the code's tile (only codes that vary across the sensor, period() > 1, change);
+//   - vignetting: every measurement of the pixel is multiplied by 1 - vignetting r^2, r the
+//     pixel's distance from the sensor's centre over its half-diagonal (so the corners lose
+//     `vignetting` of their signal).
+#pragma once
+
+#include <torch/types.h>
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <random>
+#include <string>
+
+#include "lfnet/core/fields.h"
+#include "lfnet/optics/phi.h"
+
+namespace lfnet::optics {
+
+// One camera's error against its nominal Phi.
+struct CalibrationError {
+  double depth = 0;            // relative change of the modulation depth (0.1: 10 % deeper)
+  double angular_shift_u = 0;  // the angular response displaced by this many views along U
+  double angular_shift_v = 0;  // ... and along V
+  double shift_y = 0;          // the code displaced against the pixels, in pixels
+  double shift_x = 0;
+  double period = 0;       // relative error of the code's period (0.01: 1 % longer)
+  double vignetting = 0;   // share of the signal lost at the sensor's corners, in [0, 1)
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("depth", depth);
+    f("angular_shift_u", angular_shift_u);
+    f("angular_shift_v", angular_shift_v);
+    f("shift_y", shift_y);
+    f("shift_x", shift_x);
+    f("period", period);
+    f("vignetting", vignetting);
+  }
+  bool empty() const;
+  // Throws ConfigError naming the bad field.
+  void validate() const;
+  // Strict: unknown keys are ConfigErrors naming the JSON path.
+  static CalibrationError from_json(const nlohmann::json& j, const std::string& path = "$");
+  nlohmann::json to_json() const;
+};
+
+// The ranges training draws calibration errors from, one draw per patch (docs/training.md,
+// "Calibration-robust training"): depth, each angular shift, each code shift and the period
+// uniformly in [-range, range]; vignetting uniformly in [0, vignetting], the patch placed
+// uniformly in a sensor `vignetting_sensor` times its size on each side.
+struct CalibrationRanges {
+  double depth = 0;
+  double angular_shift = 0;  // views
+  double shift = 0;          // pixels
+  double period = 0;
+  double vignetting = 0;
+  double vignetting_sensor = 4;
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("depth", depth);
+    f("angular_shift", angular_shift);
+    f("shift", shift);
+    f("period", period);
+    f("vignetting", vignetting);
+    f("vignetting_sensor", vignetting_sensor);
+  }
+  bool empty() const;
+  void validate() const;
+};
+
+// Where a block of pixels lies on its sensor, for vignetting: the block's origin (y0, x0) on a
+// sensor of sensor_h x sensor_w pixels (its code may be placed otherwise: a training patch's
+// code phase comes from its light field, its place on a sensor is drawn).
+struct SensorPlacement {
+  int64_t y0 = 0, x0 = 0;
+  int64_t sensor_h = 0, sensor_w = 0;
+};
+
+// The weights (N, U, V, h, w) of the pixels of the (h, w) block at code origin (y0, x0) of a
+// camera with Phi `phi` (local) and calibration error `error`, vignetted as a block at
+// `placement`; equal to phi.pixel_weights(y0, x0, h, w) when the error is empty.
+torch::Tensor perturbed_pixel_weights(const Phi& phi, const CalibrationError& error, int64_t y0,
+                                      int64_t x0, int64_t h, int64_t w,
+                                      const SensorPlacement& placement,
+                                      torch::ScalarType dtype = torch::kFloat32);
+
+// The sensor image (..., N, H, W) of a light field (..., U, V, H, W) taken by that camera, no
+// sensor effects; computed in bands of rows. Equals phi.forward(lf) when the error is empty.
+torch::Tensor perturbed_forward(const Phi& phi, const CalibrationError& error,
+                                const torch::Tensor& lf);
+
+}  // namespace lfnet::optics
