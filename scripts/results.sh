@@ -135,18 +135,25 @@ noise-sweep() {
 # Shot and read noise (configs/sensors/): the noise-aware lfnet models against one-sigma ones,
 # the noiseless one and the baselines, on hci_antinous.
 sensor-noise() {
-  local tmp sensor method name model
+  local tmp sensor method name model i
   tmp=$(mktemp)
-  for sensor in daylight indoor dim; do
-    local src=(--lf ../shared/data/hci_antinous --mode sensor --effects configs/sensors/$sensor.json)
-    for method in pinv pinv-nlm no-parallax; do
-      record "$tmp" --phi asp:2 "${src[@]}" --method "$method"
-    done
-    for name in lfnet-asp-n2 lfnet-noise/aware-s0.1 lfnet-asp-n2-noise lfnet-noise/sigma-0.1 \
-      lfnet-noise/sigma-0.2; do
-      model=models/$name.ckpt
-      need_model "$model"
-      VARIANT=$name record "$tmp" --model "$model" "${src[@]}" --method net
+  need_model models/lfnet-asp-n2-robust.ckpt
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    for sensor in daylight indoor dim; do
+      local src=("${heldout[@]:i:2}" --mode sensor --effects configs/sensors/$sensor.json)
+      for method in pinv pinv-nlm no-parallax; do
+        record "$tmp" --phi asp:2 "${src[@]}" --method "$method"
+      done
+      local names=(lfnet-asp-n2 lfnet-asp-n2-noise lfnet-asp-n2-robust)
+      # The models trained at one noise level, and on Gaussian noise alone, on the first only.
+      ((i == 0)) && names+=(lfnet-noise/aware-s0.1 lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2)
+      for name in "${names[@]}"; do
+        model=models/$name.ckpt
+        need_model "$model"
+        VARIANT=$name record "$tmp" --model "$model" "${src[@]}" --method net
+      done
+      VARIANT="lfnet-asp-n2-robust, estimated" record "$tmp" \
+        --model models/lfnet-asp-n2-robust.ckpt "${src[@]}" --method net --estimate-noise
     done
   done
   mv "$tmp" results/sensor-noise/records.jsonl
@@ -160,6 +167,7 @@ noise-blind() {
   local tmp i sigma
   tmp=$(mktemp)
   need_model models/lfnet-asp-n2-noise.ckpt
+  need_model models/lfnet-asp-n2-robust.ckpt
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor)
     for sigma in 0 0.05 0.1 0.2; do
@@ -173,9 +181,41 @@ noise-blind() {
       VARIANT="lfnet-asp-n2-noise, estimated" record "$tmp" \
         --model models/lfnet-asp-n2-noise.ckpt "${src[@]}" --method net --noise "$sigma" \
         --estimate-noise
+      VARIANT="lfnet-asp-n2-robust, told" record "$tmp" --model models/lfnet-asp-n2-robust.ckpt \
+        "${src[@]}" --method net --noise "$sigma"
+      VARIANT="lfnet-asp-n2-robust, estimated" record "$tmp" \
+        --model models/lfnet-asp-n2-robust.ckpt "${src[@]}" --method net --noise "$sigma" \
+        --estimate-noise
     done
   done
   mv "$tmp" results/noise-blind/records.jsonl
+}
+
+# Calibration error (docs/acquisition.md, "Calibration error"): on the light fields of the
+# cross-scene benchmark, the sensor image of a camera whose ASP is off (modulation depth
+# -10 % and +10 %, angular response shifted by 0.1 and 0.25 view, 10 % vignetting), each
+# reconstruction told the nominal Phi: the default trained on the nominal Phi alone against the
+# one trained with calibration errors (dataset.calibration), beside pinv and no-parallax.
+calibration() {
+  local tmp i error
+  tmp=$(mktemp)
+  need_model models/lfnet-asp-n2-robust.ckpt
+  local errors=('' '{"depth": -0.1}' '{"depth": 0.1}' '{"angular_shift_u": 0.1}'
+    '{"angular_shift_u": 0.25}' '{"vignetting": 0.1}')
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}" --mode sensor)
+    record "$tmp" --phi asp:2 "${src[@]}" --method no-parallax
+    for error in "${errors[@]}"; do
+      local camera=()
+      [[ -n $error ]] && camera=(--camera-error "$error")
+      record "$tmp" --phi asp:2 "${src[@]}" --method pinv "${camera[@]}"
+      for name in lfnet-asp-n2 lfnet-asp-n2-robust; do
+        VARIANT=$name record "$tmp" --model models/$name.ckpt "${src[@]}" --method net \
+          "${camera[@]}"
+      done
+    done
+  done
+  mv "$tmp" results/calibration/records.jsonl
 }
 
 # Seconds against PSNR over the stride: non-overlapping (9), 5, 2 and 1.
@@ -493,7 +533,7 @@ pictures() {
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
   sections=(cross-scene self-ensemble other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
-            sensor-noise noise-blind stride-sweep branch-ablation loss-ablation lytro
+            sensor-noise noise-blind calibration stride-sweep branch-ablation loss-ablation lytro
             phi-switching paper-scene)
 fi
 for s in "${sections[@]}"; do

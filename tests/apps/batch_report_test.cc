@@ -473,3 +473,45 @@ TEST_CASE("every shipped config is valid", "[app]") {
   }
   CHECK(checked >= 2 * 20);
 }
+
+TEST_CASE("report gives a camera error's cost against the nominal camera", "[app]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "results/c");
+  std::ofstream(tmp / "results/c/section.json") << R"({"title": "Calibration", "order": 1})";
+  auto record = [](const std::string& variant, double psnr, const nlohmann::json& error) {
+    nlohmann::json r = {{"method", "net"},    {"variant", variant},
+                        {"psnr_db", psnr},    {"ssim", 0.9},
+                        {"seconds", 1.0},     {"stride", 5},
+                        {"mode", "sensor"},   {"measurements", 2},
+                        {"noise_sigma", 0.0}, {"phi", {{"name", "asp"}, {"n", 2}}},
+                        {"light_field", "lf"}};
+    if (!error.is_null()) r["camera_error"] = error;
+    return r.dump() + "\n";
+  };
+  const nlohmann::json depth = {{"depth", -0.1}, {"vignetting", 0.0}};
+  std::ofstream(tmp / "results/c/records.jsonl")
+      << record("a", 30.0, nullptr) << record("a", 29.25, depth) << record("b", 28.0, nullptr)
+      << record("b", 27.9, depth)
+      << nlohmann::json({{"method", "no-parallax"},
+                         {"psnr_db", 20.0},
+                         {"ssim", 0.5},
+                         {"seconds", 0.1},
+                         {"mode", "sensor"},
+                         {"light_field", "lf"}})
+             .dump()
+      << "\n";
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
+                          (tmp / "R.md"),
+                      out) == 0);
+  std::ifstream in(tmp / "R.md");
+  const std::string md((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  CHECK(md.find("| camera error |") != std::string::npos);
+  CHECK(md.find("cost dB |") != std::string::npos);
+  // Each variant's cost is against its own nominal record; fields at 0 are not named.
+  CHECK(md.find("| depth -0.1 |") != std::string::npos);
+  CHECK(md.find("vignetting") == std::string::npos);
+  CHECK(md.find("| 29.25 | 0.900 | 1.00 | 0.75 |") != std::string::npos);
+  CHECK(md.find("| 27.90 | 0.900 | 1.00 | 0.10 |") != std::string::npos);
+  CHECK(md.find("| none |") != std::string::npos);
+}

@@ -166,9 +166,9 @@ TEST_CASE("simulate and evaluate take a camera whose Phi is off", "[app][simulat
   std::string out;
   const std::string lf = " --lf " + (tmp / "lf") + " --phi asp:2";
   REQUIRE(run_command(simulate(lf + " --out " + (tmp / "nominal")), out) == 0);
-  REQUIRE(run_command(simulate(lf + " --out " + (tmp / "off") +
-                               " --camera-error '{\"depth\": -0.2}'"),
-                      out) == 0);
+  REQUIRE(
+      run_command(simulate(lf + " --out " + (tmp / "off") + " --camera-error '{\"depth\": -0.2}'"),
+                  out) == 0);
   const auto nominal = lfnet::io::read_acquisition(tmp / "nominal");
   const auto off = lfnet::io::read_acquisition(tmp / "off");
   CHECK(off.meta["camera_error"]["depth"].get<double>() == Approx(-0.2));
@@ -181,14 +181,14 @@ TEST_CASE("simulate and evaluate take a camera whose Phi is off", "[app][simulat
   CHECK(diff(off.sensor) == Approx(0.8 * diff(nominal.sensor)).epsilon(0.02));
 
   // A flat grey light field, which pinv recovers well from the nominal camera.
-  lfnet::io::write_light_field(lfnet::LightField(torch::full({1, 5, 5, 20, 24}, 0.5)),
-                               tmp / "flat", {"png", 16});
+  lfnet::io::write_light_field(lfnet::LightField(torch::full({1, 5, 5, 20, 24}, 0.5)), tmp / "flat",
+                               {"png", 16});
   const std::string evaluate = lfnet_binary() + " --threads 1 --log-level warn evaluate --lf " +
                                (tmp / "flat") + " --phi asp:2 --method pinv --stride 3";
   REQUIRE(run_command(evaluate + " --json " + (tmp / "a.json"), out) == 0);
-  REQUIRE(run_command(evaluate + " --json " + (tmp / "b.json") +
-                          " --camera-error '{\"vignetting\": 0.3}'",
-                      out) == 0);
+  REQUIRE(run_command(
+              evaluate + " --json " + (tmp / "b.json") + " --camera-error '{\"vignetting\": 0.3}'",
+              out) == 0);
   const auto a = lfnet::read_json_file(tmp / "a.json");
   const auto b = lfnet::read_json_file(tmp / "b.json");
   CHECK(b["camera_error"]["vignetting"].get<double>() == Approx(0.3));

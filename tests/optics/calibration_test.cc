@@ -16,8 +16,8 @@ using lfnet::optics::SensorPlacement;
 
 namespace {
 
-std::unique_ptr<lfnet::optics::Phi> coded_by(const std::string& text,
-                                           const nlohmann::json& params = nlohmann::json::object()) {
+std::unique_ptr<lfnet::optics::Phi> coded_by(
+    const std::string& text, const nlohmann::json& params = nlohmann::json::object()) {
   auto spec = PhiSpec::parse(text);
   spec.seed = 3;
   spec.params = params;
@@ -41,7 +41,8 @@ TEST_CASE("no calibration error is the nominal Phi", "[optics][calibration]") {
     INFO(text);
     const auto phi = coded_by(text);
     CHECK(same_weights(perturbed_forward(*phi, {}, lf), phi->forward(lf)));
-    CHECK(same_weights(perturbed_pixel_weights(*phi, {}, 3, 5, 7, 9, {}), phi->pixel_weights(3, 5, 7, 9)));
+    CHECK(same_weights(perturbed_pixel_weights(*phi, {}, 3, 5, 7, 9, {}),
+                       phi->pixel_weights(3, 5, 7, 9)));
   }
 }
 
@@ -50,51 +51,59 @@ TEST_CASE("a modulation-depth error is the ASP of that depth", "[optics][calibra
   // mean over the views scales m.
   const auto nominal = coded_by("asp:2");
   const auto shallow = coded_by("asp:2", {{"depth", 0.9}});
-  const auto weights = perturbed_pixel_weights(*nominal, error_of(R"({"depth": -0.1})"), 0, 0, 4, 4, {});
+  const auto weights =
+      perturbed_pixel_weights(*nominal, error_of(R"({"depth": -0.1})"), 0, 0, 4, 4, {});
   CHECK(same_weights(weights, shallow->pixel_weights(0, 0, 4, 4), 1e-5));
   CHECK_FALSE(same_weights(weights, nominal->pixel_weights(0, 0, 4, 4), 1e-3));
 }
 
-TEST_CASE("a code shift of whole pixels moves the mask; half a pixel averages", "[optics][calibration]") {
+TEST_CASE("a code shift of whole pixels moves the mask; half a pixel averages",
+          "[optics][calibration]") {
   const auto phi = coded_by("mask:2");
   REQUIRE(phi->period() > 1);
-  const auto shifted = perturbed_pixel_weights(*phi, error_of(R"({"shift_y": 1, "shift_x": -2})"),
-                                               4, 6, 8, 8, {});
+  const auto shifted =
+      perturbed_pixel_weights(*phi, error_of(R"({"shift_y": 1, "shift_x": -2})"), 4, 6, 8, 8, {});
   CHECK(same_weights(shifted, phi->pixel_weights(5, 4, 8, 8)));
   const auto half = perturbed_pixel_weights(*phi, error_of(R"({"shift_x": 0.5})"), 4, 6, 8, 8, {});
   const auto mean = 0.5 * (phi->pixel_weights(4, 6, 8, 8) + phi->pixel_weights(4, 7, 8, 8));
   CHECK(same_weights(half, mean));
   // A code the same at every pixel does not move.
   const auto asp = coded_by("asp:2");
-  CHECK(same_weights(perturbed_pixel_weights(*asp, error_of(R"({"shift_x": 0.5, "period": 0.02})"), 0, 0,
-                                      4, 4, {}),
-              asp->pixel_weights(0, 0, 4, 4)));
+  CHECK(same_weights(perturbed_pixel_weights(*asp, error_of(R"({"shift_x": 0.5, "period": 0.02})"),
+                                             0, 0, 4, 4, {}),
+                     asp->pixel_weights(0, 0, 4, 4)));
 }
 
 TEST_CASE("a period error drifts the code across the sensor", "[optics][calibration]") {
   const auto phi = coded_by("mask:2");
   const int64_t t = phi->period();
   // 1 + 1/t: pixel y reads the code at y + y/t, a whole pixel further every t pixels.
-  const auto error = error_of(("{\"period\": " + std::to_string(1.0 / static_cast<double>(t)) + "}").c_str());
+  const auto error =
+      error_of(("{\"period\": " + std::to_string(1.0 / static_cast<double>(t)) + "}").c_str());
   const auto weights = perturbed_pixel_weights(*phi, error, 0, 0, 2 * t, 2 * t, {});
   for (int64_t y : {int64_t{0}, t}) {
     const int64_t code = y + y / t;
-    CHECK(same_weights(weights.select(3, y).select(3, 0), phi->pixel_weights(code, 0, 1, 1).select(3, 0).select(3, 0), 1e-5));
+    CHECK(same_weights(weights.select(3, y).select(3, 0),
+                       phi->pixel_weights(code, 0, 1, 1).select(3, 0).select(3, 0), 1e-5));
   }
 }
 
-TEST_CASE("an angular shift displaces the response by views, held at the edge", "[optics][calibration]") {
+TEST_CASE("an angular shift displaces the response by views, held at the edge",
+          "[optics][calibration]") {
   const auto phi = coded_by("asp:2");
   const auto nominal = phi->pixel_weights(0, 0, 1, 1);  // (N, U, V, 1, 1)
-  const auto shifted = perturbed_pixel_weights(*phi, error_of(R"({"angular_shift_u": 1})"), 0, 0, 1, 1, {});
+  const auto shifted =
+      perturbed_pixel_weights(*phi, error_of(R"({"angular_shift_u": 1})"), 0, 0, 1, 1, {});
   CHECK(same_weights(shifted.slice(1, 0, 4), nominal.slice(1, 1, 5)));
   CHECK(same_weights(shifted.select(1, 4), nominal.select(1, 4)));
-  const auto half = perturbed_pixel_weights(*phi, error_of(R"({"angular_shift_v": -0.5})"), 0, 0, 1, 1, {});
+  const auto half =
+      perturbed_pixel_weights(*phi, error_of(R"({"angular_shift_v": -0.5})"), 0, 0, 1, 1, {});
   CHECK(same_weights(half.select(2, 2), 0.5 * (nominal.select(2, 1) + nominal.select(2, 2))));
   CHECK(same_weights(half.select(2, 0), nominal.select(2, 0)));
 }
 
-TEST_CASE("vignetting dims the corners by its share and spares the centre", "[optics][calibration]") {
+TEST_CASE("vignetting dims the corners by its share and spares the centre",
+          "[optics][calibration]") {
   const auto phi = coded_by("asp:2");
   const auto error = error_of(R"({"vignetting": 0.2})");
   const SensorPlacement sensor{0, 0, 101, 101};
@@ -117,6 +126,7 @@ TEST_CASE("calibration errors refuse bad values and non-local codes", "[optics][
   CHECK_THROWS_WITH(error_of(R"({"depth": -1})"), Catch::Contains("depth"));
   CHECK_THROWS_WITH(error_of(R"({"dpeth": 0.1})"), Catch::Contains("dpeth"));
   const auto random = coded_by("random:2");
-  CHECK_THROWS_AS(perturbed_forward(*random, error_of(R"({"depth": 0.1})"), torch::rand({5, 5, 9, 9})),
-                  lfnet::ConfigError);
+  CHECK_THROWS_AS(
+      perturbed_forward(*random, error_of(R"({"depth": 0.1})"), torch::rand({5, 5, 9, 9})),
+      lfnet::ConfigError);
 }

@@ -321,8 +321,8 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
       std::vector<torch::Tensor> own;
       own.reserve(b);
       for (int64_t i = 0; i < b; ++i) {
-        own.push_back(optics::perturbed_pixel_weights(phi_, d.calibration[i], d.y0[i], d.x0[i], h, w,
-                                                        d.placement[i]));
+        own.push_back(optics::perturbed_pixel_weights(phi_, d.calibration[i], d.y0[i], d.x0[i], h,
+                                                      w, d.placement[i]));
       }
       weights = torch::stack(own);
     }

@@ -51,7 +51,8 @@ void CalibrationRanges::validate() const {
   check(shift >= 0 && std::isfinite(shift), "shift must be >= 0");
   check(period >= 0 && period < 0.5, "period must lie in [0, 0.5)");
   check(vignetting >= 0 && vignetting < 1, "vignetting must lie in [0, 1)");
-  check(vignetting_sensor >= 1 && std::isfinite(vignetting_sensor), "vignetting_sensor must be >= 1");
+  check(vignetting_sensor >= 1 && std::isfinite(vignetting_sensor),
+        "vignetting_sensor must be >= 1");
 }
 
 namespace {
@@ -77,7 +78,8 @@ torch::Tensor interpolate(const torch::Tensor& x, int64_t dim, const std::vector
   std::vector<int64_t> shape(x.dim(), 1);
   shape[dim] = static_cast<int64_t>(at.size());
   auto a = torch::tensor(frac, torch::kFloat64).to(x.scalar_type()).reshape(shape);
-  return x.index_select(dim, torch::tensor(lo)) * (1 - a) + x.index_select(dim, torch::tensor(hi)) * a;
+  return x.index_select(dim, torch::tensor(lo)) * (1 - a) +
+         x.index_select(dim, torch::tensor(hi)) * a;
 }
 
 }  // namespace
@@ -135,8 +137,8 @@ torch::Tensor perturbed_pixel_weights(const Phi& phi, const CalibrationError& er
 torch::Tensor perturbed_forward(const Phi& phi, const CalibrationError& error,
                                 const torch::Tensor& lf) {
   if (error.empty()) return phi.forward(lf);
-  LFNET_CHECK_AS(ConfigError, lf.dim() >= 4 && lf.size(-4) == phi.rows() &&
-                                  lf.size(-3) == phi.cols(),
+  LFNET_CHECK_AS(ConfigError,
+                 lf.dim() >= 4 && lf.size(-4) == phi.rows() && lf.size(-3) == phi.cols(),
                  "light field of shape ", lf.sizes(), " does not match Phi '", phi.spec().label(),
                  "' (", phi.rows(), " x ", phi.cols(), " views)");
   const int64_t height = lf.size(-2), width = lf.size(-1);
@@ -150,7 +152,7 @@ torch::Tensor perturbed_forward(const Phi& phi, const CalibrationError& error,
     const auto weights =
         perturbed_pixel_weights(phi, error, r0, 0, r1 - r0, width, at, lf.scalar_type());
     const auto part = lf.slice(-2, r0, r1).unsqueeze(-5);  // (..., 1, U, V, rows, W)
-    rows.push_back((part * weights).sum({-4, -3}));       // (..., N, rows, W)
+    rows.push_back((part * weights).sum({-4, -3}));        // (..., N, rows, W)
   }
   return torch::cat(rows, -2);
 }

@@ -199,9 +199,9 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   }
   optics::CalibrationError camera_error;  // read before any work
   if (!a.camera_error.empty()) {
-    camera_error = optics::CalibrationError::from_json(
-        read_json_argument(a.camera_error, "--camera-error"),
-        json_argument_source(a.camera_error, "--camera-error"));
+    camera_error =
+        optics::CalibrationError::from_json(read_json_argument(a.camera_error, "--camera-error"),
+                                            json_argument_source(a.camera_error, "--camera-error"));
     LFNET_CHECK_AS(ConfigError, camera_error.empty() || a.mode == optics::SimulationMode::kSensor,
                    "--camera-error is simulated in sensor mode only");
   }

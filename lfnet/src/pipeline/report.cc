@@ -79,6 +79,16 @@ std::string setting(const nlohmann::json& r, const std::string& key) {
   if (key == "light_field") return r.value("light_field", "");
   if (key == "scale") return r.value("scale", "");
   if (key == "variant") return r.value("variant", "");
+  if (key == "camera_error") {
+    // The fields of the camera's error that are not 0 ("" for a camera that is its Phi).
+    std::string text;
+    if (!r.contains("camera_error")) return text;
+    for (const auto& [field, value] : r["camera_error"].items()) {
+      if (!value.is_number() || value.get<double>() == 0) continue;
+      text += (text.empty() ? "" : ", ") + field + " " + fmt("%+g", value.get<double>());
+    }
+    return text;
+  }
   return "";
 }
 
@@ -89,8 +99,8 @@ double as_number(const std::string& text) {
   return end == text.c_str() ? INFINITY : v;
 }
 
-const std::vector<std::string> kSettings = {"light_field", "variant", "phi",  "n",
-                                            "noise",       "stride",  "mode", "method"};
+const std::vector<std::string> kSettings = {"light_field",  "variant", "phi",  "n",     "noise",
+                                            "camera_error", "stride",  "mode", "method"};
 
 // The paper's own test scene, MIT "Dragons and Bunnies" at four apertures (docs/results.md,
 // "The paper's scene"): the paper's figures are compared on it alone, at each aperture.
@@ -255,26 +265,54 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   bool has_estimate = false;  // noise-blind records: the sigma the method was told
   for (const auto& r : rows) has_training |= r.contains("training_seconds");
   for (const auto& r : rows) has_estimate |= r.contains("noise_sigma_estimated");
+  // Records of a camera whose Phi is off: what the error costs against the same record (every
+  // other setting equal) of the nominal camera.
+  const bool has_cost = std::find(columns.begin(), columns.end(), "camera_error") != columns.end();
+  auto nominal_psnr = [&](const nlohmann::json& r) {
+    for (const auto& other : rows) {
+      if (!setting(other, "camera_error").empty()) continue;
+      bool same = true;
+      for (const auto& k : kSettings) {
+        if (k != "camera_error" && setting(other, k) != setting(r, k)) same = false;
+      }
+      if (same) return number(other, "psnr_db");
+    }
+    return static_cast<double>(NAN);
+  };
   std::ostringstream md;
   md << "|";
-  for (const auto& c : columns)
-    md << " " << (c == "n" ? "N" : c == "light_field" ? "light field" : c) << " |";
+  for (const auto& c : columns) {
+    md << " "
+       << (c == "n"              ? "N"
+           : c == "light_field"  ? "light field"
+           : c == "camera_error" ? "camera error"
+                                 : c)
+       << " |";
+  }
   md << " PSNR dB | SSIM | seconds |";
+  if (has_cost) md << " cost dB |";
   if (has_estimate) md << " estimated sigma |";
   if (has_training) md << " training s |";
   if (has_paper) md << " paper PSNR dB | paper seconds |";
   md << "\n|";
-  const size_t n_columns =
-      columns.size() + 3 + (has_estimate ? 1 : 0) + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
+  const size_t n_columns = columns.size() + 3 + (has_cost ? 1 : 0) + (has_estimate ? 1 : 0) +
+                           (has_training ? 1 : 0) + (has_paper ? 2 : 0);
   for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
   md << "\n";
   for (const auto& r : rows) {
     md << "|";
-    for (const auto& c : columns) md << " " << setting(r, c) << " |";
+    for (const auto& c : columns) {
+      const auto value = setting(r, c);
+      md << " " << (c == "camera_error" && value.empty() ? "none" : value) << " |";
+    }
     const double psnr = number(r, "psnr_db", INFINITY), ssim = number(r, "ssim"),
                  sec = number(r, "seconds");
     md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
        << " | " << fmt("%.2f", sec) << " |";
+    if (has_cost) {
+      const double nominal = setting(r, "camera_error").empty() ? NAN : nominal_psnr(r);
+      md << " " << (std::isfinite(nominal) ? fmt("%.2f", nominal - psnr) : "") << " |";
+    }
     if (has_estimate) {
       md << " "
          << (r.contains("noise_sigma_estimated") ? fmt("%.4f", number(r, "noise_sigma_estimated"))

@@ -51,17 +51,16 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
       {"source", r.source},
   };
   const int64_t n = phi.measurements();
-  LFNET_CHECK_AS(ConfigError,
-                 r.camera_error.empty() || r.mode == optics::SimulationMode::kSensor,
+  LFNET_CHECK_AS(ConfigError, r.camera_error.empty() || r.mode == optics::SimulationMode::kSensor,
                  "a camera error is simulated in sensor mode only");
   if (!r.camera_error.empty()) meta["camera_error"] = r.camera_error.to_json();
   Stopwatch clock;
   if (r.mode == optics::SimulationMode::kSensor) {
-    auto sensor = r.camera_error.empty()  // (C, N, H, W)
-                      ? optics::simulate_sensor(phi, lf.data(), r.effects, r.seed)
-                      : optics::apply_sensor_effects(
-                            optics::perturbed_forward(phi, r.camera_error, lf.data()), r.effects,
-                            r.seed);
+    auto sensor =
+        r.camera_error.empty()  // (C, N, H, W)
+            ? optics::simulate_sensor(phi, lf.data(), r.effects, r.seed)
+            : optics::apply_sensor_effects(
+                  optics::perturbed_forward(phi, r.camera_error, lf.data()), r.effects, r.seed);
     meta["seconds"] = clock.seconds();
     // Shot and read noise included: what a noise-aware net reads (optics/sensor.h).
     meta["noise_sigma"] = r.effects.equivalent_sigma(sensor.mean().item<double>());

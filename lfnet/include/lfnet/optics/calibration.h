@@ -35,8 +35,8 @@ struct CalibrationError {
   double angular_shift_v = 0;  // ... and along V
   double shift_y = 0;          // the code displaced against the pixels, in pixels
   double shift_x = 0;
-  double period = 0;       // relative error of the code's period (0.01: 1 % longer)
-  double vignetting = 0;   // share of the signal lost at the sensor's corners, in [0, 1)
+  double period = 0;      // relative error of the code's period (0.01: 1 % longer)
+  double vignetting = 0;  // share of the signal lost at the sensor's corners, in [0, 1)
 
   template <typename Fields>
   void fields(Fields& f) {
