@@ -32,7 +32,7 @@ if(LFNET_BUILD_APPS)
   find_package(OpenImageIO REQUIRED)
   find_package(spdlog REQUIRED)
   find_package(CLI11 REQUIRED)
-  find_package(OpenCV REQUIRED COMPONENTS core photo)
+  find_package(OpenCV REQUIRED COMPONENTS core photo imgproc)  # imgproc: tests' reference demosaic
 endif()
 
 if(LFNET_BUILD_TESTS)

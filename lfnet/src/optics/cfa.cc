@@ -1,0 +1,159 @@
+#include "lfnet/optics/cfa.h"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <vector>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+
+namespace lfnet::optics {
+
+namespace {
+constexpr const char* kBayerPatterns[] = {"RGGB", "BGGR", "GRBG", "GBRG"};
+constexpr int64_t kMaxPeriod = 16;
+}  // namespace
+
+ColourFilterArray ColourFilterArray::bayer(const std::string& pattern) {
+  const bool known = std::find(std::begin(kBayerPatterns), std::end(kBayerPatterns), pattern) !=
+                     std::end(kBayerPatterns);
+  LFNET_CHECK_AS(ConfigError, known, "unknown Bayer pattern '", pattern,
+                 "' (known: RGGB, BGGR, GRBG, GBRG; or a JSON file with a \"response\")");
+  ColourFilterArray cfa;
+  cfa.pattern_ = pattern;
+  cfa.response_ = torch::zeros({3, 2, 2});
+  for (int64_t i = 0; i < 4; ++i) {
+    const char c = pattern[static_cast<size_t>(i)];
+    const int64_t colour = c == 'R' ? 0 : c == 'G' ? 1 : 2;
+    cfa.response_[colour][i / 2][i % 2] = 1.0f;
+  }
+  return cfa;
+}
+
+ColourFilterArray ColourFilterArray::from_json(const nlohmann::json& j, const std::string& path) {
+  LFNET_CHECK_AS(ConfigError, j.is_object() && (j.contains("pattern") != j.contains("response")),
+                 path, ": a colour filter array is {\"pattern\": \"RGGB\"} or {\"response\": ",
+                 "[[[r, g, b], ...], ...]}");
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    LFNET_CHECK_AS(ConfigError, it.key() == "pattern" || it.key() == "response", path, ".",
+                   it.key(), ": unknown key (known: pattern, response)");
+  }
+  if (j.contains("pattern")) {
+    LFNET_CHECK_AS(ConfigError, j["pattern"].is_string(), path, ".pattern: expected a string");
+    const auto p = j["pattern"].get<std::string>();
+    if (p != "custom") return bayer(p);
+    LFNET_CHECK_AS(ConfigError, false, path, ".pattern: \"custom\" needs its \"response\"");
+  }
+  const auto& rows = j["response"];
+  const auto n = static_cast<int64_t>(rows.is_array() ? rows.size() : 0);
+  LFNET_CHECK_AS(ConfigError, n >= 1 && n <= kMaxPeriod, path,
+                 ".response: expected 1 to 16 rows of pixels");
+  auto response = torch::zeros({3, n, n});
+  for (int64_t y = 0; y < n; ++y) {
+    const auto& row = rows[static_cast<size_t>(y)];
+    LFNET_CHECK_AS(ConfigError, row.is_array() && static_cast<int64_t>(row.size()) == n, path,
+                   ".response[", y, "]: expected ", n, " pixels (the tile is square)");
+    for (int64_t x = 0; x < n; ++x) {
+      const auto& rgb = row[static_cast<size_t>(x)];
+      LFNET_CHECK_AS(ConfigError, rgb.is_array() && rgb.size() == 3, path, ".response[", y, "][",
+                     x, "]: expected [r, g, b]");
+      double sum = 0;
+      for (int64_t c = 0; c < 3; ++c) {
+        const auto& v = rgb[static_cast<size_t>(c)];
+        LFNET_CHECK_AS(ConfigError, v.is_number() && std::isfinite(v.get<double>()) &&
+                                        v.get<double>() >= 0,
+                       path, ".response[", y, "][", x, "]: weights must be finite and >= 0");
+        response[c][y][x] = v.get<float>();
+        sum += v.get<double>();
+      }
+      LFNET_CHECK_AS(ConfigError, sum > 0, path, ".response[", y, "][", x,
+                     "]: a pixel must see some colour");
+    }
+  }
+  ColourFilterArray cfa;
+  cfa.pattern_ = "custom";
+  cfa.response_ = response;
+  return cfa;
+}
+
+ColourFilterArray ColourFilterArray::parse(const std::string& text) {
+  const bool named = std::find(std::begin(kBayerPatterns), std::end(kBayerPatterns), text) !=
+                     std::end(kBayerPatterns);
+  if (named) return bayer(text);
+  LFNET_CHECK_AS(ConfigError, std::ifstream(text).good(), "--cfa ", text,
+                 ": neither a Bayer pattern (RGGB, BGGR, GRBG, GBRG) nor a readable JSON file");
+  return from_json(read_json_file(text), text + ":$");
+}
+
+nlohmann::json ColourFilterArray::to_json() const {
+  if (pattern_ != "custom") return {{"pattern", pattern_}};
+  nlohmann::json rows = nlohmann::json::array();
+  const auto r = response_.accessor<float, 3>();
+  for (int64_t y = 0; y < period(); ++y) {
+    nlohmann::json row = nlohmann::json::array();
+    for (int64_t x = 0; x < period(); ++x) row.push_back({r[0][y][x], r[1][y][x], r[2][y][x]});
+    rows.push_back(row);
+  }
+  return {{"response", rows}};
+}
+
+bool ColourFilterArray::one_colour_per_pixel() const {
+  return ((response_ > 0).sum(0) == 1).all().item<bool>();
+}
+
+torch::Tensor ColourFilterArray::response_image(int64_t height, int64_t width) const {
+  const int64_t p = period();
+  return response_.repeat({1, (height + p - 1) / p, (width + p - 1) / p})
+      .slice(1, 0, height)
+      .slice(2, 0, width)
+      .contiguous();
+}
+
+torch::Tensor mosaic(const torch::Tensor& colour_sensor, const ColourFilterArray& cfa) {
+  LFNET_CHECK_AS(ConfigError, colour_sensor.dim() == 4 && colour_sensor.size(0) == 3,
+                 "a colour filter array needs the sensor images of three colours (3, N, H, W), "
+                 "got ",
+                 colour_sensor.sizes());
+  const auto r = cfa.response_image(colour_sensor.size(2), colour_sensor.size(3))
+                     .to(colour_sensor.scalar_type())
+                     .unsqueeze(1);  // (3, 1, H, W)
+  return (colour_sensor * r).sum(0, /*keepdim=*/true);
+}
+
+torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa) {
+  LFNET_CHECK_AS(ConfigError, cfa.one_colour_per_pixel(),
+                 "demosaicing needs a colour filter array whose pixels each see one colour");
+  LFNET_CHECK_AS(ConfigError, mosaicked.dim() >= 2, "demosaic: expected (..., H, W), got ",
+                 mosaicked.sizes());
+  const int64_t h = mosaicked.size(-2), w = mosaicked.size(-1);
+  LFNET_CHECK_AS(ConfigError, h >= 2 && w >= 2, "demosaic: an image of ", h, " x ", w,
+                 " pixels is too small");
+  const auto options = mosaicked.options();
+  const auto response = cfa.response_image(h, w).to(options);
+  // Each pixel's value in its own colour: divided by its filter's weight (1 for Bayer).
+  const auto images = mosaicked.reshape({-1, 1, h, w}) / response.sum(0).view({1, 1, h, w});
+  const auto kernel =
+      torch::tensor({1.0, 2.0, 1.0, 2.0, 4.0, 2.0, 1.0, 2.0, 1.0}, options).view({1, 1, 3, 3});
+  const auto reflect = [](const torch::Tensor& x) {
+    return torch::nn::functional::pad(
+        x, torch::nn::functional::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReflect));
+  };
+  std::vector<torch::Tensor> colours;
+  for (int64_t c = 0; c < 3; ++c) {
+    const auto mask = (response[c] > 0).to(options).view({1, 1, h, w});
+    const auto weight = torch::conv2d(reflect(mask), kernel);
+    LFNET_CHECK_AS(ConfigError, (weight > 0).all().item<bool>(),
+                   "demosaic: the colour filter array leaves pixels with no ", "RGB"[c],
+                   " pixel among their eight neighbours");
+    const auto mean = torch::conv2d(reflect(images * mask), kernel) / weight;
+    colours.push_back(torch::where(mask > 0, images, mean));
+  }
+  auto shape = mosaicked.sizes().vec();
+  shape.insert(shape.begin(), 3);
+  return torch::stack(colours).reshape(shape);
+}
+
+}  // namespace lfnet::optics
