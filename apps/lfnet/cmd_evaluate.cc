@@ -97,6 +97,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--estimate-noise", q.estimate_noise,
                 "noise-aware models are told the noise estimated from the sensor image, not the "
                 "simulation's: a camera whose noise is unknown (docs/acquisition.md)");
+  cmd->add_option("--cfa", q.cfa,
+                  "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
+                  "a JSON file; scores colour and luma (docs/acquisition.md)");
   cmd->add_option("--camera-error", q.camera_error,
                   "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
                   "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include "command.h"
 #include "lfnet/core/error.h"
@@ -12,6 +13,7 @@
 #include "lfnet/core/output.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/optics/calibration.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/figures.h"
 #include "lfnet/pipeline/simulate.h"
@@ -29,6 +31,7 @@ struct SimulateArgs {
   std::string out;
   std::string effects;       // EFFECTS.json
   std::string camera_error;  // JSON or a file (optics/calibration.h)
+  std::string cfa;           // a Bayer pattern or a JSON file (optics/cfa.h); implies --color
   int64_t stride = 5;
   int64_t patch = 9;
   bool force = false;
@@ -36,7 +39,13 @@ struct SimulateArgs {
   std::string plot_weights;  // folder for the angular-response PNG
 };
 
-void run_simulate(const SimulateArgs& args) {
+void run_simulate(const SimulateArgs& given) {
+  SimulateArgs args = given;
+  std::optional<optics::ColourFilterArray> cfa;  // read before any work
+  if (!args.cfa.empty()) {
+    cfa = optics::ColourFilterArray::parse(args.cfa);
+    args.source.color = true;
+  }
   const auto& source = args.source;
   const auto mode = args.mode;
   LFNET_CHECK_AS(ConfigError, args.patch >= 1 && args.stride >= 1,
@@ -95,6 +104,7 @@ void run_simulate(const SimulateArgs& args) {
   request.phi = phi.get();
   request.effects = pipeline::simulation_effects(args.effects, args.noise, input, source.scene);
   request.camera_error = camera_error;
+  request.cfa = cfa;
   request.mode = mode;
   request.seed = args.seed;
   request.patch = args.patch;
@@ -138,6 +148,10 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_flag("--color", args->source.color,
                 "simulate every colour channel (default: grey luma)");
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
+  cmd->add_option("--cfa", args->cfa,
+                  "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG "
+                  "or a JSON file of per-pixel colour responses (implies --color; "
+                  "docs/acquisition.md)");
   cmd->add_option("--camera-error", args->camera_error,
                   "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "
                   "'{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "

@@ -204,3 +204,68 @@ TEST_CASE("simulate and evaluate take a camera whose Phi is off", "[app][simulat
                     out) != 0);
   CHECK_FALSE(fs::exists(tmp / "pp"));
 }
+
+TEST_CASE("a colour filter array: one sensor image, reconstructed and scored in colour",
+          "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  const auto truth = write_test_light_field(tmp / "lf");  // 3 colours, 7 x 7 views
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 1 --log-level warn ";
+  REQUIRE(run_command(
+              simulate("--lf " + (tmp / "lf") + " --phi asp:2 --cfa GRBG --out " + (tmp / "acq")),
+              out) == 0);
+  const auto acq = lfnet::io::read_acquisition(tmp / "acq");
+  REQUIRE(acq.sensor.sizes() == torch::IntArrayRef({1, 2, 20, 24}));  // one file of N channels
+  CHECK(acq.meta["cfa"]["pattern"] == "GRBG");
+  CHECK(acq.meta["light_field"]["channels"] == 3);
+  CHECK(fs::exists(tmp / "acq/sensor.tif"));
+  CHECK_FALSE(fs::exists(tmp / "acq/sensor_r.tif"));
+  // Each pixel measures its own colour of the central views: green at (0, 0), red at (0, 1).
+  const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
+  const auto central = truth.window({1, 6}, {1, 6});
+  const auto colour = phi->forward(central.data());  // (3, N, H, W)
+  lfnet::test::require_close(acq.sensor[0].select(1, 0).select(1, 0),
+                             colour[1].select(1, 0).select(1, 0), 1e-5, 1e-5);
+  lfnet::test::require_close(acq.sensor[0].select(1, 0).select(1, 1),
+                             colour[0].select(1, 0).select(1, 1), 1e-5, 1e-5);
+
+  // pinv reconstructs the mosaicked light field and demosaics it: a colour light field.
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") + " --out " +
+                          (tmp / "rec"),
+                      out) == 0);
+  const auto rec = lfnet::io::read_light_field(tmp / "rec");
+  CHECK(rec.channels() == 3);
+  const auto record = lfnet::read_json_file(tmp / "rec/reconstruction.json");
+  CHECK(record["cfa"]["pattern"] == "GRBG");
+  // A grey model refuses it.
+  CHECK(run_command(lfnet + "reconstruct --method net --model " +
+                        (std::string(LFNET_SOURCE_DIR) + "/models/lfnet-asp-n2.ckpt") +
+                        " --sensor " + (tmp / "acq") + " --out " + (tmp / "net"),
+                    out) != 0);
+  CHECK(out.find("colour filter array") != std::string::npos);
+
+  // evaluate --cfa scores colour and luma; the grey path stays as it was.
+  const std::string evaluate = lfnet + "evaluate --lf " + (tmp / "lf") + " --phi asp:2 --stride 3";
+  REQUIRE(run_command(evaluate + " --method pinv --cfa GRBG --json " + (tmp / "c.json"), out) == 0);
+  REQUIRE(run_command(evaluate + " --method no-parallax --cfa GRBG --json " + (tmp / "n.json"),
+                      out) == 0);
+  const auto c = lfnet::read_json_file(tmp / "c.json");
+  const auto n = lfnet::read_json_file(tmp / "n.json");
+  CHECK(c["cfa"]["pattern"] == "GRBG");
+  CHECK(c.contains("luma_psnr_db"));
+  CHECK(n.contains("luma_psnr_db"));
+  CHECK(c["psnr_db"].get<double>() != Approx(c["luma_psnr_db"].get<double>()).margin(1e-6));
+  CHECK(run_command(evaluate + " --method pinv --cfa GRBG --mode per_patch", out) != 0);
+  CHECK(out.find("sensor mode") != std::string::npos);
+  CHECK(run_command(evaluate + " --method pinv --cfa RGBG", out) != 0);
+  CHECK(out.find("RGGB") != std::string::npos);
+  // batch evaluates light-field folders behind the same array.
+  fs::create_directories(tmp / "in");
+  fs::rename(tmp / "lf", tmp / "in/lf");
+  REQUIRE(run_command(lfnet + "batch --input " + (tmp / "in") + " --out " + (tmp / "batch") +
+                          " --methods pinv --phi asp:2 --stride 3 --cfa GRBG",
+                      out) == 0);
+  const auto b = lfnet::read_json_file(tmp / "batch/records/lf__pinv.json");
+  CHECK(b["cfa"]["pattern"] == "GRBG");
+  CHECK(b["psnr_db"].get<double>() == Approx(c["psnr_db"].get<double>()).margin(1e-9));
+}

@@ -19,7 +19,8 @@ TEST_CASE("bilinear demosaicing is OpenCV's inside the image", "[cv][cfa]") {
   for (const auto& [name, code] : patterns) {
     INFO(name);
     cv::Mat bayer;
-    cv::Mat(static_cast<int>(h), static_cast<int>(w), CV_32SC1, raw.data_ptr()).convertTo(bayer, CV_16U);
+    cv::Mat(static_cast<int>(h), static_cast<int>(w), CV_32SC1, raw.data_ptr())
+        .convertTo(bayer, CV_16U);
     cv::Mat rgb, rgb64;
     cv::demosaicing(bayer, rgb, code);
     REQUIRE(rgb.type() == CV_16UC3);

@@ -46,7 +46,7 @@ TEST_CASE("bilinear demosaicing is exact for flat colours and linear ramps", "[o
     const auto xx = torch::arange(w, torch::kFloat64).view({1, w}).expand({h, w});
     // Three linear images, one per colour, for two views.
     auto colour = torch::stack({0.1 + 0.02 * yy + 0.01 * xx, 0.5 - 0.01 * xx, 0.3 + 0.03 * yy});
-    colour = torch::stack({colour, colour * 0.5}, 1);                  // (3, 2, H, W)
+    colour = torch::stack({colour, colour * 0.5}, 1);  // (3, 2, H, W)
     const auto raw = (colour * cfa.response_image(h, w).to(torch::kFloat64).unsqueeze(1)).sum(0);
     const auto rgb = demosaic(raw, cfa);  // (3, 2, H, W)
     REQUIRE(rgb.sizes() == colour.sizes());
@@ -70,14 +70,16 @@ TEST_CASE("a custom colour response comes from JSON and is checked", "[optics][c
   const auto raw = (flat * cfa.response_image(6, 6)).sum(0);
   CHECK((demosaic(raw, cfa) - flat).abs().max().item<float>() < 1e-6f);
   // A pixel that sees two colours cannot be demosaiced; bad tiles are refused with their path.
-  const auto mixed = ColourFilterArray::from_json(
-      nlohmann::json::parse(R"({"response": [[[0.5, 0.5, 0]]]})"));
+  const auto mixed =
+      ColourFilterArray::from_json(nlohmann::json::parse(R"({"response": [[[0.5, 0.5, 0]]]})"));
   CHECK_FALSE(mixed.one_colour_per_pixel());
   CHECK_THROWS_WITH(demosaic(torch::rand({4, 4}), mixed), Catch::Contains("one colour"));
-  CHECK_THROWS_WITH(ColourFilterArray::from_json(nlohmann::json::parse(R"({"response": [[[0, 0, 0]]]})")),
-                    Catch::Contains("$.response[0][0]"));
-  CHECK_THROWS_WITH(ColourFilterArray::from_json(nlohmann::json::parse(R"({"pattern": "RGGB", "x": 1})")),
-                    Catch::Contains("x"));
+  CHECK_THROWS_WITH(
+      ColourFilterArray::from_json(nlohmann::json::parse(R"({"response": [[[0, 0, 0]]]})")),
+      Catch::Contains("$.response[0][0]"));
+  CHECK_THROWS_WITH(
+      ColourFilterArray::from_json(nlohmann::json::parse(R"({"pattern": "RGGB", "x": 1})")),
+      Catch::Contains("x"));
   // Red pixels only every third column: some pixels have no red neighbour.
   const auto sparse = ColourFilterArray::from_json(nlohmann::json::parse(
       R"({"response": [[[1, 0, 0], [0, 1, 0], [0, 1, 0]], [[0, 1, 0], [0, 0, 1], [0, 0, 1]], [[0, 1, 0], [0, 0, 1], [0, 0, 1]]]})"));

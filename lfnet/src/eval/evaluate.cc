@@ -74,9 +74,57 @@ nlohmann::json score(const LightField& estimate, const LightField& truth) {
           {"per_view_psnr_db", table}};
 }
 
+namespace {
+
+// Colour and luma scores of a colour reconstruction.
+nlohmann::json colour_score(const LightField& estimate, const LightField& truth) {
+  auto out = score(estimate, truth);
+  out["luma_psnr_db"] = finite_or_null(psnr(estimate.grey(), truth.grey()));
+  return out;
+}
+
+// evaluate() behind a colour filter array: the three colours' sensor images mosaicked into one
+// (then the sensor effects), the mosaicked light field reconstructed, its views demosaiced.
+EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const std::string& method,
+                        const recon::PatchSolver& solver, const EvalOptions& options,
+                        const recon::ProgressCallback& progress, const recon::ImageSolver& image) {
+  const auto& cfa = *options.cfa;
+  LFNET_CHECK_AS(ConfigError, truth.channels() == 3,
+                 "a colour filter array needs a colour light field, got ", truth.channels(),
+                 " channel(s)");
+  LFNET_CHECK_AS(ConfigError, options.mode == optics::SimulationMode::kSensor,
+                 "a colour filter array is simulated in sensor mode only");
+  LFNET_CHECK_AS(ConfigError, !image && solver, "method '", method,
+                 "' reconstructs grey sensor images; behind a colour filter array use pinv, "
+                 "adjoint or no-parallax");
+  const auto& ro = options.reconstruct;
+  ro.validate();
+  const auto colour = options.camera_error.empty()
+                          ? phi.forward(truth.data())
+                          : optics::perturbed_forward(phi, options.camera_error, truth.data());
+  const auto sensor =
+      optics::apply_sensor_effects(optics::mosaic(colour, cfa)[0], options.effects, options.seed);
+  const double signal = sensor.mean().item<double>();
+  Stopwatch clock;  // the reconstruction and the demosaicing, not the simulation
+  const auto mosaicked = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
+  auto estimate = optics::demosaic(mosaicked[0], cfa);  // (3, U, V, H, W)
+  if (ro.clamp) estimate.clamp_(0.0, 1.0);
+  const double seconds = clock.seconds();
+  const PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);
+  auto record = base_record(phi, method, options, grid.size(), seconds);
+  add_equivalent_sigma(record, options, signal);
+  record["cfa"] = cfa.to_json();
+  if (!options.camera_error.empty()) record["camera_error"] = options.camera_error.to_json();
+  record.update(colour_score(LightField(estimate), truth));
+  return {estimate, record};
+}
+
+}  // namespace
+
 EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::string& method,
                     const recon::PatchSolver& solver, const EvalOptions& options,
                     const recon::ProgressCallback& progress, const recon::ImageSolver& image) {
+  if (options.cfa) return evaluate_cfa(truth, phi, method, solver, options, progress, image);
   LFNET_CHECK_AS(ConfigError, truth.channels() == 1, "evaluation takes a grey light field");
   const auto& ro = options.reconstruct;
   ro.validate();
@@ -136,6 +184,12 @@ EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
   auto est = truth.angular_mean();
   const double seconds = clock.seconds();
   auto record = base_record(phi, "no-parallax", options, 0, seconds);
+  if (options.cfa) {
+    // The truth's own colours: a conventional colour camera, demosaicing aside.
+    record["cfa"] = options.cfa->to_json();
+    record.update(colour_score(est, truth));
+    return {est.data(), record};
+  }
   if (options.effects.shot || options.effects.read) {
     // The measurements' mean as the other methods see it, so that their records agree.
     double signal = 0;

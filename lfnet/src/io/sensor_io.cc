@@ -222,8 +222,12 @@ Acquisition read_acquisition(const std::string& dir) {
     const int64_t n = a.meta.at("phi").at("n").get<int64_t>();
     if (mode == "sensor") {
       const auto files = a.meta.at("sensor").at("files").get<std::vector<std::string>>();
-      LFNET_CHECK_AS(IoError, static_cast<int64_t>(files.size()) == c, sidecar, ": ", c,
-                     " colour channels but ", files.size(), " sensor files");
+      // A colour filter array puts every colour on one sensor: one file.
+      const int64_t expected = a.meta.contains("cfa") ? 1 : c;
+      LFNET_CHECK_AS(IoError, static_cast<int64_t>(files.size()) == expected, sidecar, ": ", c,
+                     " colour channels",
+                     a.meta.contains("cfa") ? " behind a colour filter array" : "", " but ",
+                     files.size(), " sensor files");
       std::vector<torch::Tensor> images;
       for (const auto& name : files) {
         const std::string path = (fs::path(dir) / name).string();

@@ -58,13 +58,13 @@ ColourFilterArray ColourFilterArray::from_json(const nlohmann::json& j, const st
                    ".response[", y, "]: expected ", n, " pixels (the tile is square)");
     for (int64_t x = 0; x < n; ++x) {
       const auto& rgb = row[static_cast<size_t>(x)];
-      LFNET_CHECK_AS(ConfigError, rgb.is_array() && rgb.size() == 3, path, ".response[", y, "][",
-                     x, "]: expected [r, g, b]");
+      LFNET_CHECK_AS(ConfigError, rgb.is_array() && rgb.size() == 3, path, ".response[", y, "][", x,
+                     "]: expected [r, g, b]");
       double sum = 0;
       for (int64_t c = 0; c < 3; ++c) {
         const auto& v = rgb[static_cast<size_t>(c)];
-        LFNET_CHECK_AS(ConfigError, v.is_number() && std::isfinite(v.get<double>()) &&
-                                        v.get<double>() >= 0,
+        LFNET_CHECK_AS(ConfigError,
+                       v.is_number() && std::isfinite(v.get<double>()) && v.get<double>() >= 0,
                        path, ".response[", y, "][", x, "]: weights must be finite and >= 0");
         response[c][y][x] = v.get<float>();
         sum += v.get<double>();

@@ -19,6 +19,7 @@
 #include "lfnet/core/text.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
@@ -225,14 +226,15 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.tile = a.tile;
     LightFieldSources sources;
     sources.light_fields = {item.path};
-    truths = load_sources(sources, phi->rows(), phi->cols());
+    truths = load_sources(sources, phi->rows(), phi->cols(), false, !a.cfa.empty());
   } catch (const std::exception& e) {
     for (const auto& method : methods) records.push_back(failed(method, e.what()));
     return records;
   }
   for (const auto& method : methods) {
     try {
-      const auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
+      auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
+      if (!a.cfa.empty()) o.cfa = optics::ColourFilterArray::parse(a.cfa);
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
       record["path"] = item.path;
@@ -283,6 +285,7 @@ nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::stri
           {"method_options", a.method_options},
           {"mode", optics::to_string(a.mode)},
           {"noise", a.noise},
+          {"cfa", a.cfa},
           {"seed", a.seed},
           {"stride", a.stride},
           {"window", a.window},
@@ -343,6 +346,13 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
     } catch (const ConfigError& e) {
       throw ConfigError(std::string("--methods: ") + e.what());
     }
+  }
+  if (!a.cfa.empty()) {
+    // Checked before any work; the items read it again (a name, or a small file).
+    const auto cfa = optics::ColourFilterArray::parse(a.cfa);
+    LFNET_CHECK_AS(ConfigError, cfa.one_colour_per_pixel(),
+                   "--cfa: only colour filter arrays whose pixels each see one colour are "
+                   "demosaiced");
   }
   // Checked before any work, and read once: the items take it inline, not from its file again.
   BatchOptions resolved = a;

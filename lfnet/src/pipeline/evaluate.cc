@@ -205,6 +205,18 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     LFNET_CHECK_AS(ConfigError, camera_error.empty() || a.mode == optics::SimulationMode::kSensor,
                    "--camera-error is simulated in sensor mode only");
   }
+  std::optional<optics::ColourFilterArray> cfa;
+  if (!a.cfa.empty()) {
+    cfa = optics::ColourFilterArray::parse(a.cfa);
+    LFNET_CHECK_AS(ConfigError, a.mode == optics::SimulationMode::kSensor,
+                   "--cfa is simulated in sensor mode only");
+    LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
+                   "' reconstructs grey sensor images; behind a colour filter array use pinv, "
+                   "adjoint or no-parallax");
+    LFNET_CHECK_AS(ConfigError, cfa->one_colour_per_pixel(),
+                   "--cfa: only colour filter arrays whose pixels each see one colour are "
+                   "demosaiced");
+  }
   parse_device(a.device);  // a clear error before any work
   MethodContext context;
   optics::PhiSpec spec;
@@ -250,12 +262,13 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
-  const auto truths = load_sources(sources, phi->rows(), phi->cols());
+  const auto truths = load_sources(sources, phi->rows(), phi->cols(), false, cfa.has_value());
 
   auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
   if (effects) o.effects = *effects;
   o.estimate_noise = a.estimate_noise;
   o.camera_error = camera_error;
+  o.cfa = cfa;
   EvaluateResult result;
   result.record =
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);

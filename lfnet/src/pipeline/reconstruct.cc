@@ -15,6 +15,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/io/viewer.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/noise_estimate.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -147,6 +148,20 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   LFNET_CHECK_AS(ConfigError, !a.match_mean || train_mean > 0,
                  "--match-mean needs a model that records its training measurement mean");
 
+  // A colour filter array: one sensor image whose pixels each measure one colour. Its
+  // reconstruction is a mosaicked light field, each view then demosaiced (bilinear).
+  std::optional<optics::ColourFilterArray> cfa;
+  if (acq.meta.contains("cfa")) {
+    cfa = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + "/sensor.json:$.cfa");
+    LFNET_CHECK_AS(ConfigError, acq.sensor.defined(),
+                   "a colour filter array's measurements must be a sensor image");
+    LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kNetwork, "method '", method,
+                   "' reconstructs grey sensor images with a grey model; ", a.sensor,
+                   " is the sensor image of a colour filter array: use --method pinv (then "
+                   "demosaiced)");
+    LFNET_CHECK_AS(ConfigError, cfa->one_colour_per_pixel(),
+                   "only colour filter arrays whose pixels each see one colour are demosaiced");
+  }
   const auto& lf_meta = acq.meta.at("light_field");
   const int64_t c = lf_meta.at("channels").get<int64_t>();
   const int64_t h = lf_meta.at("height").get<int64_t>(), w = lf_meta.at("width").get<int64_t>();
@@ -161,7 +176,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   Stopwatch clock;
   if (acq.sensor.defined()) {
     const int64_t per_channel = PatchGrid(h, w, o.patch_h, o.patch_w, o.stride).size();
-    for (int64_t ch = 0; ch < c; ++ch) {
+    const int64_t sensors = acq.sensor.size(0);  // 1 behind a colour filter array
+    for (int64_t ch = 0; ch < sensors; ++ch) {
       // --match-mean scales a copy; otherwise the sensor image is used as read.
       auto sensor = a.match_mean ? acq.sensor[ch].clone() : acq.sensor[ch];
       if (a.match_mean) scale = recon::match_mean(sensor, train_mean);
@@ -172,20 +188,21 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
           estimated.push_back(sigma);
         }
         channels.push_back(image(sensor, sigma));
-        if (progress) progress(ch + 1, c);  // whole images: one step a colour channel
+        if (progress) progress(ch + 1, sensors);  // whole images: one step a colour channel
         continue;
       }
       if (full) {
         channels.push_back(recon::reconstruct_sensor_fully_convolutional(
             model->net, method, *phi, sensor, o, a.tile > 0 ? a.tile : recon::kDefaultCnnTile));
-        if (progress) progress((ch + 1) * per_channel, c * per_channel);
+        if (progress) progress((ch + 1) * per_channel, sensors * per_channel);
         continue;
       }
       channels.push_back(
           recon::reconstruct_sensor(*phi, sensor, solver, o, [&](int64_t done, int64_t total) {
-            if (progress) progress(ch * per_channel + done, c * total);
+            if (progress) progress(ch * per_channel + done, sensors * total);
           }));
     }
+    if (cfa) channels = {optics::demosaic(channels[0][0], *cfa)};  // (3, U, V, H, W)
   } else {
     LFNET_CHECK_AS(ConfigError, !a.match_mean,
                    "--match-mean applies to sensor images, not to per_patch measurements");
@@ -236,6 +253,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"tile", a.tile},  // 0: the method's default
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
+  if (cfa) r.record["cfa"] = cfa->to_json();
   if (!options_used.empty()) r.record["method_options"] = options_used;
   if (noise_aware) r.record["noise_sigma"] = noise_told ? nlohmann::json(told_sigma) : estimated;
   if (!estimated.empty()) {

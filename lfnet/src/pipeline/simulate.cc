@@ -54,21 +54,27 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
   LFNET_CHECK_AS(ConfigError, r.camera_error.empty() || r.mode == optics::SimulationMode::kSensor,
                  "a camera error is simulated in sensor mode only");
   if (!r.camera_error.empty()) meta["camera_error"] = r.camera_error.to_json();
+  LFNET_CHECK_AS(ConfigError, !r.cfa || r.mode == optics::SimulationMode::kSensor,
+                 "a colour filter array is simulated in sensor mode only");
+  LFNET_CHECK_AS(ConfigError, !r.cfa || lf.channels() == 3,
+                 "a colour filter array needs a colour light field (--color), got ", lf.channels(),
+                 " channel(s)");
+  if (r.cfa) meta["cfa"] = r.cfa->to_json();
   Stopwatch clock;
   if (r.mode == optics::SimulationMode::kSensor) {
-    auto sensor =
-        r.camera_error.empty()  // (C, N, H, W)
-            ? optics::simulate_sensor(phi, lf.data(), r.effects, r.seed)
-            : optics::apply_sensor_effects(
-                  optics::perturbed_forward(phi, r.camera_error, lf.data()), r.effects, r.seed);
+    auto sensor = r.camera_error.empty()
+                      ? phi.forward(lf.data())  // (C, N, H, W)
+                      : optics::perturbed_forward(phi, r.camera_error, lf.data());
+    if (r.cfa) sensor = optics::mosaic(sensor, *r.cfa);  // (1, N, H, W): one colour sensor
+    sensor = optics::apply_sensor_effects(sensor, r.effects, r.seed);
     meta["seconds"] = clock.seconds();
     // Shot and read noise included: what a noise-aware net reads (optics/sensor.h).
     meta["noise_sigma"] = r.effects.equivalent_sigma(sensor.mean().item<double>());
     io::write_sensor_images(dir, sensor);
-    meta["sensor"] = {{"files", io::sensor_file_names(lf.channels())},
+    meta["sensor"] = {{"files", io::sensor_file_names(sensor.size(0))},
                       {"channels_per_file", n},
                       {"dtype", "float32"},
-                      {"shape", {lf.channels(), n, lf.height(), lf.width()}}};
+                      {"shape", {sensor.size(0), n, lf.height(), lf.width()}}};
     spdlog::info("simulated a {}x{}x{} sensor image with {} in {:.3f} s", n, lf.height(),
                  lf.width(), phi.spec().label(), clock.seconds());
   } else {

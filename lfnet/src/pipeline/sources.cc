@@ -49,7 +49,7 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
 
 namespace {
 LightField select_views(const LightField& lf, const std::string& views, int64_t rows, int64_t cols,
-                        const std::string& name) {
+                        const std::string& name, bool colour) {
   LightField out;
   if (views.empty()) {
     LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, name, " has ", lf.rows(),
@@ -63,12 +63,12 @@ LightField select_views(const LightField& lf, const std::string& views, int64_t 
                    " select ", out.rows(), "x", out.cols(), " views but the Phi codes ", rows, "x",
                    cols);
   }
-  return out.grey();
+  return colour ? out : out.grey();
 }
 }  // namespace
 
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
-                                          int64_t cols, bool whole_grids) {
+                                          int64_t cols, bool whole_grids, bool colour) {
   std::vector<NamedLightField> out;
   const int64_t total = static_cast<int64_t>(sources.light_fields.size() + sources.scenes.size()) +
                         sources.random_scenes;
@@ -78,10 +78,10 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     if (whole_grids && sources.views.empty()) {
       LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, dir, " has ", lf.rows(),
                      "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
-      out.push_back({fs::path(dir).filename().string(), lf.grey()});
+      out.push_back({fs::path(dir).filename().string(), colour ? lf : lf.grey()});
     } else {
-      out.push_back(
-          {fs::path(dir).filename().string(), select_views(lf, sources.views, rows, cols, dir)});
+      out.push_back({fs::path(dir).filename().string(),
+                     select_views(lf, sources.views, rows, cols, dir, colour)});
     }
     bar.advance();
   }
@@ -92,9 +92,9 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     } catch (const ConfigError& e) {
       throw ConfigError(path + ": " + e.what());
     }
-    spec.color = false;
+    spec.color = colour;
     auto lf = scene::render_scene(spec, scene_render_options(path)).light_field;
-    out.push_back({fs::path(path).stem().string(), select_views(lf, "", rows, cols, path)});
+    out.push_back({fs::path(path).stem().string(), select_views(lf, "", rows, cols, path, colour)});
     bar.advance();
   }
   if (sources.random_scenes > 0) {
@@ -102,12 +102,12 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     auto options = scene::RandomSceneOptions::from_json(reader);
     options.rows = rows;
     options.cols = cols;
-    options.color = false;
+    options.color = colour;
     for (int64_t i = 0; i < sources.random_scenes; ++i) {
       const uint64_t seed = sources.random_seed + static_cast<uint64_t>(i);
       auto lf = scene::render_scene(scene::random_scene(seed, options), scene_render_options(""))
                     .light_field;
-      out.push_back({"random-" + std::to_string(seed), lf.grey()});
+      out.push_back({"random-" + std::to_string(seed), colour ? lf : lf.grey()});
       bar.advance();
     }
   }

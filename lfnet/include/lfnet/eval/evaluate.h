@@ -5,10 +5,12 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "lfnet/core/light_field.h"
 #include "lfnet/optics/calibration.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
@@ -30,6 +32,10 @@ struct EvalOptions {
   // the sensor is simulated by the perturbed camera, the method reconstructs with the nominal
   // Phi. Empty: the camera is the Phi.
   optics::CalibrationError camera_error;
+  // A single colour sensor behind this colour filter array (sensor mode, a colour truth): the
+  // method reconstructs the mosaicked light field, each of its views then demosaiced; the
+  // record scores colour (psnr_db, ssim) and luma (luma_psnr_db).
+  std::optional<optics::ColourFilterArray> cfa;
 };
 
 // The outcome of one evaluation, as `lfnet evaluate --json` writes it.

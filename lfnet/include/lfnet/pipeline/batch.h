@@ -32,9 +32,10 @@ struct BatchOptions {
   optics::SimulationMode mode = optics::SimulationMode::kSensor;  // of evaluations
   int64_t stride = 5;                                             // patch stride
   int64_t batch = 1024;                                           // patches per solver call
-  double noise = 0;                  // Gaussian noise sigma of evaluations
-  uint64_t seed = 0;                 // noise seed of evaluations
-  bool window = false;               // weight patch estimates by a smooth window when stitching
+  double noise = 0;     // Gaussian noise sigma of evaluations
+  std::string cfa;      // evaluations behind a colour filter array (a Bayer pattern or a JSON file)
+  uint64_t seed = 0;    // noise seed of evaluations
+  bool window = false;  // weight patch estimates by a smooth window when stitching
   bool post_filter = false;          // suppress artefacts with the stride's period
   bool match_mean = false;           // scale real measurements to the training mean
   bool self_ensemble = false;        // net with an lfnet checkpoint: average over the Phi's mirrors

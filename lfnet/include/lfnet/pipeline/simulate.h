@@ -11,6 +11,7 @@
 
 #include "lfnet/core/light_field.h"
 #include "lfnet/optics/calibration.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
@@ -25,6 +26,10 @@ struct SimulateRequest {
   // The camera's error against `phi` (sensor mode only): the image it takes, recorded as
   // sensor.json's camera_error; a reconstruction is told `phi`.
   optics::CalibrationError camera_error;
+  // A single colour sensor (sensor mode, a colour light field): each pixel measures its N
+  // values of the colours its filter passes, one sensor image of N channels; recorded as
+  // sensor.json's cfa.
+  std::optional<optics::ColourFilterArray> cfa;
   optics::SimulationMode mode = optics::SimulationMode::kSensor;
   uint64_t seed = 0;                // noise seed
   int64_t patch = 9;                // per_patch mode: the patch grid's side

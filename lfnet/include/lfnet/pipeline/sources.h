@@ -44,7 +44,7 @@ struct LightFieldSources {
   bool empty() const { return light_fields.empty() && scenes.empty() && random_scenes == 0; }
 };
 
-// A named grey light field with its angular window applied.
+// A named light field (grey unless loaded in colour) with its angular window applied.
 struct NamedLightField {
   std::string name;
   LightField lf;
@@ -59,8 +59,10 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
 // Loads every source as a grey light field of rows x cols views, with a progress bar. With
 // `whole_grids`, folders without a `views` window keep every view (at least rows x cols), for
 // a data set that draws its own angular windows.
+// With `colour`, light fields keep their colour channels (a grey folder stays grey).
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
-                                          int64_t cols, bool whole_grids = false);
+                                          int64_t cols, bool whole_grids = false,
+                                          bool colour = false);
 
 // Render options for a scene file: image textures are read with io::read_image, relative to
 // the scene file's folder ("" for none).
