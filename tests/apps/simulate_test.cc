@@ -269,3 +269,29 @@ TEST_CASE("a colour filter array: one sensor image, reconstructed and scored in 
   CHECK(b["cfa"]["pattern"] == "GRBG");
   CHECK(b["psnr_db"].get<double>() == Approx(c["psnr_db"].get<double>()).margin(1e-9));
 }
+
+TEST_CASE("pinv-nlm is told the noise estimated from a sensor image of unknown noise",
+          "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  lfnet::io::write_light_field(lfnet::LightField(torch::full({1, 5, 5, 64, 64}, 0.5)),
+                               tmp / "flat", {"png", 16});
+  std::string out;
+  REQUIRE(run_command(simulate("--lf " + (tmp / "flat") + " --phi asp:2 --noise 0.1 --out " +
+                               (tmp / "acq")),
+                      out) == 0);
+  const std::string lfnet = lfnet_binary() + " --threads 1 --log-level warn ";
+  // The plain image, without the sidecar that records the noise: a camera's own.
+  const std::string plain = " --phi asp:2 --sensor " + (tmp / "acq/sensor.tif");
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv-nlm" + plain + " --out " + (tmp / "nlm"),
+                      out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv" + plain + " --out " + (tmp / "pinv"),
+                      out) == 0);
+  const auto record = lfnet::read_json_file(tmp / "nlm/reconstruction.json");
+  CHECK(record["noise_sigma_estimated"] == true);
+  CHECK(record["noise_sigma"][0].get<double>() == Approx(0.1).epsilon(0.1));
+  // Told the estimate, the denoiser works: the flat field comes out flatter than pinv's.
+  const auto nlm = lfnet::io::read_light_field(tmp / "nlm").data();
+  const auto pinv = lfnet::io::read_light_field(tmp / "pinv").data();
+  CHECK(nlm.std().item<double>() < 0.5 * pinv.std().item<double>());
+  CHECK_FALSE(lfnet::read_json_file(tmp / "pinv/reconstruction.json").contains("noise_sigma"));
+}

@@ -159,6 +159,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
                    "' reconstructs grey sensor images with a grey model; ", a.sensor,
                    " is the sensor image of a colour filter array: use --method pinv (then "
                    "demosaiced)");
+    LFNET_CHECK_AS(ConfigError, !image, "method '", method,
+                   "' works on whole grey sensor images; behind a colour filter array use a "
+                   "patch method (pinv, adjoint, dict), whose light field is then demosaiced");
     LFNET_CHECK_AS(ConfigError, cfa->one_colour_per_pixel(),
                    "only colour filter arrays whose pixels each see one colour are demosaiced");
   }
@@ -169,7 +172,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   double scale = 1.0;
   // A noise-aware model is told the sensor's noise: --noise-sigma, else what the acquisition
   // records (simulate's sensor.json), else the noise estimated from each sensor image.
-  const bool noise_aware = model && model->network.image.noise_input;
+  const bool noise_aware =
+      (model && model->network.image.noise_input) || recon::find_method(method).reads_noise();
   const bool noise_told = a.noise_sigma >= 0 || acq.meta.contains("noise_sigma");
   const double told_sigma = a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
   nlohmann::json estimated = nlohmann::json::array();  // per colour channel

@@ -25,6 +25,7 @@ struct PinvNlmOptions {
 class PinvNlmMethod : public MethodWithOptions<PinvNlmOptions> {
  public:
   std::string name() const override { return "pinv-nlm"; }
+  bool reads_noise() const override { return true; }
   bool baseline() const override { return true; }
   std::string summary() const override {
     return "the pseudo-inverse, then non-local means of the views (sensor images; the noise "

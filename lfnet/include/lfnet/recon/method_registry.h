@@ -53,6 +53,10 @@ class Method {
   // A baseline to compare with (the linear, dictionary and evaluation baselines), not one of the
   // learned reconstructions: the report's figures draw it as such.
   virtual bool baseline() const { return false; }
+  // Whether the image solver uses the noise sigma it is given (a classical denoiser's strength),
+  // so that a sensor image of unknown noise should be told an estimate (optics/noise_estimate.h).
+  // Networks say so through their own noise input instead.
+  virtual bool reads_noise() const { return false; }
   // The patch solver; a ConfigError when a needed resource is missing. kTruth methods have
   // none (the evaluation computes them from the truth).
   virtual PatchSolver solver(const MethodResources& resources) const = 0;
