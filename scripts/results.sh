@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Makes the records of results/<section>/records.jsonl, then regenerates docs/RESULTS.md with
 # `lfnet report`. Usage: scripts/results.sh [SECTION...]   (default: every section below;
-# `pictures` remakes only the reconstructions the report shows, and `report` nothing).
+# `pictures` remakes only the reconstructions the report shows, and `report` nothing;
+# `MODELS="models/X.ckpt ..." scripts/results.sh cross-scene-add` adds networks to the
+# cross-scene table without measuring the others again).
 # Needs the trained models (models/, scripts/models.py) and ../shared/data.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -343,6 +345,40 @@ cross-scene() {
       --model models/asp-n2.ckpt "${src[@]}" --method net --mode sensor --stride 2
   done
   mv "$tmp" results/cross-scene/records.jsonl
+}
+
+# Adds the networks of $MODELS (paths of checkpoints, space-separated) to the cross-scene
+# benchmark as cross-scene measures them, replacing the records of the same variant: a new
+# model joins the table without measuring every other one again.
+cross-scene-add() {
+  local tmp model name training i
+  local records=results/cross-scene/records.jsonl
+  read -r -a models <<< "${MODELS:?MODELS names the checkpoints to add}"
+  tmp=$(mktemp)
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}")
+    for model in "${models[@]}"; do
+      need_model "$model"
+      name=${model#models/}
+      name=${name%.ckpt}
+      training=
+      [[ -f models/$name.training.jsonl ]] && training=models/$name.training.jsonl
+      VARIANT=$name TRAINING=$training record "$tmp" --model "$model" "${src[@]}" --method net \
+        --mode sensor --stride 5
+    done
+  done
+  "$py" - "$records" "$tmp" <<'PY'
+import json, sys
+old_path, new_path = sys.argv[1], sys.argv[2]
+new = [json.loads(l) for l in open(new_path) if l.strip()]
+variants = {r.get("variant") for r in new}
+kept = [l for l in open(old_path) if l.strip() and json.loads(l).get("variant") not in variants]
+with open(old_path + ".tmp", "w") as f:
+    f.writelines(kept)
+    f.writelines(json.dumps(r) + "\n" for r in new)
+PY
+  mv "$records.tmp" "$records"
+  rm -f "$tmp"
 }
 
 # lfnet's shipped ASP model in one pass and as its self-ensemble (--self-ensemble: the four
