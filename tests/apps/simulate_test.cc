@@ -273,8 +273,8 @@ TEST_CASE("a colour filter array: one sensor image, reconstructed and scored in 
 TEST_CASE("pinv-nlm is told the noise estimated from a sensor image of unknown noise",
           "[app][simulate]") {
   lfnet::test::TempDir tmp;
-  lfnet::io::write_light_field(lfnet::LightField(torch::full({1, 5, 5, 64, 64}, 0.5)),
-                               tmp / "flat", {"png", 16});
+  lfnet::io::write_light_field(lfnet::LightField(torch::full({1, 5, 5, 64, 64}, 0.5)), tmp / "flat",
+                               {"png", 16});
   std::string out;
   REQUIRE(run_command(simulate("--lf " + (tmp / "flat") + " --phi asp:2 --noise 0.1 --out " +
                                (tmp / "acq")),

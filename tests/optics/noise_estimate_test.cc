@@ -94,3 +94,49 @@ TEST_CASE("noise estimation refuses what is no sensor image", "[optics][noise]")
   CHECK_THROWS_AS(estimate_noise_sigma(torch::zeros({2, 8, 8}), torch::zeros({2, 1, 1})),
                   lfnet::ConfigError);
 }
+
+TEST_CASE("shot and read noise are fitted from the image alone", "[optics][noise]") {
+  const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
+  const auto clean = lfnet::optics::simulate_sensor(*phi, scene());
+  const double mean = clean.mean().item<double>();
+  for (const char* json :
+       {R"({"photons_at_white": 100, "shot": {"model": "poisson"}, "read": {"electrons": 4}})",
+        R"({"photons_at_white": 400, "shot": {"model": "poisson"}, "read": {"electrons": 2}})",
+        R"({"photons_at_white": 25, "shot": {"model": "poisson"}, "read": {"electrons": 3}})"}) {
+    INFO(json);
+    const auto e = effects(json);
+    const auto noisy = lfnet::optics::simulate_sensor(*phi, scene(), e, 5);
+    const auto fit = lfnet::optics::estimate_shot_read(*phi, noisy);
+    const double shot = 1.0 / e.photons_at_white;
+    CHECK(fit.shot == Approx(shot).epsilon(0.25));
+    // The sigma at the image's mean signal, what a noise-aware net is told, within 5 %.
+    const double want = e.equivalent_sigma(mean);
+    CHECK(std::abs(fit.sigma_at(mean) - want) <= 0.05 * want);
+  }
+  // Gaussian noise alone: no shot noise to speak of, and its sigma.
+  for (double sigma : {0.02, 0.1}) {
+    const auto noisy = lfnet::optics::simulate_sensor(
+        *phi, scene(),
+        effects(("{\"gaussian\": {\"sigma\": " + std::to_string(sigma) + "}}").c_str()), 3);
+    const auto fit = lfnet::optics::estimate_shot_read(*phi, noisy);
+    CHECK(fit.shot * mean < 0.1 * sigma * sigma);
+    CHECK(std::abs(fit.sigma_at(mean) - sigma) <= 0.05 * sigma + 0.002);
+  }
+  CHECK_THROWS_AS(lfnet::optics::estimate_shot_read(*phi, clean.slice(1, 0, 4).slice(2, 0, 4)),
+                  lfnet::ConfigError);
+}
+
+TEST_CASE("a noise-aware method is told the sigma at the image's mean signal", "[optics][noise]") {
+  const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
+  const auto e = effects(
+      R"({"photons_at_white": 25, "shot": {"model": "poisson"}, "read": {"electrons": 3}})");
+  const auto clean = lfnet::optics::simulate_sensor(*phi, scene());
+  const auto noisy = lfnet::optics::simulate_sensor(*phi, scene(), e, 7);
+  const double want = e.equivalent_sigma(clean.mean().item<double>());
+  const double told = lfnet::optics::estimate_equivalent_sigma(*phi, noisy);
+  CHECK(std::abs(told - want) <= 0.05 * want);
+  CHECK(std::abs(told - want) < std::abs(estimate_noise_sigma(*phi, noisy) - want));
+  // Too small for the fit: the Gaussian estimate.
+  const auto small = noisy.slice(1, 0, 20).slice(2, 0, 20);
+  CHECK(lfnet::optics::estimate_equivalent_sigma(*phi, small) == estimate_noise_sigma(*phi, small));
+}

@@ -147,7 +147,7 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
     if (image) {
       // Shot and read noise reach a noise-aware method as the Gaussian sigma of the same
       // variance at the sensor image's mean signal.
-      if (options.estimate_noise) estimated = optics::estimate_noise_sigma(phi, sensor);
+      if (options.estimate_noise) estimated = optics::estimate_equivalent_sigma(phi, sensor);
       estimate = image(sensor, estimated.value_or(options.effects.equivalent_sigma(signal)));
       // A whole image has no patches: its progress counts its pixels.
       const int64_t pixels = truth.height() * truth.width();

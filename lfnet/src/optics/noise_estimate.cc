@@ -2,11 +2,26 @@
 
 #include <torch/torch.h>
 
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
 #include "lfnet/core/error.h"
 
 namespace lfnet::optics {
 
-double estimate_noise_sigma(const torch::Tensor& sensor, const torch::Tensor& white) {
+namespace {
+
+// The finest-scale diagonal Haar coefficients of a sensor image divided by its white response,
+// each over the noise its four pixels carry after the division (so each is N(0, sigma^2) where
+// the scene is smooth), with the local signal each one sees (its pixels' measurements averaged
+// as their noise weighs them). Only blocks whose four pixels are usable.
+struct HaarCoefficients {
+  torch::Tensor normalised;  // (K,) float64
+  torch::Tensor signal;      // (K,) float64
+};
+
+HaarCoefficients haar_coefficients(const torch::Tensor& sensor, const torch::Tensor& white) {
   LFNET_CHECK_AS(ConfigError, sensor.dim() == 3, "a sensor image is (N, H, W), not of ",
                  sensor.dim(), " dimensions");
   LFNET_CHECK_AS(ConfigError,
@@ -30,26 +45,98 @@ double estimate_noise_sigma(const torch::Tensor& sensor, const torch::Tensor& wh
   auto corner = [](const torch::Tensor& x, int64_t dy, int64_t dx) {
     return x.slice(1, dy, x.size(1), 2).slice(2, dx, x.size(2), 2);
   };
+  auto block_sum = [&](const torch::Tensor& x) {
+    return corner(x, 0, 0) + corner(x, 0, 1) + corner(x, 1, 0) + corner(x, 1, 1);
+  };
   const auto coefficient =
       (corner(ratio, 0, 0) - corner(ratio, 0, 1) - corner(ratio, 1, 0) + corner(ratio, 1, 1)) / 2;
-  const auto spread = (corner(factor, 0, 0).square() + corner(factor, 0, 1).square() +
-                       corner(factor, 1, 0).square() + corner(factor, 1, 1).square())
-                          .sqrt() /
-                      2;
+  const auto factor2 = factor.square();
+  const auto spread = block_sum(factor2).sqrt() / 2;
   const auto keep =
       corner(usable, 0, 0) & corner(usable, 0, 1) & corner(usable, 1, 0) & corner(usable, 1, 1);
-  const auto normalised = (coefficient / spread).abs().masked_select(keep);
-  LFNET_CHECK_AS(ConfigError, normalised.numel() > 0,
+  HaarCoefficients out;
+  out.normalised = (coefficient / spread).masked_select(keep);
+  out.signal = (block_sum(y * factor2) / block_sum(factor2)).masked_select(keep);
+  LFNET_CHECK_AS(ConfigError, out.normalised.numel() > 0,
                  "the code's white response leaves no pixel to estimate the noise from");
-  // The median of |z| of a zero-mean Gaussian is 0.6745 sigma.
-  return normalised.median().item<double>() / 0.6744897501960817;
+  return out;
+}
+
+// The median of |z| of a zero-mean Gaussian is 0.6745 sigma.
+constexpr double kMadToSigma = 1.0 / 0.6744897501960817;
+
+// The white response of a local Phi: (N, U, V, T, T) summed over the views.
+torch::Tensor white_response(const Phi& phi) {
+  const int64_t t = phi.period();
+  return phi.pixel_weights(0, 0, t, t).sum({1, 2});
+}
+
+}  // namespace
+
+double estimate_noise_sigma(const torch::Tensor& sensor, const torch::Tensor& white) {
+  const auto c = haar_coefficients(sensor, white);
+  return c.normalised.abs().median().item<double>() * kMadToSigma;
+}
+
+double ShotReadEstimate::sigma_at(double signal) const {
+  return std::sqrt(std::max(0.0, shot * std::max(signal, 0.0) + read));
+}
+
+ShotReadEstimate estimate_shot_read(const torch::Tensor& sensor, const torch::Tensor& white,
+                                    int64_t bins) {
+  LFNET_CHECK_AS(ConfigError, bins >= 2, "estimate_shot_read needs at least 2 signal bins");
+  const auto c = haar_coefficients(sensor, white);
+  const int64_t k = c.normalised.numel();
+  LFNET_CHECK_AS(ConfigError, k >= 16 * bins, "a sensor image of ", sensor.size(1), " x ",
+                 sensor.size(2), " pixels is too small to fit signal-dependent noise");
+  // Blocks sorted by signal, in bins of equal counts: per bin, the robust variance of its
+  // coefficients at its mean signal.
+  const auto order = c.signal.argsort();
+  const auto z = c.normalised.index_select(0, order).abs();
+  const auto s = c.signal.index_select(0, order);
+  std::vector<double> level(bins), variance(bins);
+  for (int64_t b = 0; b < bins; ++b) {
+    const int64_t lo = b * k / bins, hi = (b + 1) * k / bins;
+    level[b] = s.slice(0, lo, hi).mean().item<double>();
+    const double sigma = z.slice(0, lo, hi).median().item<double>() * kMadToSigma;
+    variance[b] = sigma * sigma;
+  }
+  // Least squares of variance = shot * signal + read over the bins, both >= 0.
+  double sl = 0, sv = 0, sll = 0, slv = 0;
+  for (int64_t b = 0; b < bins; ++b) {
+    sl += level[b];
+    sv += variance[b];
+    sll += level[b] * level[b];
+    slv += level[b] * variance[b];
+  }
+  const auto n = static_cast<double>(bins);
+  const double det = n * sll - sl * sl;
+  ShotReadEstimate e;
+  e.shot = det > 0 ? (n * slv - sl * sv) / det : 0.0;
+  e.read = (sv - e.shot * sl) / n;
+  if (e.shot < 0) {
+    e.shot = 0;
+    e.read = sv / n;
+  } else if (e.read < 0) {
+    e.read = 0;
+    e.shot = sll > 0 ? slv / sll : 0.0;
+  }
+  return e;
+}
+
+ShotReadEstimate estimate_shot_read(const Phi& phi, const torch::Tensor& sensor, int64_t bins) {
+  return estimate_shot_read(sensor, white_response(phi), bins);
 }
 
 double estimate_noise_sigma(const Phi& phi, const torch::Tensor& sensor) {
-  const int64_t t = phi.period();
-  // (N, U, V, T, T) summed over the views: each pixel phase's measurement of a white field.
-  const auto white = phi.pixel_weights(0, 0, t, t).sum({1, 2});
-  return estimate_noise_sigma(sensor, white);
+  return estimate_noise_sigma(sensor, white_response(phi));
+}
+
+double estimate_equivalent_sigma(const Phi& phi, const torch::Tensor& sensor) {
+  constexpr int64_t kBins = 12;
+  const int64_t blocks = sensor.size(-2) / 2 * (sensor.size(-1) / 2) * sensor.size(0);
+  if (sensor.dim() != 3 || blocks < 64 * kBins) return estimate_noise_sigma(phi, sensor);
+  return estimate_shot_read(phi, sensor, kBins).sigma_at(sensor.mean().item<double>());
 }
 
 }  // namespace lfnet::optics

@@ -188,7 +188,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
       if (image) {
         double sigma = told_sigma;
         if (noise_aware && !noise_told) {
-          sigma = optics::estimate_noise_sigma(*phi, sensor);
+          sigma = optics::estimate_equivalent_sigma(*phi, sensor);
           estimated.push_back(sigma);
         }
         channels.push_back(image(sensor, sigma));

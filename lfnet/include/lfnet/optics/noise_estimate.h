@@ -25,4 +25,31 @@ double estimate_noise_sigma(const torch::Tensor& sensor, const torch::Tensor& wh
 // The same for a local Phi (phi.h, is_local): its white response from pixel_weights.
 double estimate_noise_sigma(const Phi& phi, const torch::Tensor& sensor);
 
+// Signal-dependent noise: variance = shot * signal + read, signal relative to white. Photon
+// shot noise at photons_at_white P gives shot = 1 / P; read noise of e electrons and Gaussian
+// noise of sigma give read = (e / P)^2 + sigma^2 (optics/sensor.h).
+struct ShotReadEstimate {
+  double shot = 0;  // variance per unit of relative signal
+  double read = 0;  // variance at no signal
+  // The Gaussian sigma of the same variance at `signal`: what a noise-aware net reads
+  // (SensorOptions::equivalent_sigma).
+  double sigma_at(double signal) const;
+};
+
+// Shot and read noise estimated from a sensor image alone, the Poissonian-Gaussian model of Foi
+// et al. ("Practical Poissonian-Gaussian noise modeling and fitting for single-image raw-data",
+// IEEE TIP 2008) by its simplest fit: the coefficients of estimate_noise_sigma, sorted by the
+// signal their pixels see, in `bins` bins of equal counts; per bin the robust variance (the
+// median absolute coefficient over 0.6745, squared) at the bin's mean signal; a least-squares
+// line through them, shot and read held >= 0. Under Gaussian noise alone shot is about 0 and
+// read sigma^2.
+ShotReadEstimate estimate_shot_read(const torch::Tensor& sensor, const torch::Tensor& white,
+                                    int64_t bins = 12);
+ShotReadEstimate estimate_shot_read(const Phi& phi, const torch::Tensor& sensor, int64_t bins = 12);
+
+// What a noise-aware method is told of a sensor image whose noise nobody gives: the Gaussian
+// sigma of the same variance at the image's mean signal, from estimate_shot_read (from
+// estimate_noise_sigma when the image is too small for the fit).
+double estimate_equivalent_sigma(const Phi& phi, const torch::Tensor& sensor);
+
 }  // namespace lfnet::optics
