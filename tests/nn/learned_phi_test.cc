@@ -22,8 +22,8 @@ LearnedPhiOptions family(const std::string& name, int64_t period = 1) {
 }  // namespace
 
 TEST_CASE("learnable codes stay physical and measure white as 1", "[nn][learned_phi]") {
-  for (const auto& [name, period] : {std::pair<std::string, int64_t>{"mask", 4}, {"aperture", 1},
-                                     {"asp", 2}}) {
+  for (const auto& [name, period] :
+       {std::pair<std::string, int64_t>{"mask", 4}, {"aperture", 1}, {"asp", 2}}) {
     INFO(name);
     LearnedPhi phi(family(name, period), 2, 5, 5);
     const auto r = phi->response();

@@ -42,7 +42,8 @@ LearnedPhiImpl::LearnedPhiImpl(const LearnedPhiOptions& options, int64_t n, int6
   };
   if (options_.family == "mask") {
     // Transmittances uniform in [0.1, 0.9], as logits.
-    logits_ = register_parameter("logits", torch::logit(0.1 + 0.8 * uniform({n, rows, cols, t, t})));
+    logits_ =
+        register_parameter("logits", torch::logit(0.1 + 0.8 * uniform({n, rows, cols, t, t})));
   } else if (options_.family == "aperture") {
     logits_ = register_parameter("logits", torch::logit(0.1 + 0.8 * uniform({n, rows, cols})));
   } else {
@@ -68,7 +69,8 @@ LearnedPhiImpl::LearnedPhiImpl(const LearnedPhiOptions& options, int64_t n, int6
     beta_ = register_parameter("beta", beta);
     gamma_ = register_parameter("gamma", gamma);
     alpha_ = register_parameter("alpha", alpha);
-    depth_ = register_parameter("depth", torch::full({n, t, t}, std::log(kStartDepth / (1 - kStartDepth))));
+    depth_ = register_parameter("depth",
+                                torch::full({n, t, t}, std::log(kStartDepth / (1 - kStartDepth))));
     auto angle = [](int64_t count) {
       return count > 1 ? torch::linspace(-1.0, 1.0, count) : torch::zeros({1});
     };
@@ -82,8 +84,8 @@ torch::Tensor LearnedPhiImpl::response() const {
   if (options_.family == "aperture") return torch::sigmoid(logits_).view({n_, rows_, cols_, 1, 1});
   // (N, T, T, 1, 1) parameters against (U, V) angles: (N, T, T, U, V), then (N, U, V, T, T).
   auto at = [](const torch::Tensor& p) { return p.unsqueeze(-1).unsqueeze(-1); };
-  const auto phase = at(beta_) * (at(torch::cos(gamma_)) * theta_ + at(torch::sin(gamma_)) * phi_) +
-                     at(alpha_);
+  const auto phase =
+      at(beta_) * (at(torch::cos(gamma_)) * theta_ + at(torch::sin(gamma_)) * phi_) + at(alpha_);
   const auto m = options_.max_depth * torch::sigmoid(at(depth_));
   return ((1 + m * torch::cos(phase)) / 2).permute({0, 3, 4, 1, 2});
 }
@@ -101,10 +103,11 @@ optics::PhiSpec LearnedPhiImpl::spec() const {
   spec.n = n_;
   spec.rows = rows_;
   spec.cols = cols_;
-  spec.params = {{"period", w.size(3)},
-                 {"weights", std::vector<double>(w.data_ptr<double>(), w.data_ptr<double>() + w.numel())},
-                 {"normalise", false},
-                 {"source", "learned " + options_.family}};
+  spec.params = {
+      {"period", w.size(3)},
+      {"weights", std::vector<double>(w.data_ptr<double>(), w.data_ptr<double>() + w.numel())},
+      {"normalise", false},
+      {"source", "learned " + options_.family}};
   return spec;
 }
 
@@ -119,12 +122,9 @@ nlohmann::json LearnedPhiImpl::physical() const {
             {"shape", response().sizes().vec()},
             {"transmittance", list(response())}};
   }
-  return {{"family", "asp"},
-          {"shape", beta_.sizes().vec()},
-          {"beta", list(beta_)},
-          {"gamma", list(gamma_)},
-          {"alpha", list(alpha_)},
-          {"depth", list(options_.max_depth * torch::sigmoid(depth_))}};
+  return {{"family", "asp"},       {"shape", beta_.sizes().vec()},
+          {"beta", list(beta_)},   {"gamma", list(gamma_)},
+          {"alpha", list(alpha_)}, {"depth", list(options_.max_depth * torch::sigmoid(depth_))}};
 }
 
 torch::Tensor LearnedPhiImpl::binarised_weights() const {

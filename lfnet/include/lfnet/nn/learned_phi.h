@@ -28,8 +28,8 @@ namespace lfnet::nn {
 //             optics/asp.h, so that a learned tile can be fabricated.
 struct LearnedPhiOptions {
   std::string family = "mask";
-  int64_t period = 1;       // T (mask and asp; an aperture is the same at every pixel)
-  double max_depth = 1.0;   // asp: the largest modulation depth the device allows, in (0, 1]
+  int64_t period = 1;           // T (mask and asp; an aperture is the same at every pixel)
+  double max_depth = 1.0;       // asp: the largest modulation depth the device allows, in (0, 1]
   std::string init = "random";  // mask, aperture: "random" (uniform transmittances); asp: "table"
   uint64_t seed = 0;            // of the random start
   double init_spread = 0.5;     // asp: the spread of the random part of its start, radians
@@ -70,9 +70,9 @@ class LearnedPhiImpl : public torch::nn::Module {
  private:
   LearnedPhiOptions options_;
   int64_t n_, rows_, cols_;
-  torch::Tensor logits_;                       // mask (N, U, V, T, T); aperture (N, U, V)
+  torch::Tensor logits_;                        // mask (N, U, V, T, T); aperture (N, U, V)
   torch::Tensor beta_, gamma_, alpha_, depth_;  // asp: (N, T, T) each; depth before its sigmoid
-  torch::Tensor theta_, phi_;                  // asp: view angles in [-1, 1], (U, 1) and (1, V)
+  torch::Tensor theta_, phi_;                   // asp: view angles in [-1, 1], (U, 1) and (1, V)
 };
 TORCH_MODULE(LearnedPhi);
 

@@ -1,0 +1,37 @@
+// Training a code with its network (docs/training.md, "Learned codes"): the measurements of
+// each training patch are simulated again from the learnable code (nn/learned_phi.h), inside
+// the graph, and the lfnet architecture's per-pixel pseudo-inverse is computed from the same
+// code, so the loss's gradient reaches the code's parameters as well as the network's.
+#pragma once
+
+#include <torch/torch.h>
+
+#include <cstdint>
+
+#include "lfnet/nn/learned_phi.h"
+#include "lfnet/nn/loss.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/train/batch_source.h"
+
+namespace lfnet::train {
+
+// The measurements (B, N h w) of patches `target` (B, 1, U, V, h, w) by a code of pixel weights
+// `weights` (N, U, V, T, T), each patch of phase p = (y0 mod T) T + (x0 mod T) (`phase`, (B,)
+// int64; undefined: 0) reading the tile from ((p / T), (p mod T)): what optics' patch
+// simulation computes, differentiable in the weights.
+torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor& target,
+                               const torch::Tensor& phase);
+
+// The lfnet architecture's per-pixel Tikhonov pseudo-inverses (T, T, N, U V) of a code
+// (N, U, V, T, T): A^T (A A^T + lambda I)^-1 per pixel phase, stored transposed, as
+// LightFieldNet::set_phi computes them, but differentiable in the weights.
+torch::Tensor pixel_pinv_of(const torch::Tensor& weights, double lambda);
+
+// The loss of a lfnet-architecture `net` on `batch` when its measurements come from `code`:
+// the batch's targets simulated with code->weights() (noise of the batch's sigmas added, drawn
+// from `noise_seed`), reconstructed by the net with the code's pseudo-inverse. `net` keeps its
+// own buffers: after training, LightFieldNet::set_phi with the final weights stores them.
+torch::Tensor joint_loss(nn::LightFieldNet& net, const nn::LearnedPhi& code, const Batch& batch,
+                         const nn::ReconstructionLoss& loss, uint64_t noise_seed);
+
+}  // namespace lfnet::train
