@@ -515,3 +515,36 @@ TEST_CASE("report gives a camera error's cost against the nominal camera", "[app
   CHECK(md.find("| 27.90 | 0.900 | 1.00 | 0.10 |") != std::string::npos);
   CHECK(md.find("| none |") != std::string::npos);
 }
+
+TEST_CASE("report shows colour records' luma PSNR beside their colour PSNR", "[app]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "results/c");
+  std::ofstream(tmp / "results/c/section.json") << R"({"title": "Colour", "order": 1})";
+  std::ofstream(tmp / "results/c/records.jsonl") << nlohmann::json({{"method", "pinv"},
+                                                                    {"psnr_db", 31.5},
+                                                                    {"luma_psnr_db", 32.25},
+                                                                    {"ssim", 0.9},
+                                                                    {"seconds", 1.0},
+                                                                    {"mode", "sensor"},
+                                                                    {"cfa", {{"pattern", "RGGB"}}},
+                                                                    {"light_field", "lf"}})
+                                                        .dump()
+                                                 << "\n"
+                                                 << nlohmann::json({{"method", "no-parallax"},
+                                                                    {"psnr_db", 30.0},
+                                                                    {"ssim", 0.8},
+                                                                    {"seconds", 0.1},
+                                                                    {"mode", "sensor"},
+                                                                    {"light_field", "lf"}})
+                                                        .dump()
+                                                 << "\n";
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
+                          (tmp / "R.md"),
+                      out) == 0);
+  std::ifstream in(tmp / "R.md");
+  const std::string md((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  CHECK(md.find("| luma PSNR dB |") != std::string::npos);
+  CHECK(md.find("| 31.50 | 0.900 | 1.00 | 32.25 |") != std::string::npos);
+  CHECK(md.find("| 30.00 | 0.800 | 0.10 |  |") != std::string::npos);
+}

@@ -36,10 +36,11 @@ nn::LearnedPhi mask_code(int64_t period) {
 train::Batch patches() {
   torch::manual_seed(9);
   const auto base = torch::rand({4, 1, 1, 1, 3, 3});
-  auto target = torch::nn::functional::interpolate(
-                    base.view({4, 1, 3, 3}),
-                    torch::nn::functional::InterpolateFuncOptions().size(std::vector<int64_t>{12, 12})
-                        .mode(torch::kBilinear).align_corners(true))
+  auto target = torch::nn::functional::interpolate(base.view({4, 1, 3, 3}),
+                                                   torch::nn::functional::InterpolateFuncOptions()
+                                                       .size(std::vector<int64_t>{12, 12})
+                                                       .mode(torch::kBilinear)
+                                                       .align_corners(true))
                     .view({4, 1, 1, 1, 12, 12})
                     .expand({4, 1, 5, 5, 12, 12})
                     .contiguous();

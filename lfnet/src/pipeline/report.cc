@@ -265,6 +265,8 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   bool has_estimate = false;  // noise-blind records: the sigma the method was told
   for (const auto& r : rows) has_training |= r.contains("training_seconds");
   for (const auto& r : rows) has_estimate |= r.contains("noise_sigma_estimated");
+  bool has_luma = false;  // colour records: the luma's PSNR beside the colour one
+  for (const auto& r : rows) has_luma |= r.contains("luma_psnr_db");
   // Records of a camera whose Phi is off: what the error costs against the same record (every
   // other setting equal) of the nominal camera.
   const bool has_cost = std::find(columns.begin(), columns.end(), "camera_error") != columns.end();
@@ -290,13 +292,14 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
        << " |";
   }
   md << " PSNR dB | SSIM | seconds |";
+  if (has_luma) md << " luma PSNR dB |";
   if (has_cost) md << " cost dB |";
   if (has_estimate) md << " estimated sigma |";
   if (has_training) md << " training s |";
   if (has_paper) md << " paper PSNR dB | paper seconds |";
   md << "\n|";
-  const size_t n_columns = columns.size() + 3 + (has_cost ? 1 : 0) + (has_estimate ? 1 : 0) +
-                           (has_training ? 1 : 0) + (has_paper ? 2 : 0);
+  const size_t n_columns = columns.size() + 3 + (has_luma ? 1 : 0) + (has_cost ? 1 : 0) +
+                           (has_estimate ? 1 : 0) + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
   for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
   md << "\n";
   for (const auto& r : rows) {
@@ -309,6 +312,10 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
                  sec = number(r, "seconds");
     md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
        << " | " << fmt("%.2f", sec) << " |";
+    if (has_luma) {
+      const double luma = number(r, "luma_psnr_db", NAN);
+      md << " " << (std::isfinite(luma) ? fmt("%.2f", luma) : "") << " |";
+    }
     if (has_cost) {
       const double nominal = setting(r, "camera_error").empty() ? NAN : nominal_psnr(r);
       md << " " << (std::isfinite(nominal) ? fmt("%.2f", nominal - psnr) : "") << " |";

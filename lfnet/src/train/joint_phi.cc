@@ -20,7 +20,8 @@ torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor
   rows.reserve(static_cast<size_t>(b));
   for (int64_t i = 0; i < b; ++i) {
     const int64_t p = ph[i].item<int64_t>();
-    const auto ys = (torch::arange(h) + p / t).remainder(t), xs = (torch::arange(w) + p % t).remainder(t);
+    const auto ys = (torch::arange(h) + p / t).remainder(t),
+               xs = (torch::arange(w) + p % t).remainder(t);
     const auto patch_weights = weights.index_select(3, ys).index_select(4, xs);  // (N, U, V, h, w)
     rows.push_back((patch_weights * target[i]).sum({1, 2}).reshape({-1}));
   }
@@ -30,8 +31,7 @@ torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor
 torch::Tensor pixel_pinv_of(const torch::Tensor& weights, double lambda) {
   const int64_t n = weights.size(0), views = weights.size(1) * weights.size(2), t = weights.size(3);
   const auto a = weights.reshape({n, views, t, t}).permute({2, 3, 0, 1});  // (T, T, N, U V)
-  const auto gram =
-      torch::matmul(a, a.transpose(2, 3)) + lambda * torch::eye(n, a.options());
+  const auto gram = torch::matmul(a, a.transpose(2, 3)) + lambda * torch::eye(n, a.options());
   return at::linalg_solve(gram, a);
 }
 
