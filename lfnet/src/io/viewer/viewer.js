@@ -260,7 +260,10 @@
     if (r.whole_image) facts.push('whole image');
     else if (r.stride) facts.push(`stride ${r.stride}`);
     if (r.mode) facts.push(`${r.mode} mode`);
-    if (typeof r.psnr_db === 'number') facts.push(`PSNR ${r.psnr_db.toFixed(2)} dB`);
+    if (r.cfa) facts.push(r.cfa.pattern ? `Bayer ${r.cfa.pattern}, demosaiced` : 'colour filter array, demosaiced');
+    if (r.camera_error) facts.push('camera off its Phi');
+    if (typeof r.psnr_db === 'number') facts.push(`PSNR ${r.psnr_db.toFixed(2)} dB` + (r.cfa ? ' (colour)' : ''));
+    if (typeof r.luma_psnr_db === 'number') facts.push(`luma ${r.luma_psnr_db.toFixed(2)} dB`);
     if (typeof r.ssim === 'number') facts.push(`SSIM ${r.ssim.toFixed(4)}`);
     if (typeof r.seconds === 'number') facts.push(`${r.seconds.toFixed(2)} s`);
     facts.push(`${U} x ${V} views of ${W} x ${H} pixels`);
