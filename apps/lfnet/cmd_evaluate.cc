@@ -99,7 +99,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                 "simulation's: a camera whose noise is unknown (docs/acquisition.md)");
   cmd->add_option("--cfa", q.cfa,
                   "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
-                  "a JSON file; scores colour and luma (docs/acquisition.md)");
+                  "JSON, inline or a file; scores colour and luma (docs/acquisition.md)");
   cmd->add_option("--camera-error", q.camera_error,
                   "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
                   "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "

@@ -31,7 +31,7 @@ struct SimulateArgs {
   std::string out;
   std::string effects;       // EFFECTS.json
   std::string camera_error;  // JSON or a file (optics/calibration.h)
-  std::string cfa;           // a Bayer pattern or a JSON file (optics/cfa.h); implies --color
+  std::string cfa;  // a Bayer pattern or JSON, inline or a file (optics/cfa.h); implies --color
   int64_t stride = 5;
   int64_t patch = 9;
   bool force = false;
@@ -150,7 +150,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
   cmd->add_option("--cfa", args->cfa,
                   "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG "
-                  "or a JSON file of per-pixel colour responses (implies --color; "
+                  "or per-pixel colour responses as JSON, inline or a file (implies --color; "
                   "docs/acquisition.md)");
   cmd->add_option("--camera-error", args->camera_error,
                   "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "

@@ -17,14 +17,14 @@ bool CalibrationError::empty() const {
 
 void CalibrationError::validate() const {
   auto check = [](bool ok, const std::string& what) {
-    if (!ok) throw ConfigError("calibration error: " + what);
+    if (!ok) throw ConfigError(what);
   };
   for (double value : {depth, angular_shift_u, angular_shift_v, shift_y, shift_x, period}) {
-    check(std::isfinite(value), "every field must be a finite number");
+    check(std::isfinite(value), "every field of a calibration error must be a finite number");
   }
-  check(depth > -1, "$.depth must be > -1 (a depth of 1 + depth must stay positive)");
-  check(period > -0.5 && period < 0.5, "$.period must lie in (-0.5, 0.5)");
-  check(vignetting >= 0 && vignetting < 1, "$.vignetting must lie in [0, 1)");
+  check(depth > -1, "depth must be > -1 (the depth times 1 + depth must stay positive)");
+  check(period > -0.5 && period < 0.5, "period must lie in (-0.5, 0.5)");
+  check(vignetting >= 0 && vignetting < 1, "vignetting must lie in [0, 1)");
 }
 
 CalibrationError CalibrationError::from_json(const nlohmann::json& j, const std::string& path) {
@@ -32,7 +32,11 @@ CalibrationError CalibrationError::from_json(const nlohmann::json& j, const std:
   CalibrationError e;
   read_fields(r, e);
   r.finish();
-  e.validate();
+  try {
+    e.validate();
+  } catch (const ConfigError& error) {
+    throw ConfigError(path + ": " + error.what());
+  }
   return e;
 }
 

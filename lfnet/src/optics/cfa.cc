@@ -83,8 +83,10 @@ ColourFilterArray ColourFilterArray::parse(const std::string& text) {
   const bool named = std::find(std::begin(kBayerPatterns), std::end(kBayerPatterns), text) !=
                      std::end(kBayerPatterns);
   if (named) return bayer(text);
+  if (is_inline_json(text)) return from_json(read_json_argument(text, "--cfa"), "--cfa");
   LFNET_CHECK_AS(ConfigError, std::ifstream(text).good(), "--cfa ", text,
-                 ": neither a Bayer pattern (RGGB, BGGR, GRBG, GBRG) nor a readable JSON file");
+                 ": neither a Bayer pattern (RGGB, BGGR, GRBG, GBRG), inline JSON nor a readable "
+                 "JSON file");
   return from_json(read_json_file(text), text + ":$");
 }
 

@@ -21,7 +21,7 @@ class ColourFilterArray {
   // {"pattern": "RGGB"} or {"response": [[[r, g, b], ...], ...]} (rows of pixels, each an RGB
   // triplet of non-negative weights, at least one positive per pixel); `path` names it in errors.
   static ColourFilterArray from_json(const nlohmann::json& j, const std::string& path = "$");
-  // --cfa: a Bayer pattern's name, or a JSON file holding one of the objects above.
+  // --cfa: a Bayer pattern's name, one of the objects above inline, or a JSON file holding one.
   static ColourFilterArray parse(const std::string& text);
 
   nlohmann::json to_json() const;
