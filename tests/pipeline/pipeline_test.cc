@@ -340,7 +340,7 @@ TEST_CASE("the dict method codes as its dictionary recommends, unless its option
           "[pipeline][dict][method_options]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   dict::Dictionary d;
-  d.atoms = torch::nn::functional::normalize(torch::randn({25 * 81, 40}),
+  d.atoms = torch::nn::functional::normalize(torch::randn({int64_t{25} * 81, 40}),
                                              torch::nn::functional::NormalizeFuncOptions().dim(0));
   pipeline::MethodContext context;
   context.phi = phi.get();

@@ -37,7 +37,7 @@ LearnedPhiImpl::LearnedPhiImpl(const LearnedPhiOptions& options, int64_t n, int6
                  " views");
   const int64_t t = options_.period;
   auto gen = at::detail::createCPUGenerator(options_.seed);
-  auto uniform = [&](std::vector<int64_t> shape) {
+  auto uniform = [&](const std::vector<int64_t>& shape) {
     return at::rand(shape, gen, torch::TensorOptions().dtype(torch::kFloat32));
   };
   if (options_.family == "mask") {

@@ -50,7 +50,7 @@ class PinvNlmMethod : public MethodWithOptions<PinvNlmOptions> {
   ImageSolver image_solver(const MethodResources& r) const override {
     const nlohmann::json o = read_options(r.options, "--method-options");
     const Denoiser* denoiser = &find_denoiser(o["denoiser"].get<std::string>());
-    const nlohmann::json denoiser_options = o["options"];
+    const nlohmann::json& denoiser_options = o["options"];
     const auto pinv = optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w);
     // The pseudo-inverse's noise per unit of measurement noise (the same for every phase of
     // the periodic models, up to their small differences: the mean over phases).
