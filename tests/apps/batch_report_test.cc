@@ -548,3 +548,43 @@ TEST_CASE("report shows colour records' luma PSNR beside their colour PSNR", "[a
   CHECK(md.find("| 31.50 | 0.900 | 1.00 | 32.25 |") != std::string::npos);
   CHECK(md.find("| 30.00 | 0.800 | 0.10 |  |") != std::string::npos);
 }
+
+TEST_CASE("a section's sweep can keep one light field", "[app]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "results/s");
+  std::ofstream(tmp / "results/s/section.json")
+      << R"({"title": "Noise", "order": 1, "sweep": {"x": "noise", "light_field": "a"}})";
+  std::ofstream rec(tmp / "results/s/records.jsonl");
+  for (const char* lf : {"a", "b"}) {
+    for (double sigma : {0.0, 0.1}) {
+      for (const char* method : {"pinv", "no-parallax"}) {
+        rec << nlohmann::json({{"method", method},
+                               {"psnr_db", 30.0 - 50 * sigma},
+                               {"ssim", 0.9},
+                               {"seconds", 1.0},
+                               {"mode", "sensor"},
+                               {"noise_sigma", sigma},
+                               {"light_field", lf}})
+                   .dump()
+            << "\n";
+      }
+    }
+  }
+  rec.close();
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
+                          (tmp / "R.md"),
+                      out) == 0);
+  const auto spec = lfnet::read_json_file(tmp / "images/results/figures.json");
+  const nlohmann::json* sweep = nullptr;
+  for (const auto& f : spec["figures"]) {
+    if (f["kind"] == "sweep") sweep = &f;
+  }
+  REQUIRE(sweep != nullptr);
+  CHECK((*sweep)["title"].get<std::string>().find(", a") != std::string::npos);
+  REQUIRE((*sweep)["series"].size() == 2);  // pinv and no-parallax, of light field a alone
+  for (const auto& series : (*sweep)["series"]) {
+    CHECK(series["label"].get<std::string>().find(", b") == std::string::npos);
+    CHECK(series["x"].size() == 2);
+  }
+}

@@ -390,8 +390,17 @@ double sweep_value(const nlohmann::json& r, const std::string& key) {
 
 // A "sweep" figure of a section: PSNR against one setting ("n", "stride" or "noise"), a series
 // per method (and per other setting that varies), the paper's numbers as series of their own.
-nlohmann::json sweep_spec(const Section& s, const nlohmann::json& sweep) {
+nlohmann::json sweep_spec(const Section& whole, const nlohmann::json& sweep) {
   const std::string key = sweep.at("x").get<std::string>();
+  // "light_field": the sweep of one light field only (the section's table keeps them all).
+  const std::string only = sweep.value("light_field", "");
+  Section s = whole;
+  if (!only.empty()) {
+    s.records.clear();
+    for (const auto& r : whole.records) {
+      if (r.value("light_field", "") == only) s.records.push_back(r);
+    }
+  }
   std::map<std::string, nlohmann::json> series;
   std::vector<std::string> order;
   auto add_point = [&](const std::string& label, const std::string& method, const char* kind,
@@ -442,7 +451,8 @@ nlohmann::json sweep_spec(const Section& s, const nlohmann::json& sweep) {
   }
   return {{"kind", "sweep"},
           {"stem", s.name + "_sweep"},
-          {"title", s.meta.value("title", s.name) + ": PSNR against " + sweep.value("label", key)},
+          {"title", s.meta.value("title", s.name) + ": PSNR against " + sweep.value("label", key) +
+                        (only.empty() ? "" : ", " + scene_label(only))},
           {"xlabel", sweep.value("label", key)},
           {"xlog", sweep.value("log", false)},
           {"series", list}};
