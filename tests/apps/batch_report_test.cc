@@ -474,6 +474,17 @@ TEST_CASE("every shipped config is valid", "[app]") {
   CHECK(checked >= 2 * 20);
 }
 
+namespace {
+// `lfnet report` on a folder of sections, its markdown read back.
+std::string report_of(const std::string& results, const std::string& markdown) {
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + results + " --out " + markdown,
+                      out) == 0);
+  std::ifstream in(markdown);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+}  // namespace
+
 TEST_CASE("report gives a camera error's cost against the nominal camera", "[app]") {
   lfnet::test::TempDir tmp;
   fs::create_directories(tmp / "results/c");
@@ -500,12 +511,7 @@ TEST_CASE("report gives a camera error's cost against the nominal camera", "[app
                          {"light_field", "lf"}})
              .dump()
       << "\n";
-  std::string out;
-  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
-                          (tmp / "R.md"),
-                      out) == 0);
-  std::ifstream in(tmp / "R.md");
-  const std::string md((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string md = report_of(tmp / "results", tmp / "R.md");
   CHECK(md.find("| camera error |") != std::string::npos);
   CHECK(md.find("cost dB |") != std::string::npos);
   // Each variant's cost is against its own nominal record; fields at 0 are not named.
@@ -538,12 +544,7 @@ TEST_CASE("report shows colour records' luma PSNR beside their colour PSNR", "[a
                                                                     {"light_field", "lf"}})
                                                         .dump()
                                                  << "\n";
-  std::string out;
-  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
-                          (tmp / "R.md"),
-                      out) == 0);
-  std::ifstream in(tmp / "R.md");
-  const std::string md((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string md = report_of(tmp / "results", tmp / "R.md");
   CHECK(md.find("| luma PSNR dB |") != std::string::npos);
   CHECK(md.find("| 31.50 | 0.900 | 1.00 | 32.25 |") != std::string::npos);
   CHECK(md.find("| 30.00 | 0.800 | 0.10 |  |") != std::string::npos);
@@ -571,10 +572,7 @@ TEST_CASE("a section's sweep can keep one light field", "[app]") {
     }
   }
   rec.close();
-  std::string out;
-  REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
-                          (tmp / "R.md"),
-                      out) == 0);
+  (void)report_of(tmp / "results", tmp / "R.md");
   const auto spec = lfnet::read_json_file(tmp / "images/results/figures.json");
   const nlohmann::json* sweep = nullptr;
   for (const auto& f : spec["figures"]) {
