@@ -483,6 +483,17 @@ std::string report_of(const std::string& results, const std::string& markdown) {
   std::ifstream in(markdown);
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
+// A no-parallax record of light field "lf" in sensor mode, as one JSONL line.
+std::string no_parallax_line(double psnr, double ssim) {
+  return nlohmann::json({{"method", "no-parallax"},
+                         {"psnr_db", psnr},
+                         {"ssim", ssim},
+                         {"seconds", 0.1},
+                         {"mode", "sensor"},
+                         {"light_field", "lf"}})
+             .dump() +
+         "\n";
+}
 }  // namespace
 
 TEST_CASE("report gives a camera error's cost against the nominal camera", "[app]") {
@@ -502,15 +513,7 @@ TEST_CASE("report gives a camera error's cost against the nominal camera", "[app
   const nlohmann::json depth = {{"depth", -0.1}, {"vignetting", 0.0}};
   std::ofstream(tmp / "results/c/records.jsonl")
       << record("a", 30.0, nullptr) << record("a", 29.25, depth) << record("b", 28.0, nullptr)
-      << record("b", 27.9, depth)
-      << nlohmann::json({{"method", "no-parallax"},
-                         {"psnr_db", 20.0},
-                         {"ssim", 0.5},
-                         {"seconds", 0.1},
-                         {"mode", "sensor"},
-                         {"light_field", "lf"}})
-             .dump()
-      << "\n";
+      << record("b", 27.9, depth) << no_parallax_line(20.0, 0.5);
   const std::string md = report_of(tmp / "results", tmp / "R.md");
   CHECK(md.find("| camera error |") != std::string::npos);
   CHECK(md.find("cost dB |") != std::string::npos);
@@ -536,14 +539,7 @@ TEST_CASE("report shows colour records' luma PSNR beside their colour PSNR", "[a
                                                                     {"light_field", "lf"}})
                                                         .dump()
                                                  << "\n"
-                                                 << nlohmann::json({{"method", "no-parallax"},
-                                                                    {"psnr_db", 30.0},
-                                                                    {"ssim", 0.8},
-                                                                    {"seconds", 0.1},
-                                                                    {"mode", "sensor"},
-                                                                    {"light_field", "lf"}})
-                                                        .dump()
-                                                 << "\n";
+                                                 << no_parallax_line(30.0, 0.8);
   const std::string md = report_of(tmp / "results", tmp / "R.md");
   CHECK(md.find("| luma PSNR dB |") != std::string::npos);
   CHECK(md.find("| 31.50 | 0.900 | 1.00 | 32.25 |") != std::string::npos);
