@@ -81,8 +81,9 @@ TEST_CASE("the joint loss is the fixed-code loss, and its gradient reaches the c
   }
   CHECK(net->pixel_pinv.grad_fn() == nullptr);  // the net's own buffers are untouched
   // The pseudo-inverse it reads is the one set_phi stores.
-  CHECK(torch::allclose(train::pixel_pinv_of(code->weights().detach(), net->options().pinv_lambda),
-                        net->pixel_pinv, 1e-4, 1e-6));
+  CHECK(torch::allclose(
+      nn::pixel_pseudo_inverses(code->weights().detach(), net->options().pinv_lambda),
+      net->pixel_pinv, 1e-4, 1e-6));
 }
 
 TEST_CASE("training the code alone lowers the loss of its network", "[train][joint]") {

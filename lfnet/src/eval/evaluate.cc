@@ -99,9 +99,7 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
                  "adjoint or no-parallax");
   const auto& ro = options.reconstruct;
   ro.validate();
-  const auto colour = options.camera_error.empty()
-                          ? phi.forward(truth.data())
-                          : optics::perturbed_forward(phi, options.camera_error, truth.data());
+  const auto colour = optics::perturbed_forward(phi, options.camera_error, truth.data());
   const auto sensor =
       optics::apply_sensor_effects(optics::mosaic(colour, cfa)[0], options.effects, options.seed);
   const double signal = sensor.mean().item<double>();
@@ -137,11 +135,10 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
                  options.camera_error.empty() || options.mode == optics::SimulationMode::kSensor,
                  "a camera error is simulated in sensor mode only");
   if (options.mode == optics::SimulationMode::kSensor) {
-    auto sensor = options.camera_error.empty()
-                      ? optics::simulate_sensor(phi, truth.data()[0], options.effects, options.seed)
-                      : optics::apply_sensor_effects(
-                            optics::perturbed_forward(phi, options.camera_error, truth.data()[0]),
-                            options.effects, options.seed);
+    // The camera's own Phi (the nominal one without a camera error), then its effects.
+    auto sensor = optics::apply_sensor_effects(
+        optics::perturbed_forward(phi, options.camera_error, truth.data()[0]), options.effects,
+        options.seed);
     signal = sensor.mean().item<double>();
     clock.reset();  // time the reconstruction, not the simulation
     if (image) {

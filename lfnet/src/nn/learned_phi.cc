@@ -90,10 +90,7 @@ torch::Tensor LearnedPhiImpl::response() const {
   return ((1 + m * torch::cos(phase)) / 2).permute({0, 3, 4, 1, 2});
 }
 
-torch::Tensor LearnedPhiImpl::weights() const {
-  const auto code = response();
-  return code / code.sum({1, 2}).mean();
-}
+torch::Tensor LearnedPhiImpl::weights() const { return optics::normalise_white(response()); }
 
 optics::PhiSpec LearnedPhiImpl::spec() const {
   torch::NoGradGuard no_grad;
@@ -131,10 +128,7 @@ torch::Tensor LearnedPhiImpl::binarised_weights() const {
   LFNET_CHECK_AS(ConfigError, options_.family != "asp",
                  "an ASP's response is a cosine: it has no binary form");
   torch::NoGradGuard no_grad;
-  const auto code = (response() >= 0.5).to(torch::kFloat32);
-  const auto white = code.sum({1, 2}).mean().item<double>();
-  LFNET_CHECK_AS(NumericalError, white > 0, "the binarised code measures nothing");
-  return code / white;
+  return optics::normalise_white((response() >= 0.5).to(torch::kFloat32));
 }
 
 }  // namespace lfnet::nn

@@ -150,11 +150,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
                    "set_phi: the pixel weights contain NaN or inf");
     torch::NoGradGuard no_grad;
-    // Per pixel, A (N, U V) -> A^T (A A^T + lambda I)^-1, stored transposed as (N, U V).
-    const int64_t n = o.measurements, t = stack.size(3);
-    auto a = stack.to(torch::kFloat64).reshape({n, p.rows * p.cols, t, t}).permute({2, 3, 0, 1});
-    auto gram = torch::matmul(a, a.transpose(2, 3)) + o.pinv_lambda * torch::eye(n, a.options());
-    auto inverse = at::linalg_solve(gram, a);  // (T, T, N, U V)
+    const auto inverse = pixel_pseudo_inverses(stack.to(torch::kFloat64), o.pinv_lambda);
     net.phi.set_(stack.to(net.phi.options()).contiguous().clone());
     net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
   }
@@ -287,6 +283,17 @@ torch::Tensor LightFieldNetImpl::pixel_pinv_image(const torch::Tensor& sensor,
     out.index_copy_(0, index, torch::einsum("ijnk,bnij->bkij", {map, x.index_select(0, index)}));
   }
   return out;
+}
+
+torch::Tensor pixel_pseudo_inverses(const torch::Tensor& weights, double lambda) {
+  LFNET_CHECK(weights.dim() == 5 && weights.size(3) == weights.size(4),
+              "pixel_pseudo_inverses: expected pixel weights (N, U, V, T, T), got ",
+              weights.sizes());
+  // Per pixel, A (N, U V) -> A^T (A A^T + lambda I)^-1, stored transposed as (N, U V).
+  const int64_t n = weights.size(0), views = weights.size(1) * weights.size(2), t = weights.size(3);
+  const auto a = weights.reshape({n, views, t, t}).permute({2, 3, 0, 1});  // (T, T, N, U V)
+  const auto gram = torch::matmul(a, a.transpose(2, 3)) + lambda * torch::eye(n, a.options());
+  return at::linalg_solve(gram, a);
 }
 
 std::unique_ptr<NetworkArchitecture> make_lfnet_architecture() {

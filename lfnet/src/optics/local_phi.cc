@@ -121,12 +121,6 @@ void check_code_size(const PhiSpec& spec, int64_t values, const std::string& wha
                  "smaller period");
 }
 
-torch::Tensor normalise_white(const torch::Tensor& code) {
-  const double white = code.sum({1, 2}).mean().item<double>();
-  LFNET_CHECK_AS(NumericalError, white > 0, "a Phi code measures nothing of a white light field");
-  return code / white;
-}
-
 LocalPhi::LocalPhi(PhiSpec spec, const torch::Tensor& code) : Phi(std::move(spec)) {
   LFNET_CHECK(code.dim() == 5 && code.size(0) == spec_.n && code.size(1) == spec_.rows &&
                   code.size(2) == spec_.cols && code.size(3) == code.size(4),

@@ -39,10 +39,6 @@ class LocalPhi : public Phi {
 // specs that ask for that are mistakes, and refusing them beats running out of memory.
 void check_code_size(const PhiSpec& spec, int64_t values, const std::string& what);
 
-// Scales a non-negative code (N, U, V, T, T) so a white light field measures 1 on average
-// over one period (mean over n and the T x T pixels of sum_{u,v} M).
-torch::Tensor normalise_white(const torch::Tensor& code);
-
 // Parameters of the asp model (docs/acquisition.md).
 struct AspParams {
   double depth = 1.0;                  // m, modulation depth in [0, 1]

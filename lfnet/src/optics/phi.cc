@@ -129,6 +129,13 @@ std::vector<std::string> phi_names() {
   return names;
 }
 
+torch::Tensor normalise_white(const torch::Tensor& code) {
+  const auto white = code.sum({1, 2}).mean();
+  LFNET_CHECK_AS(NumericalError, white.item<double>() > 0,
+                 "a Phi code measures nothing of a white light field");
+  return code / white;
+}
+
 std::unique_ptr<Phi> make_phi(const PhiSpec& spec) {
   ensure_builtins();
   PhiFactory factory;

@@ -62,9 +62,8 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
   if (r.cfa) meta["cfa"] = r.cfa->to_json();
   Stopwatch clock;
   if (r.mode == optics::SimulationMode::kSensor) {
-    auto sensor = r.camera_error.empty()
-                      ? phi.forward(lf.data())  // (C, N, H, W)
-                      : optics::perturbed_forward(phi, r.camera_error, lf.data());
+    // (C, N, H, W) by the camera's own Phi: the nominal one without a camera error.
+    auto sensor = optics::perturbed_forward(phi, r.camera_error, lf.data());
     if (r.cfa) sensor = optics::mosaic(sensor, *r.cfa);  // (1, N, H, W): one colour sensor
     sensor = optics::apply_sensor_effects(sensor, r.effects, r.seed);
     meta["seconds"] = clock.seconds();

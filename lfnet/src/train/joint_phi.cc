@@ -28,13 +28,6 @@ torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor
   return torch::stack(rows);
 }
 
-torch::Tensor pixel_pinv_of(const torch::Tensor& weights, double lambda) {
-  const int64_t n = weights.size(0), views = weights.size(1) * weights.size(2), t = weights.size(3);
-  const auto a = weights.reshape({n, views, t, t}).permute({2, 3, 0, 1});  // (T, T, N, U V)
-  const auto gram = torch::matmul(a, a.transpose(2, 3)) + lambda * torch::eye(n, a.options());
-  return at::linalg_solve(gram, a);
-}
-
 torch::Tensor joint_loss(nn::LightFieldNet& net, const nn::LearnedPhi& code, const Batch& batch,
                          const nn::ReconstructionLoss& loss, uint64_t noise_seed) {
   LFNET_CHECK_AS(ConfigError, net->architecture().name() == nn::kLfnetArchitecture,
@@ -49,7 +42,7 @@ torch::Tensor joint_loss(nn::LightFieldNet& net, const nn::LearnedPhi& code, con
   }
   // The net reads the code's pseudo-inverse for this forward pass only.
   const auto kept = net->pixel_pinv;
-  net->pixel_pinv = pixel_pinv_of(weights, net->options().pinv_lambda);
+  net->pixel_pinv = nn::pixel_pseudo_inverses(weights, net->options().pinv_lambda);
   torch::Tensor out;
   try {
     out = loss(net->forward(y, batch.phase, batch.noise), batch.target, batch.noise);

@@ -55,7 +55,7 @@ class LearnedPhiImpl : public torch::nn::Module {
   // The pixel weights (N, U, V, T, T), float32, differentiable in the parameters, before
   // normalisation: transmittances for mask and aperture, the ASP response for asp.
   torch::Tensor response() const;
-  // The same normalised so a white light field measures 1 on average (optics' normalise_white).
+  // The same normalised so a white light field measures 1 on average (optics::normalise_white).
   torch::Tensor weights() const;
   // The Phi of the current weights: `calibrated`, its weights those of weights().
   optics::PhiSpec spec() const;

@@ -322,6 +322,13 @@ double image_pixel_flops(const NetworkOptions& o);
 // (halo included, as recon::reconstruct_sensor_tiled computes them).
 double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile);
 
+// lfnet architecture: the per-pixel Tikhonov pseudo-inverses (T, T, N, U V) of the pixel
+// weights (N, U, V, T, T) of one period: A^T (A A^T + lambda I)^-1 per pixel phase, stored
+// transposed, in the weights' dtype and differentiable in them. set_phi stores them (in
+// float64, cast to the net's dtype); a code trained with the net (train/joint_phi.h) reads them
+// inside the graph.
+torch::Tensor pixel_pseudo_inverses(const torch::Tensor& weights, double lambda);
+
 // Number of trainable parameters.
 int64_t parameter_count(const torch::nn::Module& module);
 

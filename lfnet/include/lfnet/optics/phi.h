@@ -105,6 +105,12 @@ class Phi {
   PhiSpec spec_;
 };
 
+// Scales a non-negative code (N, U, V, T, T) so a white light field measures 1 on average
+// over one period (mean over n and the T x T pixels of sum_{u,v} M): the normalisation of every
+// built-in model (docs/acquisition.md, "Normalisation"), differentiable in the code. A code that
+// measures nothing of white is a NumericalError.
+torch::Tensor normalise_white(const torch::Tensor& code);
+
 // Builds a Phi from its spec; the result's spec() has every parameter resolved. Unknown names
 // throw ConfigError listing the known ones; bad parameters throw ConfigError naming the path.
 std::unique_ptr<Phi> make_phi(const PhiSpec& spec);

@@ -1,7 +1,8 @@
 // Training a code with its network (docs/training.md, "Learned codes"): the measurements of
 // each training patch are simulated again from the learnable code (nn/learned_phi.h), inside
 // the graph, and the lfnet architecture's per-pixel pseudo-inverse is computed from the same
-// code, so the loss's gradient reaches the code's parameters as well as the network's.
+// code (nn::pixel_pseudo_inverses), so the loss's gradient reaches the code's parameters as
+// well as the network's.
 #pragma once
 
 #include <torch/torch.h>
@@ -21,11 +22,6 @@ namespace lfnet::train {
 // simulation computes, differentiable in the weights.
 torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor& target,
                                const torch::Tensor& phase);
-
-// The lfnet architecture's per-pixel Tikhonov pseudo-inverses (T, T, N, U V) of a code
-// (N, U, V, T, T): A^T (A A^T + lambda I)^-1 per pixel phase, stored transposed, as
-// LightFieldNet::set_phi computes them, but differentiable in the weights.
-torch::Tensor pixel_pinv_of(const torch::Tensor& weights, double lambda);
 
 // The loss of a lfnet-architecture `net` on `batch` when its measurements come from `code`:
 // the batch's targets simulated with code->weights() (noise of the batch's sigmas added, drawn
