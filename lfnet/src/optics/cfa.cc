@@ -106,6 +106,11 @@ bool ColourFilterArray::one_colour_per_pixel() const {
   return ((response_ > 0).sum(0) == 1).all().item<bool>();
 }
 
+void ColourFilterArray::check_demosaicable() const {
+  LFNET_CHECK_AS(ConfigError, one_colour_per_pixel(),
+                 "only colour filter arrays whose pixels each see one colour are demosaiced");
+}
+
 torch::Tensor ColourFilterArray::response_image(int64_t height, int64_t width) const {
   const int64_t p = period();
   return response_.repeat({1, (height + p - 1) / p, (width + p - 1) / p})
@@ -126,8 +131,7 @@ torch::Tensor mosaic(const torch::Tensor& colour_sensor, const ColourFilterArray
 }
 
 torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa) {
-  LFNET_CHECK_AS(ConfigError, cfa.one_colour_per_pixel(),
-                 "demosaicing needs a colour filter array whose pixels each see one colour");
+  cfa.check_demosaicable();
   LFNET_CHECK_AS(ConfigError, mosaicked.dim() >= 2, "demosaic: expected (..., H, W), got ",
                  mosaicked.sizes());
   const int64_t h = mosaicked.size(-2), w = mosaicked.size(-1);

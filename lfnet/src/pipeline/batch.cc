@@ -200,7 +200,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
   std::vector<NamedLightField> truths;
   MethodContext context;
   std::unique_ptr<optics::Phi> phi;
-  std::optional<nn::PatchShape> patch;  // the model's, when there is one
+  std::optional<nn::PatchShape> patch;           // the model's, when there is one
+  std::optional<optics::ColourFilterArray> cfa;  // --cfa, inline once the batch has read it
   try {
     optics::PhiSpec spec;
     if (!a.model.empty()) {
@@ -227,6 +228,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     LightFieldSources sources;
     sources.light_fields = {item.path};
     truths = load_sources(sources, phi->rows(), phi->cols(), false, !a.cfa.empty());
+    if (!a.cfa.empty()) cfa = optics::ColourFilterArray::parse(a.cfa);
   } catch (const std::exception& e) {
     for (const auto& method : methods) records.push_back(failed(method, e.what()));
     return records;
@@ -234,7 +236,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
   for (const auto& method : methods) {
     try {
       auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
-      if (!a.cfa.empty()) o.cfa = optics::ColourFilterArray::parse(a.cfa);
+      o.cfa = cfa;
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
       record["path"] = item.path;
@@ -347,17 +349,15 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
       throw ConfigError(std::string("--methods: ") + e.what());
     }
   }
-  if (!a.cfa.empty()) {
-    // Checked before any work; the items read it again (a name, or a small file).
-    const auto cfa = optics::ColourFilterArray::parse(a.cfa);
-    LFNET_CHECK_AS(ConfigError, cfa.one_colour_per_pixel(),
-                   "--cfa: only colour filter arrays whose pixels each see one colour are "
-                   "demosaiced");
-  }
-  // Checked before any work, and read once: the items take it inline, not from its file again.
+  // Checked before any work, and read once: the items take them inline, not from a file again.
   BatchOptions resolved = a;
   const auto method_options = method_options_argument(a.method_options, methods);
   resolved.method_options = method_options.empty() ? "" : method_options.dump();
+  if (!a.cfa.empty()) {
+    const auto cfa = optics::ColourFilterArray::parse(a.cfa);
+    cfa.check_demosaicable();
+    resolved.cfa = cfa.to_json().dump();
+  }
   const auto manifest = batch_manifest(a, methods);
   OutputFolderPolicy policy;
   policy.force = a.force;

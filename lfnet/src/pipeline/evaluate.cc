@@ -213,9 +213,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
                    "' reconstructs grey sensor images; behind a colour filter array use pinv, "
                    "adjoint or no-parallax");
-    LFNET_CHECK_AS(ConfigError, cfa->one_colour_per_pixel(),
-                   "--cfa: only colour filter arrays whose pixels each see one colour are "
-                   "demosaiced");
+    cfa->check_demosaicable();
   }
   parse_device(a.device);  // a clear error before any work
   MethodContext context;

@@ -162,8 +162,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     LFNET_CHECK_AS(ConfigError, !image, "method '", method,
                    "' works on whole grey sensor images; behind a colour filter array use a "
                    "patch method (pinv, adjoint, dict), whose light field is then demosaiced");
-    LFNET_CHECK_AS(ConfigError, cfa->one_colour_per_pixel(),
-                   "only colour filter arrays whose pixels each see one colour are demosaiced");
+    cfa->check_demosaicable();
   }
   const auto& lf_meta = acq.meta.at("light_field");
   const int64_t c = lf_meta.at("channels").get<int64_t>();

@@ -30,6 +30,8 @@ class ColourFilterArray {
   const torch::Tensor& response() const { return response_; }  // (3, P, P) float32
   // Whether every pixel sees exactly one colour (a Bayer pattern does): what demosaic needs.
   bool one_colour_per_pixel() const;
+  // A ConfigError unless one_colour_per_pixel(): the check every command makes before any work.
+  void check_demosaicable() const;
   // The response of every pixel of an H x W sensor: (3, H, W), the tile repeated from (0, 0).
   torch::Tensor response_image(int64_t height, int64_t width) const;
 
