@@ -17,7 +17,7 @@ namespace lfnet::app {
 namespace {
 struct PhiExportArgs {
   std::string phi, out, grid = "5x5";
-  bool force = false;
+  bool force = false, printable = false;
 };
 
 // "UxV" -> (U, V).
@@ -45,8 +45,10 @@ void run_phi_export(const PhiExportArgs& a) {
     std::tie(spec.rows, spec.cols) = parse_grid(a.grid);
   }
   const auto phi = optics::make_phi(spec);
+  const bool mask = a.printable || io::is_learned_mask(*phi);
   write_folder(a.out, policy, [&](const std::string& dir) {
     io::write_calibrated_phi(*phi, dir);
+    if (mask) io::write_printable_mask(*phi, dir);
     // Read it back: the folder must give the same camera, weight for weight.
     const auto back = optics::make_phi(io::read_calibrated_phi(dir));
     const int64_t t = phi->period();
@@ -58,10 +60,11 @@ void run_phi_export(const PhiExportArgs& a) {
     LFNET_CHECK_AS(NumericalError, diff == 0, "the written Phi differs from ", spec.label(), " by ",
                    diff, " when read back: please report this");
   });
-  std::printf("wrote %s (%lld measurements, %lldx%lld views, period %lld) to %s\n",
+  std::printf("wrote %s (%lld measurements, %lldx%lld views, period %lld) to %s%s\n",
               spec.label().c_str(), static_cast<long long>(phi->measurements()),
               static_cast<long long>(phi->rows()), static_cast<long long>(phi->cols()),
-              static_cast<long long>(phi->period()), a.out.c_str());
+              static_cast<long long>(phi->period()), a.out.c_str(),
+              mask ? ", with its printable pattern (mask_<n>.png)" : "");
 }
 }  // namespace
 
@@ -77,6 +80,9 @@ void add_phi_command(CLI::App& app, const GlobalOptions&) {
   ex->add_option("--out", a->out, "folder to write")->required();
   ex->add_option("--grid", a->grid, "views U x V coded by a NAME[:N] Phi")->capture_default_str();
   ex->add_flag("--force", a->force, "replace an existing folder");
+  ex->add_flag("--printable", a->printable,
+               "also write each measurement's code as an 8-bit image to print (mask_<n>.png; "
+               "always for a learned mask or aperture)");
   ex->callback([a] { run_phi_export(*a); });
 }
 

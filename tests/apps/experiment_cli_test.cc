@@ -153,3 +153,59 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
     CHECK_FALSE(fs::exists(tmp / "bad/models/joint_scratch.ckpt"));
   }
 }
+
+TEST_CASE("experiment with $.code learns a code, evaluates with it and exports it to print",
+          "[app][slow]") {
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "code.json") << R"({
+    "name": "code", "phi": {"name": "mask", "n": 2},
+    "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
+    "dataset": {"patch_h": 16, "patch_w": 16, "train_patches": 32, "validation_patches": 16,
+                "validation_fraction": 0.3, "seed": 2},
+    "network": {"architecture": "lfnet", "image": {"channels": 4, "levels": 2, "blocks": 1},
+                "patch": {"height": 16, "width": 16}},
+    "training": {"epochs": 2, "batch_size": 16, "progress": false},
+    "code": {"family": "mask", "period": 3, "lr": 0.05, "freeze_epochs": 1, "binarise": true},
+    "stages": ["joint_scratch"],
+    "evaluation": {"data": {"random_scenes": 1, "random_seed": 99,
+                            "random_options": {"height": 40, "width": 40}},
+                   "methods": ["net", "pinv"]}
+  })";
+  const std::string lfnet = lfnet_binary() + " --threads 2 ";
+  std::string out;
+  REQUIRE(run_command(lfnet + "experiment " + (tmp / "code.json") + " --out " + (tmp / "run"),
+                      out) == 0);
+  CHECK(out.find("learning the code with the net: family mask, period 3") != std::string::npos);
+  CHECK(out.find("the code was rounded to 0 or 1 before it") != std::string::npos);
+  // Both methods reconstruct the sensor image of the learned camera.
+  const auto results = lfnet::test::read_json_lines(tmp / "run/results.jsonl");
+  REQUIRE(results.size() == 2);
+  for (const auto& r : results) CHECK(r["phi"]["name"] == "calibrated");
+  // The model's Phi is the rounded code, which phi export writes with the pattern to print.
+  const std::string model = tmp / "run/models/joint_scratch.ckpt";
+  REQUIRE(run_command(lfnet + "phi export --phi " + model + " --out " + (tmp / "code-phi"), out) ==
+          0);
+  CHECK(out.find("with its printable pattern") != std::string::npos);
+  CHECK(fs::exists(tmp / "code-phi/mask_1.png"));
+  CHECK(fs::exists(tmp / "code-phi/mask_2.png"));
+  const auto sidecar = nlohmann::json::parse(std::ifstream(tmp / "code-phi/phi.json"));
+  CHECK(sidecar["period"] == 3);
+  CHECK(sidecar["exported_from"]["params"]["source"] == "learned mask, binarised");
+
+  // A code that cannot be trained is one error before any training.
+  const std::pair<std::string, std::string> bad[] = {
+      {"code.family=asp", "$.code.binarise: an ASP's response is a cosine"},
+      {"code.colour=red", "$.code.colour"},
+      {"code.freeze_epochs=5", "freeze_epochs"},
+      {"code.family=lens", "lens"},
+  };
+  for (const auto& [set, message] : bad) {
+    INFO(set);
+    CHECK(run_command(
+              lfnet + "train " + (tmp / "code.json") + " --set " + set + " --out " + (tmp / "bad"),
+              out) != 0);
+    CHECK(out.find(message) != std::string::npos);
+    CHECK(out.find("lfnet: error:") != std::string::npos);
+    CHECK_FALSE(fs::exists(tmp / "bad/models/joint_scratch.ckpt"));
+  }
+}

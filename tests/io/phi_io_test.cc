@@ -141,3 +141,43 @@ TEST_CASE("a malformed calibrated folder is refused naming the file and field", 
       io::write_calibrated_phi(*optics::make_phi(optics::PhiSpec::parse("random:2")), dir),
       lfnet::ConfigError);
 }
+
+TEST_CASE("a learned mask is exported with the pattern to print", "[io][phi]") {
+  lfnet::test::TempDir tmp;
+  // A code of period 2 for 2 x 3 views: transmittances 0, 0.25, 0.5, 0.75 and 1, normalised.
+  auto gen = torch::make_generator<at::CPUGeneratorImpl>(4);
+  const auto open = torch::randint(0, 5, {2, 2, 3, 2, 2}, gen).to(torch::kFloat64) / 4;
+  const auto w = open / open.sum({1, 2}).mean();
+  optics::PhiSpec spec;
+  spec.name = "calibrated";
+  spec.n = 2;
+  spec.rows = 2;
+  spec.cols = 3;
+  spec.params = {
+      {"period", 2},
+      {"weights", std::vector<double>(w.data_ptr<double>(), w.data_ptr<double>() + w.numel())},
+      {"normalise", false},
+      {"source", "learned mask"}};
+  const auto phi = optics::make_phi(spec);
+  CHECK(io::is_learned_mask(*phi));
+  CHECK_FALSE(io::is_learned_mask(*optics::make_phi(optics::PhiSpec::parse("mask:2"))));
+  const auto names = io::write_printable_mask(*phi, tmp / "out");
+  REQUIRE(names == std::vector<std::string>{"mask_1.png", "mask_2.png"});
+  for (int64_t k = 0; k < 2; ++k) {
+    const auto image = io::read_image(tmp / ("out/" + names[k]));  // (1, T U, T V)
+    REQUIRE(image.sizes() == torch::IntArrayRef({1, 4, 6}));
+    // Pixel (y, x)'s U x V block holds its transmittances over the largest (here 1).
+    for (int64_t y = 0; y < 2; ++y) {
+      for (int64_t x = 0; x < 2; ++x) {
+        const auto block = image[0].slice(0, y * 2, y * 2 + 2).slice(1, x * 3, x * 3 + 3);
+        const auto want = open.select(0, k).select(2, y).select(2, x).to(torch::kFloat32) /
+                          open.max().item<double>();
+        CHECK(torch::allclose(block, want, 0, 0.6 / 255));
+      }
+    }
+  }
+  // Random projections have no per-pixel code to print.
+  CHECK_THROWS_AS(io::write_printable_mask(*optics::make_phi(optics::PhiSpec::parse("random:2")),
+                                           tmp / "random"),
+                  lfnet::ConfigError);
+}

@@ -8,6 +8,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
+#include "lfnet/io/light_field_io.h"
 
 namespace fs = std::filesystem;
 
@@ -101,6 +102,35 @@ void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
                          {"source", phi.spec().label()},
                          {"exported_from", phi.spec().to_json()}};
   write_json_file((fs::path(dir) / kCalibratedPhiSidecar).string(), meta);
+}
+
+std::vector<std::string> write_printable_mask(const optics::Phi& phi, const std::string& dir) {
+  LFNET_CHECK_AS(ConfigError, phi.local(), "Phi '", phi.spec().label(),
+                 "' is not local and has no mask to print");
+  const int64_t t = phi.period(), n = phi.measurements(), u = phi.rows(), v = phi.cols();
+  const auto code = phi.pixel_weights(0, 0, t, t, torch::kFloat64);  // (N, U, V, T, T)
+  LFNET_CHECK_AS(ConfigError, code.min().item<double>() >= 0, "Phi '", phi.spec().label(),
+                 "' has negative weights: no transmittance makes them, so there is no mask to "
+                 "print");
+  const double top = code.max().item<double>();
+  LFNET_CHECK_AS(ConfigError, top > 0, "Phi '", phi.spec().label(), "' measures nothing");
+  std::vector<std::string> names;
+  fs::create_directories(dir);
+  for (int64_t k = 0; k < n; ++k) {
+    const auto image = (code[k] / top).permute({2, 0, 3, 1}).reshape({t * u, t * v});
+    names.push_back("mask_" + std::to_string(k + 1) + ".png");
+    write_image((fs::path(dir) / names.back()).string(), image.to(torch::kFloat32), 8);
+  }
+  return names;
+}
+
+bool is_learned_mask(const optics::Phi& phi) {
+  const auto& spec = phi.spec();
+  if (spec.name != "calibrated" || !spec.params.contains("source")) return false;
+  const auto& source = spec.params["source"];
+  if (!source.is_string()) return false;
+  const auto text = source.get<std::string>();
+  return text.rfind("learned mask", 0) == 0 || text.rfind("learned aperture", 0) == 0;
 }
 
 optics::PhiSpec read_calibrated_phi(const std::string& path) {

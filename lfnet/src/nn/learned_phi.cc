@@ -92,20 +92,26 @@ torch::Tensor LearnedPhiImpl::response() const {
 
 torch::Tensor LearnedPhiImpl::weights() const { return optics::normalise_white(response()); }
 
-optics::PhiSpec LearnedPhiImpl::spec() const {
-  torch::NoGradGuard no_grad;
-  const auto w = weights().to(torch::kFloat64).contiguous();
+optics::PhiSpec calibrated_spec(const torch::Tensor& weights, const std::string& source) {
+  LFNET_CHECK_AS(ConfigError, weights.dim() == 5 && weights.size(3) == weights.size(4),
+                 "calibrated_spec: pixel weights are (N, U, V, T, T), got ", weights.sizes());
+  const auto w = weights.detach().to(torch::kCPU, torch::kFloat64).contiguous();
   optics::PhiSpec spec;
   spec.name = "calibrated";
-  spec.n = n_;
-  spec.rows = rows_;
-  spec.cols = cols_;
+  spec.n = w.size(0);
+  spec.rows = w.size(1);
+  spec.cols = w.size(2);
   spec.params = {
       {"period", w.size(3)},
       {"weights", std::vector<double>(w.data_ptr<double>(), w.data_ptr<double>() + w.numel())},
       {"normalise", false},
-      {"source", "learned " + options_.family}};
+      {"source", source}};
   return spec;
+}
+
+optics::PhiSpec LearnedPhiImpl::spec() const {
+  torch::NoGradGuard no_grad;
+  return calibrated_spec(weights(), "learned " + options_.family);
 }
 
 nlohmann::json LearnedPhiImpl::physical() const {

@@ -190,6 +190,26 @@ void DistillConfig::read(JsonReader& r) {
 
 nlohmann::json DistillConfig::to_json() const { return fields_to_json(*this); }
 
+void CodeConfig::read(JsonReader& r) {
+  enabled = true;
+  read_fields(r, phi);
+  read_fields(r, training);
+  r.finish();
+  try {
+    phi.validate();
+  } catch (const ConfigError& e) {
+    throw ConfigError(r.path() + ": " + e.what());
+  }
+  LFNET_CHECK_AS(ConfigError, !training.binarise || phi.family != "asp", r.path_of("binarise"),
+                 ": an ASP's response is a cosine and has no binary form (mask and aperture do)");
+}
+
+nlohmann::json CodeConfig::to_json() const {
+  auto out = fields_to_json(phi);
+  out.update(fields_to_json(training));
+  return out;
+}
+
 ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std::string& source) {
   ExperimentConfig c;
   c.raw = j;
@@ -225,6 +245,10 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
     if (r.has("distill")) {
       auto d = r.child("distill");
       c.distill.read(d);
+    }
+    if (r.has("code")) {
+      auto k = r.child("code");
+      c.code.read(k);
     }
     // Parse once so errors in the common options surface before any work.
     (void)train::TrainerOptions::from_json(c.training, "$.training");
@@ -283,6 +307,15 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   }
   // The resolved spec (every parameter filled in) is what models and results record.
   c.phi = optics::make_phi(c.phi)->spec();
+  if (c.code.enabled) {
+    // The code's start, with $.phi's N and views, is the Phi the data and the net begin with.
+    try {
+      const nn::LearnedPhi start(c.code.phi, c.phi.n, c.phi.rows, c.phi.cols);
+      c.phi = optics::make_phi(start->spec())->spec();
+    } catch (const ConfigError& e) {
+      throw ConfigError(source + ": $.code: " + e.what());
+    }
+  }
   // The net's measurements and patch follow from the Phi and the dataset's patches: a value
   // given in $.network is honoured when it agrees, and refused when it does not.
   const auto given = c.network;

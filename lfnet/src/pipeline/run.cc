@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -220,9 +221,6 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
     spdlog::warn("the config names no evaluation data ($.evaluation.data): nothing evaluated");
     return;
   }
-  const auto phi = optics::make_phi(config.phi);
-  MethodContext context;
-  context.phi = phi.get();
   // net, ae and cnn use the last network stage's model (or model_stage); dict uses the dict
   // stage's dictionary.
   std::string model;
@@ -232,7 +230,15 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
   if (!ev.model_stage.empty()) {
     model = (fs::path(out) / "models" / (ev.model_stage + ".ckpt")).string();
   }
-  if (!model.empty()) context.net = train::build_net(train::load_checkpoint(model), model);
+  // A learned code's camera is the one its model was trained with.
+  auto spec = config.phi;
+  std::optional<train::Checkpoint> checkpoint;
+  if (!model.empty()) checkpoint = train::load_checkpoint(model);
+  if (checkpoint && config.code.enabled) spec = optics::PhiSpec::from_json(checkpoint->phi);
+  const auto phi = optics::make_phi(spec);
+  MethodContext context;
+  context.phi = phi.get();
+  if (checkpoint) context.net = train::build_net(*checkpoint, model);
   const fs::path dictionary = fs::path(out) / "models" / "dict.ckpt";
   if (fs::exists(dictionary)) context.dictionary = dictionary.string();
   ModelCache cache;  // the dictionary is read once for every light field, stride, mode and noise

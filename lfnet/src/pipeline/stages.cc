@@ -88,6 +88,21 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   run.command_line = command_line;
   train::Trainer trainer(net, options, run);
   trainer.set_communicator(comm);
+  if (config.code.enabled) {
+    // The code starts as the config's Phi (its start) and is trained with the net.
+    trainer.set_code(nn::LearnedPhi(config.code.phi, phi->measurements(), phi->rows(), phi->cols()),
+                     config.code.training);
+    if (lead) {
+      spdlog::info("learning the code with the net: family {}, period {}, learning rate {:g}{}{}",
+                   config.code.phi.family, config.code.phi.period, config.code.training.lr,
+                   config.code.training.freeze_epochs > 0
+                       ? ", fixed for the last " +
+                             std::to_string(config.code.training.freeze_epochs) +
+                             (config.code.training.freeze_epochs == 1 ? " epoch" : " epochs")
+                       : "",
+                   config.code.training.binarise ? ", rounded to 0 or 1" : "");
+    }
+  }
   const std::string models = (fs::path(run_dir) / "models").string();
   if (!lead) {
     // Rank 0 reads what the stage starts from; fit() hands its state to this rank.
@@ -116,6 +131,14 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
     spdlog::info("{} epoch {}: train loss {:.5f}, validation PSNR {:.2f} dB{} ({:.0f} patches/s)",
                  stage.name, r.epoch, r.train_loss, r.val_psnr_db, r.best ? " (best)" : "",
                  r.patches_per_s);
+    const auto& code = trainer.state().code;
+    if (code.contains("binarised") && code["binarised"].value("epoch", int64_t{0}) == r.epoch) {
+      spdlog::info(
+          "{} epoch {}: the code was rounded to 0 or 1 before it: validation PSNR {:.2f} dB with "
+          "the code as learned, {:.2f} dB rounded, {:.2f} dB once the net settled on it",
+          stage.name, r.epoch, code["binarised"]["continuous_psnr_db"].get<double>(),
+          code["binarised"]["binary_psnr_db"].get<double>(), r.val_psnr_db);
+    }
     append_jsonl((fs::path(run_dir) / "training.jsonl").string(),
                  nlohmann::json{{"stage", stage.name}, {"record", r.to_json()}});
   };

@@ -168,7 +168,8 @@ nlohmann::json TrainingState::to_json() const {
           {"best_metric", finite_or_null(best_metric)},
           {"best_epoch", best_epoch},
           {"history", history},
-          {"origin", origin}};
+          {"origin", origin},
+          {"code", code}};
 }
 
 TrainingState TrainingState::from_json(const nlohmann::json& j) {
@@ -180,6 +181,7 @@ TrainingState TrainingState::from_json(const nlohmann::json& j) {
   s.best_epoch = j.at("best_epoch").get<int64_t>();
   s.history = j.at("history");
   s.origin = j.value("origin", nlohmann::json::object());
+  s.code = j.value("code", nlohmann::json::object());
   return s;
 }
 
@@ -318,6 +320,7 @@ void check_architecture(const nn::LightFieldNet& net, const TensorMap& state,
   for (const auto& p : net->named_parameters()) compare(p.key(), p.value());
   for (const auto& b : net->named_buffers()) compare(b.key(), b.value());
   for (const auto& [name, t] : state) {
+    if (name.rfind(kCodePrefix, 0) == 0) continue;  // a learned code's, not the net's
     if (!mine.count(name)) problems.push_back("it has " + name + ", which this net lacks");
   }
   if (problems.empty()) return;

@@ -15,6 +15,8 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/nn/architecture.h"
+#include "lfnet/train/joint_phi.h"
 
 namespace lfnet::train {
 
@@ -131,6 +133,17 @@ void TrainerOptions::validate() const {
   }
   if (!(clip_grad_norm >= 0)) fail("clip_grad_norm", "must be >= 0");
   if (max_skipped_batches < 0) fail("max_skipped_batches", "must be >= 0");
+}
+
+void CodeTrainingOptions::validate(int64_t epochs) const {
+  LFNET_CHECK_AS(ConfigError, lr >= 0 && std::isfinite(lr),
+                 "$.code.lr: must be finite and >= 0, got ", lr);
+  LFNET_CHECK_AS(ConfigError, freeze_epochs >= 0 && freeze_epochs <= epochs,
+                 "$.code.freeze_epochs: must lie in 0..", epochs, " (the stage's epochs), got ",
+                 freeze_epochs);
+  LFNET_CHECK_AS(ConfigError, !binarise || freeze_epochs >= 1,
+                 "$.code.binarise: a binary code is held fixed for the last epochs; set "
+                 "$.code.freeze_epochs to at least 1");
 }
 
 double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch, int64_t batches) {
@@ -261,6 +274,45 @@ std::unique_ptr<torch::optim::Adam> make_adam(const nn::LightFieldNet& net,
   return std::make_unique<torch::optim::Adam>(net->parameters(), adam);
 }
 
+// A learned code's own Adam: the net's betas and eps, no weight decay.
+std::unique_ptr<torch::optim::Adam> make_code_adam(const nn::LearnedPhi& code,
+                                                   const TrainerOptions& o,
+                                                   const CodeTrainingOptions& c) {
+  torch::optim::AdamOptions adam(c.lr);
+  adam.betas({o.beta1, o.beta2}).eps(o.eps);
+  return std::make_unique<torch::optim::Adam>(code->parameters(), adam);
+}
+
+// The noise a learned code's measurements get: training step `step`, or validation batch
+// `batch` (the same draws every epoch), each from its own seed.
+uint64_t code_noise_seed(int64_t step) {
+  return 0x6c666e6574636f64ULL ^ (static_cast<uint64_t>(step) * 0x9E3779B97F4A7C15ULL);
+}
+uint64_t code_validation_seed(size_t batch) {
+  return 0x76616c6964617465ULL + static_cast<uint64_t>(batch);
+}
+
+// The module's parameters and buffers under kCodePrefix.
+void add_code_state(TensorMap& out, const TensorMap& code) {
+  for (const auto& [name, t] : code) out[kCodePrefix + name] = t;
+}
+// The entries of `state` under kCodePrefix, the prefix taken off.
+TensorMap code_part(const TensorMap& state) {
+  TensorMap out;
+  const std::string prefix = kCodePrefix;
+  for (const auto& [name, t] : state) {
+    if (name.rfind(prefix, 0) == 0) out[name.substr(prefix.size())] = t;
+  }
+  return out;
+}
+TensorMap without_code(const TensorMap& state) {
+  TensorMap out;
+  for (const auto& [name, t] : state) {
+    if (name.rfind(kCodePrefix, 0) != 0) out[name] = t;
+  }
+  return out;
+}
+
 }  // namespace
 
 Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
@@ -283,6 +335,82 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
   optimizer_ = make_adam(net_, options_);
   state_.stage = to_string(options_.stage);
   comm_ = std::make_shared<dist::LocalCommunicator>();
+}
+
+void Trainer::set_code(nn::LearnedPhi code, CodeTrainingOptions options) {
+  LFNET_CHECK(code, "set_code: no code");
+  LFNET_CHECK_AS(ConfigError, net_->architecture().name() == nn::kLfnetArchitecture,
+                 "a code is trained with a network of the lfnet architecture, not '",
+                 net_->architecture().name(), "'");
+  options.validate(options_.epochs);
+  const auto w = code->weights();
+  const auto& o = net_->options();
+  LFNET_CHECK_AS(
+      ConfigError,
+      w.size(0) == o.measurements && w.size(1) == o.patch.rows && w.size(2) == o.patch.cols,
+      "the code measures ", w.size(0), " values of ", w.size(1), "x", w.size(2),
+      " views, but the net reads ", o.measurements, " of ", o.patch.rows, "x", o.patch.cols);
+  LFNET_CHECK_AS(ConfigError, w.size(3) == net_->period(), "the code's period ", w.size(3),
+                 " differs from that of the Phi the net and its data were made with (",
+                 net_->period(), "): make them with the code's own spec");
+  code_ = std::move(code);
+  code_->to(device_);
+  code_options_ = options;
+  code_optimizer_ = make_code_adam(code_, options_, code_options_);
+  fixed_code_ = torch::Tensor();
+  sync_code_phi();
+}
+
+torch::Tensor Trainer::code_weights() const {
+  if (!code_) return {};
+  if (fixed_code_.defined()) return fixed_code_;
+  torch::NoGradGuard no_grad;
+  return code_->weights();
+}
+
+optics::PhiSpec Trainer::code_phi_spec() const {
+  LFNET_CHECK(code_, "code_phi_spec: no code");
+  std::string source = "learned " + code_->options().family;
+  if (fixed_code_.defined() && code_options_.binarise) source += ", binarised";
+  // Resolved as every spec a run records is (make_phi fills in what a spec leaves out).
+  return optics::make_phi(nn::calibrated_spec(code_weights(), source))->spec();
+}
+
+bool Trainer::code_frozen(int64_t epoch) const {
+  return code_ && epoch >= options_.epochs - code_options_.freeze_epochs;
+}
+
+void Trainer::sync_code_phi() {
+  if (!code_) return;
+  net_->set_phi(code_weights().detach().to(torch::kCPU, torch::kFloat32));
+}
+
+void Trainer::prepare_code(int64_t epoch, BatchSource& source) {
+  if (!code_frozen(epoch) || fixed_code_.defined()) return;
+  torch::NoGradGuard no_grad;
+  if (!code_options_.binarise) {
+    fixed_code_ = code_->weights().detach();
+    sync_code_phi();
+    return;
+  }
+  fixed_code_ = code_->binarised_weights().to(device_);
+  if (state_.code.contains("binarised")) {
+    sync_code_phi();  // resumed after the rounding: it was measured then
+    return;
+  }
+  // What rounding costs the net as it is, then only binary-code epochs count as best.
+  auto rounded = fixed_code_;
+  fixed_code_ = code_->weights().detach();
+  sync_code_phi();
+  const auto before = evaluate(source);
+  fixed_code_ = rounded;
+  sync_code_phi();
+  const auto after = evaluate(source);
+  state_.code["binarised"] = {{"epoch", epoch + 1},
+                              {"continuous_psnr_db", before.psnr_db},
+                              {"binary_psnr_db", after.psnr_db}};
+  state_.best_metric = -std::numeric_limits<double>::infinity();
+  state_.best_epoch = 0;
 }
 
 void Trainer::set_communicator(std::shared_ptr<dist::Communicator> communicator) {
@@ -361,6 +489,11 @@ void Trainer::average_gradients(double patches) {
 
 void Trainer::apply_lr(double lr) {
   for (auto& group : optimizer_->param_groups()) group.options().set_lr(lr);
+  if (code_optimizer_) {
+    // The code follows the net's schedule from its own learning rate.
+    const double code_lr = options_.lr > 0 ? code_options_.lr * lr / options_.lr : 0.0;
+    for (auto& group : code_optimizer_->param_groups()) group.options().set_lr(code_lr);
+  }
 }
 
 Checkpoint Trainer::checkpoint() const {
@@ -371,6 +504,12 @@ Checkpoint Trainer::checkpoint() const {
   ck.command_line = run_.command_line;
   ck.model = module_state(*net_);
   ck.optimizer = adam_state(*optimizer_, *net_);
+  if (code_) {
+    // The code as the net uses it is the model's Phi; the net's Phi buffers hold its weights.
+    ck.phi = code_phi_spec().to_json();
+    add_code_state(ck.model, module_state(*code_));
+    add_code_state(ck.optimizer, adam_state(*code_optimizer_, *code_));
+  }
   ck.optimizer_options = {{"type", "adam"},          {"lr", options_.lr},
                           {"beta1", options_.beta1}, {"beta2", options_.beta2},
                           {"eps", options_.eps},     {"weight_decay", options_.weight_decay}};
@@ -386,14 +525,29 @@ Checkpoint Trainer::checkpoint() const {
 void Trainer::resume(const std::string& path) {
   const std::string what = "checkpoint " + path;
   auto ck = load_checkpoint(path);
-  check_phi(ck, run_.phi, what);
+  if (code_) {
+    // The Phi is the code, which the checkpoint holds; the code's options must match.
+    const auto mine = fields_to_json(code_->options());
+    const auto theirs = ck.config.value("code", nlohmann::json());
+    if (!ck.model.count(std::string(kCodePrefix) + code_->named_parameters().begin()->key())) {
+      throw CheckpointError(what + " holds no learned code: it did not train one");
+    }
+    for (const auto& [key, value] : mine.items()) {
+      if (theirs.is_object() && theirs.contains(key) && theirs[key] != value) {
+        throw CheckpointError(what + " trained a code with " + key + " " + theirs[key].dump() +
+                              ", this run asks for " + value.dump());
+      }
+    }
+  } else {
+    check_phi(ck, run_.phi, what);
+  }
   if (ck.training.stage != to_string(options_.stage)) {
     throw CheckpointError(what + " is from stage '" + ck.training.stage +
                           "'; resume it with that stage, or start stage '" +
                           to_string(options_.stage) + "' from it with --init");
   }
   check_architecture(net_, ck.model, what);
-  if (!torch::equal(ck.model.at("phi"), net_->phi.to(torch::kCPU))) {
+  if (!code_ && !torch::equal(ck.model.at("phi"), net_->phi.to(torch::kCPU))) {
     throw CheckpointError(what +
                           " has other Phi matrices than this run although the Phi spec "
                           "is the same (did the Phi implementation change?); finetune with --init");
@@ -404,7 +558,21 @@ void Trainer::resume(const std::string& path) {
                           "resume from last.ckpt, or finetune from it with --init");
   }
   load_net_state(net_, ck.model, what);
-  load_adam_state(*optimizer_, *net_, ck.optimizer, what);
+  load_adam_state(*optimizer_, *net_, without_code(ck.optimizer), what);
+  if (code_) {
+    const auto code = code_part(ck.model);
+    torch::NoGradGuard no_grad;
+    for (auto& p : code_->named_parameters()) {
+      auto it = code.find(p.key());
+      if (it == code.end() || it->second.sizes() != p.value().sizes()) {
+        throw CheckpointError(what + ": its learned code lacks " + p.key() +
+                              " or has another shape");
+      }
+      p.value().copy_(it->second);
+    }
+    load_adam_state(*code_optimizer_, *code_, code_part(ck.optimizer), what);
+    fixed_code_ = torch::Tensor();
+  }
   state_ = ck.training;
   if (state_.rng_state.defined()) {
     auto gen = at::detail::getDefaultCPUGenerator();
@@ -459,6 +627,21 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
         }
       }
     }
+  }
+  if (code_) {
+    // A model that learned a code of this family and shape hands it on (the code's own Adam
+    // starts afresh, like the net's).
+    torch::NoGradGuard no_grad;
+    const auto code = code_part(ck.model);
+    for (auto& p : code_->named_parameters()) {
+      auto it = code.find(p.key());
+      if (it == code.end() || it->second.sizes() != p.value().sizes()) continue;
+      p.value().copy_(it->second);
+      report.copied.push_back(kCodePrefix + p.key());
+    }
+    code_optimizer_ = make_code_adam(code_, options_, code_options_);
+    fixed_code_ = torch::Tensor();
+    sync_code_phi();
   }
   for (const auto& name : arch.finish_warm_start(*net_, from)) {
     auto& re = report.reinitialised;
@@ -523,6 +706,11 @@ bool Trainer::weights_finite() const {
   for (const auto& p : net_->parameters()) {
     if (!all_finite(p)) return false;
   }
+  if (code_) {
+    for (const auto& p : code_->parameters()) {
+      if (!all_finite(p)) return false;
+    }
+  }
   return true;
 }
 
@@ -559,7 +747,9 @@ Evaluation Trainer::evaluate(BatchSource& source) {
     if (static_cast<int64_t>(j) % world != rank) continue;  // another rank's share
     const Batch batch = to_device(batches[j], device_);
     check_batch(batch, "validation batch");
-    auto pred = net_->forward(batch.y, batch.phase, batch.noise);
+    // A learned code measures the patches again, with the same noise every epoch.
+    auto pred = code_ ? joint_forward(net_, code_weights(), batch, code_validation_seed(j))
+                      : net_->forward(batch.y, batch.phase, batch.noise);
     loss_sum +=
         loss_(pred, batch.target, batch.noise).item<double>() * static_cast<double>(batch.size());
     squared += (pred.clamp(0, 1) - batch.target).to(torch::kFloat64).square().sum().item<double>();
@@ -589,7 +779,14 @@ Evaluation Trainer::evaluate(BatchSource& source) {
 Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distributed) {
   StepOutcome out;
   out.patches = static_cast<double>(batch.size());
-  if (!distributed) {
+  if (code_) {
+    // The code's weights stay in the graph unless they are fixed.
+    const auto weights = fixed_code_.defined() ? fixed_code_ : code_->weights();
+    auto loss = loss_(joint_forward(net_, weights, batch, code_noise_seed(state_.step)),
+                      batch.target, batch.noise);
+    out.loss = loss.item<double>();
+    if (std::isfinite(out.loss)) loss.backward();
+  } else if (!distributed) {
     auto loss = loss_(net_->forward(batch.y, batch.phase, batch.noise), batch.target, batch.noise);
     out.loss = loss.item<double>();
     if (std::isfinite(out.loss)) loss.backward();
@@ -620,6 +817,12 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
                                                         net_->parameters(), options_.clip_grad_norm)
                                                   : gradient_norm(*net_);
   if (!std::isfinite(norm)) out.problem = "the gradient norm is " + format_double(norm);
+  if (code_ && !fixed_code_.defined() && out.problem.empty()) {
+    const double code_norm = gradient_norm(*code_);
+    if (!std::isfinite(code_norm)) {
+      out.problem = "the code's gradient norm is " + format_double(code_norm);
+    }
+  }
   return out;
 }
 
@@ -650,6 +853,8 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
   const bool skip = options_.on_nonfinite == OnNonFinite::kSkip;
   const bool distributed = comm_->world_size() > 1;
   const bool lead = comm_->rank() == 0;  // the rank that writes checkpoints and shows progress
+  LFNET_CHECK_AS(ConfigError, !(code_ && distributed),
+                 "a learned code trains in one process, not data-parallel");
   if (distributed) {
     source.set_shard(comm_->rank(), comm_->world_size());
     synchronise();
@@ -658,6 +863,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     Stopwatch clock;
     communication_s_ = 0;
     source.start_epoch(epoch, options_.batch_size);
+    prepare_code(epoch, source);
     const int64_t batches = source.train_batches_per_epoch();
     LFNET_CHECK(batches > 0, "the batch source has no training batches");
     std::optional<ProgressBar> bar;
@@ -679,6 +885,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
                           : learning_rate(options_, epoch, i, batches);
       apply_lr(lr);
       optimizer_->zero_grad();
+      if (code_optimizer_) code_optimizer_->zero_grad();
       auto step = compute_gradients(batch, distributed);
       if (!step.problem.empty()) {
         // A bad batch can be dropped; weights that are no longer finite cannot be saved.
@@ -694,6 +901,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
         fail_nonfinite(step.problem, batch, epoch, i, lr);
       }
       optimizer_->step();
+      if (code_ && !fixed_code_.defined()) code_optimizer_->step();
       ++state_.step;
       loss_sum += step.loss * step.patches;
       seen += static_cast<int64_t>(step.patches);
@@ -708,6 +916,7 @@ std::vector<EpochRecord> Trainer::fit(BatchSource& source, const TrainerHooks& h
     if (!weights_finite()) {
       fail_nonfinite("the weights are no longer finite", Batch{}, epoch, batches - 1, lr);
     }
+    sync_code_phi();  // validation and checkpoints see the net with the code it has now
     const auto eval = hooks.validate ? hooks.validate(*this, source) : evaluate(source);
     if (!std::isfinite(eval.loss)) {
       fail_nonfinite("the validation loss is " + format_double(eval.loss), Batch{}, epoch,

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "lfnet/optics/phi.h"
 
@@ -25,6 +26,17 @@ bool is_calibrated_phi(const std::string& path);
 // model computes them (already normalised), so loading the folder gives the same Phi.
 // Random projections are not local and cannot be written (ConfigError).
 void write_calibrated_phi(const optics::Phi& phi, const std::string& dir);
+
+// The pattern to print for a mask or aperture code: per measurement, mask_<n>.png (n from 1), an
+// 8-bit grey image in the layout of response_<n>.tif, each weight over the code's largest (white:
+// fully open, black: opaque), the transmittances of a learned mask up to its one normalising
+// scale. Negative weights have no transmittance (ConfigError), nor has a Phi that is not local.
+// Returns the names written into `dir` (created if missing).
+std::vector<std::string> write_printable_mask(const optics::Phi& phi, const std::string& dir);
+
+// Whether `phi` is a learned mask or aperture (a `calibrated` spec whose source says so), whose
+// export comes with its printable pattern.
+bool is_learned_mask(const optics::Phi& phi);
 
 // Reads a calibrated-Phi folder (or its sidecar file, whose images lie beside it) into the spec of
 // a "calibrated" Phi, whose params carry every weight: models and acquisitions made with it record

@@ -47,6 +47,10 @@ struct LearnedPhiOptions {
   void validate() const;
 };
 
+// The `calibrated` Phi spec of pixel weights (N, U, V, T, T), normalised as they are (its
+// params: period, weights in float64, normalise false, and `source`, e.g. "learned mask").
+optics::PhiSpec calibrated_spec(const torch::Tensor& weights, const std::string& source);
+
 class LearnedPhiImpl : public torch::nn::Module {
  public:
   // A code of `n` measurements for a rows x cols grid of views.

@@ -12,6 +12,7 @@
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/dict/patch_sampling.h"
 #include "lfnet/dict/sparse_coding.h"
+#include "lfnet/nn/learned_phi.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
@@ -62,6 +63,20 @@ struct DistillConfig {
   nlohmann::json to_json() const;
 };
 
+// A code trained with the network ($.code, docs/training.md "Learned codes"): one object with
+// the keys of nn::LearnedPhiOptions (family, period, max_depth, init, seed, init_spread) and of
+// train::CodeTrainingOptions (lr, freeze_epochs, binarise). $.phi then gives only the code's N
+// and views; the config's Phi becomes the code's start (a `calibrated` spec), and each model
+// the run writes records the code it was trained with.
+struct CodeConfig {
+  bool enabled = false;  // $.code is present
+  nn::LearnedPhiOptions phi;
+  train::CodeTrainingOptions training;
+
+  void read(JsonReader& r);
+  nlohmann::json to_json() const;
+};
+
 // Sets one value of a JSON config from `KEY.PATH=VALUE` (--set): VALUE is read as JSON (a
 // number, true, a list, a quoted string...) and otherwise taken as a string; objects on the
 // path are created. A malformed override is a ConfigError naming it.
@@ -80,6 +95,7 @@ struct ExperimentConfig {
   nn::NetworkOptions network;
   nlohmann::json training = nlohmann::json::object();  // common train::TrainerOptions
   DistillConfig distill;                               // $.distill: off unless it names a teacher
+  CodeConfig code;                                     // $.code: off unless present
   std::vector<StageConfig> stages;
   // The dict stage: training patches and K-SVD ($.dictionary.sampling, $.dictionary.ksvd).
   dict::PatchSamplingOptions dictionary_sampling;

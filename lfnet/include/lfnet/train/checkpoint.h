@@ -27,6 +27,10 @@ constexpr uint32_t kCheckpointFormatVersion = 1;
 
 using TensorMap = std::map<std::string, torch::Tensor>;
 
+// The names a learned code's parameters and Adam moments have in a checkpoint (Trainer::set_code):
+// "code." then the code module's own names. Nets leave them out (check_architecture).
+constexpr const char* kCodePrefix = "code.";
+
 // Where training stands; saved with every checkpoint.
 struct TrainingState {
   std::string stage;                                              // ae, cnn or joint
@@ -36,6 +40,9 @@ struct TrainingState {
   int64_t best_epoch = 0;  // the epoch that reached best_metric (0: none yet)
   nlohmann::json history = nlohmann::json::array();  // one EpochRecord (JSON) per epoch
   nlohmann::json origin = nlohmann::json::object();  // what the weights were initialised from
+  // A learned code's events (Trainer::set_code): {"binarised": {"epoch", "continuous_psnr_db",
+  // "binary_psnr_db"}} once the code was rounded to 0 or 1.
+  nlohmann::json code = nlohmann::json::object();
   torch::Tensor rng_state;  // LibTorch's default CPU generator (uint8), may be undefined
 
   nlohmann::json to_json() const;  // everything but rng_state

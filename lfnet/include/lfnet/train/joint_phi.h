@@ -23,6 +23,14 @@ namespace lfnet::train {
 torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor& target,
                                const torch::Tensor& phase);
 
+// The reconstruction (B, 1, U, V, h, w) by a lfnet-architecture `net` of `batch`'s targets
+// measured by pixel weights `weights` (N, U, V, T, T): simulate_patches, Gaussian noise of the
+// batch's sigmas drawn from `noise_seed` (a CPU generator, so the draws are the same on any
+// device), and the net reading the weights' per-pixel pseudo-inverse for this pass only.
+// Differentiable in the weights and the net.
+torch::Tensor joint_forward(nn::LightFieldNet& net, const torch::Tensor& weights,
+                            const Batch& batch, uint64_t noise_seed);
+
 // The loss of a lfnet-architecture `net` on `batch` when its measurements come from `code`:
 // the batch's targets simulated with code->weights() (noise of the batch's sigmas added, drawn
 // from `noise_seed`), reconstructed by the net with the code's pseudo-inverse. `net` keeps its

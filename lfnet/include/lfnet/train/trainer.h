@@ -15,6 +15,7 @@
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/dist/communicator.h"
+#include "lfnet/nn/learned_phi.h"
 #include "lfnet/nn/loss.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/train/batch_source.h"
@@ -108,6 +109,24 @@ struct TrainerOptions {
   void validate() const;  // ConfigError naming the field
 };
 
+// Training a code with the net (Trainer::set_code, docs/training.md "Learned codes"): the code's
+// own Adam, its learning rate following the net's schedule, and what happens at the end.
+struct CodeTrainingOptions {
+  double lr = 0.01;           // the code's Adam learning rate (times the schedule's factor)
+  int64_t freeze_epochs = 0;  // the last epochs hold the code fixed, so the net settles on it
+  // mask and aperture: the code held fixed is rounded to 0 or 1 (binarised_weights), the code
+  // a binary mask prints; needs freeze_epochs >= 1. Its cost is measured when it happens.
+  bool binarise = false;
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("lr", lr);
+    f("freeze_epochs", freeze_epochs);
+    f("binarise", binarise);
+  }
+  void validate(int64_t epochs) const;  // ConfigError naming the field
+};
+
 // The learning rate at batch `batch` of epoch `epoch` (0-based) of `batches` per epoch. A pure
 // function of its arguments, so resumed runs follow the same schedule.
 double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch, int64_t batches);
@@ -193,9 +212,23 @@ class Trainer {
   // `net` must already hold the Phi of the measurements (set_phi).
   Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run);
 
+  // Trains `code` with the net (lfnet architecture, one process): every batch is measured again
+  // by the code's current weights inside the graph (train/joint_phi.h), the code takes its own
+  // Adam steps, and the last options.freeze_epochs epochs hold it fixed. Checkpoints then record
+  // the code: its parameters and Adam moments under kCodePrefix, and as their Phi the code's
+  // `calibrated` spec, for which the net's Phi buffers are set. Call before resume or
+  // init_from.
+  void set_code(nn::LearnedPhi code, CodeTrainingOptions options);
+  nn::LearnedPhi code() const { return code_; }
+  // The code's weights (N, U, V, T, T) as the net uses them now: fixed (perhaps binarised) in
+  // the freeze epochs, else the code's current weights. Undefined without a code.
+  torch::Tensor code_weights() const;
+  // The `calibrated` Phi of code_weights(): what checkpoints record as the model's Phi.
+  optics::PhiSpec code_phi_spec() const;
+
   // Continues an interrupted run from `path` (usually last.ckpt): weights, Adam moments,
-  // schedule position, RNG and history. The architecture, Phi and stage must match; anything
-  // else is a CheckpointError.
+  // schedule position, RNG and history. The architecture, Phi and stage must match (with a
+  // learned code, the code's options instead of the Phi); anything else is a CheckpointError.
   void resume(const std::string& path);
 
   // Finetuning: starts from the weights of any checkpoint (another stage, another Phi) with a
@@ -262,6 +295,12 @@ class Trainer {
   [[noreturn]] void fail_nonfinite(const std::string& what, const Batch& batch, int64_t epoch,
                                    int64_t index, double lr) const;
   bool weights_finite() const;
+  // With a code: whether epoch `epoch` (0-based) holds it fixed.
+  bool code_frozen(int64_t epoch) const;
+  // With a code: fixes it when epoch `epoch` is a freeze epoch (binarising it, measured on
+  // `source`'s validation, when asked), and sets the net's Phi to the weights in use.
+  void prepare_code(int64_t epoch, BatchSource& source);
+  void sync_code_phi();
   // Makes every rank hold rank 0's weights, buffers, Adam state and training position.
   void synchronise();
   // Sums the gradients over the ranks and divides by `patches` (the global batch).
@@ -277,6 +316,10 @@ class Trainer {
   std::string last_written_;  // the last checkpoint this run wrote, for error messages
   std::shared_ptr<dist::Communicator> comm_;  // LocalCommunicator unless set_communicator
   double communication_s_ = 0;                // the current epoch's EpochRecord::communication_s
+  nn::LearnedPhi code_{nullptr};              // a code trained with the net (set_code)
+  CodeTrainingOptions code_options_;
+  std::unique_ptr<torch::optim::Adam> code_optimizer_;
+  torch::Tensor fixed_code_;  // the code's weights in the freeze epochs (undefined before)
 };
 
 // "<dir>/last.ckpt" and "<dir>/best.ckpt".
