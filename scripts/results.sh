@@ -156,6 +156,8 @@ sensor-noise() {
       done
       VARIANT="lfnet-asp-n2-robust, estimated" record "$tmp" \
         --model models/lfnet-asp-n2-robust.ckpt "${src[@]}" --method net --estimate-noise
+      VARIANT="lfnet-asp-n2-auto, estimated" record "$tmp" \
+        --model models/lfnet-asp-n2-auto.json "${src[@]}" --method net --estimate-noise
     done
   done
   mv "$tmp" results/sensor-noise/records.jsonl
@@ -164,7 +166,8 @@ sensor-noise() {
 # Noise-blind (docs/acquisition.md, "Estimating the noise"): on the light fields of the
 # cross-scene benchmark at sigma 0, 0.05, 0.1 and 0.2, the noise-aware model told the true sigma
 # and told the sigma estimated from the sensor image, beside the noise-unaware default, pinv and
-# pinv-nlm (told the sigma) and no-parallax.
+# pinv-nlm (told the sigma) and no-parallax; and the noise switch lfnet-asp-n2-auto (the default
+# below the estimated sigma 0.0077, the noise-aware model above), never told.
 noise-blind() {
   local tmp i sigma
   tmp=$(mktemp)
@@ -188,6 +191,8 @@ noise-blind() {
       VARIANT="lfnet-asp-n2-robust, estimated" record "$tmp" \
         --model models/lfnet-asp-n2-robust.ckpt "${src[@]}" --method net --noise "$sigma" \
         --estimate-noise
+      VARIANT="lfnet-asp-n2-auto, estimated" record "$tmp" --model models/lfnet-asp-n2-auto.json \
+        "${src[@]}" --method net --noise "$sigma" --estimate-noise
     done
   done
   mv "$tmp" results/noise-blind/records.jsonl
@@ -237,6 +242,48 @@ calibration() {
     done
   done
   mv "$tmp" results/calibration/records.jsonl
+}
+
+# Learned codes (docs/training.md, "Learned codes"): at N = 2, one lfnet network (32 channels, 3
+# levels) and one training budget (models/lfnet-asp-n2-first20.ckpt finetuned for 10 epochs of
+# 8,000 crops at lr 5e-4 on the same data) for a fixed code and for a code learned with it: the
+# random binary mask against a learned mask of its period, the ASP quadrature pair against learned
+# ASP gratings; the learned mask rounded to 0 or 1; the same trained with noise (sigma 0 to 0.1) at
+# sigma 0 and 0.05; the shipped default lfnet-asp-n2 (a larger net trained far longer). Each net
+# beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
+# cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
+learned-codes() {
+  local tmp i m sigma
+  local clean=(lfnet-mask-n2 lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary lfnet-asp-n2-c32-e10
+    lfnet-learned-asp-n2)
+  local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-asp-n2-c32-e10-noise
+    lfnet-learned-asp-n2-noise)
+  for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
+  tmp=$(mktemp)
+  for ((i = 0; i < ${#heldout[@]}; i += 2)); do
+    local src=("${heldout[@]:i:2}" --mode sensor)
+    record "$tmp" --phi asp:2 "${src[@]}" --method no-parallax
+    VARIANT=lfnet-asp-n2 TRAINING=models/lfnet-asp-n2.training.jsonl record "$tmp" \
+      --model models/lfnet-asp-n2.ckpt "${src[@]}" --method net
+    for m in "${clean[@]}"; do
+      VARIANT=$m TRAINING=models/$m.training.jsonl record "$tmp" --model "models/$m.ckpt" \
+        "${src[@]}" --method net
+      VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv
+    done
+    for sigma in 0 0.05; do
+      for m in "${noisy[@]}"; do
+        VARIANT=$m TRAINING=models/$m.training.jsonl record "$tmp" --model "models/$m.ckpt" \
+          "${src[@]}" --method net --noise "$sigma"
+        [[ $sigma == 0 ]] && continue
+        VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv-nlm \
+          --noise "$sigma"
+      done
+    done
+  done
+  mv "$tmp" results/learned-codes/records.jsonl
+  for m in lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary lfnet-learned-asp-n2; do
+    "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
+  done
 }
 
 # Seconds against PSNR over the stride: non-overlapping (9), 5, 2 and 1.
@@ -588,7 +635,7 @@ pictures() {
 sections=("$@")
 if [[ ${#sections[@]} -eq 0 ]]; then
   sections=(cross-scene self-ensemble other-phi heldout-asp-n2 phi-comparison compression-sweep noise-sweep
-            sensor-noise noise-blind calibration colour stride-sweep branch-ablation loss-ablation lytro
+            sensor-noise noise-blind calibration colour learned-codes stride-sweep branch-ablation loss-ablation lytro
             phi-switching paper-scene)
 fi
 for s in "${sections[@]}"; do

@@ -209,8 +209,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
       spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
       check_phi_argument(model, a.phi);
       place_network(model, a.device, a.precision);
-      context.net = model.net;
-      context.script = model.script;
+      use_model(context, model);
       patch = model.network.patch_grid();
     } else {
       LFNET_CHECK_AS(ConfigError, !a.phi.empty(),

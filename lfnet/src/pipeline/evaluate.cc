@@ -50,6 +50,8 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   r.patch_h = patch_h;
   r.patch_w = patch_w;
   r.net = c.net;
+  r.noisy_net = c.noisy_net;
+  r.switch_sigma = c.switch_sigma;
   r.script = c.script.get();
   r.self_ensemble = c.self_ensemble;
   r.self_ensemble_passes = c.self_ensemble_passes;
@@ -164,11 +166,20 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   return result.record;
 }
 
+void use_model(MethodContext& context, const ModelFile& model) {
+  context.net = model.net;
+  context.script = model.script;
+  context.noisy_net = model.noisy;
+  context.switch_sigma = model.switch_sigma;
+}
+
 void place_network(const ModelFile& model, const std::string& device, nn::Precision precision) {
   if (model.net) {
-    auto net = model.net;  // a handle: the model's own net
-    net->to(parse_device(device));
-    nn::set_cnn_precision(net, precision);
+    for (auto net : {model.net, model.noisy}) {  // handles: the model's own nets
+      if (net.is_empty()) continue;
+      net->to(parse_device(device));
+      nn::set_cnn_precision(net, precision);
+    }
     return;
   }
   LFNET_CHECK_AS(ConfigError,
@@ -219,13 +230,14 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   MethodContext context;
   optics::PhiSpec spec;
   std::optional<nn::PatchShape> network_patch;  // the patch size of net, ae and cnn
+  nlohmann::json noise_switch;                  // a noise switch's members, for the record
   if (!a.model.empty()) {
     const auto model = load_model(a.model, recon::needs_network(method));
+    if (recon::needs_network(method)) noise_switch = model.noise_switch_record();
     spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
     check_phi_argument(model, a.phi);
     if (recon::needs_network(method)) {
-      context.net = model.net;
-      context.script = model.script;
+      use_model(context, model);
       network_patch = model.network.patch_grid();
       place_network(model, a.device, a.precision);
     }
@@ -271,6 +283,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   result.record =
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);
   if (!a.model.empty()) result.record["model"] = a.model;
+  if (!noise_switch.is_null()) result.record["noise_switch"] = noise_switch;
   result.record["device"] = a.device;
   if (recon::needs_network(method)) result.record["precision"] = nn::to_string(a.precision);
   result.light_field = truths[0].name;

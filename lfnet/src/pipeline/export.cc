@@ -41,6 +41,10 @@ ExportResult export_model(const ExportRequest& a) {
   OutputLock lock(a.out);
   LFNET_CHECK_AS(ConfigError, !nn::is_script_file(a.model), "--model ", a.model,
                  " is already an exported file; export takes a checkpoint");
+  LFNET_CHECK_AS(ConfigError, model_file_kind(a.model) != ModelFileKind::kNoiseSwitch, "--model ",
+                 a.model,
+                 " is a noise switch of two checkpoints: export each of them (its \"quiet\" and "
+                 "\"noisy\" files)");
   const auto ckpt = train::load_checkpoint(a.model);
   auto net = train::build_net(ckpt, a.model);
   net->eval();

@@ -1,6 +1,7 @@
 #include "lfnet/pipeline/models.h"
 
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -43,6 +44,14 @@ ModelFileKind model_file_kind(const std::string& path) {
   char head[8] = {0};
   in.read(head, 8);
   if (in.gcount() == 8 && std::memcmp(head, "LFNETCKP", 8) == 0) return ModelFileKind::kCheckpoint;
+  if (in.gcount() >= 1 && head[0] == '{' && fs::file_size(path, ec) < (1 << 20) && !ec) {
+    // A small JSON file: a noise switch if it says so.
+    nlohmann::json j = nlohmann::json::parse(std::ifstream(path), nullptr, false);
+    if (j.is_object() && j.value("format", "") == kNoiseSwitchFormat) {
+      return ModelFileKind::kNoiseSwitch;
+    }
+    return ModelFileKind::kOther;
+  }
   if (in.gcount() < 4 || std::memcmp(head, "PK\x03\x04", 4) != 0) return ModelFileKind::kOther;
   // Dictionaries and exported models are both zip archives: a damaged one is neither, and a
   // dictionary loads as one.
@@ -55,10 +64,63 @@ ModelFileKind model_file_kind(const std::string& path) {
   }
 }
 
+namespace {
+
+// A noise switch: its two checkpoints, checked to fit together.
+ModelFile load_noise_switch(const std::string& path, bool network) {
+  std::string quiet, noisy;
+  double sigma = 0;
+  int64_t version = 0;
+  try {
+    const auto j = read_json_file(path);
+    JsonReader r(j, path + ":$");
+    std::string format, about;
+    r.require("format", format);
+    r.require("version", version);
+    r.get("about", about);
+    r.require("quiet", quiet);
+    r.require("noisy", noisy);
+    r.require("switch_sigma", sigma);
+    r.finish();
+    LFNET_CHECK_AS(ConfigError, version == 1, r.path_of("version"),
+                   ": this lfnet reads version 1, got ", version);
+    LFNET_CHECK_AS(ConfigError, sigma > 0 && std::isfinite(sigma), r.path_of("switch_sigma"),
+                   ": must be a finite sigma > 0, got ", sigma);
+  } catch (const ConfigError& e) {
+    throw ConfigError(std::string("noise switch ") + e.what());
+  }
+  // Its checkpoints' paths are relative to the file.
+  const auto folder = fs::path(path).parent_path();
+  auto member = [&](const std::string& name) {
+    const auto p = fs::path(name).is_absolute() ? fs::path(name) : folder / name;
+    LFNET_CHECK_AS(ConfigError, model_file_kind(p.string()) == ModelFileKind::kCheckpoint, path,
+                   ": ", name, " is not an lfnet checkpoint (a noise switch joins two)");
+    auto m = load_model(p.string(), network);
+    LFNET_CHECK_AS(ConfigError, m.network.arch().whole_image(), path, ": ", name,
+                   " is not of a whole-image architecture such as lfnet");
+    LFNET_CHECK_AS(ConfigError, m.network.image.noise_input, path, ": ", name,
+                   " has no noise input: it cannot be told the sigma the switch reads");
+    return m;
+  };
+  auto model = member(quiet);
+  const auto above = member(noisy);
+  LFNET_CHECK_AS(ConfigError, above.phi == model.phi, path, ": ", quiet, " and ", noisy,
+                 " were trained for different Phis");
+  model.path = path;
+  model.quiet_path = (fs::path(quiet).is_absolute() ? fs::path(quiet) : folder / quiet).string();
+  model.noisy_path = above.path;
+  model.noisy = above.net;
+  model.switch_sigma = sigma;
+  return model;
+}
+
+}  // namespace
+
 ModelFile load_model(const std::string& path, bool network) {
   ModelFile model;
   model.path = path;
   const auto kind = model_file_kind(path);
+  if (kind == ModelFileKind::kNoiseSwitch) return load_noise_switch(path, network);
   LFNET_CHECK_AS(ConfigError, kind != ModelFileKind::kDictionary, "--model ", path,
                  " is a dictionary (for --method dict): give it as --dictionary");
   model.scripted = kind == ModelFileKind::kExported;
@@ -86,6 +148,11 @@ void ModelFile::check_phi(const nlohmann::json& phi_spec) const {
   train::Checkpoint ckpt;
   ckpt.phi = phi;
   train::check_phi(ckpt, phi_spec, path);
+}
+
+nlohmann::json ModelFile::noise_switch_record() const {
+  if (!noise_switch()) return nullptr;
+  return {{"quiet", quiet_path}, {"noisy", noisy_path}, {"switch_sigma", switch_sigma}};
 }
 
 double ModelFile::measurement_mean() const {
@@ -128,7 +195,9 @@ optics::PhiSpec phi_from_argument(const std::string& text, const std::string& op
     return io::read_calibrated_phi(text);
   }
   if (fs::path(text).extension() == ".json") {
-    return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
+    if (!fs::is_regular_file(text, ec) || model_file_kind(text) != ModelFileKind::kNoiseSwitch) {
+      return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
+    }
   }
   if (!fs::is_regular_file(text, ec)) return optics::PhiSpec::parse(text);
   ModelFile model;

@@ -127,10 +127,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   {
     MethodContext context;
     context.phi = phi.get();
-    if (model) {
-      context.net = model->net;
-      context.script = model->script;
-    }
+    if (model) use_model(context, *model);
     context.dictionary = a.dictionary;
     context.cache = &files;
     context.method_options = method_options;
@@ -171,8 +168,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   double scale = 1.0;
   // A noise-aware model is told the sensor's noise: --noise-sigma, else what the acquisition
   // records (simulate's sensor.json), else the noise estimated from each sensor image.
-  const bool noise_aware =
-      (model && model->network.image.noise_input) || recon::find_method(method).reads_noise();
+  const bool noise_aware = (model && (model->network.image.noise_input || model->noise_switch())) ||
+                           recon::find_method(method).reads_noise();
   const bool noise_told = a.noise_sigma >= 0 || acq.meta.contains("noise_sigma");
   const double told_sigma = a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
   nlohmann::json estimated = nlohmann::json::array();  // per colour channel
@@ -257,6 +254,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
   if (cfa) r.record["cfa"] = cfa->to_json();
+  if (model && needs == recon::MethodNeeds::kNetwork && model->noise_switch()) {
+    r.record["noise_switch"] = model->noise_switch_record();
+  }
   if (!options_used.empty()) r.record["method_options"] = options_used;
   if (noise_aware) r.record["noise_sigma"] = noise_told ? nlohmann::json(told_sigma) : estimated;
   if (!estimated.empty()) {

@@ -74,15 +74,23 @@ class NetworkMethod : public Method {
         return script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0);
       };
     }
-    auto net = r.net;
-    if (r.self_ensemble) {
-      const int64_t passes = r.self_ensemble_passes;
-      return [net, tile, passes](const torch::Tensor& sensor, double noise_sigma) {
-        return reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes);
+    auto solver_of = [&r, tile](nn::LightFieldNet net) -> ImageSolver {
+      if (r.self_ensemble) {
+        const int64_t passes = r.self_ensemble_passes;
+        return [net, tile, passes](const torch::Tensor& sensor, double noise_sigma) {
+          return reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes);
+        };
+      }
+      return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
+        return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma);
       };
-    }
-    return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
-      return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma);
+    };
+    if (r.noisy_net.is_empty()) return solver_of(r.net);
+    // A noise switch: the sigma the image is told (or estimated) picks the net.
+    auto quiet = solver_of(r.net), noisy = solver_of(r.noisy_net);
+    const double from = r.switch_sigma;
+    return [quiet, noisy, from](const torch::Tensor& sensor, double noise_sigma) {
+      return noise_sigma < from ? quiet(sensor, noise_sigma) : noisy(sensor, noise_sigma);
     };
   }
   double patch_flops(const MethodResources& r) const override {

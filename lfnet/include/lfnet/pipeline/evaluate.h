@@ -27,6 +27,8 @@ namespace lfnet::pipeline {
 struct MethodContext {
   const optics::Phi* phi = nullptr;
   nn::LightFieldNet net{nullptr};                     // for net, ae, cnn
+  nn::LightFieldNet noisy_net{nullptr};               // a noise switch's net for noisy images
+  double switch_sigma = 0;                            // and the sigma from which it takes over
   std::shared_ptr<nn::ScriptedNetwork> script;        // or an exported net (used when set)
   std::string dictionary;                             // for dict: a dictionary file,
   const dict::Dictionary* dictionary_data = nullptr;  // or the dictionary itself (used when set)
@@ -67,6 +69,9 @@ nlohmann::json method_options_argument(const std::string& text,
 // The same check for options already read (a config's $.evaluation.method_options).
 void check_method_options(const nlohmann::json& by_method, const std::vector<std::string>& methods,
                           const std::string& source);
+
+// The model's networks (a checkpoint's, an exported one, a noise switch's two) in `context`.
+void use_model(MethodContext& context, const ModelFile& model);
 
 // Puts a model's network where the command asked (the flags every reconstructing command
 // shares): a checkpoint's net moved to `device` with `precision`; an exported file, which runs

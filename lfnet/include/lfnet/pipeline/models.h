@@ -28,6 +28,16 @@ struct ModelFile {
   nn::NetworkOptions network;
   nn::LightFieldNet net{nullptr};               // checkpoints (when the network was asked for)
   std::shared_ptr<nn::ScriptedNetwork> script;  // exported files
+  // A noise switch (kNoiseSwitch, docs/models.md "One model for any noise"): two checkpoints of
+  // the lfnet architecture for one Phi. `net` (the file `path` names first, its phi, config and
+  // network are the model's) reconstructs sensor images whose noise sigma, told or estimated, is
+  // below `switch_sigma`; `noisy` (from `noisy_path`) the others.
+  nn::LightFieldNet noisy{nullptr};
+  std::string quiet_path, noisy_path;
+  double switch_sigma = 0;
+  bool noise_switch() const { return !noisy_path.empty(); }
+  // What a record says of a noise switch: {"quiet", "noisy", "switch_sigma"}; null otherwise.
+  nlohmann::json noise_switch_record() const;
 
   // Throws CheckpointError unless the model was trained for `phi_spec` (equal JSON).
   void check_phi(const nlohmann::json& phi_spec) const;
@@ -41,7 +51,10 @@ struct ModelFile {
 torch::Tensor phi_tensor(const optics::Phi& phi, const nn::NetworkOptions& options);
 
 // What a model file is, by its content.
-enum class ModelFileKind { kCheckpoint, kExported, kDictionary, kOther };
+enum class ModelFileKind { kCheckpoint, kExported, kDictionary, kNoiseSwitch, kOther };
+
+// The JSON file of a noise switch: its "format".
+constexpr const char* kNoiseSwitchFormat = "lfnet-noise-switch";
 ModelFileKind model_file_kind(const std::string& path);
 
 // Loads --model; `network`: build the checkpoint's network too (exported files always are).

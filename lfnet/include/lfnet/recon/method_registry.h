@@ -32,7 +32,10 @@ enum class MethodNeeds {
 struct MethodResources {
   const optics::Phi* phi = nullptr;
   int64_t patch_h = 9, patch_w = 9;
-  nn::LightFieldNet net{nullptr};                // kNetwork: a checkpoint's network,
+  nn::LightFieldNet net{nullptr};  // kNetwork: a checkpoint's network,
+  // with a noise switch (pipeline::ModelFile): the whole-image net for sigmas >= switch_sigma
+  nn::LightFieldNet noisy_net{nullptr};
+  double switch_sigma = 0;
   const nn::ScriptedNetwork* script = nullptr;   // or an exported one (used when set)
   const dict::Dictionary* dictionary = nullptr;  // kDictionary
   // The method's options as given (--method-options; docs/methods.md "Method options"),

@@ -1,0 +1,114 @@
+// A noise switch (models/lfnet-asp-n2-auto.json, docs/models.md "One model for any noise"): the
+// sigma a sensor image is told, or the one estimated from it, picks one of two checkpoints.
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <fstream>
+
+#include "support/test_support.h"
+
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kModels = std::string(LFNET_SOURCE_DIR) + "/models/";
+const std::string kScene = std::string(LFNET_SOURCE_DIR) + "/configs/scenes/probe_cross.json";
+
+nlohmann::json read_json(const std::string& path) {
+  return nlohmann::json::parse(std::ifstream(path));
+}
+
+// evaluate's record of `model` on the small probe scene at `sigma`, the noise estimated.
+nlohmann::json evaluate(const std::string& model, const std::string& sigma,
+                        const std::string& json) {
+  std::string out;
+  const std::string command = lfnet_binary() + " --threads 2 evaluate --model " + model +
+                              " --scene " + kScene + " --method net --noise " + sigma +
+                              " --estimate-noise --json " + json;
+  INFO(out);
+  REQUIRE(run_command(command, out) == 0);
+  return read_json(json);
+}
+
+}  // namespace
+
+TEST_CASE("a noise switch reconstructs with the quiet model below its sigma, the noisy above",
+          "[app][slow]") {
+  lfnet::test::TempDir tmp;
+  const std::string automatic = kModels + "lfnet-asp-n2-auto.json";
+  const auto quiet = evaluate(kModels + "lfnet-asp-n2.ckpt", "0", tmp / "quiet.json");
+  const auto noisy = evaluate(kModels + "lfnet-asp-n2-noise.ckpt", "0.05", tmp / "noisy.json");
+  const auto below = evaluate(automatic, "0", tmp / "below.json");
+  const auto above = evaluate(automatic, "0.05", tmp / "above.json");
+  CHECK(below["psnr_db"] == quiet["psnr_db"]);
+  CHECK(above["psnr_db"] == noisy["psnr_db"]);
+  CHECK(below["noise_sigma_estimated"].get<double>() < 0.0077);
+  CHECK(above["noise_sigma_estimated"].get<double>() > 0.0077);
+  CHECK(above["noise_switch"]["switch_sigma"] == 0.0077);
+  CHECK(above["noise_switch"]["noisy"] == kModels + "lfnet-asp-n2-noise.ckpt");
+  CHECK(above["model"] == automatic);
+
+  // reconstruct estimates the sigma of a sensor image that does not say it, and records it.
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 2 ";
+  REQUIRE(run_command(lfnet + "simulate --scene " + kScene + " --phi " + automatic +
+                          " --noise 0.05 --out " + (tmp / "acq"),
+                      out) == 0);
+  const auto meta = read_json(tmp / "acq/sensor.json");
+  CHECK(meta["phi"]["name"] == "asp");
+  auto sensor = meta;
+  sensor.erase("noise_sigma");  // a camera that does not know its noise
+  std::ofstream(tmp / "acq/sensor.json") << sensor.dump();
+  REQUIRE(run_command(lfnet + "reconstruct --model " + automatic + " --sensor " + (tmp / "acq") +
+                          " --out " + (tmp / "rec"),
+                      out) == 0);
+  const auto record = read_json(tmp / "rec/reconstruction.json");
+  CHECK(record["noise_sigma"][0].get<double>() > 0.0077);
+  CHECK(record["noise_switch"]["quiet"] == kModels + "lfnet-asp-n2.ckpt");
+}
+
+TEST_CASE("a noise switch that cannot work is one clear error", "[app]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 2 ";
+  auto write = [&](const std::string& name, nlohmann::json j) {
+    std::ofstream(tmp / name) << j.dump();
+    return std::string(tmp / name);
+  };
+  const nlohmann::json good = {{"format", "lfnet-noise-switch"},
+                               {"version", 1},
+                               {"quiet", kModels + "lfnet-asp-n2.ckpt"},
+                               {"noisy", kModels + "lfnet-asp-n2-noise.ckpt"},
+                               {"switch_sigma", 0.01}};
+  auto with = [&](const std::string& key, const nlohmann::json& value) {
+    auto j = good;
+    j[key] = value;
+    return j;
+  };
+  const std::pair<nlohmann::json, std::string> bad[] = {
+      {with("quiet", "missing.ckpt"), "missing.ckpt"},
+      {with("quiet", kModels + "lfnet-asp-n15.ckpt"), "were trained for different Phis"},
+      {with("noisy", kModels + "asp-n2.ckpt"), "not of a whole-image architecture"},
+      {with("switch_sigma", -1), "$.switch_sigma: must be a finite sigma > 0"},
+      {with("version", 2), "$.version: this lfnet reads version 1"},
+      {with("colour", true), "colour"},
+  };
+  std::string out;
+  for (const auto& [json, message] : bad) {
+    INFO(json.dump());
+    const auto path = write("switch.json", json);
+    CHECK(run_command(lfnet + "evaluate --model " + path + " --scene " + kScene +
+                          " --method net --json " + (tmp / "r.json"),
+                      out) != 0);
+    CHECK(out.find(message) != std::string::npos);
+    CHECK(out.find("lfnet: error:") != std::string::npos);
+    CHECK_FALSE(fs::exists(tmp / "r.json"));
+  }
+  // Exporting one: export each of its checkpoints instead.
+  const auto path = write("switch.json", good);
+  CHECK(run_command(lfnet + "export --model " + path + " --out " + (tmp / "x.pt"), out) != 0);
+  CHECK(out.find("export each of them") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "x.pt"));
+}
