@@ -247,17 +247,17 @@ calibration() {
 # Learned codes (docs/training.md, "Learned codes"): at N = 2, one lfnet network (32 channels, 3
 # levels) and one training budget (models/lfnet-asp-n2-first20.ckpt finetuned for 10 epochs of
 # 8,000 crops at lr 5e-4 on the same data) for a fixed code and for a code learned with it: the
-# random binary mask against a learned mask of its period, the ASP quadrature pair against learned
-# ASP gratings; the learned mask rounded to 0 or 1; the same trained with noise (sigma 0 to 0.1) at
-# sigma 0 and 0.05; the shipped default lfnet-asp-n2 (a larger net trained far longer). Each net
+# random binary mask (and a hand-designed variant) against a learned mask of its period, the ASP
+# quadrature pair against learned ASP gratings; the learned mask rounded to 0 or 1; the masks
+# trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05; the shipped default lfnet-asp-n2 and a
+# mask learned with its network (4 levels, finetuned from it for 8 epochs). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
   local tmp i m sigma
-  local clean=(lfnet-mask-n2 lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary lfnet-asp-n2-c32-e10
-    lfnet-learned-asp-n2)
-  local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-asp-n2-c32-e10-noise
-    lfnet-learned-asp-n2-noise)
+  local clean=(lfnet-mask-n2 lfnet-mask-n2-s2 lfnet-learned-mask-n2
+    lfnet-learned-mask-n2-binary lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4)
+  local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -281,7 +281,8 @@ learned-codes() {
     done
   done
   mv "$tmp" results/learned-codes/records.jsonl
-  for m in lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary lfnet-learned-asp-n2; do
+  for m in lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary lfnet-learned-asp-n2 \
+    lfnet-learned-mask-n2-l4; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
 }

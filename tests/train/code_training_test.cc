@@ -141,6 +141,41 @@ TEST_CASE("the code is held fixed for the last epochs, rounded to 0 or 1 when as
   CHECK(torch::equal(train::build_net(best)->phi, w));
 }
 
+TEST_CASE("a code learns through its rounding before it is held fixed", "[train][code]") {
+  test::TempDir dir;
+  auto code = mask_code();
+  auto source = code_source(code);
+  auto trainer = make_trainer(code, options(dir / "run", 3), 36);
+  train::CodeTrainingOptions c;
+  c.lr = 0.05;
+  c.freeze_epochs = 1;
+  c.binarise = true;
+  c.straight_through_epochs = 1;
+  trainer.set_code(code, c);
+  std::vector<torch::Tensor> after;
+  std::vector<nlohmann::json> phis;  // what each epoch's checkpoint records
+  train::TrainerHooks hooks;
+  hooks.on_epoch = [&](const train::EpochRecord&) {
+    after.push_back(logits(code));
+    phis.push_back(train::load_checkpoint(train::last_checkpoint_path(dir / "run")).phi);
+  };
+  trainer.fit(*source, hooks);
+  REQUIRE(after.size() == 3);
+  CHECK(!torch::equal(after[0], after[1]));  // the rounded code's gradient reached it
+  CHECK(torch::equal(after[1], after[2]));   // then held
+  CHECK(phis[0]["params"]["source"] == "learned mask");
+  CHECK(phis[1]["params"]["source"] == "learned mask, binarised");
+  // The epoch learning through the rounding measured the net with the binary code.
+  const auto rounded = optics::make_phi(optics::PhiSpec::from_json(phis[1]));
+  CHECK(std::get<0>(at::_unique(rounded->pixel_weights(0, 0, kPeriod, kPeriod))).numel() <= 2);
+  // Its values are the rounded code's, its gradient the transmittances': straight through.
+  auto fresh = mask_code();
+  const auto w = fresh->straight_through_weights();
+  CHECK(torch::allclose(w, fresh->binarised_weights(), 0, 1e-6));
+  (w * torch::rand_like(w)).sum().backward();
+  CHECK(fresh->named_parameters()["logits"].grad().abs().sum().item<double>() > 0);
+}
+
 TEST_CASE("a run that learns a code resumes bit for bit", "[train][code]") {
   test::TempDir dir;
   auto straight_code = mask_code();
@@ -189,6 +224,12 @@ TEST_CASE("a code is refused where it cannot train", "[train][code]") {
     CHECK_THROWS_AS(trainer.set_code(code, c), ConfigError);
     c.freeze_epochs = 3;
     CHECK_THROWS_WITH(trainer.set_code(code, c), Catch::Contains("freeze_epochs"));
+    c.freeze_epochs = 1;
+    c.straight_through_epochs = 2;
+    CHECK_THROWS_WITH(trainer.set_code(code, c), Catch::Contains("straight_through_epochs"));
+    c.binarise = false;
+    c.straight_through_epochs = 1;
+    CHECK_THROWS_WITH(trainer.set_code(code, c), Catch::Contains("set $.code.binarise"));
   }
   SECTION("the code's period must be the data's") {
     nn::LightFieldNet net(test::small_image_options(8, 8));

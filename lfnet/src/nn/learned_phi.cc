@@ -130,6 +130,14 @@ nlohmann::json LearnedPhiImpl::physical() const {
           {"alpha", list(alpha_)}, {"depth", list(options_.max_depth * torch::sigmoid(depth_))}};
 }
 
+torch::Tensor LearnedPhiImpl::straight_through_weights() const {
+  LFNET_CHECK_AS(ConfigError, options_.family != "asp",
+                 "an ASP's response is a cosine: it has no binary form");
+  const auto open = response();
+  const auto rounded = (open >= 0.5).to(open.scalar_type());
+  return optics::normalise_white(rounded + open - open.detach());
+}
+
 torch::Tensor LearnedPhiImpl::binarised_weights() const {
   LFNET_CHECK_AS(ConfigError, options_.family != "asp",
                  "an ASP's response is a cosine: it has no binary form");

@@ -144,6 +144,13 @@ void CodeTrainingOptions::validate(int64_t epochs) const {
   LFNET_CHECK_AS(ConfigError, !binarise || freeze_epochs >= 1,
                  "$.code.binarise: a binary code is held fixed for the last epochs; set "
                  "$.code.freeze_epochs to at least 1");
+  LFNET_CHECK_AS(ConfigError,
+                 straight_through_epochs >= 0 && freeze_epochs + straight_through_epochs <= epochs,
+                 "$.code.straight_through_epochs: must lie in 0..", epochs - freeze_epochs,
+                 " (the epochs before the freeze), got ", straight_through_epochs);
+  LFNET_CHECK_AS(ConfigError, straight_through_epochs == 0 || binarise,
+                 "$.code.straight_through_epochs: learning through the rounding is for a code "
+                 "that is rounded: set $.code.binarise");
 }
 
 double learning_rate(const TrainerOptions& options, int64_t epoch, int64_t batch, int64_t batches) {
@@ -365,13 +372,15 @@ torch::Tensor Trainer::code_weights() const {
   if (!code_) return {};
   if (fixed_code_.defined()) return fixed_code_;
   torch::NoGradGuard no_grad;
-  return code_->weights();
+  return straight_through_ ? code_->binarised_weights().to(device_) : code_->weights();
 }
 
 optics::PhiSpec Trainer::code_phi_spec() const {
   LFNET_CHECK(code_, "code_phi_spec: no code");
   std::string source = "learned " + code_->options().family;
-  if (fixed_code_.defined() && code_options_.binarise) source += ", binarised";
+  if ((fixed_code_.defined() || straight_through_) && code_options_.binarise) {
+    source += ", binarised";
+  }
   // Resolved as every spec a run records is (make_phi fills in what a spec leaves out).
   return optics::make_phi(nn::calibrated_spec(code_weights(), source))->spec();
 }
@@ -380,12 +389,19 @@ bool Trainer::code_frozen(int64_t epoch) const {
   return code_ && epoch >= options_.epochs - code_options_.freeze_epochs;
 }
 
+bool Trainer::code_straight_through(int64_t epoch) const {
+  return code_ && !code_frozen(epoch) &&
+         epoch >=
+             options_.epochs - code_options_.freeze_epochs - code_options_.straight_through_epochs;
+}
+
 void Trainer::sync_code_phi() {
   if (!code_) return;
   net_->set_phi(code_weights().detach().to(torch::kCPU, torch::kFloat32));
 }
 
 void Trainer::prepare_code(int64_t epoch, BatchSource& source) {
+  straight_through_ = code_straight_through(epoch);
   if (!code_frozen(epoch) || fixed_code_.defined()) return;
   torch::NoGradGuard no_grad;
   if (!code_options_.binarise) {
@@ -781,7 +797,9 @@ Trainer::StepOutcome Trainer::compute_gradients(const Batch& batch, bool distrib
   out.patches = static_cast<double>(batch.size());
   if (code_) {
     // The code's weights stay in the graph unless they are fixed.
-    const auto weights = fixed_code_.defined() ? fixed_code_ : code_->weights();
+    const auto weights = fixed_code_.defined() ? fixed_code_
+                         : straight_through_   ? code_->straight_through_weights()
+                                               : code_->weights();
     auto loss = loss_(joint_forward(net_, weights, batch, code_noise_seed(state_.step)),
                       batch.target, batch.noise);
     out.loss = loss.item<double>();

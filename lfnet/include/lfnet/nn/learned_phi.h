@@ -68,6 +68,10 @@ class LearnedPhiImpl : public torch::nn::Module {
   nlohmann::json physical() const;
   // mask: the transmittances rounded to 0 or 1 (normalised): the code a binary mask prints.
   torch::Tensor binarised_weights() const;
+  // mask, aperture: the binarised weights in the forward pass, with the gradient of the
+  // transmittances (straight through the rounding, Bengio et al. 2013), so a code learns to be
+  // rounded.
+  torch::Tensor straight_through_weights() const;
 
   const LearnedPhiOptions& options() const { return options_; }
 

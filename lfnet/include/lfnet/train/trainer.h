@@ -117,12 +117,17 @@ struct CodeTrainingOptions {
   // mask and aperture: the code held fixed is rounded to 0 or 1 (binarised_weights), the code
   // a binary mask prints; needs freeze_epochs >= 1. Its cost is measured when it happens.
   bool binarise = false;
+  // With binarise: the epochs before the freeze in which the code learns through its rounding
+  // (LearnedPhiImpl::straight_through_weights): the net sees the binary code, the code's
+  // transmittances get its gradient.
+  int64_t straight_through_epochs = 0;
 
   template <typename Fields>
   void fields(Fields& f) {
     f("lr", lr);
     f("freeze_epochs", freeze_epochs);
     f("binarise", binarise);
+    f("straight_through_epochs", straight_through_epochs);
   }
   void validate(int64_t epochs) const;  // ConfigError naming the field
 };
@@ -295,8 +300,10 @@ class Trainer {
   [[noreturn]] void fail_nonfinite(const std::string& what, const Batch& batch, int64_t epoch,
                                    int64_t index, double lr) const;
   bool weights_finite() const;
-  // With a code: whether epoch `epoch` (0-based) holds it fixed.
+  // With a code: whether epoch `epoch` (0-based) holds it fixed, or learns it straight through
+  // its rounding.
   bool code_frozen(int64_t epoch) const;
+  bool code_straight_through(int64_t epoch) const;
   // With a code: fixes it when epoch `epoch` is a freeze epoch (binarising it, measured on
   // `source`'s validation, when asked), and sets the net's Phi to the weights in use.
   void prepare_code(int64_t epoch, BatchSource& source);
@@ -319,7 +326,8 @@ class Trainer {
   nn::LearnedPhi code_{nullptr};              // a code trained with the net (set_code)
   CodeTrainingOptions code_options_;
   std::unique_ptr<torch::optim::Adam> code_optimizer_;
-  torch::Tensor fixed_code_;  // the code's weights in the freeze epochs (undefined before)
+  torch::Tensor fixed_code_;       // the code's weights in the freeze epochs (undefined before)
+  bool straight_through_ = false;  // this epoch learns the code through its rounding
 };
 
 // "<dir>/last.ckpt" and "<dir>/best.ckpt".
