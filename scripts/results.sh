@@ -285,6 +285,9 @@ learned-codes() {
     lfnet-learned-mask-n2-l4; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
+  # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
+  "$lfnet" phi export --phi models/lfnet-learned-mask-n2-binary.ckpt \
+    --out docs/images/learned-codes/printable --force
 }
 
 # Seconds against PSNR over the stride: non-overlapping (9), 5, 2 and 1.

@@ -239,7 +239,11 @@ std::string plot_weights(const optics::Phi& phi, const std::string& dir,
     }
     tiles.push_back(row);
   }
-  const std::string camera = s.name + ", N = " + std::to_string(s.n);
+  // A calibrated Phi that says where it came from (a learned code) is named by its source.
+  const bool sourced = s.name == "calibrated" && s.params.is_object() &&
+                       s.params.contains("source") && s.params["source"].is_string();
+  const std::string camera =
+      (sourced ? s.params["source"].get<std::string>() : s.name) + ", N = " + std::to_string(s.n);
   const std::string block = std::to_string(phi.block());
   const std::string title = phi.local()
                                 ? camera + ": the angular response of each measurement, M_n(u, v)"
