@@ -274,10 +274,12 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
                               : needs == recon::MethodNeeds::kDictionary ? context.dictionary
                                                                          : "";
             lines += record.dump() + "\n";
+            // A whole-image network has no stride.
+            const bool whole = record.value("whole_image", false);
             spdlog::info(
-                "{:<12} {:<14} stride {} {:<9} noise {:.2f}: PSNR {:.2f} dB, SSIM {:.4f}, "
-                "{:.2f} s",
-                method, truth.name, stride, optics::to_string(mode), noise,
+                "{:<12} {:<14} {} {:<9} noise {:.2f}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s",
+                method, truth.name, whole ? "whole image" : "stride " + std::to_string(stride),
+                optics::to_string(mode), noise,
                 record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>(),
                 record["ssim"].get<double>(), record["seconds"].get<double>());
           }
