@@ -4,9 +4,11 @@
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <filesystem>
 
 #include "command.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/io/phi_io.h"
 #include "lfnet/optics/phi.h"
@@ -46,9 +48,13 @@ void run_phi_export(const PhiExportArgs& a) {
   }
   const auto phi = optics::make_phi(spec);
   const bool mask = a.printable || io::is_learned_mask(*phi);
+  // A model that learned its code: the code's physical parameters too.
+  const auto code =
+      pipeline::phi_argument_is_file(a.phi) ? pipeline::learned_code_of(a.phi) : nlohmann::json();
   write_folder(a.out, policy, [&](const std::string& dir) {
     io::write_calibrated_phi(*phi, dir);
     if (mask) io::write_printable_mask(*phi, dir);
+    if (!code.is_null()) write_json_file((std::filesystem::path(dir) / "code.json").string(), code);
     // Read it back: the folder must give the same camera, weight for weight.
     const auto back = optics::make_phi(io::read_calibrated_phi(dir));
     const int64_t t = phi->period();
@@ -65,6 +71,9 @@ void run_phi_export(const PhiExportArgs& a) {
               static_cast<long long>(phi->rows()), static_cast<long long>(phi->cols()),
               static_cast<long long>(phi->period()), a.out.c_str(),
               mask ? ", with its printable pattern (mask_<n>.png)" : "");
+  if (!code.is_null()) {
+    std::printf("the learned code's physical parameters are in %s/code.json\n", a.out.c_str());
+  }
 }
 }  // namespace
 

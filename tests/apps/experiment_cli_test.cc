@@ -191,6 +191,13 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   const auto sidecar = nlohmann::json::parse(std::ifstream(tmp / "code-phi/phi.json"));
   CHECK(sidecar["period"] == 3);
   CHECK(sidecar["exported_from"]["params"]["source"] == "learned mask, binarised");
+  // And the code's physical parameters: one transmittance per measurement, view and pixel.
+  CHECK(out.find("code.json") != std::string::npos);
+  const auto code = nlohmann::json::parse(std::ifstream(tmp / "code-phi/code.json"));
+  CHECK(code["family"] == "mask");
+  CHECK(code["shape"] == nlohmann::json::array({2, 5, 5, 3, 3}));
+  CHECK(code["transmittance"].size() == 2 * 5 * 5 * 3 * 3);
+  CHECK(code["options"]["period"] == 3);
 
   // A code that cannot be trained is one error before any training.
   const std::pair<std::string, std::string> bad[] = {

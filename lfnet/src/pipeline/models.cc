@@ -10,6 +10,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/zip_check.h"
 #include "lfnet/io/phi_io.h"
+#include "lfnet/nn/learned_phi.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/train/checkpoint.h"
@@ -186,6 +187,35 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
 bool phi_argument_is_file(const std::string& text) {
   std::error_code ec;
   return fs::path(text).extension() == ".json" || fs::exists(text, ec);
+}
+
+nlohmann::json learned_code_of(const std::string& phi_argument) {
+  std::error_code ec;
+  if (!fs::is_regular_file(phi_argument, ec) ||
+      model_file_kind(phi_argument) != ModelFileKind::kCheckpoint) {
+    return nullptr;
+  }
+  const auto ck = train::load_checkpoint(phi_argument);
+  if (!ck.config.contains("code") || !ck.config["code"].is_object()) return nullptr;
+  nn::LearnedPhiOptions options;
+  {
+    JsonReader r(ck.config["code"], phi_argument + ":$.config.code");
+    read_fields(r, options);  // its training keys (lr, ...) are not the code's
+  }
+  const auto spec = optics::PhiSpec::from_json(ck.phi, phi_argument + ":$.phi");
+  nn::LearnedPhi code(options, spec.n, spec.rows, spec.cols);
+  torch::NoGradGuard no_grad;
+  for (auto& p : code->named_parameters()) {
+    const auto it = ck.model.find(train::kCodePrefix + p.key());
+    LFNET_CHECK_AS(CheckpointError, it != ck.model.end() && it->second.sizes() == p.value().sizes(),
+                   phi_argument, " records a learned ", options.family, " code without its ",
+                   p.key());
+    p.value().copy_(it->second);
+  }
+  auto out = code->physical();
+  out["options"] = fields_to_json(options);
+  out["phi_source"] = spec.params.value("source", "");
+  return out;
 }
 
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option) {

@@ -85,4 +85,10 @@ optics::PhiSpec phi_from_argument(const std::string& text, const std::string& op
 // NAME[:N].
 bool phi_argument_is_file(const std::string& text);
 
+// The learned code of a checkpoint trained with $.code (docs/training.md, "Learned codes") in
+// its physical units, nn::LearnedPhiImpl::physical(): the transmittances of a mask or aperture,
+// or each ASP pixel's grating (beta, gamma, alpha, depth), what a fabricated camera needs; with
+// the code's options as "options". Null for anything else (a Phi name, a file without a code).
+nlohmann::json learned_code_of(const std::string& phi_argument);
+
 }  // namespace lfnet::pipeline
