@@ -250,7 +250,7 @@ calibration() {
 # random binary mask (and a hand-designed variant) against a learned mask of its period, the ASP
 # quadrature pair against learned ASP gratings; the learned mask rounded to 0 or 1; the masks
 # trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05; the shipped default lfnet-asp-n2 and a
-# mask learned with its network (4 levels, finetuned from it for 8 epochs). Each net
+# mask learned with its network (4 levels, finetuned from it for 6 epochs). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
