@@ -4,7 +4,7 @@
 # lfnet's generator that no model trained on and no benchmark uses (seeds 91001 to 91003, 376 x
 # 541, disparities -3 to 3 px per view step, frames as in training), lfnet-asp-n2 and
 # lfnet-asp-n2-noise (told the true sigma) at Gaussian sigmas from 0 to 0.03, and the sigma the
-# estimator finds in the noiseless sensor images. The switch sigma is chosen from these records
+# estimator finds in the noiseless sensor images, beside no-parallax. The switch sigma is chosen from these records
 # alone (never from the cross-scene benchmark). Writes results/noise-switch/records.jsonl.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -31,6 +31,15 @@ open(sys.argv[1], "a").write(json.dumps(r) + "\n")
 PY
     done
   done
+  # The trivial baseline: the truth's angular mean (no noise at any sigma).
+  "$lfnet" --threads "$threads" --log-level warn evaluate --phi asp:2 \
+    --lf "$scenes/random-$seed" --method no-parallax --mode sensor --json "$records.one" --force
+  /usr/bin/python3 - "$records" "$records.one" "$seed" <<'PY'
+import json, sys
+r = json.load(open(sys.argv[2]))
+r["light_field"] = "random-" + sys.argv[3]
+open(sys.argv[1], "a").write(json.dumps(r) + "\n")
+PY
   # What the estimator reads in the noiseless sensor image.
   "$lfnet" --threads "$threads" --log-level warn evaluate --model models/lfnet-asp-n2-noise.ckpt \
     --lf "$scenes/random-$seed" --method net --mode sensor --estimate-noise --json "$records.one" --force
