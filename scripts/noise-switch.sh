@@ -59,7 +59,7 @@ import collections, json, sys
 psnr = collections.defaultdict(list)
 for line in open(sys.argv[1]):
     r = json.loads(line)
-    if r["variant"] in ("lfnet-asp-n2", "lfnet-asp-n2-noise"):
+    if r.get("variant") in ("lfnet-asp-n2", "lfnet-asp-n2-noise"):
         psnr[(r["variant"], r["noise_sigma"])].append(r["psnr_db"])
 gain = []
 for sigma in sorted({s for _, s in psnr}):
