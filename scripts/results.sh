@@ -248,16 +248,16 @@ calibration() {
 # levels) and one training budget (models/lfnet-asp-n2-first20.ckpt finetuned for 10 epochs of
 # 8,000 crops at lr 5e-4 on the same data) for a fixed code and for a code learned with it: the
 # random binary mask (and a hand-designed variant) against a learned mask of its period, the ASP
-# quadrature pair against learned ASP gratings; the learned mask made binary, and a binary mask
-# learned from the start (straight through its rounding); the masks
+# quadrature pair against learned ASP gratings; a binary mask learned from the start (straight
+# through its rounding); the masks
 # trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05; the shipped default lfnet-asp-n2 and a
 # mask learned with its network (4 levels, finetuned from it for 6 epochs). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
   local tmp i m sigma
-  local clean=(lfnet-mask-n2 lfnet-mask-n2-s2 lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary
-    lfnet-learned-binary-mask-n2 lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4)
+  local clean=(lfnet-mask-n2 lfnet-mask-n2-s2 lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2
+    lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4)
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
@@ -282,8 +282,8 @@ learned-codes() {
     done
   done
   mv "$tmp" results/learned-codes/records.jsonl
-  for m in lfnet-learned-mask-n2 lfnet-learned-mask-n2-binary lfnet-learned-binary-mask-n2 \
-    lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4; do
+  for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
+    lfnet-learned-mask-n2-l4; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
