@@ -196,7 +196,7 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   const auto code = nlohmann::json::parse(std::ifstream(tmp / "code-phi/code.json"));
   CHECK(code["family"] == "mask");
   CHECK(code["shape"] == nlohmann::json::array({2, 5, 5, 3, 3}));
-  CHECK(code["transmittance"].size() == 2 * 5 * 5 * 3 * 3);
+  CHECK(code["transmittance"].size() == size_t{2} * 5 * 5 * 3 * 3);
   CHECK(code["options"]["period"] == 3);
 
   // A code that cannot be trained is one error before any training.
@@ -208,9 +208,10 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   };
   for (const auto& [set, message] : bad) {
     INFO(set);
-    CHECK(run_command(
-              lfnet + "train " + (tmp / "code.json") + " --set " + set + " --out " + (tmp / "bad"),
-              out) != 0);
+    std::string command = lfnet + "train " + (tmp / "code.json");
+    command += " --set " + set;
+    command += " --out " + (tmp / "bad");
+    CHECK(run_command(command, out) != 0);
     CHECK(out.find(message) != std::string::npos);
     CHECK(out.find("lfnet: error:") != std::string::npos);
     CHECK_FALSE(fs::exists(tmp / "bad/models/joint_scratch.ckpt"));

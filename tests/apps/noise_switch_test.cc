@@ -73,7 +73,7 @@ TEST_CASE("a noise switch reconstructs with the quiet model below its sigma, the
 TEST_CASE("a noise switch that cannot work is one clear error", "[app]") {
   lfnet::test::TempDir tmp;
   const std::string lfnet = lfnet_binary() + " --threads 2 ";
-  auto write = [&](const std::string& name, nlohmann::json j) {
+  auto write = [&](const std::string& name, const nlohmann::json& j) {
     std::ofstream(tmp / name) << j.dump();
     return std::string(tmp / name);
   };
@@ -99,9 +99,11 @@ TEST_CASE("a noise switch that cannot work is one clear error", "[app]") {
   for (const auto& [json, message] : bad) {
     INFO(json.dump());
     const auto path = write("switch.json", json);
-    CHECK(run_command(lfnet + "evaluate --model " + path + " --scene " + kScene +
-                          " --method net --json " + (tmp / "r.json"),
-                      out) != 0);
+    std::string command = lfnet + "evaluate --model ";
+    command += path;
+    command += " --scene " + kScene;
+    command += " --method net --json " + (tmp / "r.json");
+    CHECK(run_command(command, out) != 0);
     CHECK(out.find(message) != std::string::npos);
     CHECK(out.find("lfnet: error:") != std::string::npos);
     CHECK_FALSE(fs::exists(tmp / "r.json"));

@@ -10,6 +10,7 @@
 #include "lfnet/core/version.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/train/checkpoint.h"
 

@@ -107,8 +107,8 @@ ModelFile load_noise_switch(const std::string& path, bool network) {
   const auto above = member(noisy);
   LFNET_CHECK_AS(ConfigError, above.phi == model.phi, path, ": ", quiet, " and ", noisy,
                  " were trained for different Phis");
+  model.quiet_path = model.path;  // resolved against the switch's folder
   model.path = path;
-  model.quiet_path = (fs::path(quiet).is_absolute() ? fs::path(quiet) : folder / quiet).string();
   model.noisy_path = above.path;
   model.noisy = above.net;
   model.switch_sigma = sigma;
@@ -204,14 +204,7 @@ nlohmann::json learned_code_of(const std::string& phi_argument) {
   }
   const auto spec = optics::PhiSpec::from_json(ck.phi, phi_argument + ":$.phi");
   nn::LearnedPhi code(options, spec.n, spec.rows, spec.cols);
-  torch::NoGradGuard no_grad;
-  for (auto& p : code->named_parameters()) {
-    const auto it = ck.model.find(train::kCodePrefix + p.key());
-    LFNET_CHECK_AS(CheckpointError, it != ck.model.end() && it->second.sizes() == p.value().sizes(),
-                   phi_argument, " records a learned ", options.family, " code without its ",
-                   p.key());
-    p.value().copy_(it->second);
-  }
+  train::load_code_state(code, ck.model, phi_argument, /*strict=*/true);
   auto out = code->physical();
   out["options"] = fields_to_json(options);
   out["phi_source"] = spec.params.value("source", "");
@@ -225,8 +218,10 @@ optics::PhiSpec phi_from_argument(const std::string& text, const std::string& op
     return io::read_calibrated_phi(text);
   }
   if (fs::path(text).extension() == ".json") {
-    if (!fs::is_regular_file(text, ec) || model_file_kind(text) != ModelFileKind::kNoiseSwitch) {
-      return optics::PhiSpec::from_json(read_json_file(text), text + ":$");
+    // A Phi spec, or a noise switch (a model, read below).
+    const auto j = read_json_file(text);
+    if (!j.is_object() || j.value("format", "") != kNoiseSwitchFormat) {
+      return optics::PhiSpec::from_json(j, text + ":$");
     }
   }
   if (!fs::is_regular_file(text, ec)) return optics::PhiSpec::parse(text);

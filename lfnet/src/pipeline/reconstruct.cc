@@ -168,8 +168,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   double scale = 1.0;
   // A noise-aware model is told the sensor's noise: --noise-sigma, else what the acquisition
   // records (simulate's sensor.json), else the noise estimated from each sensor image.
-  const bool noise_aware = (model && (model->network.image.noise_input || model->noise_switch())) ||
-                           recon::find_method(method).reads_noise();
+  // (A noise switch's members have a noise input, so it is noise-aware too.)
+  const bool noise_aware =
+      (model && model->network.image.noise_input) || recon::find_method(method).reads_noise();
   const bool noise_told = a.noise_sigma >= 0 || acq.meta.contains("noise_sigma");
   const double told_sigma = a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
   nlohmann::json estimated = nlohmann::json::array();  // per colour channel

@@ -74,7 +74,7 @@ class NetworkMethod : public Method {
         return script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0);
       };
     }
-    auto solver_of = [&r, tile](nn::LightFieldNet net) -> ImageSolver {
+    auto solver_of = [&r, tile](const nn::LightFieldNet& net) -> ImageSolver {
       if (r.self_ensemble) {
         const int64_t passes = r.self_ensemble_passes;
         return [net, tile, passes](const torch::Tensor& sensor, double noise_sigma) {

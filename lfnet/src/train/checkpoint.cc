@@ -338,6 +338,24 @@ void load_net_state(nn::LightFieldNet& net, const TensorMap& state, const std::s
   for (auto& b : net->named_buffers()) b.value().copy_(state.at(b.key()));
 }
 
+std::vector<std::string> load_code_state(nn::LearnedPhi& code, const TensorMap& state,
+                                         const std::string& what, bool strict) {
+  std::vector<std::string> copied;
+  torch::NoGradGuard no_grad;
+  for (auto& p : code->named_parameters()) {
+    const std::string name = kCodePrefix + p.key();
+    const auto it = state.find(name);
+    if (it == state.end() || it->second.sizes() != p.value().sizes()) {
+      if (!strict) continue;
+      throw CheckpointError(what + ": its learned " + code->options().family + " code lacks " +
+                            p.key() + " or holds it in another shape");
+    }
+    p.value().copy_(it->second);
+    copied.push_back(name);
+  }
+  return copied;
+}
+
 nn::LightFieldNet build_net(const Checkpoint& checkpoint, const std::string& what) {
   nn::NetworkOptions options;
   try {

@@ -550,8 +550,10 @@ void Trainer::resume(const std::string& path) {
     }
     for (const auto& [key, value] : mine.items()) {
       if (theirs.is_object() && theirs.contains(key) && theirs[key] != value) {
-        throw CheckpointError(what + " trained a code with " + key + " " + theirs[key].dump() +
-                              ", this run asks for " + value.dump());
+        std::string message = what;
+        message += " trained a code with " + key + " " + theirs[key].dump();
+        message += ", this run asks for " + value.dump();
+        throw CheckpointError(message);
       }
     }
   } else {
@@ -576,16 +578,7 @@ void Trainer::resume(const std::string& path) {
   load_net_state(net_, ck.model, what);
   load_adam_state(*optimizer_, *net_, without_code(ck.optimizer), what);
   if (code_) {
-    const auto code = code_part(ck.model);
-    torch::NoGradGuard no_grad;
-    for (auto& p : code_->named_parameters()) {
-      auto it = code.find(p.key());
-      if (it == code.end() || it->second.sizes() != p.value().sizes()) {
-        throw CheckpointError(what + ": its learned code lacks " + p.key() +
-                              " or has another shape");
-      }
-      p.value().copy_(it->second);
-    }
+    load_code_state(code_, ck.model, what, /*strict=*/true);
     load_adam_state(*code_optimizer_, *code_, code_part(ck.optimizer), what);
     fixed_code_ = torch::Tensor();
   }
@@ -647,13 +640,8 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   if (code_) {
     // A model that learned a code of this family and shape hands it on (the code's own Adam
     // starts afresh, like the net's).
-    torch::NoGradGuard no_grad;
-    const auto code = code_part(ck.model);
-    for (auto& p : code_->named_parameters()) {
-      auto it = code.find(p.key());
-      if (it == code.end() || it->second.sizes() != p.value().sizes()) continue;
-      p.value().copy_(it->second);
-      report.copied.push_back(kCodePrefix + p.key());
+    for (auto& name : load_code_state(code_, ck.model, what, /*strict=*/false)) {
+      report.copied.push_back(std::move(name));
     }
     code_optimizer_ = make_code_adam(code_, options_, code_options_);
     fixed_code_ = torch::Tensor();

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/nn/learned_phi.h"
 #include "lfnet/nn/network.h"
 
 namespace lfnet::train {
@@ -82,6 +83,13 @@ void check_architecture(const nn::LightFieldNet& net, const TensorMap& state,
 // Copies `state` into `net` after check_architecture: the Phi buffers through set_phi, then
 // every tensor bit for bit.
 void load_net_state(nn::LightFieldNet& net, const TensorMap& state, const std::string& what);
+
+// Copies a learned code's parameters from a checkpoint's model state (their names under
+// kCodePrefix) into `code`; returns the names copied (with the prefix). A parameter the state
+// lacks, or holds in another shape, is a CheckpointError naming `what` when `strict`, and is
+// left as it is otherwise.
+std::vector<std::string> load_code_state(nn::LearnedPhi& code, const TensorMap& state,
+                                         const std::string& what, bool strict);
 
 // The network a checkpoint holds, rebuilt from its network options and loaded.
 nn::LightFieldNet build_net(const Checkpoint& checkpoint, const std::string& what = "checkpoint");
