@@ -7,6 +7,7 @@
 #include <tuple>
 
 #include "lfnet/core/error.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 #include "support/test_support.h"
 
@@ -76,6 +77,55 @@ TEST_CASE("measurements equal the sensor crop at the patch origin", "[data]") {
     }
   }
   CHECK(checked == 4);
+}
+
+TEST_CASE("behind a colour filter array patches keep their colours and measure the mosaic",
+          "[data]") {
+  auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));  // period 9; with Bayer 18
+  torch::manual_seed(5);
+  auto lf = LightField(torch::rand({3, 5, 5, 70, 40}));
+  auto o = small_options();
+  o.augment = false;
+  o.cfa = "GRBG";
+  data::PatchDataset ds({lf}, *phi, o, 16);
+  ds.start_epoch(0, 16);
+  auto b = ds.next_train();
+  REQUIRE(b.target.sizes() == torch::IntArrayRef({16, 3, 5, 5, 9, 9}));
+  // The sensor image of the camera: every colour coded, then each pixel's own colour.
+  std::vector<torch::Tensor> colours;
+  for (int64_t c = 0; c < 3; ++c) colours.push_back(optics::simulate_sensor(*phi, lf.data()[c]));
+  const auto cfa = optics::ColourFilterArray::bayer("GRBG");
+  auto sensor = optics::mosaic(torch::stack(colours), cfa)[0];  // (N, H, W)
+  std::set<int64_t> phases;
+  int checked = 0;
+  for (int64_t i = 0; i < 6; ++i) {
+    for (int64_t y0 = 0; y0 + 9 <= 70 && checked <= i; ++y0) {
+      for (int64_t x0 = 0; x0 + 9 <= 40; ++x0) {
+        auto p = lf.data().slice(3, y0, y0 + 9).slice(4, x0, x0 + 9);
+        if (torch::equal(p, b.target[i])) {
+          auto crop = sensor.slice(1, y0, y0 + 9).slice(2, x0, x0 + 9).reshape({-1});
+          test::require_close(b.y[i], crop, 1e-5);
+          // The phase runs over 18 x 18: the code's period and the CFA's together.
+          CHECK(b.phase[i].item<int64_t>() == (y0 % 18) * 18 + x0 % 18);
+          phases.insert(b.phase[i].item<int64_t>());
+          ++checked;
+          break;
+        }
+      }
+    }
+  }
+  CHECK(checked == 6);
+  CHECK(phases.size() > 1);
+  // A grey light field is grey in all three colours.
+  data::PatchDataset grey({LightField(torch::rand({1, 5, 5, 80, 40}))}, *phi, o, 16);
+  grey.start_epoch(0, 4);
+  auto g = grey.next_train();
+  REQUIRE(g.target.size(1) == 3);
+  CHECK(torch::equal(g.target.select(1, 0), g.target.select(1, 2)));
+  // A Phi that is not local has no pixels to put colours on.
+  CHECK_THROWS_AS(data::PatchDataset({lf}, *optics::make_phi(optics::PhiSpec::parse("random:2")),
+                                     o, 16),
+                  ConfigError);
 }
 
 TEST_CASE("an epoch's batches follow from the seed and epoch alone", "[data]") {

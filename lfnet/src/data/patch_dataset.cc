@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
+#include <string>
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/dist/communicator.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 
 namespace lfnet::data {
@@ -98,10 +101,10 @@ void DatasetOptions::validate() const {
 namespace {
 // Augmentation codes: bit 0 flips (U, H), bit 1 flips (V, W), bit 2 transposes (U<->V, H<->W).
 torch::Tensor augment_patch(torch::Tensor p, int code) {
-  // p: (U, V, h, w)
-  if (code & 1) p = p.flip({0, 2});
-  if (code & 2) p = p.flip({1, 3});
-  if (code & 4) p = p.permute({1, 0, 3, 2});
+  // p: (C, U, V, h, w)
+  if (code & 1) p = p.flip({1, 3});
+  if (code & 2) p = p.flip({2, 4});
+  if (code & 4) p = p.permute({0, 2, 1, 4, 3});
   return p;
 }
 }  // namespace
@@ -115,7 +118,11 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   const int64_t nu = phi.rows(), nv = phi.cols();
   for (size_t i = 0; i < lfs_.size(); ++i) {
     auto& lf = lfs_[i];
-    lf = lf.grey();
+    if (options_.cfa.empty()) {
+      lf = lf.grey();
+    } else if (lf.channels() == 1) {
+      lf = LightField(lf.data().expand({3, -1, -1, -1, -1}));  // grey in every colour
+    }
     LFNET_CHECK_AS(ConfigError, lf.rows() >= nu && lf.cols() >= nv, "training light field ", i,
                    " has ", lf.rows(), "x", lf.cols(), " views but Phi codes ", nu, "x", nv);
     // Its windows: [0] the central one at step 1 (validation's), then training's: each
@@ -148,8 +155,15 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   }
   LFNET_CHECK_AS(ConfigError, options_.calibration.empty() || phi_.local(),
                  "dataset.calibration needs a local Phi; '", phi_.spec().label(), "' is not");
+  if (!options_.cfa.empty()) {
+    LFNET_CHECK_AS(ConfigError, phi_.local(), "a colour filter array needs a local Phi; '",
+                   phi_.spec().label(), "' is not");
+    cfa_ = optics::ColourFilterArray::bayer(options_.cfa).response();
+  }
   if (phi_.local()) {
     weights_ = optics::pixel_weight_stack(phi_, options_.patch_h, options_.patch_w);
+    const auto t = static_cast<int64_t>(std::llround(std::sqrt(static_cast<double>(weights_.size(0)))));
+    period_ = cfa_.defined() ? t / std::gcd(t, cfa_.size(1)) * cfa_.size(1) : t;
   } else {
     matrix_ = phi_.patch_matrix(0, 0, options_.patch_h, options_.patch_w);
   }
@@ -161,10 +175,14 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   }
   // Mean of simulated measurements over a fixed training sample.
   std::mt19937_64 probe_rng(options_.seed + 17);
-  measurement_mean_ =
-      make_batch(draw(false, std::min<int64_t>(2048, options_.train_patches), probe_rng), 0)
-          .y.mean()
-          .item<double>();
+  const auto probe = draw(false, std::min<int64_t>(2048, options_.train_patches), probe_rng);
+  const auto probes = static_cast<int64_t>(probe.lf.size());
+  double sum = 0;
+  for (int64_t i = 0; i < probes; i += 128) {  // in parts: large crops take memory
+    sum += make_batch(probe.slice(i, std::min(probes, i + 128)), 0).y.sum().item<double>();
+  }
+  measurement_mean_ = sum / static_cast<double>(probes * phi_.measurements() *
+                                                options_.patch_h * options_.patch_w);
 }
 
 PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
@@ -287,27 +305,37 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
 train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const {
   const int64_t b = static_cast<int64_t>(d.lf.size());
   const int64_t h = options_.patch_h, w = options_.patch_w;
-  std::vector<torch::Tensor> patches;
-  std::vector<int64_t> phases;
+  std::vector<torch::Tensor> patches, responses;
+  std::vector<int64_t> phases, code_phases;
   patches.reserve(b);
   const int64_t nu = phi_.rows(), nv = phi_.cols();
   for (int64_t i = 0; i < b; ++i) {
     const Window& win = windows_[d.lf[i]][d.window[i]];
     auto p = lfs_[d.lf[i]]
-                 .data()[0]
-                 .slice(0, win.u0, win.u0 + win.step * (nu - 1) + 1, win.step)
-                 .slice(1, win.v0, win.v0 + win.step * (nv - 1) + 1, win.step)
-                 .slice(2, d.y0[i], d.y0[i] + h)
-                 .slice(3, d.x0[i], d.x0[i] + w);
+                 .data()
+                 .slice(1, win.u0, win.u0 + win.step * (nu - 1) + 1, win.step)
+                 .slice(2, win.v0, win.v0 + win.step * (nv - 1) + 1, win.step)
+                 .slice(3, d.y0[i], d.y0[i] + h)
+                 .slice(4, d.x0[i], d.x0[i] + w);
     if (d.gamma[i] != 1.0f || d.contrast[i] != 1.0f || d.brightness[i] != 0.0f) {
       p = p.pow(d.gamma[i]);
       const auto mean = p.mean();
       p = ((p - mean) * d.contrast[i] + mean + d.brightness[i]).clamp(0.0, 1.0);
     }
     patches.push_back(augment_patch(p, d.aug[i]));
-    phases.push_back(phi_.local() ? optics::patch_phase(phi_, d.y0[i], d.x0[i]) : 0);
+    code_phases.push_back(phi_.local() ? optics::patch_phase(phi_, d.y0[i], d.x0[i]) : 0);
+    // The net's phase: over the period of the code and the CFA together.
+    phases.push_back(cfa_.defined() ? (d.y0[i] % period_) * period_ + d.x0[i] % period_
+                                    : code_phases.back());
+    if (cfa_.defined()) {
+      const int64_t p = cfa_.size(1);
+      responses.push_back(cfa_.roll({-(d.y0[i] % p), -(d.x0[i] % p)}, {1, 2})
+                              .repeat({1, (h + p - 1) / p, (w + p - 1) / p})
+                              .slice(1, 0, h)
+                              .slice(2, 0, w));
+    }
   }
-  auto target = torch::stack(patches, 0).contiguous();  // (B, U, V, h, w)
+  auto target = torch::stack(patches, 0).contiguous();  // (B, C, U, V, h, w)
   auto phase = torch::tensor(phases, torch::kInt64);
   torch::Tensor y;
   if (phi_.local()) {
@@ -315,7 +343,7 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
     // v, y, x].
     torch::Tensor weights;
     if (d.calibration.empty()) {
-      weights = weights_.index_select(0, phase);  // (B, N, U, V, h, w)
+      weights = weights_.index_select(0, torch::tensor(code_phases, torch::kInt64));
     } else {
       // Each patch's own camera: the code at the patch's origin, the vignetting at its place.
       std::vector<torch::Tensor> own;
@@ -326,7 +354,14 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
       }
       weights = torch::stack(own);
     }
-    y = (weights * target.unsqueeze(1)).sum({2, 3}).reshape({b, -1});
+    // Behind a CFA each pixel records its own colour of what the code measures (optics::
+    // mosaic); the code being linear, that is the code applied to the rays' colour mix at
+    // that pixel.
+    const auto rays =
+        cfa_.defined()
+            ? (target * torch::stack(responses).unsqueeze(2).unsqueeze(3)).sum(1, true)
+            : target;  // (B, 1, U, V, h, w), broadcast over N
+    y = (weights * rays).sum({2, 3}).reshape({b, -1});
   } else {
     y = torch::matmul(target.reshape({b, -1}), matrix_.t());
   }
@@ -350,7 +385,7 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
     }
     y = y + torch::randn(y.sizes(), gen, y.options()) * spread;
   }
-  return {y.contiguous(), phase, target.unsqueeze(1), noise};
+  return {y.contiguous(), phase, target, noise};
 }
 
 PatchDataset::~PatchDataset() {

@@ -84,7 +84,8 @@ nlohmann::json colour_score(const LightField& estimate, const LightField& truth)
 }
 
 // evaluate() behind a colour filter array: the three colours' sensor images mosaicked into one
-// (then the sensor effects), the mosaicked light field reconstructed, its views demosaiced.
+// (then the sensor effects), and either a colour net reconstructs the colour light field from
+// it (`image`), or the mosaicked light field is reconstructed and its views demosaiced.
 EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const std::string& method,
                         const recon::PatchSolver& solver, const EvalOptions& options,
                         const recon::ProgressCallback& progress, const recon::ImageSolver& image) {
@@ -94,9 +95,9 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
                  " channel(s)");
   LFNET_CHECK_AS(ConfigError, options.mode == optics::SimulationMode::kSensor,
                  "a colour filter array is simulated in sensor mode only");
-  LFNET_CHECK_AS(ConfigError, !image && solver, "method '", method,
+  LFNET_CHECK_AS(ConfigError, image || solver, "method '", method,
                  "' reconstructs grey sensor images; behind a colour filter array use pinv, "
-                 "adjoint or no-parallax");
+                 "adjoint, no-parallax or a colour model");
   const auto& ro = options.reconstruct;
   ro.validate();
   const auto colour = optics::perturbed_forward(phi, options.camera_error, truth.data());
@@ -104,12 +105,22 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
       optics::apply_sensor_effects(optics::mosaic(colour, cfa)[0], options.effects, options.seed);
   const double signal = sensor.mean().item<double>();
   Stopwatch clock;  // the reconstruction and the demosaicing, not the simulation
-  const auto mosaicked = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
-  auto estimate = optics::demosaic(mosaicked[0], cfa);  // (3, U, V, H, W)
+  torch::Tensor estimate;
+  if (image) {
+    estimate = image(sensor, options.effects.equivalent_sigma(signal));  // (3, U, V, H, W)
+    const int64_t pixels = truth.height() * truth.width();
+    if (progress) progress(pixels, pixels);
+  } else {
+    const auto mosaicked = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
+    estimate = optics::demosaic(mosaicked[0], cfa);  // (3, U, V, H, W)
+  }
+  LFNET_CHECK(estimate.dim() == 5 && estimate.size(0) == 3, "method '", method,
+              "' returned ", estimate.sizes(), " behind a colour filter array, not (3, U, V, H, W)");
   if (ro.clamp) estimate.clamp_(0.0, 1.0);
   const double seconds = clock.seconds();
   const PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);
-  auto record = base_record(phi, method, options, grid.size(), seconds);
+  auto record = base_record(phi, method, options, image ? 0 : grid.size(), seconds);
+  if (image) record["whole_image"] = true;
   add_equivalent_sigma(record, options, signal);
   record["cfa"] = cfa.to_json();
   if (!options.camera_error.empty()) record["camera_error"] = options.camera_error.to_json();

@@ -3,6 +3,8 @@
 // views. Fully convolutional: trained on crops, it reconstructs whole sensor images.
 #include <torch/torch.h>
 
+#include <numeric>
+#include <string>
 #include <vector>
 
 #include "lfnet/core/error.h"
@@ -10,6 +12,7 @@
 #include "lfnet/nn/image_net.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
+#include "lfnet/optics/cfa.h"
 
 namespace lfnet::nn {
 
@@ -99,8 +102,8 @@ def simulate(self, lf: Tensor) -> Tensor:
 // The prefix of the U-Net's parameter names: the network's submodule "image".
 constexpr std::string_view kImagePrefix = "image.";
 
-// The pseudo-inverse plus the U-Net's correction on a base (B, U V, h, w), with a noise channel
-// (B sigmas, undefined: 0) when the net is noise-aware.
+// The pseudo-inverse plus the U-Net's correction on a base (B, C U V, h, w), with a noise
+// channel (B sigmas, undefined: 0) when the net is noise-aware.
 torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
                      const torch::Tensor& noise) {
   if (!net.options().image.noise_input) return base + net.image->forward(base);
@@ -108,6 +111,80 @@ torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
       noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
   auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
   return base + net.image->forward(torch::cat({base, channel}, 1));
+}
+
+// A colour net's CFA response at every pixel of crops (B, h, w) whose pixel (0, 0) has phase
+// `phase` (B, undefined: 0), from the response tile (3, L, L) of the net's period: (B, 3, h, w).
+torch::Tensor response_maps(const torch::Tensor& tile, const torch::Tensor& phase, int64_t batch,
+                            int64_t h, int64_t w) {
+  const int64_t l = tile.size(1);
+  const auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({batch}, torch::kInt64);
+  const auto rows = (torch::arange(h, torch::kInt64).unsqueeze(0) + ph.div(l, "floor").unsqueeze(1)) % l;
+  const auto cols = (torch::arange(w, torch::kInt64).unsqueeze(0) + (ph % l).unsqueeze(1)) % l;
+  const auto device = tile.device();
+  return tile.permute({1, 2, 0})
+      .index({rows.unsqueeze(2).to(device), cols.unsqueeze(1).to(device)})  // (B, h, w, 3)
+      .permute({0, 3, 1, 2});
+}
+
+// Bilinear demosaicing inside a colour net: per-pixel estimates `base` (B, K, h, w), each pixel
+// in the one colour of its response (B, 3, h, w), to (B, 3 K, h, w), colour-major. A pixel keeps
+// its own colour; a missing colour is the bilinear-weighted mean of that colour's pixels among
+// its 3 x 3 neighbours within the crop (a tile's halo keeps its edges away from its core). For a
+// Bayer pattern this is optics::demosaic but on the image's outermost pixels, where that mirrors
+// the image.
+torch::Tensor demosaic_base(const torch::Tensor& base, const torch::Tensor& response) {
+  const int64_t b = base.size(0), k = base.size(1), h = base.size(2), w = base.size(3);
+  const auto kernel =
+      torch::tensor({0.25, 0.5, 0.25, 0.5, 1.0, 0.5, 0.25, 0.5, 0.25}, torch::kFloat64)
+          .to(base.options())
+          .view({1, 1, 3, 3});
+  std::vector<torch::Tensor> colours;
+  for (int64_t c = 0; c < 3; ++c) {
+    const auto own = response.select(1, c).unsqueeze(1).to(base.options());  // (B, 1, h, w)
+    const auto sum = torch::conv2d((base * own).reshape({b * k, 1, h, w}), kernel, {}, 1, 1);
+    const auto weight = torch::conv2d(own, kernel, {}, 1, 1).clamp_min(1e-6);
+    colours.push_back(own * base + (1 - own) * (sum.view({b, k, h, w}) / weight));
+  }
+  return torch::cat(colours, 1);
+}
+
+// The per-pixel pseudo-inverse (B, U V, h, w) of crops of phase `phase` (B, undefined: 0) as
+// the U-Net's base: itself for a grey net, demosaiced for a colour net (B, 3 U V, h, w).
+torch::Tensor colour_base(const LightFieldNetImpl& net, const torch::Tensor& pinv,
+                          const torch::Tensor& phase) {
+  if (net.options().colours() == 1) return pinv;
+  return demosaic_base(
+      pinv, response_maps(net.cfa_response, phase, pinv.size(0), pinv.size(2), pinv.size(3)));
+}
+
+// The least common multiple of two periods.
+int64_t common_period(int64_t a, int64_t b) { return a / std::gcd(a, b) * b; }
+
+// The parameters of a grey net's input and output layers that a colour net of the same U-Net
+// starts from (train --init): the input layer reads the luma of the three colours as the grey
+// net read its grey views (and the noise channel as it did), and the output layer adds the grey
+// net's correction to every colour. The colour net so starts as the demosaiced pseudo-inverse
+// corrected by the grey net on its luma. False, leaving `dst` alone, for any other parameter.
+bool colour_from_grey(const std::string& name, const torch::Tensor& src, torch::Tensor& dst,
+                      int64_t views) {
+  static constexpr double kLuma[3] = {0.299, 0.587, 0.114};  // LightField::grey
+  torch::NoGradGuard no_grad;
+  if (name == "input.weight" && src.dim() == 4 && src.size(0) == dst.size(0) &&
+      dst.size(1) == src.size(1) + 2 * views && src.size(1) >= views) {
+    for (int64_t c = 0; c < 3; ++c) {
+      dst.narrow(1, c * views, views).copy_(src.narrow(1, 0, views) * kLuma[c]);
+    }
+    const int64_t extra = src.size(1) - views;  // the noise channel
+    if (extra > 0) dst.narrow(1, 3 * views, extra).copy_(src.narrow(1, views, extra));
+    return true;
+  }
+  if ((name == "output.weight" || name == "output.bias") && src.size(0) == views &&
+      dst.size(0) == 3 * views && src.dim() == dst.dim()) {
+    for (int64_t c = 0; c < 3; ++c) dst.narrow(0, c * views, views).copy_(src);
+    return true;
+  }
+  return false;
 }
 
 class LfnetArchitecture : public NetworkArchitecture {
@@ -136,8 +213,12 @@ class LfnetArchitecture : public NetworkArchitecture {
     const int64_t views = p.rows * p.cols;
     net.phi = net.register_buffer("phi", torch::zeros({o.measurements, p.rows, p.cols, 1, 1}));
     net.pixel_pinv = net.register_buffer("pixel_pinv", torch::zeros({1, 1, o.measurements, views}));
-    const int64_t in = views + (o.image.noise_input ? 1 : 0);
-    net.image = net.register_module("image", ImageNet(o.image, in, views));
+    if (o.colours() > 1) {
+      net.cfa_response = net.register_buffer("cfa_response", torch::zeros({3, 1, 1}));
+    }
+    const int64_t channels = o.colours() * views;
+    const int64_t in = channels + (o.image.noise_input ? 1 : 0);
+    net.image = net.register_module("image", ImageNet(o.image, in, channels));
   }
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
@@ -150,8 +231,19 @@ class LfnetArchitecture : public NetworkArchitecture {
     LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
                    "set_phi: the pixel weights contain NaN or inf");
     torch::NoGradGuard no_grad;
-    const auto inverse = pixel_pseudo_inverses(stack.to(torch::kFloat64), o.pinv_lambda);
-    net.phi.set_(stack.to(net.phi.options()).contiguous().clone());
+    auto weights = stack;
+    if (o.colours() > 1) {
+      // The code and the CFA repeat together over the least common multiple of their periods.
+      const auto cfa = optics::ColourFilterArray::bayer(o.cfa);
+      const int64_t t = stack.size(3), l = common_period(t, cfa.period());
+      weights = stack.repeat({1, 1, 1, l / t, l / t});
+      net.cfa_response.set_(cfa.response()
+                                .repeat({1, l / cfa.period(), l / cfa.period()})
+                                .to(net.phi.options())
+                                .contiguous());
+    }
+    const auto inverse = pixel_pseudo_inverses(weights.to(torch::kFloat64), o.pinv_lambda);
+    net.phi.set_(weights.to(net.phi.options()).contiguous().clone());
     net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
   }
 
@@ -162,6 +254,7 @@ class LfnetArchitecture : public NetworkArchitecture {
   std::vector<size_t> phase_axes(const std::string& name, size_t rank) const override {
     if (name == "phi" && rank == 5) return {3, 4};
     if (name == "pixel_pinv") return {0, 1};
+    if (name == "cfa_response" && rank == 3) return {1, 2};
     return {};
   }
 
@@ -173,8 +266,8 @@ class LfnetArchitecture : public NetworkArchitecture {
     auto ph = net.check_phase(y, phase);
     // A crop: its pixel (0, 0) has the crop's phase.
     auto sensor = y.reshape({y.size(0), o.measurements, p.height, p.width});
-    auto base = net.pixel_pinv_image(sensor, ph);
-    const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
+    auto base = colour_base(net, net.pixel_pinv_image(sensor, ph), ph);
+    const std::vector<int64_t> shape{y.size(0), o.colours(), p.rows, p.cols, p.height, p.width};
     NetworkOutputs out;
     out.base = base.view(shape);
     out.output = refine(net, base, noise).view(shape);
@@ -190,11 +283,15 @@ class LfnetArchitecture : public NetworkArchitecture {
     const int64_t ph = (m - h % m) % m, pw = (m - w % m) % m;
     LFNET_CHECK(phase >= 0 && phase < net.phases(), "forward_image: phase ", phase, " outside [0, ",
                 net.phases(), ")");
-    auto base = net.pixel_pinv_image(
-        sensor, phase == 0 ? torch::Tensor() : torch::full({sensor.size(0)}, phase, torch::kInt64));
+    const auto phases =
+        phase == 0 ? torch::Tensor() : torch::full({sensor.size(0)}, phase, torch::kInt64);
+    // Demosaiced before padding: the padding is no measurement.
+    auto base = colour_base(net, net.pixel_pinv_image(sensor, phases), phases);
     if (ph > 0 || pw > 0) base = torch::constant_pad_nd(base, {0, pw, 0, ph});
     auto out = refine(net, base, torch::full({sensor.size(0)}, noise_sigma, base.options()));
-    return out.slice(2, 0, h).slice(3, 0, w).reshape({sensor.size(0), p.rows, p.cols, h, w});
+    out = out.slice(2, 0, h).slice(3, 0, w);
+    if (o.colours() == 1) return out.reshape({sensor.size(0), p.rows, p.cols, h, w});
+    return out.reshape({sensor.size(0), o.colours(), p.rows, p.cols, h, w});
   }
 
   ImageTiling image_tiling(const NetworkOptions& o) const override { return o.image.tiling(); }
@@ -218,6 +315,9 @@ class LfnetArchitecture : public NetworkArchitecture {
 
   std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {
     const auto& o = net.options();
+    LFNET_CHECK_AS(ConfigError, o.colours() == 1,
+                   "a colour net (cfa ", o.cfa, ") cannot be exported to TorchScript yet; ",
+                   "use its checkpoint");
     for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
     const int64_t channels = o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0);
     const int64_t m = o.image.multiple();
@@ -235,6 +335,14 @@ class LfnetArchitecture : public NetworkArchitecture {
   WarmStart warm_start(const LightFieldNetImpl& net, const std::string& name,
                        const torch::Tensor& src, torch::Tensor& dst,
                        const WarmStartSource& from) const override {
+    // A colour net starts from a grey one (colour_from_grey).
+    const auto& o = net.options();
+    const bool grey_source = !from.network.is_object() || from.network.value("cfa", "").empty();
+    if (o.colours() > 1 && grey_source && src.sizes() != dst.sizes() &&
+        name.rfind(kImagePrefix, 0) == 0 &&
+        colour_from_grey(name.substr(kImagePrefix.size()), src, dst, o.patch.rows * o.patch.cols)) {
+      return WarmStart::kWidened;
+    }
     // A wider U-Net starts as the narrower one (embed_narrow_parameter).
     if (src.sizes() != dst.sizes() && name.rfind(kImagePrefix, 0) == 0 &&
         embed_narrow_parameter(name.substr(kImagePrefix.size()), src, dst)) {

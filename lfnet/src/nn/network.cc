@@ -8,6 +8,7 @@
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
+#include "lfnet/optics/cfa.h"
 
 namespace lfnet::nn {
 
@@ -67,6 +68,16 @@ void NetworkOptions::validate() const {
   if (measurements < 1) fail("measurements", "must be >= 1, got " + std::to_string(measurements));
   if (!(pinv_lambda > 0) || !std::isfinite(pinv_lambda)) {
     fail("pinv_lambda", "must be positive and finite");
+  }
+  if (!cfa.empty()) {
+    if (architecture != kLfnetArchitecture) {
+      fail("cfa", "a colour net needs the lfnet architecture, not '" + architecture + "'");
+    }
+    try {
+      optics::ColourFilterArray::bayer(cfa);
+    } catch (const ConfigError& e) {
+      fail("cfa", e.what());
+    }
   }
   a->validate(*this);
 }
@@ -276,8 +287,9 @@ double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, in
 }
 
 double image_pixel_flops(const NetworkOptions& o) {
-  const int64_t views = o.patch.rows * o.patch.cols;
-  return 2.0 * static_cast<double>(o.measurements * views) + o.image.pixel_flops(views, views);
+  const int64_t views = o.patch.rows * o.patch.cols, channels = o.colours() * views;
+  return 2.0 * static_cast<double>(o.measurements * views) +
+         o.image.pixel_flops(channels, channels);
 }
 
 double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {

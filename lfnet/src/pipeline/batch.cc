@@ -234,6 +234,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
   }
   for (const auto& method : methods) {
     try {
+      if (!a.model.empty() && recon::needs_network(method)) {
+        cache.model(a.model).check_cfa(cfa ? cfa->pattern() : "");
+      }
       auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
       o.cfa = cfa;
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);

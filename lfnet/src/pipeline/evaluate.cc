@@ -221,9 +221,6 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     cfa = optics::ColourFilterArray::parse(a.cfa);
     LFNET_CHECK_AS(ConfigError, a.mode == optics::SimulationMode::kSensor,
                    "--cfa is simulated in sensor mode only");
-    LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
-                   "' reconstructs grey sensor images; behind a colour filter array use pinv, "
-                   "adjoint or no-parallax");
     cfa->check_demosaicable();
   }
   parse_device(a.device);  // a clear error before any work
@@ -233,7 +230,10 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   nlohmann::json noise_switch;                  // a noise switch's members, for the record
   if (!a.model.empty()) {
     const auto model = load_model(a.model, recon::needs_network(method));
-    if (recon::needs_network(method)) noise_switch = model.noise_switch_record();
+    if (recon::needs_network(method)) {
+      model.check_cfa(cfa ? cfa->pattern() : "");
+      noise_switch = model.noise_switch_record();
+    }
     spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
     check_phi_argument(model, a.phi);
     if (recon::needs_network(method)) {
@@ -244,6 +244,8 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   } else {
     LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
                    "' needs --model");
+    LFNET_CHECK_AS(ConfigError, !cfa || !recon::needs_network(method), "method '", method,
+                   "' needs a colour model behind a colour filter array");
     LFNET_CHECK_AS(ConfigError, !a.phi.empty(), "--phi NAME[:N] is needed without --model");
     spec = phi_from_argument(a.phi);
   }

@@ -345,6 +345,13 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
   refuse_if_differs("patch.height", given.patch.height, c.network.patch.height,
                     "$.dataset.patch_h");
   refuse_if_differs("patch.width", given.patch.width, c.network.patch.width, "$.dataset.patch_w");
+  if (!c.network.cfa.empty()) {
+    // A colour net trains on its own colour crops, measured by the code of $.phi.
+    LFNET_CHECK_AS(ConfigError, !c.code.enabled, source,
+                   ": $.network.cfa: a colour net learns no code ($.code) yet");
+    LFNET_CHECK_AS(ConfigError, c.distill.teacher.empty(), source,
+                   ": $.network.cfa: a colour net cannot distil a teacher ($.distill)");
+  }
   return c;
 }
 

@@ -52,6 +52,8 @@ ExportResult export_model(const ExportRequest& a) {
   const auto spec = optics::PhiSpec::from_json(ckpt.phi, a.model + ":$.phi");
   const auto phi = optics::make_phi(spec);
   const auto& o = net->options();
+  LFNET_CHECK_AS(ConfigError, o.cfa.empty(), "--model ", a.model, " is a colour net (cfa ", o.cfa,
+                 "), which cannot be exported to TorchScript yet: use the checkpoint");
   LFNET_CHECK_AS(CheckpointError,
                  phi->measurements() == o.measurements && phi->rows() == o.patch.rows &&
                      phi->cols() == o.patch.cols,

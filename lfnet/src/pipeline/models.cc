@@ -144,6 +144,19 @@ ModelFile load_model(const std::string& path, bool network) {
   return model;
 }
 
+void ModelFile::check_cfa(const std::string& cfa) const {
+  const auto& own = network.cfa;
+  if (own == cfa) return;
+  LFNET_CHECK_AS(ConfigError, !own.empty(), "model ", path,
+                 " reconstructs grey sensor images; behind a colour filter array use pinv, "
+                 "adjoint, no-parallax or a colour model (docs/reconstruction.md)");
+  LFNET_CHECK_AS(ConfigError, !cfa.empty(), "model ", path,
+                 " reconstructs colour sensor images behind a Bayer ", own, " filter: give --cfa ",
+                 own);
+  throw ConfigError("model " + path + " reconstructs colour sensor images behind a Bayer " + own +
+                    " filter, not " + cfa);
+}
+
 void ModelFile::check_phi(const nlohmann::json& phi_spec) const {
   if (script) return nn::check_script_phi(*script, phi_spec);
   train::Checkpoint ckpt;

@@ -145,21 +145,23 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   LFNET_CHECK_AS(ConfigError, !a.match_mean || train_mean > 0,
                  "--match-mean needs a model that records its training measurement mean");
 
-  // A colour filter array: one sensor image whose pixels each measure one colour. Its
-  // reconstruction is a mosaicked light field, each view then demosaiced (bilinear).
+  // A colour filter array: one sensor image whose pixels each measure one colour. A colour
+  // model reconstructs its colour light field; a patch method its mosaicked light field, each
+  // view then demosaiced (bilinear).
   std::optional<optics::ColourFilterArray> cfa;
   if (acq.meta.contains("cfa")) {
     cfa = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + "/sensor.json:$.cfa");
     LFNET_CHECK_AS(ConfigError, acq.sensor.defined(),
                    "a colour filter array's measurements must be a sensor image");
-    LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kNetwork, "method '", method,
-                   "' reconstructs grey sensor images with a grey model; ", a.sensor,
-                   " is the sensor image of a colour filter array: use --method pinv (then "
-                   "demosaiced)");
-    LFNET_CHECK_AS(ConfigError, !image, "method '", method,
-                   "' works on whole grey sensor images; behind a colour filter array use a "
-                   "patch method (pinv, adjoint, dict), whose light field is then demosaiced");
     cfa->check_demosaicable();
+  }
+  const bool network_method = model && needs == recon::MethodNeeds::kNetwork;
+  if (network_method) model->check_cfa(cfa ? cfa->pattern() : "");
+  if (cfa && !network_method) {
+    LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kNetwork && !image, "method '",
+                   method, "' works on whole grey sensor images; ", a.sensor,
+                   " is the sensor image of a colour filter array: use a colour model or a "
+                   "patch method (pinv, adjoint, dict), whose light field is then demosaiced");
   }
   const auto& lf_meta = acq.meta.at("light_field");
   const int64_t c = lf_meta.at("channels").get<int64_t>();
@@ -169,8 +171,10 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   // A noise-aware model is told the sensor's noise: --noise-sigma, else what the acquisition
   // records (simulate's sensor.json), else the noise estimated from each sensor image.
   // (A noise switch's members have a noise input, so it is noise-aware too.)
+  // (A colour net is told the noise only: the estimator reads grey sensor images.)
   const bool noise_aware =
-      (model && model->network.image.noise_input) || recon::find_method(method).reads_noise();
+      ((model && model->network.image.noise_input) || recon::find_method(method).reads_noise()) &&
+      !cfa;
   const bool noise_told = a.noise_sigma >= 0 || acq.meta.contains("noise_sigma");
   const double told_sigma = a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
   nlohmann::json estimated = nlohmann::json::array();  // per colour channel
@@ -203,7 +207,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
             if (progress) progress(ch * per_channel + done, sensors * total);
           }));
     }
-    if (cfa) channels = {optics::demosaic(channels[0][0], *cfa)};  // (3, U, V, H, W)
+    if (cfa && !image) channels = {optics::demosaic(channels[0][0], *cfa)};  // (3, U, V, H, W)
   } else {
     LFNET_CHECK_AS(ConfigError, !a.match_mean,
                    "--match-mean applies to sensor images, not to per_patch measurements");

@@ -11,6 +11,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
@@ -249,7 +250,9 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
     spdlog::info("evaluations: done ({})", results);
     return;
   }
-  const auto truths = load_sources(ev.data, phi->rows(), phi->cols());
+  // A colour net is evaluated behind its colour filter array, on colour light fields.
+  const bool colour = !config.network.cfa.empty();
+  const auto truths = load_sources(ev.data, phi->rows(), phi->cols(), false, colour);
   std::string lines;  // results.jsonl appears whole, once every evaluation is done
   for (const auto& truth : truths) {
     for (const auto& method : ev.methods) {
@@ -263,9 +266,10 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
               patch->width = config.dataset.patch_w;
             }
             const eval::EvalOptions defaults;
-            const auto o =
+            auto o =
                 make_eval_options(mode, noise, defaults.seed, stride, defaults.reconstruct.batch,
                                   defaults.reconstruct.window, patch);
+            if (colour) o.cfa = optics::ColourFilterArray::bayer(config.network.cfa);
             auto record = evaluate_method(truth, method, context, o);
             record["experiment"] = config.name;
             record["scale"] = config.scale;

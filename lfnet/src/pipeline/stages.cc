@@ -29,13 +29,16 @@ namespace lfnet::pipeline {
 
 std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi) {
-  auto named =
-      load_sources(config.train_data, phi.rows(), phi.cols(), config.dataset.needs_whole_grids());
+  const bool colour = !config.network.cfa.empty();
+  auto named = load_sources(config.train_data, phi.rows(), phi.cols(),
+                            config.dataset.needs_whole_grids(), colour);
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
   lfs.reserve(named.size());
   for (auto& n : named) lfs.push_back(n.lf);
-  return std::make_unique<data::PatchDataset>(std::move(lfs), phi, config.dataset);
+  auto options = config.dataset;
+  options.cfa = config.network.cfa;  // a colour net's patches keep their colours
+  return std::make_unique<data::PatchDataset>(std::move(lfs), phi, options);
 }
 
 nn::LightFieldNet load_teacher(const ExperimentConfig& config, const std::string& device) {

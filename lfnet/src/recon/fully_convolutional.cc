@@ -124,20 +124,22 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   const int64_t m = tiling.multiple, h = sensor.size(1), w = sensor.size(2);
   const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->period();
   const auto device = net->phi.device();
-  // The image is zero-padded to (hp, wp) tile by tile: crops that reach past it are padded,
-  // the image itself is not copied.
+  // The image is zero-padded to (hp, wp) tile by tile: crops that reach past it are padded by
+  // forward_image, the image itself is not copied.
   const auto image = sensor.to(torch::kFloat32);
-  auto out = torch::empty({1, o.patch.rows, o.patch.cols, h, w}, torch::kFloat32);
+  const int64_t colours = o.colours();
+  auto out = torch::empty({colours, o.patch.rows, o.patch.cols, h, w}, torch::kFloat32);
   int64_t step = 0, done = 0;
   const auto tiles = nn::image_tiles(tiling, h, w, tile, &step);
   for (const auto& c : tiles) {
     LFNET_CHECK(c.a1 <= hp && c.b1 <= wp, "internal: a tile reaches past the padded image");
-    auto inside = image.slice(1, c.a0, std::min(c.a1, h)).slice(2, c.b0, std::min(c.b1, w));
-    auto crop = torch::constant_pad_nd(
-                    inside, {0, c.b1 - c.b0 - inside.size(2), 0, c.a1 - c.a0 - inside.size(1)})
-                    .unsqueeze(0)
-                    .to(device);
-    auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma).to(torch::kCPU);
+    // forward_image pads the crop to the multiple itself, as it pads a whole image (a colour
+    // net demosaics before padding, so the padding is no measurement).
+    auto crop =
+        image.slice(1, c.a0, std::min(c.a1, h)).slice(2, c.b0, std::min(c.b1, w)).unsqueeze(0).to(device);
+    auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma)
+                   .to(torch::kCPU)
+                   .reshape({colours, o.patch.rows, o.patch.cols, crop.size(2), crop.size(3)});
     const int64_t th = std::min(c.y0 + step, h) - c.y0, tw = std::min(c.x0 + step, w) - c.x0;
     if (th > 0 && tw > 0) {
       out.slice(3, c.y0, c.y0 + th)
@@ -191,6 +193,8 @@ void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net
   LFNET_CHECK_AS(ConfigError, method == "net" && image,
                  "--self-ensemble applies to --method net with a model of a whole-image "
                  "architecture (lfnet)");
+  LFNET_CHECK_AS(ConfigError, net.is_empty() || net->options().colours() == 1,
+                 "--self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
 }
 
 void check_ensemble_passes(bool self_ensemble, int64_t passes) {
@@ -242,6 +246,8 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
                                           const ProgressCallback& progress, int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
+  LFNET_CHECK_AS(ConfigError, net->options().colours() == 1,
+                 "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
   return reconstruct_mirrored(
       ensemble_mirrors(net->phi, max_passes), sensor,
       [&](const torch::Tensor& mirrored, const ProgressCallback& part) {
@@ -255,6 +261,8 @@ torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Ten
                                          int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
+  LFNET_CHECK_AS(ConfigError, net->options().colours() == 1,
+                 "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
   LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == net->options().measurements,
               "reconstruct_crops_mirrored: expected sensor crops (B, ", net->options().measurements,
               ", h, w), got ", sensor.sizes());

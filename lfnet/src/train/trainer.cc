@@ -700,7 +700,7 @@ void Trainer::check_batch(const Batch& batch, const std::string& where) const {
               where, ": y and target must be ", net_->phi.scalar_type(), " like the net, got ",
               batch.y.scalar_type(), " and ",
               batch.target.defined() ? c10::toString(batch.target.scalar_type()) : "nothing");
-  const std::vector<int64_t> shape{batch.y.size(0), 1, p.rows, p.cols, p.height, p.width};
+  const std::vector<int64_t> shape{batch.y.size(0), o.colours(), p.rows, p.cols, p.height, p.width};
   LFNET_CHECK(batch.target.defined() && batch.target.sizes() == torch::IntArrayRef(shape), where,
               ": target must be ", torch::IntArrayRef(shape), ", got ",
               batch.target.defined() ? batch.target.sizes() : torch::IntArrayRef{});

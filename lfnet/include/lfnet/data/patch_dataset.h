@@ -70,6 +70,10 @@ struct DatasetOptions {
   optics::CalibrationRanges calibration;
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
+  // A colour net's Bayer pattern (network.cfa, not a dataset key): the patches keep their three
+  // colours (a grey light field counts as grey in all three), and every pixel measures its N
+  // coded values in its own colour. Empty: grey patches.
+  std::string cfa;
 
   // Whether training draws windows other than the central one at step 1, so that light
   // fields should come with their whole angular grid.
@@ -105,7 +109,7 @@ struct DatasetOptions {
   void validate() const;
 };
 
-// Random patches of grey light fields with an 85:15 split that shares no pixel: the bottom
+// Random patches of grey light fields (colour ones behind a CFA: DatasetOptions::cfa) with an 85:15 split that shares no pixel: the bottom
 // `validation_fraction` of every light field's rows is kept for validation, and training
 // patches never reach into it. Measurements are simulated per patch with the patch matrix of
 // the patch's origin, which for every local Phi equals cropping a simulated sensor image
@@ -159,6 +163,8 @@ class PatchDataset : public train::BatchSource {
   DatasetOptions options_;
   torch::Tensor weights_;                     // local Phi: (P, N, U, V, h, w) per-pixel weights
   torch::Tensor matrix_;                      // block Phi: (N h w, U V h w)
+  torch::Tensor cfa_;                         // with options.cfa: the response tile (3, P, P)
+  int64_t period_ = 1;                        // the phases' period: the code's and the CFA's
   std::vector<std::vector<Window>> windows_;  // per light field; [0]: central, step 1
   std::vector<int64_t> split_row_;            // first validation row of every light field
   std::vector<double> train_weight_;

@@ -127,6 +127,11 @@ struct NetworkOptions {
   Residual residual = Residual::kNone;
   double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
   ImageNetOptions image;      // the lfnet architecture's U-Net
+  // A colour net (lfnet architecture): the Bayer pattern ("RGGB", "BGGR", "GRBG", "GBRG") of
+  // the colour filter array over the coded pixels. The net reads the single mosaicked sensor
+  // image and reconstructs the three colours of every view jointly (docs/architectures.md,
+  // "Colour"). Empty: a grey net.
+  std::string cfa;
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -142,6 +147,7 @@ struct NetworkOptions {
     f("pinv_lambda", pinv_lambda);
     f("architecture", architecture);
     f("image", image);
+    f("cfa", cfa);
   }
   // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
@@ -158,6 +164,8 @@ struct NetworkOptions {
     if (arch().whole_image()) return std::nullopt;
     return patch;
   }
+  // Colour channels of the light field the net reconstructs: 3 behind a CFA, else 1.
+  int64_t colours() const { return cfa.empty() ? 1 : 3; }
   // The paper architecture's branches.
   bool has_ae() const { return architecture == kPaperArchitecture && branches != Branches::kCnn; }
   bool has_cnn() const { return architecture == kPaperArchitecture && branches != Branches::kAe; }
@@ -219,8 +227,8 @@ class LightFieldNetImpl : public torch::nn::Module {
 
   // y: (B, N h w) measurement vectors of patches (or training crops); phase: (B) int64 indices
   // into the phi stack, may be undefined when there is one phase; noise: (B) sigma of each
-  // patch's measurement noise, read by noise-aware nets only (undefined: 0). Returns (B, 1, U,
-  // V, h, w).
+  // patch's measurement noise, read by noise-aware nets only (undefined: 0). Returns (B, C, U,
+  // V, h, w), C = options().colours().
   torch::Tensor forward(const torch::Tensor& y, const torch::Tensor& phase = {},
                         const torch::Tensor& noise = {});
   NetworkOutputs forward_all(const torch::Tensor& y, const torch::Tensor& phase = {});
@@ -237,7 +245,8 @@ class LightFieldNetImpl : public torch::nn::Module {
   void set_phi(const torch::Tensor& stack);
 
   // Whole-image architectures: the reconstruction of sensor images (B, N, H, W) whose pixel
-  // (0, 0) has phase `phase` (0 for a whole image): (B, U, V, H, W). The lfnet architecture
+  // (0, 0) has phase `phase` (0 for a whole image): (B, U, V, H, W), or (B, 3, U, V, H, W) for a
+  // colour net (the sensor images mosaicked by its CFA). The lfnet architecture
   // pads H and W to the U-Net's multiple (zeros, cropped off again). Peak memory grows with
   // H W: recon::reconstruct_sensor_tiled bounds it.
   // `noise_sigma`: the sensor's noise for a noise-aware net (ignored by others).
@@ -264,6 +273,9 @@ class LightFieldNetImpl : public torch::nn::Module {
   ImageNet image{nullptr};  // lfnet architecture
   torch::Tensor phi, adjoint_scale, base;
   torch::Tensor pixel_pinv;  // lfnet architecture: (T, T, N, U V) per-pixel pseudo-inverses
+  // A colour net: the CFA's response (3, T, T) over the period T of `phi` and `pixel_pinv`,
+  // the least common multiple of the code's and the CFA's.
+  torch::Tensor cfa_response;
 
   // Checks y (B, N h w) and phase; returns phase (undefined for one phase).
   torch::Tensor check_phase(const torch::Tensor& y, const torch::Tensor& phase) const;

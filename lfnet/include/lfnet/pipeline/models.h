@@ -41,6 +41,9 @@ struct ModelFile {
 
   // Throws CheckpointError unless the model was trained for `phi_spec` (equal JSON).
   void check_phi(const nlohmann::json& phi_spec) const;
+  // Throws ConfigError unless the model reconstructs sensor images behind the Bayer pattern
+  // `cfa` (a colour net, network.cfa), or grey ones when `cfa` is empty.
+  void check_cfa(const std::string& cfa) const;
   // The training measurement mean its config records, or 0.
   double measurement_mean() const;
 };

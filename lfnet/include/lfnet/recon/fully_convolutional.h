@@ -62,7 +62,8 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
 constexpr int64_t kDefaultImageTile = 256;
 
 // Reconstructs a grey light field (1, U, V, H, W) from a sensor image (N, H, W) with a net of
-// the lfnet architecture, in tiles of about `tile` x `tile` pixels (rounded up to the U-Net's
+// the lfnet architecture (a colour net: the colour light field (3, U, V, H, W) from its
+// mosaicked sensor image), in tiles of about `tile` x `tile` pixels (rounded up to the U-Net's
 // multiple) with a halo of its receptive radius, so peak memory depends on the tile, not on
 // the image. The result equals net->forward_image on the whole image, to float rounding.
 // Runs on the device of the net's weights; returns float32 on the CPU, clamped to [0, 1]

@@ -260,7 +260,9 @@
     if (r.whole_image) facts.push('whole image');
     else if (r.stride) facts.push(`stride ${r.stride}`);
     if (r.mode) facts.push(`${r.mode} mode`);
-    if (r.cfa) facts.push(r.cfa.pattern ? `Bayer ${r.cfa.pattern}, demosaiced` : 'colour filter array, demosaiced');
+    // A colour net reconstructs the colours with the views; pinv's views are demosaiced.
+    const colourWay = r.whole_image ? 'colours reconstructed jointly' : 'demosaiced';
+    if (r.cfa) facts.push(r.cfa.pattern ? `Bayer ${r.cfa.pattern}, ${colourWay}` : `colour filter array, ${colourWay}`);
     if (r.camera_error) facts.push('camera off its Phi');
     if (typeof r.psnr_db === 'number') facts.push(`PSNR ${r.psnr_db.toFixed(2)} dB` + (r.cfa ? ' (colour)' : ''));
     if (typeof r.luma_psnr_db === 'number') facts.push(`luma ${r.luma_psnr_db.toFixed(2)} dB`);

@@ -1,0 +1,107 @@
+// A colour model (network.cfa, docs/architectures.md "Colour"): evaluate, reconstruct and batch
+// run it on the sensor image of its colour filter array, and refuse what does not fit.
+#include <torch/torch.h>
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+
+#include "lfnet/core/json.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
+#include "support/small_nets.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using lfnet::test::lfnet_binary;
+using lfnet::test::run_command;
+
+namespace {
+
+// An untrained colour net for asp:2 behind `cfa`: it returns the demosaiced pseudo-inverse.
+void save_colour_net(const std::string& cfa, const std::string& path) {
+  const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
+  lfnet::nn::NetworkOptions o;
+  o.architecture = lfnet::nn::kLfnetArchitecture;
+  o.measurements = 2;
+  o.patch = {5, 5, 16, 16};
+  o.image.channels = 6;
+  o.image.levels = 2;
+  o.image.blocks = 1;
+  o.cfa = cfa;
+  lfnet::nn::LightFieldNet net(o);
+  net->set_phi(phi->pixel_weights(0, 0, 1, 1));
+  lfnet::test::save_net(net, *phi, "joint", path);
+}
+
+}  // namespace
+
+TEST_CASE("a colour model reconstructs the sensor image of its colour filter array",
+          "[app][colour]") {
+  lfnet::test::TempDir tmp;
+  torch::manual_seed(4);
+  lfnet::io::write_light_field(lfnet::LightField(torch::rand({3, 5, 5, 32, 36})), tmp / "in/lf",
+                               {"png", 16});
+  const std::string model = tmp / "colour.ckpt";
+  save_colour_net("GRBG", model);
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 1 --log-level warn ";
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "in/lf") +
+                          " --phi asp:2 --cfa GRBG --out " + (tmp / "acq"),
+                      out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --model " + model + " --sensor " + (tmp / "acq") +
+                          " --out " + (tmp / "net"),
+                      out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") + " --out " +
+                          (tmp / "pinv"),
+                      out) == 0);
+  // Colour views; untrained, the net is pinv's demosaiced light field but on the outermost
+  // pixels, where pinv's demosaicing mirrors the image.
+  const auto net = lfnet::io::read_light_field(tmp / "net").data();
+  const auto pinv = lfnet::io::read_light_field(tmp / "pinv").data();
+  REQUIRE(net.sizes() == torch::IntArrayRef({3, 5, 5, 32, 36}));
+  auto inner = [](const torch::Tensor& x) { return x.slice(3, 1, -1).slice(4, 1, -1); };
+  CHECK((inner(net) - inner(pinv)).abs().max().item<double>() < 1e-4);
+  const auto record = lfnet::read_json_file(tmp / "net/reconstruction.json");
+  CHECK(record["cfa"]["pattern"] == "GRBG");
+
+  // evaluate scores it in colour and luma, as a whole image.
+  const std::string evaluate = lfnet + "evaluate --lf " + (tmp / "in/lf") + " --model " + model;
+  REQUIRE(run_command(evaluate + " --cfa GRBG --json " + (tmp / "e.json"), out) == 0);
+  REQUIRE(run_command(lfnet + "evaluate --lf " + (tmp / "in/lf") +
+                          " --phi asp:2 --method pinv --cfa GRBG --json " + (tmp / "p.json"),
+                      out) == 0);
+  const auto e = lfnet::read_json_file(tmp / "e.json");
+  const auto p = lfnet::read_json_file(tmp / "p.json");
+  CHECK(e["cfa"]["pattern"] == "GRBG");
+  CHECK(e["whole_image"] == true);
+  CHECK(e.contains("luma_psnr_db"));
+  CHECK(e["psnr_db"].get<double>() == Approx(p["psnr_db"].get<double>()).margin(1.0));
+
+  // batch runs it on light-field folders behind the same array.
+  REQUIRE(run_command(lfnet + "batch --input " + (tmp / "in") + " --out " + (tmp / "batch") +
+                          " --methods net --model " + model + " --cfa GRBG",
+                      out) == 0);
+  const auto b = lfnet::read_json_file(tmp / "batch/records/lf__net.json");
+  CHECK(b["psnr_db"].get<double>() == Approx(e["psnr_db"].get<double>()).margin(1e-9));
+
+  // What does not fit is one clear error, and writes nothing.
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {evaluate + " --json " + (tmp / "x.json"), "give --cfa GRBG"},
+      {evaluate + " --cfa RGGB --json " + (tmp / "x.json"), "not RGGB"},
+      {evaluate + " --cfa GRBG --self-ensemble --json " + (tmp / "x.json"), "does not mirror"},
+      {lfnet + "evaluate --lf " + (tmp / "in/lf") + " --model " +
+           (std::string(LFNET_SOURCE_DIR) + "/models/lfnet-asp-n2.ckpt") + " --cfa GRBG --json " +
+           (tmp / "x.json"),
+       "reconstructs grey sensor images"},
+      {lfnet + "export --model " + model + " --out " + (tmp / "x.pt"), "colour net"},
+  };
+  for (const auto& [command, message] : bad) {
+    INFO(command);
+    CHECK(run_command(command, out) != 0);
+    CHECK(out.find(message) != std::string::npos);
+    CHECK(out.find("lfnet: error:") != std::string::npos);
+  }
+  CHECK_FALSE(fs::exists(tmp / "x.json"));
+  CHECK_FALSE(fs::exists(tmp / "x.pt"));
+}

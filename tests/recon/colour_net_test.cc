@@ -1,0 +1,159 @@
+// A colour net of the lfnet architecture (network.cfa): its demosaiced pseudo-inverse input,
+// tiled inference, its start from a grey net and what it refuses.
+#include <torch/torch.h>
+#include <catch2/catch.hpp>
+
+#include "lfnet/core/error.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/cfa.h"
+#include "lfnet/optics/measure.h"
+#include "lfnet/recon/fully_convolutional.h"
+#include "support/small_nets.h"
+#include "support/test_support.h"
+
+using namespace lfnet;
+
+namespace {
+
+nn::NetworkOptions colour_options(const optics::Phi& phi, const std::string& cfa) {
+  nn::NetworkOptions o;
+  o.architecture = nn::kLfnetArchitecture;
+  o.measurements = phi.measurements();
+  o.patch = {phi.rows(), phi.cols(), 16, 16};
+  o.image.channels = 6;
+  o.image.levels = 3;
+  o.image.blocks = 1;
+  o.cfa = cfa;
+  return o;
+}
+
+nn::LightFieldNet net_of(const nn::NetworkOptions& o, const optics::Phi& phi) {
+  nn::LightFieldNet net(o);
+  net->set_phi(phi.pixel_weights(0, 0, phi.period(), phi.period()));
+  return net;
+}
+
+// The camera: every colour of `lf` (3, U, V, H, W) coded by phi, then each pixel's own colour.
+torch::Tensor colour_sensor(const optics::Phi& phi, const torch::Tensor& lf,
+                            const optics::ColourFilterArray& cfa) {
+  std::vector<torch::Tensor> colours;
+  for (int64_t c = 0; c < 3; ++c) colours.push_back(optics::simulate_sensor(phi, lf[c]));
+  return optics::mosaic(torch::stack(colours), cfa)[0];
+}
+
+torch::Tensor colour_light_field(const optics::Phi& phi, int64_t h, int64_t w, uint64_t seed) {
+  auto gen = torch::make_generator<at::CPUGeneratorImpl>(seed);
+  return torch::rand({3, phi.rows(), phi.cols(), h, w}, gen);
+}
+
+}  // namespace
+
+TEST_CASE("an untrained colour net returns the pseudo-inverse demosaiced as pinv's views are",
+          "[recon][image][colour]") {
+  for (const std::string name : {"asp", "mask"}) {
+    for (const std::string pattern : {"RGGB", "GBRG"}) {
+      INFO(name << ", " << pattern);
+      const auto phi = optics::make_phi(optics::PhiSpec::parse(name + ":2"));
+      const auto cfa = optics::ColourFilterArray::bayer(pattern);
+      const auto sensor = colour_sensor(*phi, colour_light_field(*phi, 37, 30, 3), cfa);
+      // pinv's way: the mosaicked light field of a grey net's pseudo-inverse, then demosaiced.
+      auto grey = net_of(colour_options(*phi, ""), *phi);
+      const auto want =
+          optics::demosaic(recon::reconstruct_sensor_tiled(grey, sensor, 256, false)[0], cfa);
+      auto net = net_of(colour_options(*phi, pattern), *phi);
+      // Tiles of 8 start at every phase of the code's and the CFA's period.
+      for (int64_t tile : {8, 256}) {
+        INFO("tile " << tile);
+        const auto got = recon::reconstruct_sensor_tiled(net, sensor, tile, false);
+        REQUIRE(got.sizes() == want.sizes());
+        // Equal but on the image's outermost pixels, where pinv's demosaic mirrors the image
+        // and the net's leaves out what lies beyond (as at a tile's edge).
+        auto inner = [](const torch::Tensor& x) { return x.slice(3, 1, -1).slice(4, 1, -1); };
+        CHECK(torch::allclose(inner(got), inner(want), 1e-5, 1e-5));
+        CHECK((got - want).abs().max().item<double>() < 0.2);
+      }
+    }
+  }
+}
+
+TEST_CASE("tiled inference of a colour net equals one pass over the whole image",
+          "[recon][image][colour]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));
+  const auto cfa = optics::ColourFilterArray::bayer("GRBG");
+  auto net = net_of(colour_options(*phi, "GRBG"), *phi);
+  test::randomise_image_net(net, 21);
+  CHECK(net->period() == 18);  // the mask's 9 and the CFA's 2
+  const auto sensor = colour_sensor(*phi, colour_light_field(*phi, 50, 45, 4), cfa);
+  torch::Tensor whole;
+  {
+    torch::NoGradGuard no_grad;
+    whole = net->forward_image(sensor.unsqueeze(0))[0];
+  }
+  REQUIRE(whole.sizes() == torch::IntArrayRef({3, phi->rows(), phi->cols(), 50, 45}));
+  for (int64_t tile : {8, 20, 64}) {
+    INFO("tile " << tile);
+    CHECK(torch::allclose(recon::reconstruct_sensor_tiled(net, sensor, tile, false), whole, 1e-4,
+                          1e-4));
+  }
+  // A training crop through forward() is forward_image of that crop, at the crop's phase.
+  const int64_t y0 = 5, x0 = 13;
+  const auto crop = sensor.slice(1, y0, y0 + 16).slice(2, x0, x0 + 16).unsqueeze(0).contiguous();
+  const int64_t phase = (y0 % 18) * 18 + x0 % 18;
+  torch::NoGradGuard no_grad;
+  const auto via_forward = net->forward(crop.flatten(1), torch::full({1}, phase, torch::kInt64));
+  REQUIRE(via_forward.sizes() == torch::IntArrayRef({1, 3, phi->rows(), phi->cols(), 16, 16}));
+  CHECK(torch::allclose(via_forward, net->forward_image(crop, phase), 1e-5, 1e-5));
+}
+
+TEST_CASE("a colour net starts from a grey one: the grey net's correction of the luma",
+          "[recon][image][colour]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto grey_options = colour_options(*phi, "");
+  grey_options.image.noise_input = true;
+  auto grey = net_of(grey_options, *phi);
+  test::randomise_image_net(grey, 5);
+  auto options = grey_options;
+  options.cfa = "RGGB";
+  auto colour = net_of(options, *phi);
+  test::randomise_image_net(colour, 6);
+  nn::WarmStartSource from;
+  from.network = grey_options.to_json();
+  int64_t coloured = 0;
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& p : colour->named_parameters()) {
+      const auto src = grey->named_parameters()[p.key()];
+      auto dst = p.value();
+      const auto how = colour->architecture().warm_start(*colour, p.key(), src, dst, from);
+      INFO(p.key());
+      CHECK((how == nn::WarmStart::kCopied || how == nn::WarmStart::kWidened));
+      if (how == nn::WarmStart::kWidened) ++coloured;
+      if (how == nn::WarmStart::kCopied) dst.copy_(src);
+    }
+  }
+  CHECK(coloured == 3);  // the input's weights, the output's weights and bias
+  // Three equal colours (their luma is that colour) come out as the grey net's output, thrice.
+  const int64_t views = phi->rows() * phi->cols();
+  auto gen = torch::make_generator<at::CPUGeneratorImpl>(8);
+  const auto x = torch::rand({2, views, 16, 16}, gen);
+  const auto sigma = torch::full({2, 1, 16, 16}, 0.05);
+  torch::NoGradGuard no_grad;
+  const auto want = grey->image->forward(torch::cat({x, sigma}, 1)).repeat({1, 3, 1, 1});
+  lfnet::test::require_close(colour->image->forward(torch::cat({x, x, x, sigma}, 1)), want, 1e-5);
+}
+
+TEST_CASE("colour nets are checked", "[recon][image][colour]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = colour_options(*phi, "RGBG");
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("cfa") && Catch::Contains("unknown Bayer"));
+  o.cfa = "RGGB";
+  o.architecture = nn::kPaperArchitecture;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("needs the lfnet architecture"));
+  o = colour_options(*phi, "RGGB");
+  CHECK_NOTHROW(o.validate());
+  CHECK(nn::NetworkOptions::from_json(o.to_json()).cfa == "RGGB");
+  auto net = net_of(o, *phi);
+  // The self-ensemble mirrors the sensor image, which moves the CFA's colours.
+  CHECK_THROWS_WITH(recon::check_self_ensemble("net", net, nullptr),
+                    Catch::Contains("CFA does not mirror"));
+}
