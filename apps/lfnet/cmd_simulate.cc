@@ -41,11 +41,9 @@ struct SimulateArgs {
 
 void run_simulate(const SimulateArgs& given) {
   SimulateArgs args = given;
-  std::optional<optics::ColourFilterArray> cfa;  // read before any work
-  if (!args.cfa.empty()) {
-    cfa = optics::ColourFilterArray::parse(args.cfa);
-    args.source.color = true;
-  }
+  // --cfa, or the one a calibrated Phi's folder names; read before any work.
+  const auto cfa = pipeline::cfa_of_arguments(args.cfa, args.phi);
+  if (cfa) args.source.color = true;
   const auto& source = args.source;
   const auto mode = args.mode;
   LFNET_CHECK_AS(ConfigError, args.patch >= 1 && args.stride >= 1,

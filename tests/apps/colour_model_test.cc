@@ -105,3 +105,39 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
   CHECK_FALSE(fs::exists(tmp / "x.json"));
   CHECK_FALSE(fs::exists(tmp / "x.pt"));
 }
+
+TEST_CASE("a calibrated Phi that names a colour filter array makes every command colour",
+          "[app][colour]") {
+  lfnet::test::TempDir tmp;
+  torch::manual_seed(6);
+  lfnet::io::write_light_field(lfnet::LightField(torch::rand({3, 5, 5, 24, 20})), tmp / "lf",
+                               {"png", 16});
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 1 --log-level warn ";
+  REQUIRE(run_command(lfnet + "phi export --phi asp:2 --out " + (tmp / "camera"), out) == 0);
+  auto meta = lfnet::read_json_file(tmp / "camera/phi.json");
+  meta["cfa"] = {{"pattern", "BGGR"}};
+  lfnet::write_json_file(tmp / "camera/phi.json", meta);
+  const std::string camera = " --phi " + (tmp / "camera");
+  // simulate: one sensor image behind the camera's array, without --cfa.
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + camera + " --out " + (tmp / "acq"),
+                      out) == 0);
+  CHECK(lfnet::read_json_file(tmp / "acq/sensor.json")["cfa"]["pattern"] == "BGGR");
+  // reconstruct: the camera's plain sensor image is read as behind its array.
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv" + camera + " --sensor " +
+                          (tmp / "acq/sensor.tif") + " --out " + (tmp / "plain"),
+                      out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") + " --out " +
+                          (tmp / "folder"),
+                      out) == 0);
+  const auto plain = lfnet::io::read_light_field(tmp / "plain").data();
+  CHECK(plain.size(0) == 3);
+  CHECK(torch::equal(plain, lfnet::io::read_light_field(tmp / "folder").data()));
+  // evaluate: scored in colour behind it; a --cfa that differs is refused.
+  const std::string evaluate = lfnet + "evaluate --lf " + (tmp / "lf") + camera + " --method pinv";
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "e.json"), out) == 0);
+  CHECK(lfnet::read_json_file(tmp / "e.json")["cfa"]["pattern"] == "BGGR");
+  CHECK(run_command(evaluate + " --cfa RGGB --json " + (tmp / "x.json"), out) != 0);
+  CHECK(out.find("not the colour filter array of the camera") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "x.json"));
+}

@@ -293,6 +293,15 @@ TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[ap
     std::string out;
     const auto network = lfnet::nn::NetworkOptions::from_json(
         lfnet::train::load_checkpoint(model.string()).network, "$.network");
+    if (!network.cfa.empty()) {
+      // A colour net is not exported yet, and says so.
+      CHECK(run_command(lfnet_binary() + " --threads 2 --log-level warn export --model " +
+                            model.string() + " --out " + pt,
+                        out) != 0);
+      CHECK(out.find("is a colour net") != std::string::npos);
+      CHECK_FALSE(fs::exists(pt));
+      continue;
+    }
     // export compares the file with the checkpoint on 256 patches (the lfnet architecture: on
     // a sensor image in tiles) and fails above 1e-5.
     REQUIRE(run_command(lfnet_binary() + " --threads 2 --log-level warn export --model " +

@@ -7,6 +7,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/optics/cfa.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -41,6 +42,36 @@ TEST_CASE("a Phi written as a calibrated folder reads back as the same camera", 
     // The spec survives JSON (checkpoints and sensor.json store it) unchanged.
     CHECK(optics::PhiSpec::from_json(back_spec.to_json()) == back_spec);
   }
+}
+
+TEST_CASE("a calibrated folder names its camera's colour filter array", "[io][phi]") {
+  lfnet::test::TempDir tmp;
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  const std::string dir = tmp / "camera";
+  io::write_calibrated_phi(*phi, dir);
+  CHECK_FALSE(optics::camera_cfa(io::read_calibrated_phi(dir).to_json()));
+  auto meta = lfnet::read_json_file(dir + "/phi.json");
+  meta["cfa"] = {{"pattern", "GBRG"}};
+  lfnet::write_json_file(dir + "/phi.json", meta);
+  const auto spec = io::read_calibrated_phi(dir);
+  const auto cfa = optics::camera_cfa(spec.to_json());
+  REQUIRE(cfa);
+  CHECK(cfa->pattern() == "GBRG");
+  // The Phi itself is the grey one's; the spec carries the array through JSON and an export.
+  const auto back = optics::make_phi(optics::PhiSpec::from_json(spec.to_json()));
+  CHECK(optics::camera_cfa(back->spec().to_json())->pattern() == "GBRG");
+  io::write_calibrated_phi(*back, tmp / "again");
+  CHECK(lfnet::read_json_file(tmp / "again/phi.json")["cfa"] == cfa->to_json());
+  // --cfa agrees with it or is refused; without --cfa the camera's is used.
+  CHECK(optics::resolve_cfa("", spec.to_json())->pattern() == "GBRG");
+  CHECK(optics::resolve_cfa("GBRG", spec.to_json())->pattern() == "GBRG");
+  CHECK_THROWS_WITH(optics::resolve_cfa("RGGB", spec.to_json()),
+                    Catch::Contains("not the colour filter array of the camera"));
+  CHECK(optics::resolve_cfa("RGGB", phi->spec().to_json())->pattern() == "RGGB");
+  // A malformed array is refused naming the sidecar's field.
+  meta["cfa"] = {{"pattern", "RGBX"}};
+  lfnet::write_json_file(dir + "/phi.json", meta);
+  CHECK_THROWS_WITH(io::read_calibrated_phi(dir), Catch::Contains("cfa"));
 }
 
 TEST_CASE("a measured response in 16-bit images is scaled and normalised", "[io][phi]") {

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/method_registry.h"
@@ -65,7 +66,18 @@ nlohmann::json reconstruct_summary(const fs::path& path) {
   auto net = train::build_net(ckpt, path.string());
   net->eval();
   const auto phi = optics::make_phi(optics::PhiSpec::from_json(ckpt.phi, path.string() + ":phi"));
-  const auto sensor = optics::simulate_sensor(*phi, analytic_light_field(phi->rows(), phi->cols()));
+  const auto lf = analytic_light_field(phi->rows(), phi->cols());
+  torch::Tensor sensor;
+  if (net->options().colours() == 1) {
+    sensor = optics::simulate_sensor(*phi, lf);
+  } else {
+    // A colour net: three colours of the light field behind its colour filter array.
+    std::vector<torch::Tensor> colours;
+    for (const auto& c : {lf, 0.8 * lf + 0.1, 1.0 - lf}) {
+      colours.push_back(optics::simulate_sensor(*phi, c));
+    }
+    sensor = optics::mosaic(torch::stack(colours), optics::ColourFilterArray::bayer(net->options().cfa))[0];
+  }
   recon::MethodResources r;
   r.phi = phi.get();
   r.net = net;

@@ -9,6 +9,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/optics/cfa.h"
 
 namespace fs = std::filesystem;
 
@@ -101,6 +102,7 @@ void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
                          {"normalise", false},
                          {"source", phi.spec().label()},
                          {"exported_from", phi.spec().to_json()}};
+  if (const auto cfa = optics::camera_cfa(phi.spec().to_json())) meta["cfa"] = cfa->to_json();
   write_json_file((fs::path(dir) / kCalibratedPhiSidecar).string(), meta);
 }
 
@@ -147,7 +149,7 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   double scale = 1.0;
   bool normalise = true;
   std::string source;
-  nlohmann::json exported_from;
+  nlohmann::json exported_from, cfa;
   try {
     JsonReader r(meta, sidecar + ":$");
     r.require("format", format);
@@ -161,7 +163,9 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
     r.get("normalise", normalise);
     r.get("source", source);
     r.get("exported_from", exported_from);
+    r.get("cfa", cfa);
     r.finish();
+    if (!cfa.is_null()) cfa = optics::ColourFilterArray::from_json(cfa, sidecar + ":$.cfa").to_json();
   } catch (const ConfigError& e) {
     throw IoError(e.what());
   }
@@ -204,6 +208,7 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
                                                  code.data_ptr<double>() + code.numel())},
                  {"normalise", normalise}};
   if (!source.empty()) spec.params["source"] = source;
+  if (!cfa.is_null()) spec.params["cfa"] = cfa;
   try {
     return optics::make_phi(spec)->spec();
   } catch (const Error& e) {  // a code the Phi refuses, named by its folder

@@ -162,4 +162,22 @@ torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& 
   return torch::stack(colours).reshape(shape);
 }
 
+std::optional<ColourFilterArray> camera_cfa(const nlohmann::json& phi_spec) {
+  if (!phi_spec.is_object() || phi_spec.value("name", "") != "calibrated") return std::nullopt;
+  const auto params = phi_spec.value("params", nlohmann::json::object());
+  if (!params.is_object() || !params.contains("cfa")) return std::nullopt;
+  return ColourFilterArray::from_json(params["cfa"], "$.params.cfa");
+}
+
+std::optional<ColourFilterArray> resolve_cfa(const std::string& given,
+                                             const nlohmann::json& phi_spec) {
+  auto own = camera_cfa(phi_spec);
+  if (given.empty()) return own;
+  auto cfa = ColourFilterArray::parse(given);
+  LFNET_CHECK_AS(ConfigError, !own || own->to_json() == cfa.to_json(), "--cfa ", given,
+                 " is not the colour filter array of the camera's Phi (", own->to_json().dump(),
+                 "): leave --cfa out to use the camera's");
+  return cfa;
+}
+
 }  // namespace lfnet::optics

@@ -3,6 +3,7 @@
 #include <numeric>
 
 #include "lfnet/core/error.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/counter_rng.h"
 #include "models.h"
 
@@ -123,11 +124,14 @@ std::unique_ptr<Phi> make_calibrated(const PhiSpec& spec) {
   std::vector<double> weights;  // M_n(u, v, y, x), N * U * V * T * T values in that order
   bool normalise = true;        // scale so a white light field measures 1 on average
   std::string source;           // where the measurement came from (informational)
+  nlohmann::json cfa;           // the camera's colour filter array (optics/cfa.h), if it has one
   r.get("period", period);
   r.require("weights", weights);
   r.get("normalise", normalise);
   r.get("source", source);
+  r.get("cfa", cfa);
   r.finish();
+  if (!cfa.is_null()) cfa = ColourFilterArray::from_json(cfa, r.path_of("cfa")).to_json();
   LFNET_CHECK_AS(ConfigError, period >= 1 && period <= 64, r.path_of("period"),
                  ": the period T must be in 1..64, got ", period);
   const int64_t expected = spec.n * spec.rows * spec.cols * period * period;
@@ -147,6 +151,7 @@ std::unique_ptr<Phi> make_calibrated(const PhiSpec& spec) {
   PhiSpec resolved = spec;
   resolved.params = {{"period", period}, {"weights", weights}, {"normalise", normalise}};
   if (!source.empty()) resolved.params["source"] = source;
+  if (!cfa.is_null()) resolved.params["cfa"] = cfa;
   return std::make_unique<LocalPhi>(resolved, normalise ? normalise_white(code) : code);
 }
 

@@ -355,10 +355,10 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   BatchOptions resolved = a;
   const auto method_options = method_options_argument(a.method_options, methods);
   resolved.method_options = method_options.empty() ? "" : method_options.dump();
-  if (!a.cfa.empty()) {
-    const auto cfa = optics::ColourFilterArray::parse(a.cfa);
-    cfa.check_demosaicable();
-    resolved.cfa = cfa.to_json().dump();
+  // --cfa, or the one a calibrated Phi's folder names.
+  if (const auto cfa = cfa_of_arguments(a.cfa, a.phi)) {
+    cfa->check_demosaicable();
+    resolved.cfa = cfa->to_json().dump();
   }
   const auto manifest = batch_manifest(a, methods);
   OutputFolderPolicy policy;

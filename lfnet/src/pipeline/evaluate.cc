@@ -216,9 +216,9 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     LFNET_CHECK_AS(ConfigError, camera_error.empty() || a.mode == optics::SimulationMode::kSensor,
                    "--camera-error is simulated in sensor mode only");
   }
-  std::optional<optics::ColourFilterArray> cfa;
-  if (!a.cfa.empty()) {
-    cfa = optics::ColourFilterArray::parse(a.cfa);
+  // --cfa, or the one a calibrated Phi's folder names.
+  auto cfa = cfa_of_arguments(a.cfa, a.phi);
+  if (cfa) {
     LFNET_CHECK_AS(ConfigError, a.mode == optics::SimulationMode::kSensor,
                    "--cfa is simulated in sensor mode only");
     cfa->check_demosaicable();

@@ -197,6 +197,13 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   return it->second;
 }
 
+std::optional<optics::ColourFilterArray> cfa_of_arguments(const std::string& cfa,
+                                                          const std::string& phi) {
+  const auto spec = !phi.empty() && phi_argument_is_file(phi) ? phi_from_argument(phi).to_json()
+                                                              : nlohmann::json();
+  return optics::resolve_cfa(cfa, spec);
+}
+
 bool phi_argument_is_file(const std::string& text) {
   std::error_code ec;
   return fs::path(text).extension() == ".json" || fs::exists(text, ec);

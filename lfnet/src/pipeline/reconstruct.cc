@@ -97,6 +97,13 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
                          : phi_from_argument(a.phi);
     spec = optics::make_phi(spec)->spec();
     acq = plain_sensor_acquisition(a.sensor, spec);
+    // A camera whose calibrated Phi names its colour filter array: one image behind it.
+    if (const auto cfa = optics::camera_cfa(spec.to_json())) {
+      LFNET_CHECK_AS(ConfigError, acq.sensor.size(0) == 1, "the camera of ", spec.label(),
+                     " has a colour filter array: give its one sensor image of N channels");
+      acq.meta["cfa"] = cfa->to_json();
+      acq.meta["light_field"]["channels"] = 3;
+    }
   }
   const auto phi = optics::make_phi(spec);
   recon::ReconstructOptions o = a.options;

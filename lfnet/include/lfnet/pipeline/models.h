@@ -7,12 +7,14 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/dict/sparse_coding.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
+#include "lfnet/optics/cfa.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/reconstruct.h"
 
@@ -83,6 +85,12 @@ class ModelCache {
 // model file (an lfnet checkpoint or an exported model), whose Phi it takes: `--phi
 // models/asp-n2.ckpt` simulates exactly the camera the model was trained for.
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option = "--phi");
+
+// The colour filter array of a command: `--cfa` (`cfa`, empty for none) or the one a
+// calibrated-Phi folder given as `--phi` names (docs/acquisition.md, "Calibrated Phi"); both
+// must agree when both are given.
+std::optional<optics::ColourFilterArray> cfa_of_arguments(const std::string& cfa,
+                                                          const std::string& phi);
 
 // True when `text` names a file or folder (a spec, a calibrated Phi, a model) rather than
 // NAME[:N].
