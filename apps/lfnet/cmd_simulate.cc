@@ -16,6 +16,7 @@
 #include "lfnet/optics/cfa.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/figures.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/simulate.h"
 
 namespace lfnet::app {

@@ -123,9 +123,9 @@ TEST_CASE("behind a colour filter array patches keep their colours and measure t
   REQUIRE(g.target.size(1) == 3);
   CHECK(torch::equal(g.target.select(1, 0), g.target.select(1, 2)));
   // A Phi that is not local has no pixels to put colours on.
-  CHECK_THROWS_AS(data::PatchDataset({lf}, *optics::make_phi(optics::PhiSpec::parse("random:2")),
-                                     o, 16),
-                  ConfigError);
+  CHECK_THROWS_AS(
+      data::PatchDataset({lf}, *optics::make_phi(optics::PhiSpec::parse("random:2")), o, 16),
+      ConfigError);
 }
 
 TEST_CASE("an epoch's batches follow from the seed and epoch alone", "[data]") {

@@ -76,7 +76,8 @@ nlohmann::json reconstruct_summary(const fs::path& path) {
     for (const auto& c : {lf, 0.8 * lf + 0.1, 1.0 - lf}) {
       colours.push_back(optics::simulate_sensor(*phi, c));
     }
-    sensor = optics::mosaic(torch::stack(colours), optics::ColourFilterArray::bayer(net->options().cfa))[0];
+    sensor = optics::mosaic(torch::stack(colours),
+                            optics::ColourFilterArray::bayer(net->options().cfa))[0];
   }
   recon::MethodResources r;
   r.phi = phi.get();

@@ -162,7 +162,8 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   }
   if (phi_.local()) {
     weights_ = optics::pixel_weight_stack(phi_, options_.patch_h, options_.patch_w);
-    const auto t = static_cast<int64_t>(std::llround(std::sqrt(static_cast<double>(weights_.size(0)))));
+    const auto t =
+        static_cast<int64_t>(std::llround(std::sqrt(static_cast<double>(weights_.size(0)))));
     period_ = cfa_.defined() ? t / std::gcd(t, cfa_.size(1)) * cfa_.size(1) : t;
   } else {
     matrix_ = phi_.patch_matrix(0, 0, options_.patch_h, options_.patch_w);
@@ -181,8 +182,8 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   for (int64_t i = 0; i < probes; i += 128) {  // in parts: large crops take memory
     sum += make_batch(probe.slice(i, std::min(probes, i + 128)), 0).y.sum().item<double>();
   }
-  measurement_mean_ = sum / static_cast<double>(probes * phi_.measurements() *
-                                                options_.patch_h * options_.patch_w);
+  measurement_mean_ =
+      sum / static_cast<double>(probes * phi_.measurements() * options_.patch_h * options_.patch_w);
 }
 
 PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
@@ -358,9 +359,8 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
     // mosaic); the code being linear, that is the code applied to the rays' colour mix at
     // that pixel.
     const auto rays =
-        cfa_.defined()
-            ? (target * torch::stack(responses).unsqueeze(2).unsqueeze(3)).sum(1, true)
-            : target;  // (B, 1, U, V, h, w), broadcast over N
+        cfa_.defined() ? (target * torch::stack(responses).unsqueeze(2).unsqueeze(3)).sum(1, true)
+                       : target;  // (B, 1, U, V, h, w), broadcast over N
     y = (weights * rays).sum({2, 3}).reshape({b, -1});
   } else {
     y = torch::matmul(target.reshape({b, -1}), matrix_.t());

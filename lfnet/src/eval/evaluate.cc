@@ -114,8 +114,8 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
     const auto mosaicked = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
     estimate = optics::demosaic(mosaicked[0], cfa);  // (3, U, V, H, W)
   }
-  LFNET_CHECK(estimate.dim() == 5 && estimate.size(0) == 3, "method '", method,
-              "' returned ", estimate.sizes(), " behind a colour filter array, not (3, U, V, H, W)");
+  LFNET_CHECK(estimate.dim() == 5 && estimate.size(0) == 3, "method '", method, "' returned ",
+              estimate.sizes(), " behind a colour filter array, not (3, U, V, H, W)");
   if (ro.clamp) estimate.clamp_(0.0, 1.0);
   const double seconds = clock.seconds();
   const PatchGrid grid(truth.height(), truth.width(), ro.patch_h, ro.patch_w, ro.stride);

@@ -165,7 +165,8 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
     r.get("exported_from", exported_from);
     r.get("cfa", cfa);
     r.finish();
-    if (!cfa.is_null()) cfa = optics::ColourFilterArray::from_json(cfa, sidecar + ":$.cfa").to_json();
+    if (!cfa.is_null())
+      cfa = optics::ColourFilterArray::from_json(cfa, sidecar + ":$.cfa").to_json();
   } catch (const ConfigError& e) {
     throw IoError(e.what());
   }

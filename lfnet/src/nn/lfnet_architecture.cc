@@ -119,7 +119,8 @@ torch::Tensor response_maps(const torch::Tensor& tile, const torch::Tensor& phas
                             int64_t h, int64_t w) {
   const int64_t l = tile.size(1);
   const auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({batch}, torch::kInt64);
-  const auto rows = (torch::arange(h, torch::kInt64).unsqueeze(0) + ph.div(l, "floor").unsqueeze(1)) % l;
+  const auto rows =
+      (torch::arange(h, torch::kInt64).unsqueeze(0) + ph.div(l, "floor").unsqueeze(1)) % l;
   const auto cols = (torch::arange(w, torch::kInt64).unsqueeze(0) + (ph % l).unsqueeze(1)) % l;
   const auto device = tile.device();
   return tile.permute({1, 2, 0})
@@ -315,9 +316,8 @@ class LfnetArchitecture : public NetworkArchitecture {
 
   std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {
     const auto& o = net.options();
-    LFNET_CHECK_AS(ConfigError, o.colours() == 1,
-                   "a colour net (cfa ", o.cfa, ") cannot be exported to TorchScript yet; ",
-                   "use its checkpoint");
+    LFNET_CHECK_AS(ConfigError, o.colours() == 1, "a colour net (cfa ", o.cfa,
+                   ") cannot be exported to TorchScript yet; ", "use its checkpoint");
     for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
     const int64_t channels = o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0);
     const int64_t m = o.image.multiple();

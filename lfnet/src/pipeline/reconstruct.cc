@@ -165,8 +165,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   const bool network_method = model && needs == recon::MethodNeeds::kNetwork;
   if (network_method) model->check_cfa(cfa ? cfa->pattern() : "");
   if (cfa && !network_method) {
-    LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kNetwork && !image, "method '",
-                   method, "' works on whole grey sensor images; ", a.sensor,
+    LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kNetwork && !image, "method '", method,
+                   "' works on whole grey sensor images; ", a.sensor,
                    " is the sensor image of a colour filter array: use a colour model or a "
                    "patch method (pinv, adjoint, dict), whose light field is then demosaiced");
   }

@@ -135,8 +135,10 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
     LFNET_CHECK(c.a1 <= hp && c.b1 <= wp, "internal: a tile reaches past the padded image");
     // forward_image pads the crop to the multiple itself, as it pads a whole image (a colour
     // net demosaics before padding, so the padding is no measurement).
-    auto crop =
-        image.slice(1, c.a0, std::min(c.a1, h)).slice(2, c.b0, std::min(c.b1, w)).unsqueeze(0).to(device);
+    auto crop = image.slice(1, c.a0, std::min(c.a1, h))
+                    .slice(2, c.b0, std::min(c.b1, w))
+                    .unsqueeze(0)
+                    .to(device);
     auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma)
                    .to(torch::kCPU)
                    .reshape({colours, o.patch.rows, o.patch.cols, crop.size(2), crop.size(3)});
@@ -246,8 +248,9 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
                                           const ProgressCallback& progress, int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
-  LFNET_CHECK_AS(ConfigError, net->options().colours() == 1,
-                 "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
+  LFNET_CHECK_AS(
+      ConfigError, net->options().colours() == 1,
+      "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
   return reconstruct_mirrored(
       ensemble_mirrors(net->phi, max_passes), sensor,
       [&](const torch::Tensor& mirrored, const ProgressCallback& part) {
@@ -261,8 +264,9 @@ torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Ten
                                          int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
-  LFNET_CHECK_AS(ConfigError, net->options().colours() == 1,
-                 "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
+  LFNET_CHECK_AS(
+      ConfigError, net->options().colours() == 1,
+      "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
   LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == net->options().measurements,
               "reconstruct_crops_mirrored: expected sensor crops (B, ", net->options().measurements,
               ", h, w), got ", sensor.sizes());

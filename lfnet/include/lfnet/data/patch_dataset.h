@@ -109,12 +109,12 @@ struct DatasetOptions {
   void validate() const;
 };
 
-// Random patches of grey light fields (colour ones behind a CFA: DatasetOptions::cfa) with an 85:15 split that shares no pixel: the bottom
-// `validation_fraction` of every light field's rows is kept for validation, and training
-// patches never reach into it. Measurements are simulated per patch with the patch matrix of
-// the patch's origin, which for every local Phi equals cropping a simulated sensor image
-// (noise aside: here every patch draws its own). Deterministic: the batches of an epoch follow
-// from (seed, epoch) alone, so resumed training is exact.
+// Random patches of grey light fields (colour ones behind a CFA: DatasetOptions::cfa) with an 85:15
+// split that shares no pixel: the bottom `validation_fraction` of every light field's rows is kept
+// for validation, and training patches never reach into it. Measurements are simulated per patch
+// with the patch matrix of the patch's origin, which for every local Phi equals cropping a
+// simulated sensor image (noise aside: here every patch draws its own). Deterministic: the batches
+// of an epoch follow from (seed, epoch) alone, so resumed training is exact.
 class PatchDataset : public train::BatchSource {
  public:
   PatchDataset(std::vector<LightField> light_fields, const optics::Phi& phi, DatasetOptions options,

@@ -47,7 +47,8 @@ std::optional<ColourFilterArray> camera_cfa(const nlohmann::json& phi_spec);
 
 // The colour filter array of a command: `--cfa` (`given`, empty for none) and the one the
 // camera's Phi names, which must agree when both are given (a ConfigError otherwise).
-std::optional<ColourFilterArray> resolve_cfa(const std::string& given, const nlohmann::json& phi_spec);
+std::optional<ColourFilterArray> resolve_cfa(const std::string& given,
+                                             const nlohmann::json& phi_spec);
 
 // The single sensor image (1, N, H, W) of a colour camera from the sensor images of its three
 // colours (3, N, H, W) (each Phi applied to one colour of the light field): each pixel sums
