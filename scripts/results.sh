@@ -201,12 +201,18 @@ noise-blind() {
 # A colour sensor behind a Bayer colour filter array (docs/acquisition.md, "Colour filter
 # arrays"): on the colour light fields of the cross-scene benchmark, pinv of the mosaicked
 # sensor image, each view then demosaiced, against the grey pinv of a grey sensor and the
-# colour no-parallax; colour PSNR and luma PSNR (the baselines a colour network must beat).
+# colour no-parallax; colour PSNR and luma PSNR. Against them the colour network
+# lfnet-asp-n2-bayer, which reconstructs the colours with the views from the same sensor image,
+# and the grey default on a grey sensor.
 colour() {
   local tmp i
+  need_model models/lfnet-asp-n2-bayer.ckpt
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor --phi asp:2)
+    VARIANT="Bayer RGGB" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl record "$tmp" \
+      "${src[@]}" --model models/lfnet-asp-n2-bayer.ckpt --cfa RGGB
+    VARIANT="grey sensor" record "$tmp" "${src[@]}" --model models/lfnet-asp-n2.ckpt
     for pattern in RGGB GRBG; do
       VARIANT="Bayer $pattern" record "$tmp" "${src[@]}" --method pinv --cfa "$pattern"
     done
@@ -251,13 +257,14 @@ calibration() {
 # quadrature pair against learned ASP gratings; a binary mask learned from the start (straight
 # through its rounding); the masks
 # trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05; the shipped default lfnet-asp-n2 and a
-# mask learned with its network (4 levels, finetuned from it for 6 epochs). Each net
+# mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
   local tmp i m sigma
   local clean=(lfnet-mask-n2 lfnet-mask-n2-s2 lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2
-    lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4)
+    lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4
+    lfnet-learned-mask-n2-l4-e20)
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
@@ -275,7 +282,10 @@ learned-codes() {
       for m in "${noisy[@]}"; do
         VARIANT=$m TRAINING=models/$m.training.jsonl record "$tmp" --model "models/$m.ckpt" \
           "${src[@]}" --method net --noise "$sigma"
-        [[ $sigma == 0 ]] && continue
+        if [[ $sigma == 0 ]]; then
+          VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv
+          continue
+        fi
         VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv-nlm \
           --noise "$sigma"
       done
@@ -283,7 +293,7 @@ learned-codes() {
   done
   mv "$tmp" results/learned-codes/records.jsonl
   for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
-    lfnet-learned-mask-n2-l4; do
+    lfnet-learned-mask-n2-l4 lfnet-learned-mask-n2-l4-e20; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
