@@ -119,7 +119,7 @@ TEST_CASE("a malformed calibrated folder is refused naming the file and field", 
   const std::string dir = tmp.path().string();
   io::write_calibrated_phi(*optics::make_phi(optics::PhiSpec::parse("asp:2")), dir);
   const auto good = lfnet::read_json_file(dir + "/phi.json");
-  auto expect_error = [&](nlohmann::json meta, const std::string& fragment) {
+  auto expect_error = [&](const nlohmann::json& meta, const std::string& fragment) {
     lfnet::write_json_file(dir + "/phi.json", meta);
     REQUIRE_THROWS_WITH(io::read_calibrated_phi(dir), Catch::Contains(fragment));
   };

@@ -448,7 +448,7 @@ TEST_CASE("simulate's inputs: the window, the Phi on it, the effects, and the Ph
   source.lf = tmp / "lf";
   auto input = pipeline::load_simulate_input(source);
   CHECK(input.lf.shape_string() == LightField(torch::zeros({1, 5, 5, 12, 14})).shape_string());
-  CHECK(input.views["rows"] == nlohmann::json{2, 6});  // the central 5 x 5 of 7 x 7
+  CHECK((input.views["rows"] == nlohmann::json{2, 6}));  // the central 5 x 5 of 7 x 7
   CHECK(input.source["kind"] == "light_field");
   source.views = "1:3,1:4";
   input = pipeline::load_simulate_input(source);
