@@ -162,9 +162,8 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   }
   if (phi_.local()) {
     weights_ = optics::pixel_weight_stack(phi_, options_.patch_h, options_.patch_w);
-    const auto t =
-        static_cast<int64_t>(std::llround(std::sqrt(static_cast<double>(weights_.size(0)))));
-    period_ = cfa_.defined() ? t / std::gcd(t, cfa_.size(1)) * cfa_.size(1) : t;
+    const int64_t t = phi_.period();
+    period_ = cfa_.defined() ? std::lcm(t, cfa_.size(1)) : t;
   } else {
     matrix_ = phi_.patch_matrix(0, 0, options_.patch_h, options_.patch_w);
   }

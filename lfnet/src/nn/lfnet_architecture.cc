@@ -159,9 +159,6 @@ torch::Tensor colour_base(const LightFieldNetImpl& net, const torch::Tensor& pin
       pinv, response_maps(net.cfa_response, phase, pinv.size(0), pinv.size(2), pinv.size(3)));
 }
 
-// The least common multiple of two periods.
-int64_t common_period(int64_t a, int64_t b) { return a / std::gcd(a, b) * b; }
-
 // The parameters of a grey net's input and output layers that a colour net of the same U-Net
 // starts from (train --init): the input layer reads the luma of the three colours as the grey
 // net read its grey views (and the noise channel as it did), and the output layer adds the grey
@@ -236,7 +233,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     if (o.colours() > 1) {
       // The code and the CFA repeat together over the least common multiple of their periods.
       const auto cfa = optics::ColourFilterArray::bayer(o.cfa);
-      const int64_t t = stack.size(3), l = common_period(t, cfa.period());
+      const int64_t t = stack.size(3), l = std::lcm(t, cfa.period());
       weights = stack.repeat({1, 1, 1, l / t, l / t});
       net.cfa_response.set_(cfa.response()
                                 .repeat({1, l / cfa.period(), l / cfa.period()})
