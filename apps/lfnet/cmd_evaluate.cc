@@ -8,6 +8,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/process_time.h"
+#include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/evaluate.h"
@@ -40,13 +41,17 @@ void run_evaluate(EvaluateArgs& a) {
   // The outputs first, the records last: a record's end_to_end_seconds is the command's time
   // from its start up to that record, every other output written.
   if (!a.out.empty()) {
-    LightField est(r.estimate);
+    const LightFieldViews est(r.estimate);  // 16-bit codes or float32
     write_folder(a.out, policy, [&](const std::string& dir) {
+      // What each step freed is returned before the next (the peak is one step's, not all).
+      release_free_memory();
       io::write_light_field(est, dir);
+      release_free_memory();
       io::write_previews(est, dir);
+      release_free_memory();
       io::ViewerPage page;
       page.title = record["method"].get<std::string>() + " on " + r.light_field;
-      page.truth = LightField(r.truth);
+      page.truth = LightFieldViews(r.truth);
       page.record = record;
       io::write_viewer(est, (std::filesystem::path(dir) / "index.html").string(), page);
       record["end_to_end_seconds"] = process_seconds();

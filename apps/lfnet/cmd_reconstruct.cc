@@ -38,8 +38,10 @@ void run_reconstruct(const ReconstructArgs& a) {
   // Its total is known once the work starts.
   ProgressBar bar("reconstruct", 0, whole_image ? "channels" : "patches");
   int64_t shown = 0;
+  auto request = a.request;
+  request.coded = true;  // a grey light field in 16-bit codes, what its files hold
   auto r = pipeline::reconstruct_acquisition(
-      a.request,
+      request,
       [&](int64_t done, int64_t total) {
         bar.set_total(total);
         bar.advance(done - shown);

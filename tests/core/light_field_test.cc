@@ -5,7 +5,10 @@
 #include "lfnet/core/error.h"
 #include "support/test_support.h"
 
+using lfnet::decode_codes;
+using lfnet::encode_codes;
 using lfnet::LightField;
+using lfnet::LightFieldViews;
 
 TEST_CASE("grey conversion uses Rec. 601 luma", "[core]") {
   auto data = torch::rand({3, 2, 2, 4, 5});
@@ -56,4 +59,51 @@ TEST_CASE("angular mean is the same in every view", "[core]") {
 TEST_CASE("a light field rejects tensors of the wrong rank or channels", "[core]") {
   CHECK_THROWS_AS(LightField(torch::rand({3, 4, 4})), lfnet::Error);
   CHECK_THROWS_AS(LightField(torch::rand({2, 5, 5, 4, 4})), lfnet::Error);
+}
+
+TEST_CASE("16-bit codes hold every 16-bit value exactly, clamped to [0, 1]", "[core]") {
+  const auto k = torch::arange(0, 65536, torch::kFloat64);
+  // What an image reader makes of 16-bit values: k times float32(1 / 65535).
+  const auto values = k.to(torch::kFloat32) * (1.0F / 65535.0F);
+  REQUIRE((values != (k / 65535.0).to(torch::kFloat32)).any().item<bool>());  // not k / 65535
+  const auto codes = encode_codes(values);
+  REQUIRE(codes.scalar_type() == torch::kInt16);
+  // Each value is coded as k - 32768 and decodes to the same float32.
+  CHECK(torch::equal(codes.to(torch::kFloat64) + 32768.0, k));
+  CHECK(torch::equal(decode_codes(codes), values));
+  CHECK(torch::equal(encode_codes((k / 65535.0).to(torch::kFloat32)), codes));
+  // Out of range values are clamped; halfway values round up, as 16-bit image writers do.
+  // (2.5 / 65535 and 200.5 / 65535 in float32 times 65535 are 2.5 and 200.5 exactly.)
+  const auto edge = encode_codes(torch::tensor({-0.5f, 1.5f, 2.5f / 65535.0f, 200.5f / 65535.0f}));
+  REQUIRE((torch::tensor({2.5f / 65535.0f, 200.5f / 65535.0f}) * 65535.0f)
+              .equal(torch::tensor({2.5f, 200.5f})));
+  CHECK(edge[0].item<int64_t>() == -32768);
+  CHECK(edge[1].item<int64_t>() == 32767);
+  CHECK(edge[2].item<int64_t>() == 3 - 32768);
+  CHECK(edge[3].item<int64_t>() == 201 - 32768);
+  CHECK_THROWS(decode_codes(values));
+}
+
+TEST_CASE("light-field views read float32 and 16-bit codes alike", "[core]") {
+  torch::manual_seed(3);
+  const LightField lf(torch::rand({1, 2, 3, 5, 7}));
+  const LightFieldViews plain(lf);
+  const LightFieldViews coded(encode_codes(lf.data()));
+  CHECK_FALSE(plain.coded());
+  CHECK(coded.coded());
+  CHECK(coded.shape_string() == lf.shape_string());
+  for (int64_t u = 0; u < 2; ++u) {
+    for (int64_t v = 0; v < 3; ++v) {
+      CHECK(torch::equal(plain.view(u, v), lf.view(u, v)));
+      // Within half a step of 1 / 65535 of the float32 values.
+      CHECK((coded.view(u, v) - lf.view(u, v)).abs().max().item<double>() <= 0.5 / 65535 + 1e-7);
+      // view_bits: the unsigned values k in int16's bits.
+      const auto k = coded.view_bits(u, v).to(torch::kInt32).remainder(65536);
+      CHECK(torch::equal(k, (lf.view(u, v) * 65535 + 0.5).floor().to(torch::kInt32)));
+    }
+  }
+  CHECK(torch::equal(coded.decode().data(), decode_codes(encode_codes(lf.data()))));
+  CHECK_THROWS_WITH(plain.view_bits(0, 0), Catch::Contains("not 16-bit codes"));
+  CHECK_THROWS_WITH(coded.view(2, 0), Catch::Contains("outside"));
+  CHECK_THROWS(LightFieldViews(torch::zeros({1, 2, 3, 4, 4}, torch::kInt32)));
 }

@@ -65,3 +65,24 @@ TEST_CASE("PSNR and SSIM agree with scikit-image", "[core][metrics][reference]")
     CHECK(ours < 0.99);  // the comparison is not between two perfect scores
   }
 }
+
+TEST_CASE("light-field scores go a band of rows at a time, float32 or 16-bit codes",
+          "[core][metrics]") {
+  torch::manual_seed(4);
+  // Views taller than the band of rows the scores take at a time.
+  const auto truth = torch::rand({1, 2, 2, 301, 37});
+  const auto estimate = (truth + 0.05 * torch::randn({1, 2, 2, 301, 37})).clamp(0, 1);
+  const LightField t(truth), e(estimate);
+  double whole = 0;
+  for (int64_t u = 0; u < 2; ++u) {
+    for (int64_t v = 0; v < 2; ++v) whole += lfnet::ssim_image(e.view(u, v), t.view(u, v)) / 4;
+  }
+  CHECK(lfnet::ssim(e, t) == Approx(whole).epsilon(1e-12));
+  CHECK(lfnet::psnr(e, t) == Approx(lfnet::psnr(estimate, truth)).epsilon(1e-12));
+  // The same scores of the estimate held in 16-bit codes: within what the codes round.
+  const lfnet::LightFieldViews coded(lfnet::encode_codes(estimate));
+  CHECK(lfnet::psnr(coded, t) == Approx(lfnet::psnr(e, t)).margin(1e-3));
+  CHECK(lfnet::ssim(coded, t) == Approx(lfnet::ssim(e, t)).margin(1e-5));
+  CHECK_THROWS_WITH(lfnet::psnr(coded, LightField(truth.slice(3, 0, 300))),
+                    Catch::Contains("differ in shape"));
+}

@@ -3,8 +3,10 @@
 #include <catch2/catch.hpp>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/light_field.h"
 #include "support/test_support.h"
 
+using lfnet::encode_codes;
 using lfnet::PatchGrid;
 using lfnet::Stitcher;
 
@@ -94,4 +96,25 @@ TEST_CASE("a stitching window weights the estimates", "[core][patches]") {
   s.add(grid.extract(data), 0, grid.rows());
   // Identical estimates average to themselves whatever the weights.
   lfnet::test::require_close(s.result(), data, 1e-6);
+}
+
+TEST_CASE("stitching into 16-bit codes encodes each finished row", "[core][patches]") {
+  torch::manual_seed(2);
+  auto data = torch::rand({1, 2, 2, 31, 17});
+  PatchGrid grid(31, 17, 9, 9, 2);
+  auto estimates = grid.extract(data) + 0.2 * torch::randn({grid.size(), 2, 2, 9, 9});
+  Stitcher plain(grid, 1, 2, 2);
+  Stitcher coded(grid, 1, 2, 2, {}, /*coded=*/true);
+  for (int64_t r = 0; r < grid.rows(); r += 3) {
+    const int64_t e = std::min(grid.rows(), r + 3);
+    const auto part = estimates.slice(0, r * grid.cols(), e * grid.cols());
+    plain.add(part, r, e);
+    coded.add(part, r, e);
+  }
+  const auto codes = coded.result();
+  REQUIRE(codes.scalar_type() == torch::kInt16);
+  // The noise puts some averages outside [0, 1]: the codes clamp them.
+  const auto values = plain.result();
+  REQUIRE(((values < 0) | (values > 1)).any().item<bool>());
+  CHECK(torch::equal(codes, encode_codes(values)));
 }

@@ -309,3 +309,51 @@ TEST_CASE("layout patterns read any naming: row and column fields, or an index a
   CHECK_THROWS_WITH(io::parse_layout("{index}.png:cols=4:sideways"),
                     Catch::Contains("unknown option"));
 }
+
+TEST_CASE("16-bit codes write the files their float32 values write, byte for byte", "[io]") {
+  lfnet::test::TempDir tmp;
+  torch::manual_seed(5);
+  // Values beyond [0, 1] too: both are clamped.
+  LightField lf(torch::rand({1, 2, 3, 9, 13}) * 1.2 - 0.1);
+  const lfnet::LightFieldViews coded(lfnet::encode_codes(lf.data()));
+  for (const std::string ext : {"png", "tif"}) {
+    io::write_light_field(lf, tmp / ("float-" + ext), {ext, 16});
+    io::write_light_field(coded, tmp / ("coded-" + ext), {ext, 16});
+    for (const auto& entry : fs::directory_iterator(tmp / ("float-" + ext))) {
+      const auto other = tmp / ("coded-" + ext) / entry.path().filename();
+      REQUIRE(fs::exists(other));
+      CHECK(lfnet::test::read_bytes(entry.path().string()) ==
+            lfnet::test::read_bytes(other.string()));
+    }
+  }
+  // 8-bit files and the previews read the codes' values.
+  io::write_light_field(coded, tmp / "coded-8", {"png", 8});
+  const auto decoded = coded.decode();
+  lfnet::test::require_close(io::read_light_field(tmp / "coded-8").data(), decoded.data(),
+                             0.5 / 255 + 1e-7);
+  CHECK(torch::equal(io::horizontal_epi(coded), io::horizontal_epi(decoded)));
+  CHECK(torch::equal(io::vertical_epi(coded, 4, 2), io::vertical_epi(decoded, 4, 2)));
+  CHECK(torch::equal(io::downscale_views(coded, 2).data(), io::downscale_views(decoded, 2).data()));
+}
+
+TEST_CASE("grey 16-bit views are read into 16-bit codes, exactly; others as float32", "[io]") {
+  lfnet::test::TempDir tmp;
+  torch::manual_seed(8);
+  const LightField grey(torch::rand({1, 3, 2, 10, 12}));
+  io::write_light_field(grey, tmp / "grey16", {"png", 16});
+  const auto views = io::read_light_field_views(tmp / "grey16");
+  REQUIRE(views.coded());
+  // The codes decode to the very floats read_light_field gives.
+  CHECK(torch::equal(views.decode().data(), io::read_light_field(tmp / "grey16").data()));
+  // 8-bit views are not held in codes (their floats are k / 255 as read, not a code's value),
+  // nor colour views, nor float ones.
+  io::write_light_field(grey, tmp / "grey8", {"png", 8});
+  io::write_light_field(LightField(torch::rand({3, 2, 2, 10, 12})), tmp / "rgb16", {"png", 16});
+  io::write_light_field(grey, tmp / "float", {"tif", 32});
+  for (const std::string dir : {"grey8", "rgb16", "float"}) {
+    INFO(dir);
+    const auto read = io::read_light_field_views(tmp / dir);
+    CHECK_FALSE(read.coded());
+    CHECK(torch::equal(read.raw(), io::read_light_field(tmp / dir).data()));
+  }
+}

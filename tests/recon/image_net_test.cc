@@ -68,7 +68,13 @@ TEST_CASE("an untrained lfnet net returns the per-pixel pseudo-inverse of the pi
       auto est = recon::reconstruct_sensor_tiled(net, sensor, tile);
       REQUIRE(est.sizes() == pinv.sizes());
       CHECK(torch::allclose(est, pinv, 1e-5, 1e-5));
+      // In 16-bit codes, each tile encoded as it is done: the float32 result's codes.
+      const auto codes = recon::reconstruct_sensor_tiled(net, sensor, tile, true, 0.0, {}, true);
+      REQUIRE(codes.scalar_type() == torch::kInt16);
+      CHECK(torch::equal(codes, encode_codes(est)));
     }
+    CHECK_THROWS_WITH(recon::reconstruct_sensor_tiled(net, sensor, 8, false, 0.0, {}, true),
+                      Catch::Contains("clamped"));
   }
 }
 

@@ -1,11 +1,18 @@
 #include "lfnet/core/light_field.h"
 
+#include <limits>
 #include <regex>
 #include <sstream>
 
 #include "lfnet/core/error.h"
 
 namespace lfnet {
+
+namespace {
+// Codes k - 32768 of values k / 65535.
+constexpr double kCodeScale = 65535.0;
+constexpr double kCodeOffset = 32768.0;
+}  // namespace
 
 LightField::LightField(const torch::Tensor& data) {
   LFNET_CHECK(data.defined() && data.dim() == axis::kRank,
@@ -19,6 +26,72 @@ torch::Tensor LightField::view(int64_t u, int64_t v) const {
   LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
               rows(), "x", cols(), " grid");
   return data_.select(axis::kU, u).select(axis::kU, v);
+}
+
+torch::Tensor encode_codes(const torch::Tensor& values) {
+  // floor(65535 v + 1/2) in float32, as OpenImageIO converts float to 16 bits: a written code
+  // equals the file's (float32 products fall on exact halves often enough to matter).
+  return values.to(torch::kFloat32)
+      .clamp(0.0, 1.0)
+      .mul_(kCodeScale)
+      .add_(0.5)
+      .floor_()
+      .sub_(kCodeOffset)
+      .to(torch::kInt16);
+}
+
+torch::Tensor decode_codes(const torch::Tensor& codes) {
+  LFNET_CHECK(codes.scalar_type() == torch::kInt16, "decode_codes takes int16 codes, got ",
+              codes.scalar_type());
+  // k times float32(1 / 65535), as image readers scale 16-bit values: a 16-bit file's views
+  // decode to exactly the floats read_image gives.
+  return codes.to(torch::kFloat32).add_(kCodeOffset).mul_(static_cast<float>(1.0 / kCodeScale));
+}
+
+LightFieldViews::LightFieldViews(const LightField& lf) : data_(lf.data()) {}
+
+LightFieldViews::LightFieldViews(const torch::Tensor& data) : data_(data) {
+  LFNET_CHECK(data.defined() && data.dim() == axis::kRank &&
+                  (data.size(axis::kC) == 1 || data.size(axis::kC) == 3),
+              "light-field views need a tensor of shape (C, U, V, H, W) with 1 or 3 channels");
+  LFNET_CHECK(data.scalar_type() == torch::kFloat32 || data.scalar_type() == torch::kInt16,
+              "light-field views are float32 values or int16 codes, not ", data.scalar_type());
+}
+
+torch::Tensor LightFieldViews::view(int64_t u, int64_t v) const {
+  LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
+              rows(), "x", cols(), " grid");
+  auto view = data_.select(axis::kU, u).select(axis::kU, v);
+  return coded() ? decode_codes(view) : view;
+}
+
+torch::Tensor LightFieldViews::view_rows(int64_t u, int64_t v, int64_t y0, int64_t y1) const {
+  LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
+              rows(), "x", cols(), " grid");
+  LFNET_CHECK(0 <= y0 && y0 < y1 && y1 <= height(), "rows ", y0, "..", y1, " outside a view of ",
+              height(), " rows");
+  auto rows = data_.select(axis::kU, u).select(axis::kU, v).slice(1, y0, y1);
+  return coded() ? decode_codes(rows) : rows;
+}
+
+torch::Tensor LightFieldViews::view_bits(int64_t u, int64_t v) const {
+  LFNET_CHECK(coded(), "view_bits: the views are not 16-bit codes");
+  LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
+              rows(), "x", cols(), " grid");
+  // k - 32768 in two's complement is k with its top bit flipped.
+  return data_.select(axis::kU, u)
+      .select(axis::kU, v)
+      .bitwise_xor(static_cast<int64_t>(std::numeric_limits<int16_t>::min()));
+}
+
+LightField LightFieldViews::decode() const {
+  return LightField(coded() ? decode_codes(data_) : data_);
+}
+
+std::string LightFieldViews::shape_string() const {
+  std::ostringstream s;
+  s << channels() << "x" << rows() << "x" << cols() << "x" << height() << "x" << width();
+  return s.str();
 }
 
 LightField LightField::grey() const {

@@ -15,6 +15,11 @@ void check_same(const torch::Tensor& a, const torch::Tensor& b) {
               b.sizes());
 }
 
+void check_same_shape(const LightFieldViews& a, const LightFieldViews& b) {
+  LFNET_CHECK(a.shape_string() == b.shape_string(),
+              "metric inputs differ in shape: ", a.shape_string(), " vs ", b.shape_string());
+}
+
 double psnr_from_mse(double mse) {
   if (mse <= 0) return std::numeric_limits<double>::infinity();
   return -10.0 * std::log10(mse);
@@ -52,56 +57,67 @@ double psnr(const torch::Tensor& estimate, const torch::Tensor& truth) {
 }
 
 namespace {
-// The mean squared error of each view (U, V) in float64, one view at a time: float64 copies of a
-// whole light field would take four times its memory.
-torch::Tensor per_view_mse(const LightField& estimate, const LightField& truth) {
-  check_same(estimate.data(), truth.data());
+// Rows of a view scored at a time: the float64 copies stay a band high (a 12-megapixel view is
+// 48 MB in float32, 96 MB per float64 copy).
+constexpr int64_t kScoreBand = 128;
+
+// The mean squared error of each view (U, V) in float64, a band of rows at a time.
+torch::Tensor per_view_mse(const LightFieldViews& estimate, const LightFieldViews& truth) {
+  check_same_shape(estimate, truth);
   auto mse = torch::empty({truth.rows(), truth.cols()}, torch::kFloat64);
   auto out = mse.accessor<double, 2>();
+  const int64_t h = truth.height();
+  const auto count = static_cast<double>(truth.channels() * h * truth.width());
   for (int64_t u = 0; u < truth.rows(); ++u) {
     for (int64_t v = 0; v < truth.cols(); ++v) {
-      auto diff = estimate.view(u, v).to(torch::kFloat64) - truth.view(u, v).to(torch::kFloat64);
-      out[u][v] = diff.pow_(2).mean().item<double>();
+      double sum = 0;
+      for (int64_t y0 = 0; y0 < h; y0 += kScoreBand) {
+        const int64_t y1 = std::min(h, y0 + kScoreBand);
+        auto diff = estimate.view_rows(u, v, y0, y1).to(torch::kFloat64) -
+                    truth.view_rows(u, v, y0, y1).to(torch::kFloat64);
+        sum += diff.pow_(2).sum().item<double>();
+      }
+      out[u][v] = sum / count;
     }
   }
   return mse;
 }
 }  // namespace
 
-double psnr(const LightField& estimate, const LightField& truth) {
+double psnr(const LightFieldViews& estimate, const LightFieldViews& truth) {
   // Every view has as many pixels, so the mean of the views' errors is the light field's.
   return psnr_from_mse(per_view_mse(estimate, truth).mean().item<double>());
 }
 
-torch::Tensor per_view_psnr(const LightField& estimate, const LightField& truth) {
+torch::Tensor per_view_psnr(const LightFieldViews& estimate, const LightFieldViews& truth) {
   // A view that matches exactly has infinite PSNR, as the whole-field PSNR does.
   return -10.0 * torch::log10(per_view_mse(estimate, truth));
 }
 
-double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOptions& options) {
-  check_same(a, b);
-  LFNET_CHECK(a.dim() == 2 || a.dim() == 3, "SSIM takes (H, W) or (C, H, W) images");
-  const auto x = a.dim() == 2 ? a.unsqueeze(0) : a;
-  const auto y = b.dim() == 2 ? b.unsqueeze(0) : b;
-  const int64_t radius = std::lround(options.truncate * options.sigma);
-  const int64_t win = 2 * radius + 1;
-  LFNET_CHECK(x.size(1) >= win && x.size(2) >= win, "SSIM needs images of at least ", win, "x", win,
-              " pixels, got ", x.size(1), "x", x.size(2));
-  const double np = static_cast<double>(win * win);
-  const double cov_norm = options.sample_covariance ? np / (np - 1.0) : 1.0;
-  const double c1 = std::pow(options.k1 * options.data_range, 2);
-  const double c2 = std::pow(options.k2 * options.data_range, 2);
+namespace {
+// SSIM's constants for `options`, and the sum of a band's SSIM map per channel.
+struct SsimWindow {
+  explicit SsimWindow(const SsimOptions& o) : options(o) {
+    radius = std::lround(o.truncate * o.sigma);
+    const int64_t win = 2 * radius + 1;
+    const double np = static_cast<double>(win * win);
+    cov_norm = o.sample_covariance ? np / (np - 1.0) : 1.0;
+    c1 = std::pow(o.k1 * o.data_range, 2);
+    c2 = std::pow(o.k2 * o.data_range, 2);
+  }
 
-  // Scikit-image averages the SSIM map over the pixels at least `radius` from the border, so
-  // only windows inside the image count: rows are taken a band at a time (with the radius
-  // above and below), which keeps the float64 maps a band high.
-  const int64_t c = x.size(0), h = x.size(1), w = x.size(2);
-  constexpr int64_t kBand = 128;
-  auto total = torch::zeros({c}, torch::kFloat64);
-  for (int64_t y0 = radius; y0 < h - radius; y0 += kBand) {
-    const int64_t rows = std::min(kBand, h - radius - y0);
-    auto xb = x.narrow(1, y0 - radius, rows + 2 * radius).to(torch::kFloat64);
-    auto yb = y.narrow(1, y0 - radius, rows + 2 * radius).to(torch::kFloat64);
+  void check(int64_t h, int64_t w) const {
+    const int64_t win = 2 * radius + 1;
+    LFNET_CHECK(h >= win && w >= win, "SSIM needs images of at least ", win, "x", win,
+                " pixels, got ", h, "x", w);
+  }
+
+  // The sum over the SSIM map of the rows whose windows the band (C, rows + 2 radius, W) holds
+  // whole, per channel (C) float64.
+  torch::Tensor band_sum(const torch::Tensor& x, const torch::Tensor& y) const {
+    const int64_t c = x.size(0);
+    auto xb = x.to(torch::kFloat64);
+    auto yb = y.to(torch::kFloat64);
     auto stack = torch::cat({xb, yb, xb * xb, yb * yb, xb * yb}, 0);  // (5C, rows + 2r, W)
     auto f = gaussian_filter_valid(stack, options.sigma, radius).split(c, 0);
     const auto &ux = f[0], &uy = f[1];
@@ -109,19 +125,57 @@ double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOpti
     auto vy = cov_norm * (f[3] - uy * uy);
     auto vxy = cov_norm * (f[4] - ux * uy);
     auto s = ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
-    total += s.sum({1, 2});
+    return s.sum({1, 2});
   }
-  // Mean per channel, then over channels, as scikit-image does with channel_axis.
-  const auto interior = static_cast<double>((h - 2 * radius) * (w - 2 * radius));
-  return (total / interior).mean().item<double>();
+
+  // Mean per channel over the interior pixels, then over channels, as scikit-image does.
+  double mean(const torch::Tensor& total, int64_t h, int64_t w) const {
+    const auto interior = static_cast<double>((h - 2 * radius) * (w - 2 * radius));
+    return (total / interior).mean().item<double>();
+  }
+
+  SsimOptions options;
+  int64_t radius = 0;
+  double cov_norm = 1, c1 = 0, c2 = 0;
+};
+}  // namespace
+
+double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOptions& options) {
+  check_same(a, b);
+  LFNET_CHECK(a.dim() == 2 || a.dim() == 3, "SSIM takes (H, W) or (C, H, W) images");
+  const auto x = a.dim() == 2 ? a.unsqueeze(0) : a;
+  const auto y = b.dim() == 2 ? b.unsqueeze(0) : b;
+  const SsimWindow window(options);
+  const int64_t c = x.size(0), h = x.size(1), w = x.size(2), r = window.radius;
+  window.check(h, w);
+  // Scikit-image averages the SSIM map over the pixels at least `radius` from the border, so
+  // only windows inside the image count: rows are taken a band at a time (with the radius
+  // above and below), which keeps the float64 maps a band high.
+  auto total = torch::zeros({c}, torch::kFloat64);
+  for (int64_t y0 = r; y0 < h - r; y0 += kScoreBand) {
+    const int64_t rows = std::min(kScoreBand, h - r - y0);
+    total += window.band_sum(x.narrow(1, y0 - r, rows + 2 * r), y.narrow(1, y0 - r, rows + 2 * r));
+  }
+  return window.mean(total, h, w);
 }
 
-double ssim(const LightField& estimate, const LightField& truth, const SsimOptions& options) {
-  check_same(estimate.data(), truth.data());
+double ssim(const LightFieldViews& estimate, const LightFieldViews& truth,
+            const SsimOptions& options) {
+  check_same_shape(estimate, truth);
+  const SsimWindow window(options);
+  const int64_t h = truth.height(), w = truth.width(), r = window.radius;
+  window.check(h, w);
+  // As ssim_image, each view a band of rows at a time (no view is decoded whole).
   double total = 0;
   for (int64_t u = 0; u < truth.rows(); ++u) {
     for (int64_t v = 0; v < truth.cols(); ++v) {
-      total += ssim_image(estimate.view(u, v), truth.view(u, v), options);
+      auto sum = torch::zeros({truth.channels()}, torch::kFloat64);
+      for (int64_t y0 = r; y0 < h - r; y0 += kScoreBand) {
+        const int64_t y1 = std::min(h - r, y0 + kScoreBand);
+        sum += window.band_sum(estimate.view_rows(u, v, y0 - r, y1 + r),
+                               truth.view_rows(u, v, y0 - r, y1 + r));
+      }
+      total += window.mean(sum, h, w);
     }
   }
   return total / static_cast<double>(truth.rows() * truth.cols());

@@ -80,11 +80,11 @@ torch::Tensor matching_cost(const torch::Tensor& centre, const std::vector<torch
 
 }  // namespace
 
-ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o) {
+ParallaxCheck check_parallax(const LightFieldViews& lf, const ParallaxCheckOptions& o) {
   LFNET_CHECK_AS(ConfigError, o.block > 0 && o.step > 0 && o.max_disparity > 0,
                  "check_parallax: block, step and max_disparity must be positive");
   ParallaxCheck out;
-  if (!lf.defined() || lf.rows() < 2 || lf.cols() < 2) return out;
+  if (!lf.raw().defined() || lf.rows() < 2 || lf.cols() < 2) return out;
   torch::NoGradGuard no_grad;
   // The two nearest views on each side of the centre: enough to see the sign, and the
   // margin (the largest shift) stays small. Only those views are converted to grey.
@@ -103,12 +103,13 @@ ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& o
   // The central max_side x max_side pixels (and the margin around them) of those views.
   const int64_t crop_h = std::min(lf.height(), o.max_side + 2 * margin);
   const int64_t crop_w = std::min(lf.width(), o.max_side + 2 * margin);
-  const auto crop = lf.data()
+  const auto crop = lf.raw()
                         .slice(axis::kU, ru.begin, ru.end)
                         .slice(axis::kV, rv.begin, rv.end)
                         .narrow(axis::kH, (lf.height() - crop_h) / 2, crop_h)
                         .narrow(axis::kW, (lf.width() - crop_w) / 2, crop_w);
-  const auto g = LightField(crop).grey().data()[0];  // (U', V', h, w) around the centre
+  // (U', V', h, w) around the centre
+  const auto g = LightField(lf.coded() ? decode_codes(crop) : crop).grey().data()[0];
   std::vector<int64_t> off_h, off_v;
   std::vector<torch::Tensor> row_views, col_views;
   for (int64_t v = 0; v < g.size(1); ++v) {
@@ -192,13 +193,23 @@ AngularOrientation AngularOrientation::parse(const std::string& text, const std:
   return o;
 }
 
-LightField reorient(const LightField& lf, const AngularOrientation& o) {
-  if (o.identity()) return lf;
-  auto t = lf.data();
+namespace {
+torch::Tensor reoriented(torch::Tensor t, const AngularOrientation& o) {
   if (o.transpose) t = t.transpose(axis::kU, axis::kV);
   if (o.flip_u) t = t.flip({axis::kU});
   if (o.flip_v) t = t.flip({axis::kV});
-  return LightField(t.contiguous());
+  return t.contiguous();
+}
+}  // namespace
+
+LightField reorient(const LightField& lf, const AngularOrientation& o) {
+  if (o.identity()) return lf;
+  return LightField(reoriented(lf.data(), o));
+}
+
+LightFieldViews reorient(const LightFieldViews& lf, const AngularOrientation& o) {
+  if (o.identity()) return lf;
+  return LightFieldViews(reoriented(lf.raw(), o));
 }
 
 }  // namespace lfnet

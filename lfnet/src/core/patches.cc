@@ -1,6 +1,7 @@
 #include "lfnet/core/patches.h"
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/light_field.h"
 
 namespace lfnet {
 
@@ -53,8 +54,8 @@ torch::Tensor PatchGrid::extract(const torch::Tensor& lf, int64_t row_begin,
 }
 
 Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_t cols,
-                   const torch::Tensor& weight)
-    : grid_(grid), channels_(channels), rows_(rows), cols_(cols) {
+                   const torch::Tensor& weight, bool coded)
+    : grid_(grid), channels_(channels), rows_(rows), cols_(cols), coded_(coded) {
   auto opts = torch::TensorOptions().dtype(torch::kFloat64);
   if (weight.defined()) {
     LFNET_CHECK(
@@ -64,7 +65,8 @@ Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_
   } else {
     weight_ = torch::ones({grid.patch_h() * grid.patch_w()}, opts);
   }
-  out_ = torch::empty({channels, rows, cols, grid.height(), grid.width()}, torch::kFloat32);
+  out_ = torch::empty({channels, rows, cols, grid.height(), grid.width()},
+                      coded ? torch::kInt16 : torch::kFloat32);
   sum_ = torch::zeros({channels, rows, cols, 0}, opts);
   count_ = torch::zeros({0}, opts);
 }
@@ -75,8 +77,8 @@ void Stitcher::flush(int64_t until) {
   LFNET_CHECK(count_.size(0) >= n * w, "stitching left pixels without any estimate");
   auto count = count_.slice(0, 0, n * w);
   LFNET_CHECK(count.min().item<double>() > 0, "stitching left pixels without any estimate");
-  out_.slice(3, top_, until)
-      .copy_((sum_.slice(3, 0, n * w) / count).reshape({channels_, rows_, cols_, n, w}));
+  auto rows = (sum_.slice(3, 0, n * w) / count).reshape({channels_, rows_, cols_, n, w});
+  out_.slice(3, top_, until).copy_(coded_ ? encode_codes(rows) : rows);
   sum_ = sum_.slice(3, n * w);
   count_ = count_.slice(0, n * w);
   top_ = until;

@@ -41,6 +41,12 @@ bool configure_allocator() {
 #endif
 }
 
+void release_free_memory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
 c10::Device parse_device(const std::string& name) {
   const bool cuda = name == "cuda" || name.rfind("cuda:", 0) == 0;
   LFNET_CHECK_AS(ConfigError, name == "cpu" || cuda, "unknown device '", name,

@@ -52,6 +52,26 @@ double mean_of(const std::vector<optics::PatchMeasurements>& bands) {
   return count > 0 ? sum / count : 0.0;
 }
 
+// The sensor image of a grey light field held in 16-bit codes, simulated in bands of rows that
+// start on the code's period, so that no float32 copy of the whole light field is made. A local
+// Phi measures each pixel from its own rays: the bands give the whole image's sensor exactly.
+torch::Tensor coded_forward(const optics::Phi& phi, const LightFieldViews& truth) {
+  LFNET_CHECK(phi.local() && truth.coded() && truth.channels() == 1,
+              "coded_forward: a local Phi and grey views in 16-bit codes");
+  const int64_t h = truth.height(), w = truth.width(), period = phi.period();
+  // About 2^22 values a band.
+  const int64_t per_row = truth.rows() * truth.cols() * w;
+  const int64_t band =
+      std::max<int64_t>(1, (int64_t{1} << 22) / std::max<int64_t>(per_row * period, 1)) * period;
+  auto sensor = torch::empty({phi.measurements(), h, w});
+  const auto codes = truth.raw()[0];  // (U, V, H, W)
+  for (int64_t y0 = 0; y0 < h; y0 += band) {
+    const int64_t y1 = std::min(h, y0 + band);
+    sensor.slice(1, y0, y1).copy_(phi.forward(decode_codes(codes.slice(2, y0, y1))));
+  }
+  return sensor;
+}
+
 // Shot and read noise are named in records by the Gaussian sigma of the same variance at the
 // measurements' mean `signal` (docs/acquisition.md), which is what a noise-aware net reads.
 void add_equivalent_sigma(nlohmann::json& record, const EvalOptions& o, double signal) {
@@ -61,7 +81,7 @@ void add_equivalent_sigma(nlohmann::json& record, const EvalOptions& o, double s
 }  // namespace
 
 // PSNR may be +inf for a perfect view; JSON has no inf, so such values are written as null.
-nlohmann::json score(const LightField& estimate, const LightField& truth) {
+nlohmann::json score(const LightFieldViews& estimate, const LightFieldViews& truth) {
   auto pv = per_view_psnr(estimate, truth);
   nlohmann::json table = nlohmann::json::array();
   for (int64_t u = 0; u < pv.size(0); ++u) {
@@ -130,10 +150,12 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
 
 }  // namespace
 
-EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::string& method,
+EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const std::string& method,
                     const recon::PatchSolver& solver, const EvalOptions& options,
                     const recon::ProgressCallback& progress, const recon::ImageSolver& image) {
-  if (options.cfa) return evaluate_cfa(truth, phi, method, solver, options, progress, image);
+  if (options.cfa) {
+    return evaluate_cfa(truth.decode(), phi, method, solver, options, progress, image);
+  }
   LFNET_CHECK_AS(ConfigError, truth.channels() == 1, "evaluation takes a grey light field");
   const auto& ro = options.reconstruct;
   ro.validate();
@@ -146,12 +168,16 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
                  options.camera_error.empty() || options.mode == optics::SimulationMode::kSensor,
                  "a camera error is simulated in sensor mode only");
   if (options.mode == optics::SimulationMode::kSensor) {
-    // The camera's own Phi (the nominal one without a camera error), then its effects.
+    // The camera's own Phi (the nominal one without a camera error), then its effects. Views
+    // in 16-bit codes are coded a band at a time where the Phi allows.
+    const bool banded = truth.coded() && phi.local() && options.camera_error.empty();
     auto sensor = optics::apply_sensor_effects(
-        optics::perturbed_forward(phi, options.camera_error, truth.data()[0]), options.effects,
-        options.seed);
+        banded ? coded_forward(phi, truth)
+               : optics::perturbed_forward(phi, options.camera_error, truth.decode().data()[0]),
+        options.effects, options.seed);
     signal = sensor.mean().item<double>();
-    clock.reset();  // time the reconstruction, not the simulation
+    release_free_memory();  // the simulation's working memory, before the reconstruction's
+    clock.reset();          // time the reconstruction, not the simulation
     if (image) {
       // Shot and read noise reach a noise-aware method as the Gaussian sigma of the same
       // variance at the sensor image's mean signal.
@@ -166,14 +192,15 @@ EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::
   } else {
     // Simulate every band up front so only the reconstruction is timed.
     const int64_t band = recon::band_rows(grid, ro);
-    const auto bands = measure_bands(truth, phi, grid, options, band);
+    const auto bands = measure_bands(truth.decode(), phi, grid, options, band);
     signal = mean_of(bands);
     auto source = [&](int64_t r0, int64_t) { return bands[r0 / band]; };
     clock.reset();
     estimate = recon::reconstruct_patches(phi, grid, source, solver, ro, progress);
   }
   const double seconds = clock.seconds();
-  LightField est(estimate);
+  release_free_memory();                // the reconstruction's working memory, before the scores'
+  const LightFieldViews est(estimate);  // float32, or 16-bit codes (options.reconstruct.coded)
   // A whole-image solver (the lfnet architecture) uses no patches: the record says so, and
   // keeps the stride it was asked for only as a setting.
   const bool whole_image = image && options.mode == optics::SimulationMode::kSensor;

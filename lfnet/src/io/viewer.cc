@@ -19,12 +19,18 @@ std::string data_uri(const torch::Tensor& view) {
   return "data:image/png;base64," + base64(encode_png(view));
 }
 
-nlohmann::json view_uris(const LightField& lf) {
-  // One encode per view, on LibTorch's thread count.
+// The views averaged over f x f pixels (downscale_views), as PNG data URIs: one view at a time
+// is downscaled and encoded, on LibTorch's thread count, so no downscaled copy of the whole
+// light field is held.
+nlohmann::json view_uris(const LightFieldViews& lf, int64_t f) {
   const int64_t cols = lf.cols();
   std::vector<std::string> encoded(static_cast<size_t>(lf.rows() * cols));
   parallel_chunks(lf.rows() * cols, 1, [&](int64_t begin, int64_t end) {
-    for (int64_t i = begin; i < end; ++i) encoded[i] = data_uri(lf.view(i / cols, i % cols));
+    for (int64_t i = begin; i < end; ++i) {
+      auto view = lf.view(i / cols, i % cols);
+      if (f > 1) view = torch::avg_pool2d(view.unsqueeze(1), {f, f}, {f, f}).squeeze(1);
+      encoded[static_cast<size_t>(i)] = data_uri(view);
+    }
   });
   auto uris = nlohmann::json::array();
   for (auto& uri : encoded) uris.push_back(std::move(uri));
@@ -85,17 +91,15 @@ int64_t viewer_scale(int64_t height, int64_t width) {
   return f;
 }
 
-std::string viewer_html(const LightField& lf, const ViewerPage& page) {
-  LFNET_CHECK(lf.defined(), "the viewer needs a light field");
+std::string viewer_html(const LightFieldViews& lf, const ViewerPage& page) {
   // Views larger than kViewerMaxSide are shown averaged over f x f pixels: the page stays a size
   // a browser opens, and its disparities are in the pixels shown.
   const int64_t f = viewer_scale(lf.height(), lf.width());
-  const auto shown = downscale_views(lf, f);
   nlohmann::json data = {{"title", page.title.empty() ? "light field" : page.title},
                          {"rows", lf.rows()},
                          {"cols", lf.cols()},
-                         {"height", shown.height()},
-                         {"width", shown.width()},
+                         {"height", lf.height() / f},  // as downscale_views drops the rest
+                         {"width", lf.width() / f},
                          {"scale", f},
                          {"full_height", lf.height()},
                          {"full_width", lf.width()},
@@ -103,7 +107,7 @@ std::string viewer_html(const LightField& lf, const ViewerPage& page) {
                          {"max_disparity", page.max_disparity / static_cast<double>(f)},
                          {"record", page.record},
                          {"viridis", viridis_table()},
-                         {"views", view_uris(shown)},
+                         {"views", view_uris(lf, f)},
                          {"truth", nullptr},
                          {"per_view_psnr_db", nullptr}};
   if (page.truth) {
@@ -112,18 +116,23 @@ std::string viewer_html(const LightField& lf, const ViewerPage& page) {
                     t.width() == lf.width(),
                 "the viewer's truth (", t.shape_string(), ") and light field (", lf.shape_string(),
                 ") differ in shape");
-    data["truth"] = view_uris(downscale_views(t, f));
+    data["truth"] = view_uris(t, f);
     if (page.record.contains("per_view_psnr_db"))
       data["per_view_psnr_db"] = page.record["per_view_psnr_db"];
   }
   data["record"].erase("per_view_psnr_db");
   std::string html(kViewerHtml);
   fill(html, "<!--lfnet:script-->", kViewerJs);  // first: the data may hold any text
-  fill(html, "<!--lfnet:data-->", script_safe(data.dump()));
+  // The views make the data tens of MB for large light fields: each form is freed as soon as
+  // the next is made, so at most two are held at once.
+  std::string text = data.dump();
+  data = nullptr;
+  text = script_safe(text);
+  fill(html, "<!--lfnet:data-->", text);
   return html;
 }
 
-void write_viewer(const LightField& lf, const std::string& path, const ViewerPage& page) {
+void write_viewer(const LightFieldViews& lf, const std::string& path, const ViewerPage& page) {
   write_text_file(path, viewer_html(lf, page));
 }
 

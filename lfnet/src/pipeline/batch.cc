@@ -176,6 +176,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.device = a.device;
         q.precision = a.precision;
         q.tile = a.tile;
+        q.coded = true;  // as reconstruct: a grey light field in 16-bit codes
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
@@ -226,7 +227,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.tile = a.tile;
     LightFieldSources sources;
     sources.light_fields = {item.path};
-    truths = load_sources(sources, phi->rows(), phi->cols(), false, !a.cfa.empty());
+    // As evaluate: a grey truth of 8- or 16-bit views in 16-bit codes.
+    truths = load_sources(sources, phi->rows(), phi->cols(), false, !a.cfa.empty(), a.cfa.empty());
     if (!a.cfa.empty()) cfa = optics::ColourFilterArray::parse(a.cfa);
   } catch (const std::exception& e) {
     for (const auto& method : methods) records.push_back(failed(method, e.what()));
@@ -239,6 +241,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
       }
       auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
       o.cfa = cfa;
+      context.coded = o.reconstruct.coded = !cfa;  // as evaluate: a grey estimate in 16-bit codes
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
       record["path"] = item.path;

@@ -56,6 +56,7 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   r.self_ensemble = c.self_ensemble;
   r.self_ensemble_passes = c.self_ensemble_passes;
   if (c.tile > 0) r.tile = c.tile;
+  r.coded = c.coded;
   if (c.method_options.is_object() && c.method_options.contains(method)) {
     r.options = c.method_options[method];
   }
@@ -122,7 +123,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       (whole_image ? " (whole image)" : " stride " + std::to_string(options.reconstruct.stride));
   const auto report = prepared.report;
   if (recon::find_method(method).needs() == recon::MethodNeeds::kTruth) {
-    result = eval::evaluate_no_parallax(truth.lf, phi, options);
+    result = eval::evaluate_no_parallax(truth.views().decode(), phi, options);
   } else {
     const recon::PatchSolver solver = prepared.solver;
     const recon::ImageSolver image = prepared.image;
@@ -131,14 +132,15 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
       patches_bar = std::make_unique<ProgressBar>(
           label,
           whole_image ? 0
-                      : PatchGrid(truth.lf.height(), truth.lf.width(), options.reconstruct.patch_h,
-                                  options.reconstruct.patch_w, options.reconstruct.stride)
+                      : PatchGrid(truth.views().height(), truth.views().width(),
+                                  options.reconstruct.patch_h, options.reconstruct.patch_w,
+                                  options.reconstruct.stride)
                             .size(),
           whole_image ? "pixels" : "patches");
     }
     int64_t shown = 0;
     result = eval::evaluate(
-        truth.lf, phi, method, solver, options,
+        truth.views(), phi, method, solver, options,
         [&](int64_t done, int64_t total) {
           if (patches_bar && whole_image) patches_bar->set_total(total);
           if (patches_bar) patches_bar->advance(done - shown);
@@ -274,13 +276,18 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
-  const auto truths = load_sources(sources, phi->rows(), phi->cols(), false, cfa.has_value());
+  // A grey truth of 8- or 16-bit views is held in 16-bit codes, as the estimate is.
+  const auto truths =
+      load_sources(sources, phi->rows(), phi->cols(), false, cfa.has_value(), !cfa.has_value());
 
   auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
   if (effects) o.effects = *effects;
   o.estimate_noise = a.estimate_noise;
   o.camera_error = camera_error;
   o.cfa = cfa;
+  // A grey estimate is held in 16-bit codes, what its files hold: half the memory (the scores
+  // differ from float32's by far less than their printed digits).
+  context.coded = o.reconstruct.coded = !cfa;
   EvaluateResult result;
   result.record =
       evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);
@@ -289,7 +296,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   result.record["device"] = a.device;
   if (recon::needs_network(method)) result.record["precision"] = nn::to_string(a.precision);
   result.light_field = truths[0].name;
-  if (a.keep_estimate) result.truth = truths[0].lf.data();
+  if (a.keep_estimate) result.truth = truths[0].views().raw();
   result.phi = spec.label();
   return result;
 }

@@ -130,6 +130,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
     train_mean = model->measurement_mean();
   }
+  // A grey result that nothing processes further is held in 16-bit codes when asked for.
+  o.coded = a.coded && !a.post_filter && !acq.meta.contains("cfa") &&
+            acq.meta.at("light_field").at("channels").get<int64_t>() == 1;
   nlohmann::json options_used;  // the method's options, complete
   {
     MethodContext context;
@@ -141,6 +144,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     context.tile = a.tile;
     context.self_ensemble = a.self_ensemble;
     context.self_ensemble_passes = a.self_ensemble_passes;
+    context.coded = o.coded;
     auto prepared = prepare_method(method, context, o.patch_h, o.patch_w);
     solver = prepared.solver;
     image = prepared.image;
@@ -204,8 +208,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
         continue;
       }
       if (full) {
-        channels.push_back(recon::reconstruct_sensor_fully_convolutional(
-            model->net, method, *phi, sensor, o, a.tile > 0 ? a.tile : recon::kDefaultCnnTile));
+        auto lf = recon::reconstruct_sensor_fully_convolutional(
+            model->net, method, *phi, sensor, o, a.tile > 0 ? a.tile : recon::kDefaultCnnTile);
+        channels.push_back(o.coded ? encode_codes(lf) : lf);
         if (progress) progress((ch + 1) * per_channel, sensors * per_channel);
         continue;
       }
@@ -246,7 +251,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     if (o.clamp) lf.clamp_(0.0, 1.0);
   }
   const double seconds = clock.seconds();
-  Reconstruction r{LightField(lf), {}};
+  Reconstruction r{o.coded ? LightFieldViews(lf) : LightFieldViews(LightField(lf)), {}};
   r.record = {{"method", method},
               {"model", needs == recon::MethodNeeds::kNetwork      ? a.model
                         : needs == recon::MethodNeeds::kDictionary ? a.dictionary
@@ -282,8 +287,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
 void write_reconstruction(const Reconstruction& r, const std::string& out,
                           const OutputFolderPolicy& policy, bool end_to_end) {
   write_folder(out, policy, [&](const std::string& dir) {
+    // What each step freed is returned before the next (the peak is one step's, not all).
+    release_free_memory();
     io::write_light_field(r.lf, dir);
+    release_free_memory();
     io::write_previews(r.lf, dir);
+    release_free_memory();
     io::ViewerPage page;
     page.title = r.record.value("method", "") + " reconstruction of " +
                  fs::path(r.record.value("sensor", "")).filename().string();

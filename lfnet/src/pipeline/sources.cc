@@ -9,6 +9,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/scene/random_scene.h"
 #include "lfnet/scene/render.h"
@@ -28,10 +29,10 @@ void LightFieldSources::read(JsonReader& r) {
 
 nlohmann::json LightFieldSources::to_json() const { return fields_to_json(*this); }
 
-LightField read_oriented(const std::string& dir, const std::string& orient, const std::string& what,
-                         const std::string& layout) {
-  const auto orientation = AngularOrientation::parse(orient, what);
-  LightField lf = reorient(io::read_light_field(dir, 0, layout), orientation);
+namespace {
+// Warns once per folder when its horizontal and vertical parallax disagree in sign.
+void check_folder_parallax(const std::string& dir, const LightFieldViews& lf,
+                           const std::string& what) {
   const auto check = check_parallax(lf);
   if (check.verdict == ParallaxVerdict::kDisagree) {
     static std::mutex mutex;
@@ -44,47 +45,80 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
           dir, check.summary(), what);
     }
   }
-  return lf;
 }
 
-namespace {
-LightField select_views(const LightField& lf, const std::string& views, int64_t rows, int64_t cols,
-                        const std::string& name, bool colour) {
-  LightField out;
+// The angular window of `rows` x `cols` views a source keeps: its `views` option, else the
+// central one (every view with `whole`, for a data set that draws its own windows).
+std::pair<AngularRange, AngularRange> view_window(const LightFieldViews& lf,
+                                                  const std::string& views, int64_t rows,
+                                                  int64_t cols, const std::string& name,
+                                                  bool whole) {
   if (views.empty()) {
     LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, name, " has ", lf.rows(),
                    "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
+    if (whole) return {{0, lf.rows()}, {0, lf.cols()}};
     const int64_t u0 = central_start(lf.rows(), rows), v0 = central_start(lf.cols(), cols);
-    out = lf.window({u0, u0 + rows}, {v0, v0 + cols});
-  } else {
-    auto [ru, rv] = parse_views(views);
-    out = lf.window(ru, rv);
-    LFNET_CHECK_AS(ConfigError, out.rows() == rows && out.cols() == cols, "views ", views,
-                   " select ", out.rows(), "x", out.cols(), " views but the Phi codes ", rows, "x",
-                   cols);
+    return {{u0, u0 + rows}, {v0, v0 + cols}};
   }
+  auto [ru, rv] = parse_views(views);
+  LFNET_CHECK_AS(ConfigError,
+                 ru.begin >= 0 && ru.end <= lf.rows() && ru.size() > 0 && rv.begin >= 0 &&
+                     rv.end <= lf.cols() && rv.size() > 0,
+                 "angular window rows ", ru.begin + 1, ":", ru.end, ", columns ", rv.begin + 1, ":",
+                 rv.end, " (1-based) does not fit the ", lf.rows(), "x", lf.cols(), " grid");
+  LFNET_CHECK_AS(ConfigError, ru.size() == rows && rv.size() == cols, "views ", views, " select ",
+                 ru.size(), "x", rv.size(), " views but the Phi codes ", rows, "x", cols);
+  return {ru, rv};
+}
+
+LightField select_views(const LightField& lf, const std::string& views, int64_t rows, int64_t cols,
+                        const std::string& name, bool colour, bool whole = false) {
+  const auto [ru, rv] = view_window(lf, views, rows, cols, name, whole);
+  const auto out = lf.window(ru, rv);
   return colour ? out : out.grey();
 }
 }  // namespace
 
+LightField read_oriented(const std::string& dir, const std::string& orient, const std::string& what,
+                         const std::string& layout) {
+  const auto orientation = AngularOrientation::parse(orient, what);
+  LightField lf = reorient(io::read_light_field(dir, 0, layout), orientation);
+  check_folder_parallax(dir, lf, what);
+  return lf;
+}
+
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
-                                          int64_t cols, bool whole_grids, bool colour) {
+                                          int64_t cols, bool whole_grids, bool colour, bool coded) {
   std::vector<NamedLightField> out;
   const int64_t total = static_cast<int64_t>(sources.light_fields.size() + sources.scenes.size()) +
                         sources.random_scenes;
   ProgressBar bar("loading light fields", total);
+  const bool whole = whole_grids && sources.views.empty();
   for (const auto& dir : sources.light_fields) {
-    auto lf = read_oriented(dir, sources.orient, "orient", sources.layout);
-    if (whole_grids && sources.views.empty()) {
-      LFNET_CHECK_AS(ConfigError, lf.rows() >= rows && lf.cols() >= cols, dir, " has ", lf.rows(),
-                     "x", lf.cols(), " views, fewer than the ", rows, "x", cols, " the Phi codes");
-      out.push_back({fs::path(dir).filename().string(), colour ? lf : lf.grey()});
+    const std::string name = fs::path(dir).filename().string();
+    LightField lf;
+    if (coded && !colour) {
+      const auto orientation = AngularOrientation::parse(sources.orient, "orient");
+      const auto views = reorient(io::read_light_field_views(dir, 0, sources.layout), orientation);
+      check_folder_parallax(dir, views, "orient");
+      if (views.coded()) {  // grey views of 8 or 16 bits, held in 16-bit codes
+        const auto [ru, rv] = view_window(views, sources.views, rows, cols, dir, whole);
+        out.push_back({name, LightField(),
+                       views.raw()
+                           .slice(axis::kU, ru.begin, ru.end)
+                           .slice(axis::kV, rv.begin, rv.end)
+                           .contiguous()});
+        bar.advance();
+        continue;
+      }
+      lf = LightField(views.raw());
     } else {
-      out.push_back({fs::path(dir).filename().string(),
-                     select_views(lf, sources.views, rows, cols, dir, colour)});
+      lf = read_oriented(dir, sources.orient, "orient", sources.layout);
     }
+    out.push_back({name, select_views(lf, sources.views, rows, cols, dir, colour, whole)});
     bar.advance();
   }
+  release_free_memory();  // the decoding's buffers, before the light fields are used
   for (const auto& path : sources.scenes) {
     scene::SceneSpec spec;
     try {

@@ -1,6 +1,7 @@
 #include "lfnet/recon/builtin_methods.h"
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/light_field.h"
 #include "lfnet/dict/omp.h"
 #include "lfnet/dict/sparse_coding.h"
 #include "lfnet/optics/measure.h"
@@ -59,30 +60,35 @@ class NetworkMethod : public Method {
     if (!is_image(r)) return {};
     check_image_branch();
     const int64_t tile = r.tile;
+    const bool coded = r.coded;
+    // Passes that hold a float32 result anyway encode it at the end.
+    auto maybe_coded = [coded](const torch::Tensor& lf) { return coded ? encode_codes(lf) : lf; };
     if (r.script) {
       const auto* script = r.script;
       if (r.self_ensemble) {
         const auto mirrors = ensemble_mirrors(script->pixel_weights(), r.self_ensemble_passes);
-        return [script, tile, mirrors](const torch::Tensor& sensor, double noise_sigma) {
-          return reconstruct_mirrored(
+        return [script, tile, mirrors, maybe_coded](const torch::Tensor& sensor,
+                                                    double noise_sigma) {
+          return maybe_coded(reconstruct_mirrored(
               mirrors, sensor, [&](const torch::Tensor& mirrored, const ProgressCallback&) {
                 return script->reconstruct_image(mirrored, tile, false, noise_sigma).unsqueeze(0);
-              });
+              }));
         };
       }
-      return [script, tile](const torch::Tensor& sensor, double noise_sigma) {
-        return script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0);
+      return [script, tile, maybe_coded](const torch::Tensor& sensor, double noise_sigma) {
+        return maybe_coded(script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0));
       };
     }
-    auto solver_of = [&r, tile](const nn::LightFieldNet& net) -> ImageSolver {
+    auto solver_of = [&r, tile, coded, maybe_coded](const nn::LightFieldNet& net) -> ImageSolver {
       if (r.self_ensemble) {
         const int64_t passes = r.self_ensemble_passes;
-        return [net, tile, passes](const torch::Tensor& sensor, double noise_sigma) {
-          return reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes);
+        return [net, tile, passes, maybe_coded](const torch::Tensor& sensor, double noise_sigma) {
+          return maybe_coded(
+              reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes));
         };
       }
-      return [net, tile](const torch::Tensor& sensor, double noise_sigma) {
-        return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma);
+      return [net, tile, coded](const torch::Tensor& sensor, double noise_sigma) {
+        return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded);
       };
     };
     if (r.noisy_net.is_empty()) return solver_of(r.net);

@@ -7,6 +7,7 @@
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/light_field.h"
 #include "lfnet/recon/methods.h"
 
 namespace lfnet::recon {
@@ -78,6 +79,7 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
   const auto device = net->phi.device();
   ReconstructOptions raw = options;
   raw.clamp = false;
+  raw.coded = false;  // the pieces are summed in float32
   // The CNN's input: the stitched scaled adjoint of the patches.
   PatchSolver adjoint = [&](const torch::Tensor& y, const torch::Tensor& phase) {
     torch::InferenceMode guard;
@@ -110,7 +112,7 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
 
 torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tensor& sensor,
                                        int64_t tile, bool clamp, double noise_sigma,
-                                       const ProgressCallback& progress) {
+                                       const ProgressCallback& progress, bool coded) {
   const auto& o = net->options();
   const auto& arch = net->architecture();
   LFNET_CHECK_AS(ConfigError, arch.whole_image(), "whole-image reconstruction needs a model of ",
@@ -118,6 +120,7 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   LFNET_CHECK_AS(ConfigError, sensor.dim() == 3 && sensor.size(0) == o.measurements,
                  "the sensor image must be (", o.measurements, ", H, W), got ", sensor.sizes());
   LFNET_CHECK_AS(ConfigError, tile >= 1, "the tile must be positive, got ", tile);
+  LFNET_CHECK(clamp || !coded, "a result in 16-bit codes is clamped to [0, 1]");
   torch::NoGradGuard no_grad;
   net->eval();
   const auto tiling = arch.image_tiling(o);
@@ -128,7 +131,8 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   // forward_image, the image itself is not copied.
   const auto image = sensor.to(torch::kFloat32);
   const int64_t colours = o.colours();
-  auto out = torch::empty({colours, o.patch.rows, o.patch.cols, h, w}, torch::kFloat32);
+  auto out = torch::empty({colours, o.patch.rows, o.patch.cols, h, w},
+                          coded ? torch::kInt16 : torch::kFloat32);
   int64_t step = 0, done = 0;
   const auto tiles = nn::image_tiles(tiling, h, w, tile, &step);
   for (const auto& c : tiles) {
@@ -144,14 +148,15 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
                    .reshape({colours, o.patch.rows, o.patch.cols, crop.size(2), crop.size(3)});
     const int64_t th = std::min(c.y0 + step, h) - c.y0, tw = std::min(c.x0 + step, w) - c.x0;
     if (th > 0 && tw > 0) {
+      auto part =
+          est.slice(3, c.y0 - c.a0, c.y0 - c.a0 + th).slice(4, c.x0 - c.b0, c.x0 - c.b0 + tw);
       out.slice(3, c.y0, c.y0 + th)
           .slice(4, c.x0, c.x0 + tw)
-          .copy_(
-              est.slice(3, c.y0 - c.a0, c.y0 - c.a0 + th).slice(4, c.x0 - c.b0, c.x0 - c.b0 + tw));
+          .copy_(coded ? encode_codes(part) : part);
     }
     if (progress) progress(++done, static_cast<int64_t>(tiles.size()));
   }
-  if (clamp) out.clamp_(0.0, 1.0);
+  if (clamp && !coded) out.clamp_(0.0, 1.0);
   return out;
 }
 

@@ -2,6 +2,7 @@
 // default, lfnet's own as "nlm"): the classical baseline for noisy sensor images
 // (docs/methods.md).
 #include "lfnet/core/error.h"
+#include "lfnet/core/light_field.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/builtin_methods.h"
 #include "lfnet/recon/denoise.h"
@@ -63,14 +64,14 @@ class PinvNlmMethod : public MethodWithOptions<PinvNlmOptions> {
     ro.stride = r.phi->local() ? r.patch_h : ro.stride;  // per pixel: overlaps add nothing
     ro.clamp = false;                                    // clamping would bias the noise
     const optics::Phi* phi = r.phi;
-    return [phi, pinv, gain, ro, denoiser, denoiser_options](const torch::Tensor& sensor,
-                                                             double sigma) {
+    const bool coded = r.coded;
+    return [phi, pinv, gain, ro, denoiser, denoiser_options, coded](const torch::Tensor& sensor,
+                                                                    double sigma) {
       auto lf = reconstruct_sensor(*phi, sensor, pinv_solver(pinv), ro);  // (1, U, V, H, W)
       const auto shape = lf.sizes().vec();
       auto views = lf.reshape({shape[1] * shape[2], shape[3], shape[4]});
-      return denoiser->denoise(views, sigma * gain, denoiser_options)
-          .reshape(shape)
-          .clamp(0.0, 1.0);
+      auto out = denoiser->denoise(views, sigma * gain, denoiser_options).reshape(shape);
+      return coded ? encode_codes(out) : out.clamp(0.0, 1.0);
     };
   }
   double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }

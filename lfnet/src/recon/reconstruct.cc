@@ -19,6 +19,7 @@ void ReconstructOptions::validate() const {
                       std::to_string(stride));
   }
   if (batch < 1) throw ConfigError("batch must be at least 1, got " + std::to_string(batch));
+  if (coded && !clamp) throw ConfigError("a result in 16-bit codes is clamped to [0, 1]");
 }
 
 namespace {}  // namespace
@@ -57,7 +58,8 @@ torch::Tensor reconstruct_patches(const optics::Phi& phi, const PatchGrid& grid,
   options.validate();
   const int64_t u = phi.spec().rows, v = phi.spec().cols;
   const int64_t h = grid.patch_h(), w = grid.patch_w();
-  Stitcher stitcher(grid, 1, u, v, options.window ? hann_window(h, w) : torch::Tensor());
+  Stitcher stitcher(grid, 1, u, v, options.window ? hann_window(h, w) : torch::Tensor(),
+                    options.coded);
   const int64_t band = band_rows(grid, options);
   int64_t done = 0;
   for (int64_t r0 = 0; r0 < grid.rows(); r0 += band) {
@@ -79,7 +81,7 @@ torch::Tensor reconstruct_patches(const optics::Phi& phi, const PatchGrid& grid,
     if (progress) progress(done, grid.size());
   }
   auto out = stitcher.result();
-  return options.clamp ? out.clamp_(0, 1) : out;
+  return options.clamp && !options.coded ? out.clamp_(0, 1) : out;
 }
 
 torch::Tensor reconstruct_sensor(const optics::Phi& phi, const torch::Tensor& sensor,

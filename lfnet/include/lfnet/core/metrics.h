@@ -9,10 +9,11 @@ namespace lfnet {
 
 // 10 log10(1 / MSE) over every view, pixel and channel; values in [0, 1]. Infinite when equal.
 double psnr(const torch::Tensor& estimate, const torch::Tensor& truth);
-double psnr(const LightField& estimate, const LightField& truth);
+// Light fields are read a view at a time, float32 or 16-bit codes.
+double psnr(const LightFieldViews& estimate, const LightFieldViews& truth);
 
 // PSNR of every view, a (U, V) float64 tensor.
-torch::Tensor per_view_psnr(const LightField& estimate, const LightField& truth);
+torch::Tensor per_view_psnr(const LightFieldViews& estimate, const LightFieldViews& truth);
 
 // Options of SSIM; defaults match scikit-image's structural_similarity(gaussian_weights=True,
 // sigma=1.5, use_sample_covariance=True, data_range=1).
@@ -30,6 +31,7 @@ struct SsimOptions {
 double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOptions& options = {});
 
 // SSIM of a light field: the mean over views of each view's SSIM.
-double ssim(const LightField& estimate, const LightField& truth, const SsimOptions& options = {});
+double ssim(const LightFieldViews& estimate, const LightFieldViews& truth,
+            const SsimOptions& options = {});
 
 }  // namespace lfnet

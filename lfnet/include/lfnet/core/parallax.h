@@ -46,7 +46,7 @@ struct ParallaxCheck {
 // against the central view over a range of candidate disparities, then compares their signs.
 // Works on grey; needs at least 2 views along each axis. Cost: one bilinear warp per view
 // and candidate of the central row and column (about 0.3 s for 512 x 512 x 9 x 9).
-ParallaxCheck check_parallax(const LightField& lf, const ParallaxCheckOptions& options = {});
+ParallaxCheck check_parallax(const LightFieldViews& lf, const ParallaxCheckOptions& options = {});
 
 // Reorientations of the angular axes alone, for a folder whose naming maps views onto the
 // grid differently from lfnet's convention. Applied in this order: swap u and v (views named
@@ -66,5 +66,6 @@ struct AngularOrientation {
 
 // `lf` reoriented; the identity returns it unchanged.
 LightField reorient(const LightField& lf, const AngularOrientation& orientation);
+LightFieldViews reorient(const LightFieldViews& lf, const AngularOrientation& orientation);
 
 }  // namespace lfnet

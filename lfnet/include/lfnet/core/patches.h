@@ -49,15 +49,16 @@ class PatchGrid {
 class Stitcher {
  public:
   // `channels`, `rows`, `cols`: the light field's C, U, V. `weight` (h, w), optional: a
-  // spatial window applied to every patch estimate (e.g. to soften patch seams).
+  // spatial window applied to every patch estimate (e.g. to soften patch seams). `coded`: the
+  // result holds 16-bit codes (int16, clamped to [0, 1]; core/light_field.h), half the memory.
   Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_t cols,
-           const torch::Tensor& weight = {});
+           const torch::Tensor& weight = {}, bool coded = false);
 
   // Adds patches of patch rows [row_begin, row_end) in the layout `PatchGrid::extract` gives.
   // row_begin must not be below the row_end of an earlier call.
   void add(const torch::Tensor& patches, int64_t row_begin, int64_t row_end);
 
-  // The averaged light field (C, U, V, H, W), float32. Every pixel must have been covered.
+  // The averaged light field (C, U, V, H, W), float32 or codes. Every pixel must have been covered.
   // Nothing may be added after it.
   torch::Tensor result();
 
@@ -68,7 +69,8 @@ class Stitcher {
   const PatchGrid grid_;
   int64_t channels_, rows_, cols_;
   torch::Tensor weight_;  // (h * w) float64
-  torch::Tensor out_;     // (C, U, V, H, W) float32
+  bool coded_;
+  torch::Tensor out_;     // (C, U, V, H, W) float32, or int16 codes
   int64_t next_row_ = 0;  // the first patch row not added yet
   int64_t top_ = 0;       // the first image row not in out_ yet: the buffer's first row
   torch::Tensor sum_;     // (C, U, V, buffer rows * W) float64

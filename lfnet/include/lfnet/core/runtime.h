@@ -23,6 +23,12 @@ int thread_count();
 // chose. Call once, before the work starts; a program's choice, not a library's.
 bool configure_allocator();
 
+// Returns the memory malloc holds free to the system (glibc's malloc_trim; nothing elsewhere).
+// With configure_allocator's settings freed blocks stay in the heap for reuse, so a command
+// that goes from one large phase to another (reconstruct, then write) calls this between them:
+// what the last phase freed then does not add to the next one's peak.
+void release_free_memory();
+
 // "cpu" or "cuda" (or "cuda:K") as a device. Throws ConfigError for other names and for CUDA
 // when this LibTorch has no CUDA or the machine no GPU, saying which.
 c10::Device parse_device(const std::string& name);

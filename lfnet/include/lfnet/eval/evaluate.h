@@ -47,7 +47,9 @@ struct EvalResult {
 // Simulates measurements of the grey light field `truth` with `phi`, reconstructs them with
 // `solver` and scores the result. `method` names the solver in the record. A non-empty
 // `image` solver reconstructs sensor images whole instead (per_patch mode still uses `solver`).
-EvalResult evaluate(const LightField& truth, const optics::Phi& phi, const std::string& method,
+// The truth may be held in 16-bit codes (LightFieldViews): it is then simulated a band at a time
+// for a local Phi in sensor mode, and decoded whole otherwise.
+EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const std::string& method,
                     const recon::PatchSolver& solver, const EvalOptions& options,
                     const recon::ProgressCallback& progress = {},
                     const recon::ImageSolver& image = {});
@@ -57,6 +59,6 @@ EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
                                 const EvalOptions& options);
 
 // The metric fields of a record: psnr_db, ssim, per_view_psnr_db (U x V).
-nlohmann::json score(const LightField& estimate, const LightField& truth);
+nlohmann::json score(const LightFieldViews& estimate, const LightFieldViews& truth);
 
 }  // namespace lfnet::eval

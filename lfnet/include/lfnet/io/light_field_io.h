@@ -76,6 +76,12 @@ bool holds_view_names(const std::string& dir);
 LightField read_light_field(const std::string& dir, int threads = 0,
                             const std::string& layout = "");
 
+// read_light_field for a command that only reads the views: a folder of grey views whose values
+// 16-bit codes hold exactly (8- and 16-bit files) is held in codes, half the memory; any other
+// folder in float32, as read_light_field reads it.
+LightFieldViews read_light_field_views(const std::string& dir, int threads = 0,
+                                       const std::string& layout = "");
+
 // Reads one image as (C, H, W) float32: integer formats scaled to [0, 1], floats as stored.
 torch::Tensor read_image(const std::string& path);
 
@@ -104,7 +110,7 @@ struct WriteOptions {
 };
 
 // Writes views as DIR/lf_R_C.ext (1-based). The folder must not hold views already.
-void write_light_field(const LightField& lf, const std::string& dir,
+void write_light_field(const LightFieldViews& lf, const std::string& dir,
                        const WriteOptions& options = {});
 
 // The sub-aperture views tiled into one (C, U * (H + gap) - gap, V * (W + gap) - gap) image.
@@ -113,23 +119,23 @@ torch::Tensor grid_image(const LightField& lf, int64_t gap = 2);
 // Epipolar-plane images through the central view: horizontal (C, V * scale, W) at spatial row
 // `y`, vertical (C, U * scale, H) at column `x` (transposed so it reads left to right).
 // Negative y / x take the centre.
-torch::Tensor horizontal_epi(const LightField& lf, int64_t y = -1, int64_t scale = 8);
-torch::Tensor vertical_epi(const LightField& lf, int64_t x = -1, int64_t scale = 8);
+torch::Tensor horizontal_epi(const LightFieldViews& lf, int64_t y = -1, int64_t scale = 8);
+torch::Tensor vertical_epi(const LightFieldViews& lf, int64_t x = -1, int64_t scale = 8);
 
 // The views averaged over f x f pixel blocks (the rows and columns that do not fill a block
-// dropped); `lf` itself for f = 1.
-LightField downscale_views(const LightField& lf, int64_t f);
+// dropped), a view at a time; `lf` itself (decoded) for f = 1.
+LightField downscale_views(const LightFieldViews& lf, int64_t f);
 
 // The light field to tile into a preview grid of at most `max_side` pixels a side: `lf` itself
 // when its grid fits, else its views averaged over f x f pixel blocks with the smallest f that
 // fits (a 5 x 5 grid of 12-megapixel views is 21,000 pixels wide at full size).
 inline constexpr int64_t kPreviewMaxSide = 8192;
-LightField preview_light_field(const LightField& lf, int64_t max_side = kPreviewMaxSide,
+LightField preview_light_field(const LightFieldViews& lf, int64_t max_side = kPreviewMaxSide,
                                int64_t gap = 2);
 
 // Writes grid.png (of preview_light_field: at most kPreviewMaxSide pixels a side), epi_h.png and
 // epi_v.png (full resolution) into `dir`, for looking at a result.
-void write_previews(const LightField& lf, const std::string& dir);
+void write_previews(const LightFieldViews& lf, const std::string& dir);
 
 // PFM by hand: OpenImageIO 2.4 (Debian bookworm) reads PFM but has no PFM writer ("could not
 // find a format writer"), and one format is best read and written by one piece of code. GIF

@@ -12,8 +12,8 @@ namespace lfnet::io {
 
 // What the page shows beside the light field.
 struct ViewerPage {
-  std::string title;                // the heading, e.g. "net on hci_antinous"
-  std::optional<LightField> truth;  // of the same shape: error map and "show truth"
+  std::string title;                     // the heading, e.g. "net on hci_antinous"
+  std::optional<LightFieldViews> truth;  // of the same shape: error map and "show truth"
   // An evaluate or reconstruct record: method, Phi, PSNR, SSIM and seconds are listed, and
   // per_view_psnr_db fills the per-view table.
   nlohmann::json record = nlohmann::json::object();
@@ -28,10 +28,10 @@ int64_t viewer_scale(int64_t height, int64_t width);
 // The page as text: viewer.html with viewer.js and the views (8-bit PNG data URIs, row-major)
 // embedded, so it opens from a file in any browser without a network. The page data says the
 // views' shown size (height, width), their full size and the factor between (scale).
-std::string viewer_html(const LightField& lf, const ViewerPage& page = {});
+std::string viewer_html(const LightFieldViews& lf, const ViewerPage& page = {});
 
 // Writes viewer_html to `path` (usually DIR/index.html) through a temporary file.
-void write_viewer(const LightField& lf, const std::string& path, const ViewerPage& page = {});
+void write_viewer(const LightFieldViews& lf, const std::string& path, const ViewerPage& page = {});
 
 // Base64 (RFC 4648, with padding) of bytes.
 std::string base64(const std::string& bytes);

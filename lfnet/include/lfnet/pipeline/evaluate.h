@@ -39,6 +39,9 @@ struct MethodContext {
   bool self_ensemble = false;        // lfnet architecture: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   int64_t tile = 0;                  // whole-image methods' spatial tile (0: their default)
+  // Whole-image methods return 16-bit codes (recon::MethodResources::coded); the patch methods
+  // take theirs from recon::ReconstructOptions::coded.
+  bool coded = false;
 };
 
 // A method ready to run on one Phi and patch size.
@@ -128,8 +131,9 @@ struct EvaluateRequest {
 // One evaluation's outcome.
 struct EvaluateResult {
   nlohmann::json record;    // evaluate_method's record with model, device and precision
-  torch::Tensor estimate;   // the reconstruction (with keep_estimate)
-  torch::Tensor truth;      // the light field it was scored against (with keep_estimate)
+  torch::Tensor estimate;   // the reconstruction (with keep_estimate): grey in 16-bit codes
+  torch::Tensor truth;      // the light field it was scored against (with keep_estimate): codes or
+                            // float32, as LightFieldViews reads it
   std::string light_field;  // the truth's name
   std::string phi;          // the Phi's label, e.g. asp:2
 };

@@ -37,11 +37,15 @@ struct ReconstructRequest {
   // The sensor's Gaussian noise sigma (relative to white) for noise-aware models; negative:
   // the noise_sigma that the acquisition's sensor.json records, else 0.
   double noise_sigma = -1;
+  // Hold a grey light field in 16-bit codes (core/light_field.h), what its files hold: half
+  // the memory of float32 (`lfnet reconstruct` and `batch`). Not with post_filter or a colour
+  // filter array, which stay float32.
+  bool coded = false;
 };
 
 // A reconstruction and its record (method, model, sensor, stride, seconds, phi, mode, shape).
 struct Reconstruction {
-  LightField lf;
+  LightFieldViews lf{LightField(torch::zeros({1, 1, 1, 1, 1}))};  // float32 or 16-bit codes
   nlohmann::json record;
 };
 

@@ -48,6 +48,11 @@ struct LightFieldSources {
 struct NamedLightField {
   std::string name;
   LightField lf;
+  // Or, loaded with `coded`, the grey light field in 16-bit codes (core/light_field.h), `lf`
+  // then undefined.
+  torch::Tensor codes;
+  // Its views, either way.
+  LightFieldViews views() const { return codes.defined() ? LightFieldViews(codes) : lf; }
 };
 
 // Reads a light-field folder and reorients its angular axes (`orient`, parsed as `what`: an
@@ -59,10 +64,12 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
 // Loads every source as a grey light field of rows x cols views, with a progress bar. With
 // `whole_grids`, folders without a `views` window keep every view (at least rows x cols), for
 // a data set that draws its own angular windows.
-// With `colour`, light fields keep their colour channels (a grey folder stays grey).
+// With `colour`, light fields keep their colour channels (a grey folder stays grey). With
+// `coded`, for commands that only simulate and score, grey folders of 8- or 16-bit views are held
+// in 16-bit codes (NamedLightField::codes), half the memory.
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
                                           int64_t cols, bool whole_grids = false,
-                                          bool colour = false);
+                                          bool colour = false, bool coded = false);
 
 // Render options for a scene file: image textures are read with io::read_image, relative to
 // the scene file's folder ("" for none).

@@ -68,11 +68,12 @@ constexpr int64_t kDefaultImageTile = 256;
 // the image. The result equals net->forward_image on the whole image, to float rounding.
 // Runs on the device of the net's weights; returns float32 on the CPU, clamped to [0, 1]
 // when `clamp`. `noise_sigma` conditions a noise-aware net. `progress` gets (tiles done,
-// tiles in all).
+// tiles in all). `coded`: the result is 16-bit codes (int16, clamped; core/light_field.h),
+// each tile encoded as it is done, so the light field is held in half the memory.
 torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tensor& sensor,
                                        int64_t tile = kDefaultImageTile, bool clamp = true,
                                        double noise_sigma = 0.0,
-                                       const ProgressCallback& progress = {});
+                                       const ProgressCallback& progress = {}, bool coded = false);
 
 // A mirror image under which a Phi is symmetric: it measures the mirrored light field (x and
 // v reversed with `flip_x`, y and u with `flip_y`) as the mirrored sensor image with its

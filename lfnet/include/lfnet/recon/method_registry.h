@@ -45,6 +45,9 @@ struct MethodResources {
   int64_t tile = 256;                    // whole-image methods: spatial tile
   bool self_ensemble = false;            // whole-image methods: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;      // at most this many of them (0: all)
+  // Whole-image methods: return 16-bit codes (int16; core/light_field.h), a plain tiled pass
+  // encoding each tile as it is done (half the memory of float32).
+  bool coded = false;
 };
 
 class Method {

@@ -36,6 +36,9 @@ struct ReconstructOptions {
   int64_t batch = 1024;  // patches per solver call; with the band, bounds peak memory
   bool window = false;   // weight patch estimates by a separable Hann-like window when stitching
   bool clamp = true;     // clamp the result to [0, 1]
+  // Return 16-bit codes (int16; core/light_field.h) instead of float32: half the memory, what a
+  // 16-bit file holds. Needs clamp.
+  bool coded = false;
   void validate() const;
 };
 
