@@ -220,6 +220,33 @@ TEST_CASE("evaluate_method scores the registry's methods and the no-parallax bas
   CHECK_FALSE(pinv.contains("equivalent_sigma"));
 }
 
+TEST_CASE("a truth held in 16-bit codes is simulated in bands and scores as its float32 values",
+          "[pipeline]") {
+  torch::manual_seed(12);
+  // Views wide enough that the simulation takes several bands of rows (about 2^22 values each,
+  // starting on the code's period).
+  const auto codes = encode_codes(torch::rand({1, 5, 5, 160, 2100}));
+  const pipeline::NamedLightField plain{"plain", LightField(decode_codes(codes))};
+  const pipeline::NamedLightField coded{"coded", LightField(), codes};
+  REQUIRE(coded.views().coded());
+  for (const std::string name : {"asp:2", "mask:2"}) {
+    INFO(name);
+    auto phi = optics::make_phi(optics::PhiSpec::parse(name));
+    pipeline::MethodContext context;
+    context.phi = phi.get();
+    const auto o = pipeline::make_eval_options(optics::SimulationMode::kSensor, 0.01, 3, 5, 4096,
+                                               false, std::nullopt);
+    const auto a = pipeline::evaluate_method(plain, "pinv", context, o, nullptr, false);
+    const auto b = pipeline::evaluate_method(coded, "pinv", context, o, nullptr, false);
+    CHECK(b["psnr_db"].get<double>() == Approx(a["psnr_db"].get<double>()).epsilon(1e-9));
+    CHECK(b["ssim"].get<double>() == Approx(a["ssim"].get<double>()).epsilon(1e-9));
+    const auto np = pipeline::evaluate_method(coded, "no-parallax", context, o, nullptr, false);
+    CHECK(np["psnr_db"].get<double>() ==
+          pipeline::evaluate_method(plain, "no-parallax", context, o, nullptr, false)["psnr_db"]
+              .get<double>());
+  }
+}
+
 namespace {
 
 // A method with an option, registered from outside the library: the pseudo-inverse times a

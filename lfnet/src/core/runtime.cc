@@ -42,7 +42,12 @@ bool configure_allocator() {
 }
 
 void release_free_memory() {
-#if defined(__GLIBC__)
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
+  // Only when much is free: returned pages are faulted in again when reused, which costs more
+  // than it saves for a small light field (a tenth of a second of `evaluate` on 593 x 840 views).
+  constexpr size_t kWorthReleasing = size_t{256} << 20;
+  if (mallinfo2().fordblks >= kWorthReleasing) malloc_trim(0);
+#elif defined(__GLIBC__)
   malloc_trim(0);
 #endif
 }

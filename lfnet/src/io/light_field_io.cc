@@ -449,6 +449,19 @@ torch::Tensor read_image(const std::string& path) {
   return chw;
 }
 
+namespace {
+// View `path`, which must have the size and channels of `first` (read from `first_path`).
+torch::Tensor read_view_like(const std::string& path, const torch::Tensor& first,
+                             const std::string& first_path) {
+  auto image = read_image(path);
+  if (image.sizes() != first.sizes()) {
+    throw IoError("view " + path + " is " + size_text(image) + ", but " + first_path + " is " +
+                  size_text(first) + ": every view must have the same size and channels");
+  }
+  return image;
+}
+}  // namespace
+
 LightField read_light_field(const std::string& dir, int threads, const std::string& naming) {
   const FolderLayout layout = scan_folder(dir, naming);
   const int64_t n = static_cast<int64_t>(layout.views.size());
@@ -481,13 +494,7 @@ LightField read_light_field(const std::string& dir, int threads, const std::stri
               continue;
             }
           }
-          auto image = read_image(path);
-          if (image.sizes() != first.sizes()) {
-            throw IoError("view " + path + " is " + size_text(image) + ", but " +
-                          layout.views[0].path + " is " + size_text(first) +
-                          ": every view must have the same size and channels");
-          }
-          place(i, image);
+          place(i, read_view_like(path, first, layout.views[0].path));
         }
       },
       threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency()));
@@ -499,8 +506,14 @@ LightFieldViews read_light_field_views(const std::string& dir, int threads,
                                        const std::string& naming) {
   const FolderLayout layout = scan_folder(dir, naming);
   const int64_t n = static_cast<int64_t>(layout.views.size());
+  {
+    // Only grey 16-bit files can be codes: the header says, before anything is decoded.
+    auto input = OIIO::ImageInput::open(layout.views[0].path);
+    if (!input || input->spec().nchannels != 1 || input->spec().format != OIIO::TypeDesc::UINT16) {
+      return LightFieldViews(read_light_field(dir, threads, naming));
+    }
+  }
   const auto first = read_image(layout.views[0].path);
-  if (first.size(0) != 1) return LightFieldViews(read_light_field(dir, threads, naming));
   const int64_t h = first.size(1), w = first.size(2);
   auto codes = torch::empty({1, layout.rows, layout.cols, h, w}, torch::kInt16);
   std::vector<std::pair<double, double>> range(static_cast<size_t>(n));
@@ -509,7 +522,7 @@ LightFieldViews read_light_field_views(const std::string& dir, int threads,
     const auto [lo, hi] = torch::aminmax(image);
     range[static_cast<size_t>(i)] = {lo.item<double>(), hi.item<double>()};
     auto code = encode_codes(image);
-    if (!torch::equal(decode_codes(code), image)) exact = false;  // not 8 or 16 bits
+    if (!torch::equal(decode_codes(code), image)) exact = false;  // not 16-bit values
     const auto& view = layout.views[static_cast<size_t>(i)];
     codes.index({torch::indexing::Slice(), view.u, view.v}).copy_(code);
   };
@@ -519,13 +532,7 @@ LightFieldViews read_light_field_views(const std::string& dir, int threads,
       [&](int64_t begin, int64_t end) {
         for (int64_t i = begin + 1; i < end + 1 && exact; ++i) {
           const auto& path = layout.views[static_cast<size_t>(i)].path;
-          auto image = read_image(path);
-          if (image.sizes() != first.sizes()) {
-            throw IoError("view " + path + " is " + size_text(image) + ", but " +
-                          layout.views[0].path + " is " + size_text(first) +
-                          ": every view must have the same size and channels");
-          }
-          place(i, image);
+          place(i, read_view_like(path, first, layout.views[0].path));
         }
       },
       threads > 0 ? threads : static_cast<int>(std::thread::hardware_concurrency()));

@@ -33,6 +33,9 @@ void write_file_atomically(const std::string& target,
 // Writes `bytes` to the file `target` atomically (write_file_atomically); a failure names the
 // file and the system's reason ("No space left on device").
 void write_bytes_file(const std::string& target, std::string_view bytes, bool durable = false);
+// The same for the concatenation of `pieces`, which is never made (a large page need not be
+// held twice).
+void write_pieces_file(const std::string& target, const std::vector<std::string_view>& pieces);
 
 // Writes `text` to the file `target` atomically.
 void write_text_file(const std::string& target, const std::string& text);

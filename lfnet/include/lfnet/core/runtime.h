@@ -26,7 +26,8 @@ bool configure_allocator();
 // Returns the memory malloc holds free to the system (glibc's malloc_trim; nothing elsewhere).
 // With configure_allocator's settings freed blocks stay in the heap for reuse, so a command
 // that goes from one large phase to another (reconstruct, then write) calls this between them:
-// what the last phase freed then does not add to the next one's peak.
+// what the last phase freed then does not add to the next one's peak. Does nothing while less
+// than 256 MB is free.
 void release_free_memory();
 
 // "cpu" or "cuda" (or "cuda:K") as a device. Throws ConfigError for other names and for CUDA
