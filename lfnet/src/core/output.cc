@@ -165,14 +165,15 @@ void write_file_atomically(const std::string& target,
   if (durable) sync_path(folder_of(path), O_RDONLY | O_DIRECTORY);
 }
 
-void write_bytes_file(const std::string& target, std::string_view bytes, bool durable) {
+void write_pieces_file(const std::string& target, const std::vector<std::string_view>& pieces,
+                       bool durable) {
   write_file_atomically(
       target,
       [&](const std::string& tmp) {
         const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
         if (fd < 0) throw IoError("cannot write " + target + ": " + std::strerror(errno));
         try {
-          write_all(fd, bytes, target);
+          for (const auto piece : pieces) write_all(fd, piece, target);
         } catch (...) {
           ::close(fd);
           throw;
@@ -182,18 +183,8 @@ void write_bytes_file(const std::string& target, std::string_view bytes, bool du
       durable);
 }
 
-void write_pieces_file(const std::string& target, const std::vector<std::string_view>& pieces) {
-  write_file_atomically(target, [&](const std::string& tmp) {
-    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) throw IoError("cannot write " + target + ": " + std::strerror(errno));
-    try {
-      for (const auto piece : pieces) write_all(fd, piece, target);
-    } catch (...) {
-      ::close(fd);
-      throw;
-    }
-    if (::close(fd) != 0) throw IoError("cannot write " + target + ": " + std::strerror(errno));
-  });
+void write_bytes_file(const std::string& target, std::string_view bytes, bool durable) {
+  write_pieces_file(target, {bytes}, durable);
 }
 
 void write_text_file(const std::string& target, const std::string& text) {

@@ -35,7 +35,8 @@ void write_file_atomically(const std::string& target,
 void write_bytes_file(const std::string& target, std::string_view bytes, bool durable = false);
 // The same for the concatenation of `pieces`, which is never made (a large page need not be
 // held twice).
-void write_pieces_file(const std::string& target, const std::vector<std::string_view>& pieces);
+void write_pieces_file(const std::string& target, const std::vector<std::string_view>& pieces,
+                       bool durable = false);
 
 // Writes `text` to the file `target` atomically.
 void write_text_file(const std::string& target, const std::string& text);
