@@ -103,12 +103,24 @@ LightField LightField::grey() const {
   return LightField(y.unsqueeze(axis::kC));
 }
 
-LightField LightField::window(AngularRange u, AngularRange v) const {
-  LFNET_CHECK(u.begin >= 0 && u.end <= rows() && u.size() > 0 && v.begin >= 0 && v.end <= cols() &&
+namespace {
+// The views [u.begin, u.end) x [v.begin, v.end) of `data` (C, U, V, H, W), checked to fit.
+torch::Tensor window_of(const torch::Tensor& data, AngularRange u, AngularRange v) {
+  const int64_t rows = data.size(axis::kU), cols = data.size(axis::kV);
+  LFNET_CHECK(u.begin >= 0 && u.end <= rows && u.size() > 0 && v.begin >= 0 && v.end <= cols &&
                   v.size() > 0,
               "angular window rows ", u.begin + 1, ":", u.end, ", columns ", v.begin + 1, ":",
-              v.end, " (1-based) does not fit the ", rows(), "x", cols(), " grid");
-  return LightField(data_.slice(axis::kU, u.begin, u.end).slice(axis::kV, v.begin, v.end));
+              v.end, " (1-based) does not fit the ", rows, "x", cols, " grid");
+  return data.slice(axis::kU, u.begin, u.end).slice(axis::kV, v.begin, v.end);
+}
+}  // namespace
+
+LightField LightField::window(AngularRange u, AngularRange v) const {
+  return LightField(window_of(data_, u, v));
+}
+
+LightFieldViews LightFieldViews::window(AngularRange u, AngularRange v) const {
+  return LightFieldViews(window_of(data_, u, v));
 }
 
 LightField LightField::central(int64_t n) const {

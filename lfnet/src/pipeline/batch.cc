@@ -227,7 +227,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.tile = a.tile;
     LightFieldSources sources;
     sources.light_fields = {item.path};
-    // As evaluate: a grey truth of 8- or 16-bit views in 16-bit codes.
+    // As evaluate: a grey truth of 16-bit views in 16-bit codes.
     truths = load_sources(sources, phi->rows(), phi->cols(), false, !a.cfa.empty(), a.cfa.empty());
     if (!a.cfa.empty()) cfa = optics::ColourFilterArray::parse(a.cfa);
   } catch (const std::exception& e) {

@@ -276,7 +276,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
-  // A grey truth of 8- or 16-bit views is held in 16-bit codes, as the estimate is.
+  // A grey truth of 16-bit views is held in 16-bit codes, as the estimate is.
   const auto truths =
       load_sources(sources, phi->rows(), phi->cols(), false, cfa.has_value(), !cfa.has_value());
 

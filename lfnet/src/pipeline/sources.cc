@@ -61,11 +61,7 @@ std::pair<AngularRange, AngularRange> view_window(const LightFieldViews& lf,
     return {{u0, u0 + rows}, {v0, v0 + cols}};
   }
   auto [ru, rv] = parse_views(views);
-  LFNET_CHECK_AS(ConfigError,
-                 ru.begin >= 0 && ru.end <= lf.rows() && ru.size() > 0 && rv.begin >= 0 &&
-                     rv.end <= lf.cols() && rv.size() > 0,
-                 "angular window rows ", ru.begin + 1, ":", ru.end, ", columns ", rv.begin + 1, ":",
-                 rv.end, " (1-based) does not fit the ", lf.rows(), "x", lf.cols(), " grid");
+  lf.window(ru, rv);  // that it fits the grid, before its size
   LFNET_CHECK_AS(ConfigError, ru.size() == rows && rv.size() == cols, "views ", views, " select ",
                  ru.size(), "x", rv.size(), " views but the Phi codes ", rows, "x", cols);
   return {ru, rv};
@@ -101,13 +97,9 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
       const auto orientation = AngularOrientation::parse(sources.orient, "orient");
       const auto views = reorient(io::read_light_field_views(dir, 0, sources.layout), orientation);
       check_folder_parallax(dir, views, "orient");
-      if (views.coded()) {  // grey views of 8 or 16 bits, held in 16-bit codes
+      if (views.coded()) {  // grey 16-bit views, held in 16-bit codes
         const auto [ru, rv] = view_window(views, sources.views, rows, cols, dir, whole);
-        out.push_back({name, LightField(),
-                       views.raw()
-                           .slice(axis::kU, ru.begin, ru.end)
-                           .slice(axis::kV, rv.begin, rv.end)
-                           .contiguous()});
+        out.push_back({name, LightField(), views.window(ru, rv).raw().contiguous()});
         bar.advance();
         continue;
       }

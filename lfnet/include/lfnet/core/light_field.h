@@ -79,6 +79,7 @@ torch::Tensor decode_codes(const torch::Tensor& codes);
 // large estimate need not be held in float32.
 class LightFieldViews {
  public:
+  LightFieldViews() = default;            // none: undefined, as a default LightField
   LightFieldViews(const LightField& lf);  // NOLINT(google-explicit-constructor): a view of it
   // A (C, U, V, H, W) tensor of float32 values or of int16 codes.
   explicit LightFieldViews(const torch::Tensor& data);
@@ -101,6 +102,8 @@ class LightFieldViews {
   LightField decode() const;
   // The tensor as held: float32 values or int16 codes.
   const torch::Tensor& raw() const { return data_; }
+  // The views [u.begin, u.end) x [v.begin, v.end), not copied (LightField::window's check).
+  LightFieldViews window(AngularRange u, AngularRange v) const;
   std::string shape_string() const;
 
  private:

@@ -76,9 +76,9 @@ bool holds_view_names(const std::string& dir);
 LightField read_light_field(const std::string& dir, int threads = 0,
                             const std::string& layout = "");
 
-// read_light_field for a command that only reads the views: a folder of grey views whose values
-// 16-bit codes hold exactly (8- and 16-bit files) is held in codes, half the memory; any other
-// folder in float32, as read_light_field reads it.
+// read_light_field for a command that only reads the views: a folder of grey 16-bit views, whose
+// values 16-bit codes hold exactly, is held in codes, half the memory; any other folder (8-bit,
+// colour, float) in float32, as read_light_field reads it.
 LightFieldViews read_light_field_views(const std::string& dir, int threads = 0,
                                        const std::string& layout = "");
 

@@ -45,7 +45,7 @@ struct ReconstructRequest {
 
 // A reconstruction and its record (method, model, sensor, stride, seconds, phi, mode, shape).
 struct Reconstruction {
-  LightFieldViews lf{LightField(torch::zeros({1, 1, 1, 1, 1}))};  // float32 or 16-bit codes
+  LightFieldViews lf;  // float32 or 16-bit codes
   nlohmann::json record;
 };
 

@@ -65,7 +65,7 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
 // `whole_grids`, folders without a `views` window keep every view (at least rows x cols), for
 // a data set that draws its own angular windows.
 // With `colour`, light fields keep their colour channels (a grey folder stays grey). With
-// `coded`, for commands that only simulate and score, grey folders of 8- or 16-bit views are held
+// `coded`, for commands that only simulate and score, grey folders of 16-bit views are held
 // in 16-bit codes (NamedLightField::codes), half the memory.
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
                                           int64_t cols, bool whole_grids = false,
