@@ -107,7 +107,7 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     } else {
       lf = read_oriented(dir, sources.orient, "orient", sources.layout);
     }
-    out.push_back({name, select_views(lf, sources.views, rows, cols, dir, colour, whole)});
+    out.push_back({name, select_views(lf, sources.views, rows, cols, dir, colour, whole), {}});
     bar.advance();
   }
   release_free_memory();  // the decoding's buffers, before the light fields are used
@@ -120,7 +120,8 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     }
     spec.color = colour;
     auto lf = scene::render_scene(spec, scene_render_options(path)).light_field;
-    out.push_back({fs::path(path).stem().string(), select_views(lf, "", rows, cols, path, colour)});
+    out.push_back(
+        {fs::path(path).stem().string(), select_views(lf, "", rows, cols, path, colour), {}});
     bar.advance();
   }
   if (sources.random_scenes > 0) {
@@ -133,7 +134,7 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
       const uint64_t seed = sources.random_seed + static_cast<uint64_t>(i);
       auto lf = scene::render_scene(scene::random_scene(seed, options), scene_render_options(""))
                     .light_field;
-      out.push_back({"random-" + std::to_string(seed), colour ? lf : lf.grey()});
+      out.push_back({"random-" + std::to_string(seed), colour ? lf : lf.grey(), {}});
       bar.advance();
     }
   }
