@@ -7,8 +7,10 @@
 #include "support/test_support.h"
 
 using lfnet::encode_codes;
+using lfnet::file_backed;
 using lfnet::PatchGrid;
 using lfnet::Stitcher;
+namespace test = lfnet::test;
 
 TEST_CASE("patch origins cover every pixel and end flush with the border", "[core][patches]") {
   CHECK(lfnet::patch_origins(20, 9, 9) == std::vector<int64_t>{0, 9, 11});
@@ -117,4 +119,15 @@ TEST_CASE("stitching into 16-bit codes encodes each finished row", "[core][patch
   const auto values = plain.result();
   REQUIRE(((values < 0) | (values > 1)).any().item<bool>());
   CHECK(torch::equal(codes, encode_codes(values)));
+
+  // File-backed, as a large light field's, each finished row out of memory: the same codes.
+  const test::FileBackedEverything everything;
+  Stitcher held(grid, 1, 2, 2, {}, /*coded=*/true);
+  for (int64_t r = 0; r < grid.rows(); r += 3) {
+    const int64_t e = std::min(grid.rows(), r + 3);
+    held.add(estimates.slice(0, r * grid.cols(), e * grid.cols()), r, e);
+  }
+  const auto held_codes = held.result();
+  CHECK(file_backed(held_codes) == test::FileBackedEverything::available());
+  CHECK(torch::equal(held_codes, codes));
 }

@@ -345,6 +345,14 @@ TEST_CASE("grey 16-bit views are read into 16-bit codes, exactly; others as floa
   REQUIRE(views.coded());
   // The codes decode to the very floats read_light_field gives.
   CHECK(torch::equal(views.decode().data(), io::read_light_field(tmp / "grey16").data()));
+  {
+    // Read into a file-backed tensor, as a large light field is, each view out of memory once
+    // placed: the same codes.
+    const lfnet::test::FileBackedEverything everything;
+    const auto held = io::read_light_field_views(tmp / "grey16");
+    CHECK(lfnet::file_backed(held.raw()) == lfnet::test::FileBackedEverything::available());
+    CHECK(torch::equal(held.raw(), views.raw()));
+  }
   // 8-bit views are not held in codes (their floats are k / 255 as read, not a code's value),
   // nor colour views, nor float ones.
   io::write_light_field(grey, tmp / "grey8", {"png", 8});

@@ -203,7 +203,7 @@ TEST_CASE("reconstruct_acquisition with pinv equals the solver run directly", "[
 TEST_CASE("evaluate_method scores the registry's methods and the no-parallax baseline",
           "[pipeline]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
-  pipeline::NamedLightField truth{"noise", LightField(torch::rand({1, 5, 5, 18, 18}))};
+  pipeline::NamedLightField truth{"noise", LightField(torch::rand({1, 5, 5, 18, 18})), {}};
   pipeline::MethodContext context;
   context.phi = phi.get();
   const auto o = pipeline::make_eval_options(optics::SimulationMode::kSensor, 0.0, 0, 5, 256, false,
@@ -226,7 +226,7 @@ TEST_CASE("a truth held in 16-bit codes is simulated in bands and scores as its 
   // Views wide enough that the simulation takes several bands of rows (about 2^22 values each,
   // starting on the code's period).
   const auto codes = encode_codes(torch::rand({1, 5, 5, 160, 2100}));
-  const pipeline::NamedLightField plain{"plain", LightField(decode_codes(codes))};
+  const pipeline::NamedLightField plain{"plain", LightField(decode_codes(codes)), {}};
   const pipeline::NamedLightField coded{"coded", LightField(), codes};
   REQUIRE(coded.views().coded());
   for (const std::string name : {"asp:2", "mask:2"}) {
@@ -244,6 +244,20 @@ TEST_CASE("a truth held in 16-bit codes is simulated in bands and scores as its 
     CHECK(np["psnr_db"].get<double>() ==
           pipeline::evaluate_method(plain, "no-parallax", context, o, nullptr, false)["psnr_db"]
               .get<double>());
+    // File-backed, as a large light field's: out of memory while the method runs and read back
+    // a band at a time, truth and estimate score alike and the truth is unchanged.
+    auto oc = o;
+    oc.reconstruct.coded = true;  // the estimate in codes too
+    const auto ref = pipeline::evaluate_method(coded, "pinv", context, oc, nullptr, false);
+    const test::FileBackedEverything everything;
+    const pipeline::NamedLightField held{"held", LightField(), file_backed_copy(codes)};
+    CHECK(file_backed(held.codes) == test::FileBackedEverything::available());
+    torch::Tensor estimate;
+    const auto c = pipeline::evaluate_method(held, "pinv", context, oc, &estimate, false);
+    CHECK(file_backed(estimate) == test::FileBackedEverything::available());
+    CHECK(c["psnr_db"].get<double>() == ref["psnr_db"].get<double>());
+    CHECK(c["ssim"].get<double>() == ref["ssim"].get<double>());
+    CHECK(torch::equal(held.codes, codes));
   }
 }
 
@@ -280,7 +294,7 @@ TEST_CASE("a method with options registered from outside is read and run like th
   recon::register_method(std::make_unique<GainPinvMethod>());
   CHECK(recon::methods_with_options() == "dict, pinv-nlm, gain-pinv");
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
-  pipeline::NamedLightField truth{"flat", LightField(torch::full({1, 5, 5, 18, 18}, 0.4))};
+  pipeline::NamedLightField truth{"flat", LightField(torch::full({1, 5, 5, 18, 18}, 0.4)), {}};
   pipeline::MethodContext context;
   context.phi = phi.get();
   const auto o = pipeline::make_eval_options(optics::SimulationMode::kSensor, 0.0, 0, 9, 256, false,
@@ -324,7 +338,7 @@ TEST_CASE("shot and read noise are recorded as their equivalent Gaussian sigma",
     for (const std::string method : {"pinv", "pinv-nlm", "no-parallax"}) {
       if (method == "pinv-nlm" && mode == optics::SimulationMode::kPerPatch) continue;
       INFO(method << " " << optics::to_string(mode));
-      const pipeline::NamedLightField truth{"lf", lf};
+      const pipeline::NamedLightField truth{"lf", lf, {}};
       const auto record = pipeline::evaluate_method(truth, method, context, o, nullptr, false);
       sigmas.push_back(record.at("equivalent_sigma").get<double>());
       CHECK(sigmas.back() == Approx(want).epsilon(0.05));
@@ -482,8 +496,8 @@ TEST_CASE("simulate's inputs: the window, the Phi on it, the effects, and the Ph
   input = pipeline::load_simulate_input(source);
   CHECK(input.lf.rows() == 3);
   CHECK(input.lf.cols() == 4);
-  CHECK(pipeline::window_size("1:3,1:4") == std::pair<int64_t, int64_t>{3, 4});
-  CHECK(pipeline::window_size("") == std::pair<int64_t, int64_t>{5, 5});
+  CHECK((pipeline::window_size("1:3,1:4") == std::pair<int64_t, int64_t>{3, 4}));
+  CHECK((pipeline::window_size("") == std::pair<int64_t, int64_t>{5, 5}));
   const auto spec = pipeline::phi_for_window("mask:2", 3, 4);
   CHECK(spec.rows == 3);
   CHECK(spec.cols == 4);

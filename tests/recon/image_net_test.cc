@@ -72,6 +72,12 @@ TEST_CASE("an untrained lfnet net returns the per-pixel pseudo-inverse of the pi
       const auto codes = recon::reconstruct_sensor_tiled(net, sensor, tile, true, 0.0, {}, true);
       REQUIRE(codes.scalar_type() == torch::kInt16);
       CHECK(torch::equal(codes, encode_codes(est)));
+      // File-backed, as a large light field's, each finished row of tiles out of memory: the
+      // same codes.
+      const test::FileBackedEverything everything;
+      const auto held = recon::reconstruct_sensor_tiled(net, sensor, tile, true, 0.0, {}, true);
+      CHECK(lfnet::file_backed(held) == test::FileBackedEverything::available());
+      CHECK(torch::equal(held, codes));
     }
     CHECK_THROWS_WITH(recon::reconstruct_sensor_tiled(net, sensor, 8, false, 0.0, {}, true),
                       Catch::Contains("clamped"));

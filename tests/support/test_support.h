@@ -10,6 +10,7 @@
 #include <iostream>
 #include <string>
 
+#include "lfnet/core/file_backed.h"
 #include "lfnet/core/light_field.h"
 
 // Ends the running test case as skipped, with `reason` in its output: CTest reports it as
@@ -22,6 +23,18 @@
   } while (false)
 
 namespace lfnet::test {
+
+// For the object's life every tensor that may be file-backed is (core/file_backed.h's
+// threshold 0), so that small light fields take the paths of large ones.
+struct FileBackedEverything {
+  size_t old = file_backed_threshold();
+  FileBackedEverything() { set_file_backed_threshold(0); }
+  ~FileBackedEverything() { set_file_backed_threshold(old); }
+  FileBackedEverything(const FileBackedEverything&) = delete;
+  FileBackedEverything& operator=(const FileBackedEverything&) = delete;
+  // Whether a temporary folder on a disk can hold one here (else nothing is file-backed).
+  static bool available() { return file_backed(file_backed_empty({1}, torch::kInt16, 0)); }
+};
 
 // Fails the current test with the first index where |got - want| > atol + rtol * |want|.
 void require_close(const torch::Tensor& got, const torch::Tensor& want, double atol,

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_backed.h"
 
 namespace lfnet {
 
@@ -48,6 +49,16 @@ torch::Tensor decode_codes(const torch::Tensor& codes) {
   return codes.to(torch::kFloat32).add_(kCodeOffset).mul_(static_cast<float>(1.0 / kCodeScale));
 }
 
+namespace {
+// The codes decoded; a file-backed light field's pages leave memory once read
+// (core/file_backed.h), so that going through its views holds one view at a time.
+torch::Tensor decoded_once(const torch::Tensor& codes) {
+  auto values = decode_codes(codes);
+  page_out(codes);
+  return values;
+}
+}  // namespace
+
 LightFieldViews::LightFieldViews(const LightField& lf) : data_(lf.data()) {}
 
 LightFieldViews::LightFieldViews(const torch::Tensor& data) : data_(data) {
@@ -62,7 +73,7 @@ torch::Tensor LightFieldViews::view(int64_t u, int64_t v) const {
   LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
               rows(), "x", cols(), " grid");
   auto view = data_.select(axis::kU, u).select(axis::kU, v);
-  return coded() ? decode_codes(view) : view;
+  return coded() ? decoded_once(view) : view;
 }
 
 torch::Tensor LightFieldViews::view_rows(int64_t u, int64_t v, int64_t y0, int64_t y1) const {
@@ -71,7 +82,7 @@ torch::Tensor LightFieldViews::view_rows(int64_t u, int64_t v, int64_t y0, int64
   LFNET_CHECK(0 <= y0 && y0 < y1 && y1 <= height(), "rows ", y0, "..", y1, " outside a view of ",
               height(), " rows");
   auto rows = data_.select(axis::kU, u).select(axis::kU, v).slice(1, y0, y1);
-  return coded() ? decode_codes(rows) : rows;
+  return coded() ? decoded_once(rows) : rows;
 }
 
 torch::Tensor LightFieldViews::view_bits(int64_t u, int64_t v) const {
@@ -79,13 +90,14 @@ torch::Tensor LightFieldViews::view_bits(int64_t u, int64_t v) const {
   LFNET_CHECK(u >= 0 && u < rows() && v >= 0 && v < cols(), "view (", u, ", ", v, ") outside the ",
               rows(), "x", cols(), " grid");
   // k - 32768 in two's complement is k with its top bit flipped.
-  return data_.select(axis::kU, u)
-      .select(axis::kU, v)
-      .bitwise_xor(static_cast<int64_t>(std::numeric_limits<int16_t>::min()));
+  const auto codes = data_.select(axis::kU, u).select(axis::kU, v);
+  auto bits = codes.bitwise_xor(static_cast<int64_t>(std::numeric_limits<int16_t>::min()));
+  page_out(codes);
+  return bits;
 }
 
 LightField LightFieldViews::decode() const {
-  return LightField(coded() ? decode_codes(data_) : data_);
+  return LightField(coded() ? decoded_once(data_) : data_);
 }
 
 std::string LightFieldViews::shape_string() const {

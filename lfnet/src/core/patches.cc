@@ -1,6 +1,7 @@
 #include "lfnet/core/patches.h"
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_backed.h"
 #include "lfnet/core/light_field.h"
 
 namespace lfnet {
@@ -65,8 +66,11 @@ Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_
   } else {
     weight_ = torch::ones({grid.patch_h() * grid.patch_w()}, opts);
   }
-  out_ = torch::empty({channels, rows, cols, grid.height(), grid.width()},
-                      coded ? torch::kInt16 : torch::kFloat32);
+  // Codes of a large light field are file-backed, and finished rows leave memory
+  // (core/file_backed.h).
+  out_ = coded
+             ? file_backed_empty({channels, rows, cols, grid.height(), grid.width()}, torch::kInt16)
+             : torch::empty({channels, rows, cols, grid.height(), grid.width()});
   sum_ = torch::zeros({channels, rows, cols, 0}, opts);
   count_ = torch::zeros({0}, opts);
 }
@@ -79,6 +83,7 @@ void Stitcher::flush(int64_t until) {
   LFNET_CHECK(count.min().item<double>() > 0, "stitching left pixels without any estimate");
   auto rows = (sum_.slice(3, 0, n * w) / count).reshape({channels_, rows_, cols_, n, w});
   out_.slice(3, top_, until).copy_(coded_ ? encode_codes(rows) : rows);
+  page_out(out_);  // every row above `until` is final
   sum_ = sum_.slice(3, n * w);
   count_ = count_.slice(0, n * w);
   top_ = until;

@@ -4,6 +4,7 @@
 #include <optional>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_backed.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/metrics.h"
 #include "lfnet/core/progress.h"
@@ -176,6 +177,9 @@ EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const 
                : optics::perturbed_forward(phi, options.camera_error, truth.decode().data()[0]),
         options.effects, options.seed);
     signal = sensor.mean().item<double>();
+    // A file-backed truth (core/file_backed.h) leaves memory while the method runs, and comes
+    // back from the file when it is scored.
+    page_out(truth.raw());
     release_free_memory();  // the simulation's working memory, before the reconstruction's
     clock.reset();          // time the reconstruction, not the simulation
     if (image) {

@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_backed.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/parallel.h"
 #include "lfnet/io/sensor_io.h"
@@ -515,7 +516,7 @@ LightFieldViews read_light_field_views(const std::string& dir, int threads,
   }
   const auto first = read_image(layout.views[0].path);
   const int64_t h = first.size(1), w = first.size(2);
-  auto codes = torch::empty({1, layout.rows, layout.cols, h, w}, torch::kInt16);
+  auto codes = file_backed_empty({1, layout.rows, layout.cols, h, w}, torch::kInt16);  // when large
   std::vector<std::pair<double, double>> range(static_cast<size_t>(n));
   std::atomic<bool> exact{true};
   auto place = [&](int64_t i, const torch::Tensor& image) {
@@ -524,7 +525,9 @@ LightFieldViews read_light_field_views(const std::string& dir, int threads,
     auto code = encode_codes(image);
     if (!torch::equal(decode_codes(code), image)) exact = false;  // not 16-bit values
     const auto& view = layout.views[static_cast<size_t>(i)];
-    codes.index({torch::indexing::Slice(), view.u, view.v}).copy_(code);
+    auto place = codes.index({torch::indexing::Slice(), view.u, view.v});
+    place.copy_(code);
+    page_out(place);  // a file-backed light field holds no view in memory once it is placed
   };
   place(0, first);
   parallel_chunks(

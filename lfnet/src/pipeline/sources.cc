@@ -7,6 +7,7 @@
 #include <set>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_backed.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
@@ -99,7 +100,9 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
       check_folder_parallax(dir, views, "orient");
       if (views.coded()) {  // grey 16-bit views, held in 16-bit codes
         const auto [ru, rv] = view_window(views, sources.views, rows, cols, dir, whole);
-        out.push_back({name, LightField(), views.window(ru, rv).raw().contiguous()});
+        // A large one in a temporary file, so that phases that do not read it can give its
+        // memory back (core/file_backed.h).
+        out.push_back({name, LightField(), file_backed_copy(views.window(ru, rv).raw())});
         bar.advance();
         continue;
       }

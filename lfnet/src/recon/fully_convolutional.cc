@@ -7,6 +7,7 @@
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_backed.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/recon/methods.h"
 
@@ -131,8 +132,10 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   // forward_image, the image itself is not copied.
   const auto image = sensor.to(torch::kFloat32);
   const int64_t colours = o.colours();
-  auto out = torch::empty({colours, o.patch.rows, o.patch.cols, h, w},
-                          coded ? torch::kInt16 : torch::kFloat32);
+  // Codes of a large light field are file-backed, and each finished row of tiles leaves memory
+  // (core/file_backed.h).
+  auto out = coded ? file_backed_empty({colours, o.patch.rows, o.patch.cols, h, w}, torch::kInt16)
+                   : torch::empty({colours, o.patch.rows, o.patch.cols, h, w});
   int64_t step = 0, done = 0;
   const auto tiles = nn::image_tiles(tiling, h, w, tile, &step);
   for (const auto& c : tiles) {
@@ -154,6 +157,7 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
           .slice(4, c.x0, c.x0 + tw)
           .copy_(coded ? encode_codes(part) : part);
     }
+    if (c.x0 + step >= wp) page_out(out);  // the rows of tiles so far are final
     if (progress) progress(++done, static_cast<int64_t>(tiles.size()));
   }
   if (clamp && !coded) out.clamp_(0.0, 1.0);

@@ -76,7 +76,8 @@ torch::Tensor decode_codes(const torch::Tensor& codes);
 
 // The views of a light field (C, U, V, H, W) held either as float32 values (a LightField) or as
 // 16-bit codes, one float32 view at a time: what scores, writers and previews read, so that a
-// large estimate need not be held in float32.
+// large estimate need not be held in float32. Codes may be file-backed (core/file_backed.h):
+// then the pages of a view, or band of rows, leave memory once it has been read.
 class LightFieldViews {
  public:
   LightFieldViews() = default;            // none: undefined, as a default LightField
