@@ -225,21 +225,35 @@ colour() {
 
 # Calibration error (docs/acquisition.md, "Calibration error"): on the light fields of the
 # cross-scene benchmark, the sensor image of a camera whose ASP is off (modulation depth
-# -10 % and +10 %, angular response shifted by 0.1 and 0.25 view, 10 % vignetting), each
-# reconstruction told the nominal Phi: the default trained on the nominal Phi alone against the
-# one trained with calibration errors (dataset.calibration), beside pinv and no-parallax.
+# -10 % and +10 %, angular response shifted by 0.1 and 0.25 view, 10 % vignetting, and that
+# vignetting divided out by the camera's flat field from its white frame), each reconstruction
+# told the nominal Phi: the default trained on the nominal Phi alone against the one trained with
+# calibration errors (dataset.calibration), beside pinv and no-parallax.
 calibration() {
-  local tmp i error
+  local tmp work i error size
   tmp=$(mktemp)
+  work=$(mktemp -d)
   need_model models/lfnet-asp-n2-robust.ckpt
+  local vignetting='{"vignetting": 0.1}'
   local errors=('' '{"depth": -0.1}' '{"depth": 0.1}' '{"angular_shift_u": 0.1}'
-    '{"angular_shift_u": 0.25}' '{"vignetting": 0.1}')
+    '{"angular_shift_u": 0.25}' "$vignetting" flat)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor)
+    # The vignetted camera's white frame, of the light field's size, for its flat field.
+    rm -rf "$work/acq" "$work/white"
+    "$lfnet" --log-level warn simulate "${heldout[@]:i:2}" --phi asp:2 --out "$work/acq"
+    size=$("$py" -c 'import json, sys; l = json.load(open(sys.argv[1]))["light_field"]
+print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
+    "$lfnet" --log-level warn simulate --white "$size" --phi asp:2 --camera-error "$vignetting" \
+      --out "$work/white"
     record "$tmp" --phi asp:2 "${src[@]}" --method no-parallax
     for error in "${errors[@]}"; do
       local camera=()
-      [[ -n $error ]] && camera=(--camera-error "$error")
+      if [[ $error == flat ]]; then
+        camera=(--camera-error "$vignetting" --flat-field "$work/white")
+      elif [[ -n $error ]]; then
+        camera=(--camera-error "$error")
+      fi
       record "$tmp" --phi asp:2 "${src[@]}" --method pinv "${camera[@]}"
       for name in lfnet-asp-n2 lfnet-asp-n2-robust; do
         VARIANT=$name record "$tmp" --model models/$name.ckpt "${src[@]}" --method net \
@@ -248,6 +262,7 @@ calibration() {
     done
   done
   mv "$tmp" results/calibration/records.jsonl
+  rm -rf "$work"
 }
 
 # Learned codes (docs/training.md, "Learned codes"): at N = 2, one lfnet network (32 channels, 3

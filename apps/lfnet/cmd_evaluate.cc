@@ -27,7 +27,7 @@ void run_evaluate(EvaluateArgs& a) {
   auto& q = a.request;
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = {q.lf, q.scene, q.model, q.dictionary, q.effects};
+  policy.inputs = {q.lf, q.scene, q.model, q.dictionary, q.effects, q.flat_field};
   if (!a.out.empty()) check_output_folder(a.out, policy);
   if (!a.json.empty()) {
     OutputFolderPolicy json_policy = policy;
@@ -109,6 +109,10 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
                   "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
                   "vignetting; docs/acquisition.md)");
+  cmd->add_option("--flat-field", q.flat_field,
+                  "the camera's white frame (an acquisition folder, or an image of its N "
+                  "channels): its gain across the sensor, such as vignetting, is divided out "
+                  "(docs/acquisition.md, \"Flat field\")");
   add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
   cmd->add_option("--method", q.method,
                   recon::method_list() + " (default net with --model, pinv without)");

@@ -28,7 +28,8 @@ void run_reconstruct(const ReconstructArgs& a) {
   OutputFolderPolicy policy;
   policy.force = a.force;
   policy.inputs = split_paths(a.request.sensor);
-  policy.inputs.insert(policy.inputs.end(), {a.request.model, a.request.dictionary, a.request.phi});
+  policy.inputs.insert(policy.inputs.end(), {a.request.model, a.request.dictionary, a.request.phi,
+                                             a.request.flat_field});
   check_output_folder(a.out, policy);
   // A whole-image model reconstructs colour channels, not patches (the model, read here to
   // know, is read once: the cache passes it on).
@@ -83,6 +84,10 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                 "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", q.post_filter,
                 "suppress artefacts that repeat with the patch stride (a spectral notch per view)");
+  cmd->add_option("--flat-field", q.flat_field,
+                  "the camera's white frame (an acquisition folder, or an image of its N "
+                  "channels): its gain across the sensor, such as vignetting, is divided out "
+                  "(docs/acquisition.md, \"Flat field\")");
   cmd->add_flag("--match-mean", q.match_mean,
                 "scale real measurements to the training data's mean (the paper's step)");
   cmd->add_flag("--force", a->force, "replace an existing output folder");

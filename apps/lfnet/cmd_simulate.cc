@@ -49,14 +49,19 @@ void run_simulate(const SimulateArgs& given) {
   const auto mode = args.mode;
   LFNET_CHECK_AS(ConfigError, args.patch >= 1 && args.stride >= 1,
                  "--patch and --stride must be >= 1");
-  const bool simulate = !source.lf.empty() || !source.scene.empty() || !args.out.empty();
-  LFNET_CHECK_AS(ConfigError, source.lf.empty() || source.scene.empty(),
-                 "give either --lf DIR or --scene SCENE.json, not both");
+  const bool simulate =
+      !source.lf.empty() || !source.scene.empty() || !source.white.empty() || !args.out.empty();
+  LFNET_CHECK_AS(ConfigError,
+                 (source.lf.empty() ? 0 : 1) + (source.scene.empty() ? 0 : 1) +
+                         (source.white.empty() ? 0 : 1) <=
+                     1,
+                 "give one of --lf DIR, --scene SCENE.json and --white HxW");
   LFNET_CHECK_AS(ConfigError, simulate || args.describe || !args.plot_weights.empty(),
                  "nothing to do: give --lf and --out to simulate, or --describe / "
                  "--plot-weights DIR");
-  LFNET_CHECK_AS(ConfigError, !simulate || !source.lf.empty() || !source.scene.empty(),
-                 "--lf DIR or --scene SCENE.json is required to simulate");
+  LFNET_CHECK_AS(ConfigError,
+                 !simulate || !source.lf.empty() || !source.scene.empty() || !source.white.empty(),
+                 "--lf DIR, --scene SCENE.json or --white HxW is required to simulate");
   LFNET_CHECK_AS(ConfigError, !simulate || !args.out.empty(), "--out DIR is required to simulate");
   optics::CalibrationError camera_error;  // read before any work
   if (!args.camera_error.empty()) {
@@ -122,6 +127,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
       "simulate", "Simulate coded capture of a light field with a Phi model and sensor effects");
   auto args = std::make_shared<SimulateArgs>();
   cmd->add_option("--lf", args->source.lf, "light field folder of sub-aperture images");
+  cmd->add_option("--white", args->source.white,
+                  "or a uniform white light field of HxW pixels: the camera's white frame, for "
+                  "--flat-field (docs/acquisition.md)");
   cmd->add_option("--scene", args->source.scene,
                   "procedural scene spec to render and simulate (configs/scenes)");
   cmd->add_option("--phi", args->phi,

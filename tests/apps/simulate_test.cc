@@ -205,6 +205,110 @@ TEST_CASE("simulate and evaluate take a camera whose Phi is off", "[app][simulat
   CHECK_FALSE(fs::exists(tmp / "pp"));
 }
 
+TEST_CASE("a white frame's flat field undoes vignetting in evaluate and reconstruct",
+          "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  // A smooth scene without parallax, which pinv recovers well from the nominal camera.
+  const auto y = torch::arange(40).unsqueeze(1).to(torch::kFloat32);
+  const auto x = torch::arange(48).unsqueeze(0).to(torch::kFloat32);
+  const auto image = 0.5 + 0.2 * torch::sin(x / 6) * torch::cos(y / 7);
+  lfnet::io::write_light_field(lfnet::LightField(image.expand({1, 5, 5, 40, 48}).contiguous()),
+                               tmp / "lf", {"png", 16});
+  std::string out;
+  const std::string camera_error = " --camera-error '{\"vignetting\": 0.3}'";
+  const std::string vignetted = " --phi asp:2" + camera_error;
+  // The camera's white frame: a uniform white light field of the sensor's size.
+  REQUIRE(run_command(simulate("--white 40x48" + vignetted + " --out " + (tmp / "white")), out) ==
+          0);
+  const auto white = lfnet::io::read_acquisition(tmp / "white");
+  CHECK(white.meta["source"]["kind"] == "white");
+  REQUIRE(white.sensor.sizes() == torch::IntArrayRef({1, 2, 40, 48}));
+  // Dimmer at the corners than at the centre, by about the vignetting.
+  const double corner = white.sensor[0].select(1, 0).select(1, 0).sum().item<double>();
+  const double centre = white.sensor[0].select(1, 20).select(1, 24).sum().item<double>();
+  CHECK(corner / centre == Approx(0.7).margin(0.04));
+
+  const std::string evaluate = lfnet_binary() + " --threads 1 --log-level warn evaluate --lf " +
+                               (tmp / "lf") + " --phi asp:2 --method pinv --stride 3";
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "nominal.json"), out) == 0);
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "off.json") + camera_error, out) == 0);
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "flat.json") + camera_error +
+                          " --flat-field " + (tmp / "white"),
+                      out) == 0);
+  const auto nominal = lfnet::read_json_file(tmp / "nominal.json")["psnr_db"].get<double>();
+  const auto off = lfnet::read_json_file(tmp / "off.json")["psnr_db"].get<double>();
+  const auto flat = lfnet::read_json_file(tmp / "flat.json");
+  CHECK(off < nominal - 3);
+  // Within the white frame's one scale: pinv's small bias here makes PSNR move by 0.1 dB for
+  // a change of scale of 1e-4.
+  CHECK(flat["psnr_db"].get<double>() == Approx(nominal).margin(0.3));
+  CHECK(flat["flat_field"] == true);
+
+  // reconstruct: the vignetted camera's sensor image, flat-fielded, is reconstructed as the
+  // nominal camera's.
+  const std::string lf = " --lf " + (tmp / "lf");
+  REQUIRE(run_command(simulate(lf + " --phi asp:2 --out " + (tmp / "acq")), out) == 0);
+  REQUIRE(run_command(simulate(lf + vignetted + " --out " + (tmp / "acq-off")), out) == 0);
+  const std::string reconstruct =
+      lfnet_binary() + " --threads 1 --log-level warn reconstruct --method pinv --stride 3";
+  REQUIRE(run_command(reconstruct + " --sensor " + (tmp / "acq") + " --out " + (tmp / "rec"),
+                      out) == 0);
+  REQUIRE(run_command(reconstruct + " --sensor " + (tmp / "acq-off") + " --out " +
+                          (tmp / "rec-flat") + " --flat-field " + (tmp / "white"),
+                      out) == 0);
+  const auto a = lfnet::io::read_light_field(tmp / "rec").data();
+  const auto b = lfnet::io::read_light_field(tmp / "rec-flat").data();
+  CHECK((a - b).abs().max().item<double>() < 2e-3);
+  CHECK(lfnet::read_json_file(
+            (fs::path(tmp / "rec-flat") / "reconstruction.json").string())["flat_field"] == true);
+  // batch applies it to every acquisition it finds.
+  REQUIRE(run_command(simulate(lf + vignetted + " --out " + (tmp / "items/acq-off")), out) == 0);
+  REQUIRE(run_command(lfnet_binary() + " --threads 1 --log-level warn batch --input " +
+                          (tmp / "items") + " --out " + (tmp / "batch") +
+                          " --methods pinv --stride 3 --flat-field " + (tmp / "white"),
+                      out) == 0);
+  const auto c = lfnet::io::read_light_field(tmp / "batch/acq-off/pinv").data();
+  CHECK(torch::equal(c, b));
+
+  // Behind a Bayer pattern: the white frame of the colour camera, and colour PSNR.
+  lfnet::io::write_light_field(lfnet::LightField(torch::stack({image, 1 - image, 0.8 * image})
+                                                     .unsqueeze(1)
+                                                     .unsqueeze(1)
+                                                     .expand({3, 5, 5, 40, 48})
+                                                     .contiguous()),
+                               tmp / "colour", {"png", 16});
+  REQUIRE(run_command(
+              simulate("--white 40x48 --cfa RGGB" + vignetted + " --out " + (tmp / "white-rggb")),
+              out) == 0);
+  const std::string colour = lfnet_binary() + " --threads 1 --log-level warn evaluate --lf " +
+                             (tmp / "colour") + " --phi asp:2 --cfa RGGB --method pinv --stride 3";
+  REQUIRE(run_command(colour + " --json " + (tmp / "c0.json"), out) == 0);
+  REQUIRE(run_command(colour + " --json " + (tmp / "c1.json") + camera_error, out) == 0);
+  REQUIRE(run_command(colour + " --json " + (tmp / "c2.json") + camera_error + " --flat-field " +
+                          (tmp / "white-rggb"),
+                      out) == 0);
+  const auto c0 = lfnet::read_json_file(tmp / "c0.json")["psnr_db"].get<double>();
+  const auto c1 = lfnet::read_json_file(tmp / "c1.json")["psnr_db"].get<double>();
+  const auto c2 = lfnet::read_json_file(tmp / "c2.json");
+  CHECK(c1 < c0 - 3);
+  CHECK(c2["psnr_db"].get<double>() == Approx(c0).margin(0.3));
+  CHECK(c2["flat_field"] == true);
+
+  // A white frame of another size or camera: one line, nothing written.
+  REQUIRE(run_command(simulate("--white 40x49 --phi asp:2 --out " + (tmp / "white-other")), out) ==
+          0);
+  CHECK(run_command(reconstruct + " --sensor " + (tmp / "acq-off") + " --out " + (tmp / "bad") +
+                        " --flat-field " + (tmp / "white-other"),
+                    out) != 0);
+  CHECK(out.find("--flat-field") != std::string::npos);
+  CHECK(std::count(out.begin(), out.end(), '\n') == 1);
+  CHECK_FALSE(fs::exists(tmp / "bad"));
+  CHECK(run_command(evaluate + " --flat-field " + (tmp / "nothing-here"), out) != 0);
+  CHECK(out.find("nothing-here") != std::string::npos);
+  CHECK(run_command(simulate("--white 40by48 --phi asp:2 --out " + (tmp / "w2")), out) != 0);
+  CHECK(out.find("--white") != std::string::npos);
+}
+
 TEST_CASE("a colour filter array: one sensor image, reconstructed and scored in colour",
           "[app][simulate]") {
   lfnet::test::TempDir tmp;

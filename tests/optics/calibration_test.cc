@@ -121,6 +121,49 @@ TEST_CASE("vignetting dims the corners by its share and spares the centre",
   CHECK(same_weights(y, direct, 1e-4));
 }
 
+TEST_CASE("a white frame's flat field undoes vignetting, whatever the exposure",
+          "[optics][calibration]") {
+  for (const std::string name : {"asp:2", "mask:2"}) {
+    INFO(name);
+    const auto phi = coded_by(name);
+    const int64_t h = 61, w = 83;
+    const auto nominal = lfnet::optics::nominal_white(*phi, h, w);
+    // The nominal camera's white frame, computed without the period's tiling.
+    CHECK(same_weights(nominal, phi->forward(torch::ones({5, 5, h, w})), 1e-5));
+    const auto error = error_of(R"({"vignetting": 0.1})");
+    // A white frame at 0.7 of white, through the vignetted camera.
+    const auto white = perturbed_forward(*phi, error, torch::full({5, 5, h, w}, 0.7));
+    const auto gain = lfnet::optics::flat_field_gain(white, nominal);
+    REQUIRE(gain.sizes() == torch::IntArrayRef({h, w}));
+    // 1 - 0.1 r^2, r over the half-diagonal: the fitted peak is the centre.
+    const double cy = h / 2.0, cx = w / 2.0;
+    const auto dy = (torch::arange(h, torch::kFloat64) + 0.5 - cy).square().unsqueeze(1);
+    const auto dx = (torch::arange(w, torch::kFloat64) + 0.5 - cx).square().unsqueeze(0);
+    const auto expected = 1 - 0.1 * (dy + dx) / (cy * cy + cx * cx);
+    CHECK(same_weights(gain.to(torch::kFloat64), expected, 1e-4));
+    CHECK(gain[0][0].item<double>() == Approx(0.9).margin(0.01));
+    // A scene through the vignetted camera, flat-fielded, is the nominal camera's.
+    torch::manual_seed(4);
+    const auto lf = torch::rand({5, 5, h, w});
+    const auto corrected =
+        lfnet::optics::apply_flat_field(perturbed_forward(*phi, error, lf), gain);
+    const auto nominal_sensor = phi->forward(lf);
+    CHECK((corrected - nominal_sensor).abs().max().item<double>() < 1e-4);
+    // Without the correction the corners are 10 % off.
+    CHECK((perturbed_forward(*phi, error, lf) - nominal_sensor).abs().max().item<double>() > 0.02);
+  }
+  const auto phi = coded_by("asp:2");
+  const auto nominal = lfnet::optics::nominal_white(*phi, 20, 30);
+  CHECK_THROWS_WITH(lfnet::optics::flat_field_gain(torch::ones({2, 20, 31}), nominal),
+                    Catch::Contains("white frame"));
+  CHECK_THROWS_WITH(lfnet::optics::flat_field_gain(torch::zeros({2, 20, 30}), nominal),
+                    Catch::Contains("no light"));
+  CHECK_THROWS_WITH(
+      lfnet::optics::apply_flat_field(torch::ones({2, 20, 30}), torch::ones({20, 31})),
+      Catch::Contains("same size"));
+  CHECK_THROWS_AS(lfnet::optics::nominal_white(*coded_by("random:2"), 18, 18), lfnet::ConfigError);
+}
+
 TEST_CASE("calibration errors refuse bad values and non-local codes", "[optics][calibration]") {
   CHECK_THROWS_WITH(error_of(R"({"vignetting": 1.5})"), Catch::Contains("vignetting"));
   CHECK_THROWS_WITH(error_of(R"({"depth": -1})"), Catch::Contains("depth"));

@@ -22,6 +22,9 @@ namespace lfnet {
 
 namespace {
 
+// The size from which tensors are file-backed by default (set_file_backed_threshold).
+std::atomic<size_t> threshold{kFileBackedMinBytes};
+
 // The live mappings: base address to length, for file_backed and page_out.
 std::mutex mappings_mutex;
 std::map<void*, size_t>& mappings() {
@@ -73,10 +76,6 @@ void* map_temporary(const std::string& dir, size_t bytes) {
 }
 #endif
 
-}  // namespace
-
-namespace {
-std::atomic<size_t> threshold{kFileBackedMinBytes};
 }  // namespace
 
 size_t file_backed_threshold() { return threshold.load(); }

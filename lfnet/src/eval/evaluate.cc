@@ -122,8 +122,9 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
   const auto& ro = options.reconstruct;
   ro.validate();
   const auto colour = optics::perturbed_forward(phi, options.camera_error, truth.data());
-  const auto sensor =
+  auto sensor =
       optics::apply_sensor_effects(optics::mosaic(colour, cfa)[0], options.effects, options.seed);
+  if (options.flat_field.defined()) sensor = optics::apply_flat_field(sensor, options.flat_field);
   const double signal = sensor.mean().item<double>();
   Stopwatch clock;  // the reconstruction and the demosaicing, not the simulation
   torch::Tensor estimate;
@@ -145,6 +146,7 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
   add_equivalent_sigma(record, options, signal);
   record["cfa"] = cfa.to_json();
   if (!options.camera_error.empty()) record["camera_error"] = options.camera_error.to_json();
+  if (options.flat_field.defined()) record["flat_field"] = true;
   record.update(colour_score(LightField(estimate), truth));
   return {estimate, record};
 }
@@ -168,6 +170,9 @@ EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const 
   LFNET_CHECK_AS(ConfigError,
                  options.camera_error.empty() || options.mode == optics::SimulationMode::kSensor,
                  "a camera error is simulated in sensor mode only");
+  LFNET_CHECK_AS(ConfigError,
+                 !options.flat_field.defined() || options.mode == optics::SimulationMode::kSensor,
+                 "a flat field corrects a sensor image: sensor mode only");
   if (options.mode == optics::SimulationMode::kSensor) {
     // The camera's own Phi (the nominal one without a camera error), then its effects. Views
     // in 16-bit codes are coded a band at a time where the Phi allows.
@@ -176,6 +181,8 @@ EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const 
         banded ? coded_forward(phi, truth)
                : optics::perturbed_forward(phi, options.camera_error, truth.decode().data()[0]),
         options.effects, options.seed);
+    // The camera's flat field, measured beforehand, undoes its gain across the sensor.
+    if (options.flat_field.defined()) sensor = optics::apply_flat_field(sensor, options.flat_field);
     signal = sensor.mean().item<double>();
     // A file-backed truth (core/file_backed.h) leaves memory while the method runs, and comes
     // back from the file when it is scored.
@@ -213,6 +220,7 @@ EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const 
   add_equivalent_sigma(record, options, signal);
   if (estimated) record["noise_sigma_estimated"] = *estimated;
   if (!options.camera_error.empty()) record["camera_error"] = options.camera_error.to_json();
+  if (options.flat_field.defined()) record["flat_field"] = true;
   record.update(score(est, truth));
   return {estimate, record};
 }

@@ -161,4 +161,71 @@ torch::Tensor perturbed_forward(const Phi& phi, const CalibrationError& error,
   return torch::cat(rows, -2);
 }
 
+torch::Tensor nominal_white(const Phi& phi, int64_t height, int64_t width) {
+  LFNET_CHECK_AS(ConfigError, phi.local(), "a flat field needs a local Phi; '", phi.spec().label(),
+                 "' is not");
+  const int64_t t = phi.period();
+  const auto tile = phi.pixel_weights(0, 0, t, t, torch::kFloat64).sum({1, 2});  // (N, t, t)
+  const auto rows = torch::arange(height).remainder(t);
+  const auto cols = torch::arange(width).remainder(t);
+  return tile.index_select(1, rows).index_select(2, cols).to(torch::kFloat32);
+}
+
+namespace {
+// The largest value, within the image, of the quadratic surface a + b x + c y + d x^2 + e x y +
+// f y^2 fitted by least squares to `ratio` (H, W) where `lit`: the brightest point of a smooth
+// gain, found without reading any one noisy pixel. Every pixel of a small image, every s-th
+// row and column of a large one.
+double fitted_peak(const torch::Tensor& ratio, const torch::Tensor& lit) {
+  using torch::indexing::None;
+  using torch::indexing::Slice;
+  const int64_t h = ratio.size(0), w = ratio.size(1);
+  const int64_t s = std::max<int64_t>(1, std::max(h, w) / 512);
+  auto opts = torch::TensorOptions().dtype(torch::kFloat64);
+  // Coordinates scaled to about [-1, 1], for a well-conditioned fit.
+  const double sy = std::max<double>(1, 0.5 * static_cast<double>(h));
+  const double sx = std::max<double>(1, 0.5 * static_cast<double>(w));
+  auto terms = [&](int64_t step) {
+    const auto y = ((torch::arange(0, h, step, opts) - sy) / sy).unsqueeze(1);
+    const auto x = ((torch::arange(0, w, step, opts) - sx) / sx).unsqueeze(0);
+    const auto ones = torch::ones({y.size(0), x.size(1)}, opts);
+    return torch::stack({ones, x * ones, y * ones, x * x * ones, x * y, y * y * ones}, -1);
+  };
+  const auto keep = lit.index({Slice(None, None, s), Slice(None, None, s)});
+  const auto a = terms(s).index({keep});  // (M, 6)
+  const auto b = ratio.index({Slice(None, None, s), Slice(None, None, s)}).index({keep});
+  if (a.size(0) < 6) return ratio.index({lit}).max().item<double>();
+  const auto coef = torch::linalg_solve(a.t().matmul(a), a.t().matmul(b));
+  const int64_t fine = std::max<int64_t>(1, std::max(h, w) / 1024);
+  return terms(fine).matmul(coef).max().item<double>();
+}
+}  // namespace
+
+torch::Tensor flat_field_gain(const torch::Tensor& white, const torch::Tensor& nominal) {
+  LFNET_CHECK_AS(ConfigError, white.dim() == 3 && white.sizes() == nominal.sizes(),
+                 "the white frame is ", white.sizes(), ", the camera's sensor image ",
+                 nominal.sizes(), ": a flat field needs a white frame of the same camera");
+  const auto measured = white.to(torch::kFloat64).sum(0);
+  const auto expected = nominal.to(torch::kFloat64).sum(0);
+  const auto lit = expected > 1e-9 * expected.abs().max().item<double>();
+  LFNET_CHECK_AS(ConfigError,
+                 lit.any().item<bool>() && measured.index({lit}).max().item<double>() > 0,
+                 "the white frame has no light: it cannot give a flat field");
+  auto ratio = torch::where(lit, measured / expected.clamp_min(1e-300), torch::ones_like(measured));
+  const double top = fitted_peak(ratio, lit);
+  LFNET_CHECK_AS(ConfigError, std::isfinite(top) && top > 0,
+                 "the white frame has no light: it cannot give a flat field");
+  // Pixels the nominal camera does not expose keep gain 1.
+  return torch::where(lit, ratio / top, torch::ones_like(ratio)).to(torch::kFloat32);
+}
+
+torch::Tensor apply_flat_field(const torch::Tensor& sensor, const torch::Tensor& gain) {
+  LFNET_CHECK_AS(ConfigError,
+                 gain.dim() == 2 && sensor.dim() >= 3 && sensor.size(-2) == gain.size(0) &&
+                     sensor.size(-1) == gain.size(1),
+                 "the flat field is ", gain.sizes(), ", the sensor image ", sensor.sizes(),
+                 ": the white frame must come from a sensor of the same size");
+  return sensor / gain.clamp_min(1e-3).to(sensor.scalar_type());
+}
+
 }  // namespace lfnet::optics

@@ -171,6 +171,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.options.window = a.window;
         q.post_filter = a.post_filter;
         q.match_mean = a.match_mean;
+        q.flat_field = a.flat_field;
         q.self_ensemble = a.self_ensemble;
         q.self_ensemble_passes = a.self_ensemble_passes;
         q.device = a.device;
@@ -180,7 +181,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
-        policy.inputs = {item.path, a.model, a.dictionary};
+        policy.inputs = {item.path, a.model, a.dictionary, a.flat_field};
         policy.force = a.resume;  // an output without its record is an unfinished attempt
         write_reconstruction(r, target, policy,
                              /*end_to_end=*/false);  // the batch's, not the item's
@@ -284,22 +285,25 @@ nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::stri
   auto absolute = [](const std::string& p) {
     return p.empty() ? p : fs::absolute(p).lexically_normal().string();
   };
-  return {{"input", absolute(a.in)},
-          {"methods", methods},
-          {"model", absolute(a.model)},
-          {"dictionary", absolute(a.dictionary)},
-          {"phi", a.phi},
-          {"method_options", a.method_options},
-          {"mode", optics::to_string(a.mode)},
-          {"noise", a.noise},
-          {"cfa", a.cfa},
-          {"seed", a.seed},
-          {"stride", a.stride},
-          {"window", a.window},
-          {"post_filter", a.post_filter},
-          {"match_mean", a.match_mean},
-          {"self_ensemble", a.self_ensemble},
-          {"self_ensemble_passes", a.self_ensemble_passes}};
+  nlohmann::json options = {{"input", absolute(a.in)},
+                            {"methods", methods},
+                            {"model", absolute(a.model)},
+                            {"dictionary", absolute(a.dictionary)},
+                            {"phi", a.phi},
+                            {"method_options", a.method_options},
+                            {"mode", optics::to_string(a.mode)},
+                            {"noise", a.noise},
+                            {"cfa", a.cfa},
+                            {"seed", a.seed},
+                            {"stride", a.stride},
+                            {"window", a.window},
+                            {"post_filter", a.post_filter},
+                            {"match_mean", a.match_mean},
+                            {"self_ensemble", a.self_ensemble},
+                            {"self_ensemble_passes", a.self_ensemble_passes}};
+  // Only when given, so that batches from before the option resume as they were.
+  if (!a.flat_field.empty()) options["flat_field"] = absolute(a.flat_field);
+  return options;
 }
 
 namespace {
@@ -366,7 +370,7 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   const auto manifest = batch_manifest(a, methods);
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = {a.in, a.model, a.dictionary};
+  policy.inputs = {a.in, a.model, a.dictionary, a.flat_field};
   if (a.resume) {
     check_resumable(a, manifest);
   } else {

@@ -276,6 +276,12 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   const auto phi = optics::make_phi(spec);
   context.phi = phi.get();
   context.dictionary = a.dictionary;
+  torch::Tensor flat_field;  // read before the light field
+  if (!a.flat_field.empty()) {
+    LFNET_CHECK_AS(ConfigError, a.mode == optics::SimulationMode::kSensor,
+                   "--flat-field corrects a sensor image: sensor mode only");
+    flat_field = read_flat_field(a.flat_field, *phi, cfa);
+  }
   // A grey truth of 16-bit views is held in 16-bit codes, as the estimate is.
   const auto truths =
       load_sources(sources, phi->rows(), phi->cols(), false, cfa.has_value(), !cfa.has_value());
@@ -285,6 +291,15 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   o.estimate_noise = a.estimate_noise;
   o.camera_error = camera_error;
   o.cfa = cfa;
+  if (flat_field.defined()) {
+    const auto views = truths[0].views();
+    LFNET_CHECK_AS(ConfigError,
+                   flat_field.size(0) == views.height() && flat_field.size(1) == views.width(),
+                   "--flat-field ", a.flat_field, " is a white frame of ", flat_field.size(0), "x",
+                   flat_field.size(1), " pixels; the light field's views are ", views.height(), "x",
+                   views.width());
+    o.flat_field = flat_field;
+  }
   // A grey estimate is held in 16-bit codes, what its files hold: half the memory (the scores
   // differ from float32's by far less than their printed digits).
   context.coded = o.reconstruct.coded = !cfa;

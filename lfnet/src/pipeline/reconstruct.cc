@@ -15,9 +15,11 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/io/viewer.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/optics/cfa.h"
 #include "lfnet/optics/noise_estimate.h"
 #include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/sources.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
 #include "lfnet/recon/post_filter.h"
@@ -106,6 +108,23 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
   }
   const auto phi = optics::make_phi(spec);
+  if (!a.flat_field.empty()) {
+    // The camera's gain across the sensor, measured by its white frame, divided out.
+    LFNET_CHECK_AS(ConfigError, acq.sensor.defined() && acq.sensor.size(0) == 1,
+                   "--flat-field corrects one sensor image (sensor mode, grey or behind a colour "
+                   "filter array); ",
+                   a.sensor, " is not one");
+    std::optional<optics::ColourFilterArray> behind;
+    if (acq.meta.contains("cfa")) {
+      behind = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + ":$.cfa");
+    }
+    const auto gain = read_flat_field(a.flat_field, *phi, behind);
+    try {
+      acq.sensor = optics::apply_flat_field(acq.sensor, gain);
+    } catch (const ConfigError& e) {
+      throw ConfigError("--flat-field " + a.flat_field + ": " + e.what());
+    }
+  }
   recon::ReconstructOptions o = a.options;
   recon::PatchSolver solver;
   recon::ImageSolver image;
@@ -271,6 +290,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
   if (cfa) r.record["cfa"] = cfa->to_json();
+  if (!a.flat_field.empty()) r.record["flat_field"] = true;
   if (model && needs == recon::MethodNeeds::kNetwork && model->noise_switch()) {
     r.record["noise_switch"] = model->noise_switch_record();
   }

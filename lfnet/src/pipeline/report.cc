@@ -82,11 +82,13 @@ std::string setting(const nlohmann::json& r, const std::string& key) {
   if (key == "camera_error") {
     // The fields of the camera's error that are not 0 ("" for a camera that is its Phi).
     std::string text;
-    if (!r.contains("camera_error")) return text;
+    if (!r.contains("camera_error") && !r.value("flat_field", false)) return text;
     for (const auto& [field, value] : r["camera_error"].items()) {
       if (!value.is_number() || value.get<double>() == 0) continue;
       text += (text.empty() ? "" : ", ") + field + " " + fmt("%+g", value.get<double>());
     }
+    // Corrected by the camera's flat field (--flat-field).
+    if (r.value("flat_field", false)) text += std::string(text.empty() ? "" : ", ") + "flat field";
     return text;
   }
   return "";

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <sstream>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -111,6 +112,23 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
 SimulateInput load_simulate_input(const SimulateSource& args) {
   SimulateInput in;
   LightField lf;
+  if (!args.white.empty()) {
+    // A white frame: every view of every pixel 1, on the window's grid (a flat field's input,
+    // docs/acquisition.md).
+    int64_t h = 0, w = 0;
+    char x = 0, extra = 0;
+    std::istringstream text(args.white);
+    LFNET_CHECK_AS(ConfigError,
+                   (text >> h >> x >> w) && x == 'x' && !(text >> extra) && h >= 1 && w >= 1 &&
+                       h <= 100000 && w <= 100000,
+                   "--white takes the sensor's size HxW, e.g. 593x840, not '", args.white, "'");
+    const auto [rows, cols] = window_size(args.views);
+    lf = LightField(torch::ones({args.color ? 3 : 1, rows, cols, h, w}));
+    in.source = {{"kind", "white"}, {"size", {h, w}}};
+    in.views = {{"rows", {1, rows}}, {"cols", {1, cols}}, {"source_grid", {rows, cols}}};
+    in.lf = lf;
+    return in;
+  }
   if (!args.scene.empty()) {
     scene::SceneSpec spec;
     try {

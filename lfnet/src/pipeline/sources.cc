@@ -12,6 +12,8 @@
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/io/sensor_io.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/scene/random_scene.h"
 #include "lfnet/scene/render.h"
 #include "lfnet/scene/scene_spec.h"
@@ -82,6 +84,37 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
   LightField lf = reorient(io::read_light_field(dir, 0, layout), orientation);
   check_folder_parallax(dir, lf, what);
   return lf;
+}
+
+torch::Tensor read_flat_field(const std::string& path, const optics::Phi& phi,
+                              const std::optional<optics::ColourFilterArray>& cfa,
+                              const std::string& option) {
+  torch::Tensor white;  // (N, H, W)
+  if (fs::is_directory(path)) {
+    io::Acquisition acq;
+    try {
+      acq = io::read_acquisition(path);
+    } catch (const IoError& e) {
+      throw IoError(option + ": " + e.what());
+    }
+    LFNET_CHECK_AS(ConfigError, acq.sensor.defined() && acq.sensor.size(0) == 1, option, " ", path,
+                   ": a white frame is a grey sensor image (an acquisition in sensor mode)");
+    white = acq.sensor[0];
+  } else {
+    LFNET_CHECK_AS(IoError, fs::exists(path), option, " ", path, ": no such file or folder");
+    white = io::read_image_channels(path);
+  }
+  LFNET_CHECK_AS(ConfigError, white.size(0) == phi.measurements(), option, " ", path, " has ",
+                 white.size(0), " measurement channel(s); the camera '", phi.spec().label(),
+                 "' takes ", phi.measurements());
+  try {
+    auto nominal = optics::nominal_white(phi, white.size(1), white.size(2));
+    // Behind a colour filter array: the code on each colour, then each pixel's own colours.
+    if (cfa) nominal = optics::mosaic(nominal.unsqueeze(0).expand({3, -1, -1, -1}), *cfa)[0];
+    return optics::flat_field_gain(white, nominal);
+  } catch (const ConfigError& e) {
+    throw ConfigError(option + " " + path + ": " + e.what());
+  }
 }
 
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,

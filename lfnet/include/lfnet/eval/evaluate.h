@@ -32,6 +32,9 @@ struct EvalOptions {
   // the sensor is simulated by the perturbed camera, the method reconstructs with the nominal
   // Phi. Empty: the camera is the Phi.
   optics::CalibrationError camera_error;
+  // The camera's flat field (H, W) (optics::flat_field_gain; sensor mode): the sensor image's
+  // measurements are divided by it before the method runs. Undefined: none.
+  torch::Tensor flat_field;
   // A single colour sensor behind this colour filter array (sensor mode, a colour truth): the
   // method reconstructs the mosaicked light field, each of its views then demosaiced; the
   // record scores colour (psnr_db, ssim) and luma (luma_psnr_db).

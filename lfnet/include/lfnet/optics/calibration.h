@@ -102,4 +102,25 @@ torch::Tensor perturbed_pixel_weights(const Phi& phi, const CalibrationError& er
 torch::Tensor perturbed_forward(const Phi& phi, const CalibrationError& error,
                                 const torch::Tensor& lf);
 
+// Flat fields (docs/acquisition.md, "Flat field"): what a gain across the sensor, such as
+// vignetting, does to every measurement of a pixel is undone by dividing by it, once it has been
+// measured. The measurement is a white frame: the sensor image (N, H, W) of a uniform light field
+// (a white diffuser, or `lfnet simulate --white HxW`) taken with the camera.
+
+// The nominal camera's sensor image (N, H, W) of the uniform light field of value 1: a local
+// Phi's weights summed over the views, tiled over the sensor by the code's period.
+torch::Tensor nominal_white(const Phi& phi, int64_t height, int64_t width);
+
+// The gain (H, W) of each sensor pixel from a white frame (N, H, W) of any exposure: the sum of
+// the pixel's measurements over the nominal camera's (`nominal`, from nominal_white), divided by
+// the peak of a quadratic surface fitted to that ratio by least squares, so that the brightest
+// part of the sensor (vignetting's optical centre) has gain 1 without reading any one noisy
+// pixel. A pixel whose nominal measurements are all 0 (a mask opaque at every shot) keeps gain 1.
+// Throws ConfigError when the shapes differ or the frame has no light.
+torch::Tensor flat_field_gain(const torch::Tensor& white, const torch::Tensor& nominal);
+
+// The sensor image (..., N, H, W) with each measurement divided by its pixel's gain (H, W)
+// (at least 1e-3). Throws ConfigError when the sizes differ, naming both.
+torch::Tensor apply_flat_field(const torch::Tensor& sensor, const torch::Tensor& gain);
+
 }  // namespace lfnet::optics

@@ -36,8 +36,9 @@ struct BatchOptions {
   std::string cfa;      // evaluations behind a colour filter array (a Bayer pattern or a JSON file)
   uint64_t seed = 0;    // noise seed of evaluations
   bool window = false;  // weight patch estimates by a smooth window when stitching
-  bool post_filter = false;          // suppress artefacts with the stride's period
-  bool match_mean = false;           // scale real measurements to the training mean
+  bool post_filter = false;  // suppress artefacts with the stride's period
+  bool match_mean = false;   // scale real measurements to the training mean
+  std::string flat_field;    // the camera's white frame, divided out of every acquisition; "" none
   bool self_ensemble = false;        // net with an lfnet checkpoint: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   bool force = false;                // write into an existing non-empty output folder

@@ -115,6 +115,7 @@ struct EvaluateRequest {
   std::string effects;          // sensor effects JSON file (shot, read, ...); noise on top
   bool estimate_noise = false;  // noise-aware methods are told the noise estimated, not the truth
   std::string camera_error;     // --camera-error: JSON or file (optics/calibration.h); "" none
+  std::string flat_field;       // --flat-field: the camera's white frame (read_flat_field); "" none
   std::string cfa;       // --cfa: a Bayer pattern or a JSON file (optics/cfa.h); "" a grey sensor
   uint64_t seed = 0;     // noise seed
   int64_t stride = 5;    // patch stride

@@ -25,6 +25,7 @@ struct ReconstructRequest {
   std::string model;                  // checkpoint for net, ae, cnn
   std::string dictionary;             // dictionary file for dict
   std::string method_options;         // --method-options: JSON or file, keyed by method
+  std::string flat_field;             // the camera's white frame (read_flat_field); "" none
   recon::ReconstructOptions options;  // stride (sensor mode), batch, window
   bool match_mean = false;            // scale the measurements to the training mean
   bool post_filter = false;           // suppress artefacts with the stride's period

@@ -47,6 +47,7 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
 struct SimulateSource {
   std::string lf;      // a light-field folder
   std::string scene;   // or a procedural scene spec to render
+  std::string white;   // or "HxW": a uniform white light field of that size, a white frame
   std::string views;   // angular window R0:R1,C0:C1, 1-based ("" = the central 5 x 5)
   std::string orient;  // reorientation of the folder's angular axes (docs/conventions.md)
   std::string layout;  // file-naming pattern of the folder (io::parse_layout)

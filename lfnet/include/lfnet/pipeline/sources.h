@@ -5,12 +5,15 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
+#include "lfnet/optics/cfa.h"
+#include "lfnet/optics/phi.h"
 #include "lfnet/scene/render.h"
 
 namespace lfnet::pipeline {
@@ -54,6 +57,14 @@ struct NamedLightField {
   // Its views, either way.
   LightFieldViews views() const { return codes.defined() ? LightFieldViews(codes) : lf; }
 };
+
+// The flat field (H, W) of a camera coded by `phi`, behind `cfa` if it has one
+// (optics::flat_field_gain), from its white frame at `path`: an acquisition folder in sensor
+// mode (`lfnet simulate --white HxW --out DIR` makes one), or an image of the camera's N
+// measurement channels. Throws ConfigError or IoError naming `option` and the file.
+torch::Tensor read_flat_field(const std::string& path, const optics::Phi& phi,
+                              const std::optional<optics::ColourFilterArray>& cfa = std::nullopt,
+                              const std::string& option = "--flat-field");
 
 // Reads a light-field folder and reorients its angular axes (`orient`, parsed as `what`: an
 // option or JSON path); warns once per folder when its horizontal and vertical parallax
