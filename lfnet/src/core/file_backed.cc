@@ -138,9 +138,9 @@ void page_out(const torch::Tensor& t) {
   // Whole pages only: the pages at either end may hold bytes of other rows or views. A shared
   // file mapping keeps its contents in the file: the pages are only unmapped here.
   const auto page = static_cast<uintptr_t>(sysconf(_SC_PAGESIZE));
-  const uintptr_t a = (reinterpret_cast<uintptr_t>(first) + page - 1) / page * page;
-  const uintptr_t b = reinterpret_cast<uintptr_t>(end) / page * page;
-  if (b > a) madvise(reinterpret_cast<void*>(a), b - a, MADV_DONTNEED);
+  char* a = first + (page - reinterpret_cast<uintptr_t>(first) % page) % page;
+  char* b = end - reinterpret_cast<uintptr_t>(end) % page;
+  if (b > a) madvise(a, static_cast<size_t>(b - a), MADV_DONTNEED);
 #else
   (void)t;
 #endif
