@@ -108,17 +108,20 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     }
   }
   const auto phi = optics::make_phi(spec);
+  // A colour filter array: one sensor image whose pixels each measure one colour. A colour
+  // model reconstructs its colour light field; a patch method its mosaicked light field, each
+  // view then demosaiced (bilinear).
+  std::optional<optics::ColourFilterArray> cfa;
+  if (acq.meta.contains("cfa")) {
+    cfa = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + "/sensor.json:$.cfa");
+  }
   if (!a.flat_field.empty()) {
     // The camera's gain across the sensor, measured by its white frame, divided out.
     LFNET_CHECK_AS(ConfigError, acq.sensor.defined() && acq.sensor.size(0) == 1,
                    "--flat-field corrects one sensor image (sensor mode, grey or behind a colour "
                    "filter array); ",
                    a.sensor, " is not one");
-    std::optional<optics::ColourFilterArray> behind;
-    if (acq.meta.contains("cfa")) {
-      behind = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + ":$.cfa");
-    }
-    const auto gain = read_flat_field(a.flat_field, *phi, behind);
+    const auto gain = read_flat_field(a.flat_field, *phi, cfa);
     try {
       acq.sensor = optics::apply_flat_field(acq.sensor, gain);
     } catch (const ConfigError& e) {
@@ -175,12 +178,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   LFNET_CHECK_AS(ConfigError, !a.match_mean || train_mean > 0,
                  "--match-mean needs a model that records its training measurement mean");
 
-  // A colour filter array: one sensor image whose pixels each measure one colour. A colour
-  // model reconstructs its colour light field; a patch method its mosaicked light field, each
-  // view then demosaiced (bilinear).
-  std::optional<optics::ColourFilterArray> cfa;
-  if (acq.meta.contains("cfa")) {
-    cfa = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + "/sensor.json:$.cfa");
+  if (cfa) {
     LFNET_CHECK_AS(ConfigError, acq.sensor.defined(),
                    "a colour filter array's measurements must be a sensor image");
     cfa->check_demosaicable();
