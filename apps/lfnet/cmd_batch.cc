@@ -57,6 +57,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   add_reconstruction_flags(
       cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile, &o.stride, nullptr,
             &o.self_ensemble, &o.self_ensemble_passes, &o.method_options});
+  add_self_calibrate_flag(cmd, o.self_calibrate);
   cmd->add_option("--dictionary", o.dictionary, "dictionary file for dict");
   add_enum_option(cmd, "--mode", o.mode, "simulation mode of evaluations: sensor or per_patch");
   cmd->add_option("--noise", o.noise, "Gaussian noise sigma of evaluations")->check(kNoiseSigma);

@@ -84,6 +84,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   add_reconstruction_flags(
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.stride, nullptr,
             &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
+  add_self_calibrate_flag(cmd, q.self_calibrate);
   cmd->add_option("--lf", q.lf, "light field folder with the truth");
   cmd->add_option("--scene", q.scene, "or a procedural scene spec");
   cmd->add_option("--views", q.views, "angular window R0:R1,C0:C1 (1-based; default central)");

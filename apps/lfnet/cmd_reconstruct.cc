@@ -74,6 +74,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   add_reconstruction_flags(
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.options.stride, nullptr,
             &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
+  add_self_calibrate_flag(cmd, q.self_calibrate);
   cmd->add_option(
       "--method", q.method,
       recon::method_list(recon::MethodNeeds::kTruth) + " (default net with --model, pinv without)");

@@ -165,6 +165,15 @@ inline void add_self_ensemble_options(CLI::App* cmd, bool& self_ensemble, int64_
       ->needs(flag);
 }
 
+// --self-calibrate: lfnet models estimate the camera's angular shift from each sensor image and
+// are told the Phi so displaced (recon/self_calibration.h).
+inline void add_self_calibrate_flag(CLI::App* cmd, bool& self_calibrate) {
+  cmd->add_flag("--self-calibrate", self_calibrate,
+                "lfnet models: estimate the camera's angular shift (a response displaced "
+                "against the nominal Phi) from each sensor image and reconstruct with the Phi so "
+                "displaced (docs/acquisition.md, \"Self-calibration\")");
+}
+
 // The flags every command that reconstructs (evaluate, reconstruct, batch, bench) shares, bound
 // once here so that their names, checks and help are the same in all four (docs/reconstruction.md,
 // "Flags every command shares"). Each member points at the command's field, and every one must

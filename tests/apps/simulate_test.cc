@@ -207,6 +207,58 @@ TEST_CASE("simulate and evaluate take a camera whose Phi is off", "[app][simulat
   CHECK_FALSE(fs::exists(tmp / "pp"));
 }
 
+TEST_CASE("evaluate, reconstruct and batch self-calibrate a camera whose response is displaced",
+          "[app][simulate]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 1 --log-level warn ";
+  REQUIRE(run_command(lfnet +
+                          "render --random 93002 --size 96x96 --grey --disparity-range -2:2 "
+                          "--bits 16 --out " +
+                          (tmp / "lf"),
+                      out) == 0);
+  const std::string path = (fs::path(LFNET_SOURCE_DIR) / "models" / "lfnet-asp-n2.ckpt").string();
+  const std::string model = " --model " + path;
+  const std::string shifted = " --camera-error '{\"angular_shift_u\": 0.25}'";
+  const std::string evaluate = lfnet + "evaluate --lf " + (tmp / "lf") + model + shifted;
+  REQUIRE(run_command(evaluate + " --json " + (tmp / "plain.json"), out) == 0);
+  REQUIRE(run_command(evaluate + " --self-calibrate --json " + (tmp / "told.json"), out) == 0);
+  const auto plain = lfnet::read_json_file(tmp / "plain.json");
+  const auto told = lfnet::read_json_file(tmp / "told.json");
+  CHECK_FALSE(plain.contains("camera_error_estimated"));
+  CHECK(told["camera_error_estimated"]["angular_shift_u"].get<double>() ==
+        Approx(0.25).margin(0.06));
+  CHECK(told["psnr_db"].get<double>() > plain["psnr_db"].get<double>() + 2);
+
+  // A displaced camera's acquisition, reconstructed with and without the estimate.
+  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi " + path + shifted +
+                          " --out " + (tmp / "acq"),
+                      out) == 0);
+  const std::string reconstruct = lfnet + "reconstruct --sensor " + (tmp / "acq") + model;
+  REQUIRE(run_command(reconstruct + " --self-calibrate --out " + (tmp / "rec"), out) == 0);
+  const auto record = lfnet::read_json_file(tmp / "rec/reconstruction.json");
+  CHECK(record["camera_error_estimated"]["angular_shift_u"].get<double>() ==
+        Approx(0.25).margin(0.06));
+  // batch evaluates the light fields under a folder the same way.
+  fs::create_directories(tmp / "set");
+  fs::rename(tmp / "lf", tmp / "set/lf");
+  REQUIRE(run_command(lfnet + "batch --input " + (tmp / "set") + model +
+                          " --self-calibrate --out " + (tmp / "batch"),
+                      out) == 0);
+  const auto item = lfnet::read_json_file(tmp / "batch/records/lf__net.json");
+  CHECK(std::abs(item["camera_error_estimated"]["angular_shift_u"].get<double>()) < 0.06);
+
+  // What it cannot do: one line, before any work.
+  CHECK(run_command(reconstruct + " --method pinv --self-calibrate --out " + (tmp / "pinv"), out) !=
+        0);
+  CHECK(out.find("--self-calibrate") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "pinv"));
+  CHECK(run_command(reconstruct + " --self-calibrate --self-ensemble --out " + (tmp / "ens"),
+                    out) != 0);
+  CHECK(out.find("self-ensemble") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "ens"));
+}
+
 TEST_CASE("a white frame's flat field undoes vignetting in evaluate and reconstruct",
           "[app][simulate]") {
   lfnet::test::TempDir tmp;

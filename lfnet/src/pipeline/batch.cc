@@ -174,6 +174,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.flat_field = a.flat_field;
         q.self_ensemble = a.self_ensemble;
         q.self_ensemble_passes = a.self_ensemble_passes;
+        q.self_calibrate = a.self_calibrate;
         q.device = a.device;
         q.precision = a.precision;
         q.tile = a.tile;
@@ -225,6 +226,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
     context.method_options = method_options_argument(a.method_options, methods);
     context.self_ensemble = a.self_ensemble;
     context.self_ensemble_passes = a.self_ensemble_passes;
+    context.self_calibrate = a.self_calibrate;
     context.tile = a.tile;
     LightFieldSources sources;
     sources.light_fields = {item.path};
@@ -303,6 +305,7 @@ nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::stri
                             {"self_ensemble_passes", a.self_ensemble_passes}};
   // Only when given, so that batches from before the option resume as they were.
   if (!a.flat_field.empty()) options["flat_field"] = absolute(a.flat_field);
+  if (a.self_calibrate) options["self_calibrate"] = true;
   return options;
 }
 

@@ -57,6 +57,11 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   r.self_ensemble_passes = c.self_ensemble_passes;
   if (c.tile > 0) r.tile = c.tile;
   r.coded = c.coded;
+  if (c.self_calibrate) {
+    p.calibration = std::make_shared<optics::CalibrationError>();
+    r.self_calibrate = true;
+    r.calibration = p.calibration;
+  }
   if (c.method_options.is_object() && c.method_options.contains(method)) {
     r.options = c.method_options[method];
   }
@@ -76,6 +81,8 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   recon::check_ensemble_passes(c.self_ensemble, c.self_ensemble_passes);
   p.solver = recon::make_solver(method, r);
   p.image = recon::make_image_solver(method, r);
+  LFNET_CHECK_AS(ConfigError, !c.self_calibrate || p.image, "--self-calibrate: method '", method,
+                 "' is not a whole-image network (the lfnet architecture's net)");
   p.options = m.options_used(r);
   return p;
 }
@@ -156,6 +163,13 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
         recon::ensemble_mirrors(context.net ? context.net->phi : context.script->pixel_weights(),
                                 context.self_ensemble_passes)
             .size();
+  }
+  if (prepared.calibration) {
+    result.record["camera_error_estimated"] = prepared.calibration->to_json();
+    spdlog::info(
+        "{}: angular shift estimated from the sensor image: {:.3f} views along U, {:.3f} "
+        "along V",
+        label, prepared.calibration->angular_shift_u, prepared.calibration->angular_shift_v);
   }
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
@@ -271,6 +285,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   context.method_options = method_options;
   context.self_ensemble = a.self_ensemble;
   context.self_ensemble_passes = a.self_ensemble_passes;
+  context.self_calibrate = a.self_calibrate;
   LFNET_CHECK_AS(ConfigError, a.tile >= 0, "--tile must be positive, got ", a.tile);
   context.tile = a.tile;
   const auto phi = optics::make_phi(spec);

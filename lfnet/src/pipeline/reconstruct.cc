@@ -155,7 +155,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   // A grey result that nothing processes further is held in 16-bit codes when asked for.
   o.coded = a.coded && !a.post_filter && !acq.meta.contains("cfa") &&
             acq.meta.at("light_field").at("channels").get<int64_t>() == 1;
-  nlohmann::json options_used;  // the method's options, complete
+  nlohmann::json options_used;                            // the method's options, complete
+  std::shared_ptr<optics::CalibrationError> calibration;  // --self-calibrate's estimate
   {
     MethodContext context;
     context.phi = phi.get();
@@ -167,10 +168,12 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     context.self_ensemble = a.self_ensemble;
     context.self_ensemble_passes = a.self_ensemble_passes;
     context.coded = o.coded;
+    context.self_calibrate = a.self_calibrate;
     auto prepared = prepare_method(method, context, o.patch_h, o.patch_w);
     solver = prepared.solver;
     image = prepared.image;
     options_used = prepared.options;
+    calibration = prepared.calibration;
     LFNET_CHECK_AS(ConfigError, !(image && full),
                    "--cnn-mode full applies to the paper's architecture; a model of the lfnet "
                    "architecture always reconstructs the whole image");
@@ -293,6 +296,13 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     r.record["noise_switch"] = model->noise_switch_record();
   }
   if (!options_used.empty()) r.record["method_options"] = options_used;
+  if (calibration) {
+    r.record["camera_error_estimated"] = calibration->to_json();
+    spdlog::info(
+        "angular shift estimated from the sensor image: {:.3f} views along U, {:.3f} "
+        "along V",
+        calibration->angular_shift_u, calibration->angular_shift_v);
+  }
   if (noise_aware) r.record["noise_sigma"] = noise_told ? nlohmann::json(told_sigma) : estimated;
   if (!estimated.empty()) {
     r.record["noise_sigma_estimated"] = true;

@@ -6,6 +6,7 @@
 #include "lfnet/dict/sparse_coding.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/fully_convolutional.h"
+#include "lfnet/recon/self_calibration.h"
 
 namespace lfnet::recon {
 
@@ -63,6 +64,12 @@ class NetworkMethod : public Method {
     const bool coded = r.coded;
     // Passes that hold a float32 result anyway encode it at the end.
     auto maybe_coded = [coded](const torch::Tensor& lf) { return coded ? encode_codes(lf) : lf; };
+    LFNET_CHECK_AS(ConfigError, !r.self_calibrate || !r.script,
+                   "self-calibration tells the net another Phi: it needs a checkpoint, not an "
+                   "exported network");
+    LFNET_CHECK_AS(ConfigError, !r.self_calibrate || !r.self_ensemble,
+                   "self-calibration and the self-ensemble do not go together: a displaced "
+                   "camera's response has not the nominal Phi's mirror symmetries");
     if (r.script) {
       const auto* script = r.script;
       if (r.self_ensemble) {
@@ -85,6 +92,28 @@ class NetworkMethod : public Method {
         return [net, tile, passes, maybe_coded](const torch::Tensor& sensor, double noise_sigma) {
           return maybe_coded(
               reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes));
+        };
+      }
+      if (r.self_calibrate) {
+        const optics::Phi* phi = r.phi;
+        auto found = r.calibration;
+        return [net, phi, tile, coded, found](const torch::Tensor& sensor, double noise_sigma) {
+          // The camera's angular shift from its own sensor image, then the whole image with the
+          // net told the Phi so displaced; the net holds the nominal Phi again afterwards.
+          const auto calibration = estimate_angular_shift(net, *phi, sensor, noise_sigma);
+          if (found) *found = calibration.error;
+          tell_camera(net, *phi, calibration.error);
+          struct Nominal {
+            nn::LightFieldNet net;
+            const optics::Phi* phi;
+            ~Nominal() {
+              try {
+                tell_camera(net, *phi, {});
+              } catch (...) {  // a destructor must not throw
+              }
+            }
+          } nominal{net, phi};
+          return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded);
         };
       }
       return [net, tile, coded](const torch::Tensor& sensor, double noise_sigma) {

@@ -41,6 +41,7 @@ struct BatchOptions {
   std::string flat_field;    // the camera's white frame, divided out of every acquisition; "" none
   bool self_ensemble = false;        // net with an lfnet checkpoint: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
+  bool self_calibrate = false;       // net with an lfnet checkpoint: estimate the angular shift
   bool force = false;                // write into an existing non-empty output folder
   // Continue the batch in `out`: the item-method pairs with a record of status "ok" are kept,
   // the others (failed, or never finished) are done. The batch's options must be the same.

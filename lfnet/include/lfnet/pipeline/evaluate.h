@@ -42,6 +42,9 @@ struct MethodContext {
   // Whole-image methods return 16-bit codes (recon::MethodResources::coded); the patch methods
   // take theirs from recon::ReconstructOptions::coded.
   bool coded = false;
+  // Whole-image networks estimate the camera's angular shift from each sensor image and are told
+  // the Phi so displaced (recon/self_calibration.h; --self-calibrate).
+  bool self_calibrate = false;
 };
 
 // A method ready to run on one Phi and patch size.
@@ -52,6 +55,8 @@ struct PreparedMethod {
   std::shared_ptr<recon::SolverReport> report;  // iterative methods' non-convergence
   nlohmann::json options;                       // the method's options, complete ({}: none)
   std::shared_ptr<ModelCache> files;            // a dictionary read without the context's cache
+  // With self-calibration: the camera error estimated from the last sensor image.
+  std::shared_ptr<optics::CalibrationError> calibration;
 };
 
 // The method `method` with the context's resources, its options checked: the one place that
@@ -127,6 +132,7 @@ struct EvaluateRequest {
   bool keep_estimate = false;                         // return the reconstruction too
   bool self_ensemble = false;        // lfnet architecture: average over the Phi's mirror images
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
+  bool self_calibrate = false;       // lfnet architecture: estimate the camera's angular shift
 };
 
 // One evaluation's outcome.

@@ -34,6 +34,7 @@ struct ReconstructRequest {
   int64_t tile = 0;                  // tile of cnn_mode full and of lfnet models (0: 128, 256)
   bool self_ensemble = false;        // lfnet models: average over the Phi's mirror images
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
+  bool self_calibrate = false;       // lfnet models: estimate the camera's angular shift
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   // The sensor's Gaussian noise sigma (relative to white) for noise-aware models; negative:
   // the noise_sigma that the acquisition's sensor.json records, else 0.

@@ -14,6 +14,7 @@
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/nn/script.h"
+#include "lfnet/optics/calibration.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/recon/reconstruct.h"
@@ -48,6 +49,10 @@ struct MethodResources {
   // Whole-image methods: return 16-bit codes (int16; core/light_field.h), a plain tiled pass
   // encoding each tile as it is done (half the memory of float32).
   bool coded = false;
+  // Whole-image networks: estimate the camera's angular shift from each sensor image and tell
+  // the net the Phi so displaced (recon/self_calibration.h); each estimate goes to *calibration.
+  bool self_calibrate = false;
+  std::shared_ptr<optics::CalibrationError> calibration;
 };
 
 class Method {
