@@ -259,6 +259,19 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
         VARIANT=$name record "$tmp" --model models/$name.ckpt "${src[@]}" --method net \
           "${camera[@]}"
       done
+      # The default told the angular shift it estimates from the sensor image itself.
+      VARIANT="lfnet-asp-n2, self-calibrated" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+        "${src[@]}" --method net "${camera[@]}" --self-calibrate
+    done
+    # With noise of sigma 0.05, not told: the noise switch, with and without self-calibration.
+    for error in '' '{"angular_shift_u": 0.1}' '{"angular_shift_u": 0.25}'; do
+      local camera=()
+      [[ -n $error ]] && camera=(--camera-error "$error")
+      for calibrate in '' --self-calibrate; do
+        VARIANT="lfnet-asp-n2-auto, estimated${calibrate:+, self-calibrated}" record "$tmp" \
+          --model models/lfnet-asp-n2-auto.json "${src[@]}" --method net "${camera[@]}" \
+          --noise 0.05 --estimate-noise $calibrate
+      done
     done
   done
   mv "$tmp" results/calibration/records.jsonl

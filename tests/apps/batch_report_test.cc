@@ -514,14 +514,21 @@ TEST_CASE("report gives a camera error's cost against the nominal camera", "[app
   std::ofstream(tmp / "results/c/records.jsonl")
       << record("a", 30.0, nullptr) << record("a", 29.25, depth) << record("b", 28.0, nullptr)
       << record("b", 27.9, depth) << no_parallax_line(20.0, 0.5);
+  // A self-calibrated record: its estimated shift in a column of its own.
+  auto calibrated = nlohmann::json::parse(record("c", 29.8, {{"angular_shift_u", 0.25}}));
+  calibrated["camera_error_estimated"] = {{"angular_shift_u", 0.2468}, {"angular_shift_v", 0.0}};
+  std::ofstream(tmp / "results/c/records.jsonl", std::ios::app)
+      << record("c", 30.1, nullptr) << calibrated.dump() << "\n";
   const std::string md = report_of(tmp / "results", tmp / "R.md");
+  CHECK(md.find("| estimated shift |") != std::string::npos);
+  CHECK(md.find("| 29.80 | 0.900 | 1.00 | 0.30 | U 0.247 |") != std::string::npos);
   CHECK(md.find("| camera error |") != std::string::npos);
   CHECK(md.find("cost dB |") != std::string::npos);
   // Each variant's cost is against its own nominal record; fields at 0 are not named.
   CHECK(md.find("| depth -0.1 |") != std::string::npos);
   CHECK(md.find("vignetting") == std::string::npos);
-  CHECK(md.find("| 29.25 | 0.900 | 1.00 | 0.75 |") != std::string::npos);
-  CHECK(md.find("| 27.90 | 0.900 | 1.00 | 0.10 |") != std::string::npos);
+  CHECK(md.find("| 29.25 | 0.900 | 1.00 | 0.75 |  |") != std::string::npos);
+  CHECK(md.find("| 27.90 | 0.900 | 1.00 | 0.10 |  |") != std::string::npos);
   CHECK(md.find("| none |") != std::string::npos);
 }
 

@@ -267,6 +267,8 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   bool has_estimate = false;  // noise-blind records: the sigma the method was told
   for (const auto& r : rows) has_training |= r.contains("training_seconds");
   for (const auto& r : rows) has_estimate |= r.contains("noise_sigma_estimated");
+  bool has_shift = false;  // self-calibrated records: the angular shift they estimated
+  for (const auto& r : rows) has_shift |= r.contains("camera_error_estimated");
   bool has_luma = false;  // colour records: the luma's PSNR beside the colour one
   for (const auto& r : rows) has_luma |= r.contains("luma_psnr_db");
   // Records of a camera whose Phi is off: what the error costs against the same record (every
@@ -297,11 +299,13 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   if (has_luma) md << " luma PSNR dB |";
   if (has_cost) md << " cost dB |";
   if (has_estimate) md << " estimated sigma |";
+  if (has_shift) md << " estimated shift |";
   if (has_training) md << " training s |";
   if (has_paper) md << " paper PSNR dB | paper seconds |";
   md << "\n|";
   const size_t n_columns = columns.size() + 3 + (has_luma ? 1 : 0) + (has_cost ? 1 : 0) +
-                           (has_estimate ? 1 : 0) + (has_training ? 1 : 0) + (has_paper ? 2 : 0);
+                           (has_estimate ? 1 : 0) + (has_shift ? 1 : 0) + (has_training ? 1 : 0) +
+                           (has_paper ? 2 : 0);
   for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
   md << "\n";
   for (const auto& r : rows) {
@@ -327,6 +331,17 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
          << (r.contains("noise_sigma_estimated") ? fmt("%.4f", number(r, "noise_sigma_estimated"))
                                                  : "")
          << " |";
+    }
+    if (has_shift) {
+      // The views along U (and along V when that was found too).
+      std::string shift;
+      if (r.contains("camera_error_estimated")) {
+        const auto& e = r["camera_error_estimated"];
+        shift = fmt("U %.3f", e.value("angular_shift_u", 0.0));
+        const double v = e.value("angular_shift_v", 0.0);
+        if (v != 0) shift += fmt(", V %.3f", v);
+      }
+      md << " " << shift << " |";
     }
     if (has_training)
       md << " "
