@@ -106,10 +106,16 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--cfa", q.cfa,
                   "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
                   "JSON, inline or a file; scores colour and luma (docs/acquisition.md)");
-  cmd->add_option("--camera-error", q.camera_error,
-                  "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
-                  "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
-                  "vignetting; docs/acquisition.md)");
+  auto* camera_error = cmd->add_option(
+      "--camera-error", q.camera_error,
+      "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
+      "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
+      "vignetting; docs/acquisition.md)");
+  cmd->add_flag("--tell-camera-error", q.tell_camera_error,
+                "lfnet models: the net is told the camera's Phi with that error (its weights over "
+                "one period; no vignetting), as if it had been measured (docs/acquisition.md, "
+                "\"Self-calibration\")")
+      ->needs(camera_error);
   cmd->add_option("--flat-field", q.flat_field,
                   "the camera's white frame (an acquisition folder, or an image of its N "
                   "channels): its gain across the sensor, such as vignetting, is divided out "

@@ -229,6 +229,17 @@ TEST_CASE("evaluate, reconstruct and batch self-calibrate a camera whose respons
   CHECK(told["camera_error_estimated"]["angular_shift_u"].get<double>() ==
         Approx(0.25).margin(0.06));
   CHECK(told["psnr_db"].get<double>() > plain["psnr_db"].get<double>() + 2);
+  // Told the camera's error itself, as if measured: about as good as the estimate.
+  REQUIRE(run_command(evaluate + " --tell-camera-error --json " + (tmp / "known.json"), out) == 0);
+  const auto known = lfnet::read_json_file(tmp / "known.json");
+  CHECK(known["camera_error_told"].get<bool>());
+  CHECK(known["psnr_db"].get<double>() > plain["psnr_db"].get<double>() + 2);
+  CHECK(std::abs(known["psnr_db"].get<double>() - told["psnr_db"].get<double>()) < 0.5);
+  CHECK(run_command(evaluate + " --tell-camera-error --method pinv --json " + (tmp / "p.json"),
+                    out) != 0);
+  CHECK(out.find("--tell-camera-error") != std::string::npos);
+  CHECK(run_command(lfnet + "evaluate --lf " + (tmp / "lf") + model + " --tell-camera-error",
+                    out) != 0);
 
   // A displaced camera's acquisition, reconstructed with and without the estimate.
   REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi " + path + shifted +

@@ -17,6 +17,7 @@
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
+#include "lfnet/recon/self_calibration.h"
 
 namespace fs = std::filesystem;
 
@@ -58,6 +59,12 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   if (c.tile > 0) r.tile = c.tile;
   r.coded = c.coded;
   if (c.self_calibrate) {
+    // Measured for the ASP: a displaced binary mask told to a mask net does worse than the
+    // nominal one (docs/acquisition.md, "Self-calibration").
+    if (c.phi->spec().name != "asp") {
+      spdlog::warn("--self-calibrate is measured for ASP cameras only; with {} it may not help",
+                   c.phi->spec().label());
+    }
     p.calibration = std::make_shared<optics::CalibrationError>();
     r.self_calibrate = true;
     r.calibration = p.calibration;
@@ -305,6 +312,16 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   if (effects) o.effects = *effects;
   o.estimate_noise = a.estimate_noise;
   o.camera_error = camera_error;
+  if (a.tell_camera_error) {
+    // The camera as if measured: its nets hold the Phi with the error (recon/self_calibration.h).
+    LFNET_CHECK_AS(ConfigError, context.net && context.net->architecture().whole_image(),
+                   "--tell-camera-error: the model must be a checkpoint of the lfnet architecture");
+    LFNET_CHECK_AS(ConfigError, !a.self_calibrate,
+                   "--tell-camera-error and --self-calibrate: give one, not both");
+    for (auto net : {context.net, context.noisy_net}) {
+      if (!net.is_empty()) recon::tell_camera(net, *phi, camera_error);
+    }
+  }
   o.cfa = cfa;
   if (flat_field.defined()) {
     const auto views = truths[0].views();
@@ -324,6 +341,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   if (!a.model.empty()) result.record["model"] = a.model;
   if (!noise_switch.is_null()) result.record["noise_switch"] = noise_switch;
   result.record["device"] = a.device;
+  if (a.tell_camera_error) result.record["camera_error_told"] = true;
   if (recon::needs_network(method)) result.record["precision"] = nn::to_string(a.precision);
   result.light_field = truths[0].name;
   if (a.keep_estimate) result.truth = truths[0].views().raw();

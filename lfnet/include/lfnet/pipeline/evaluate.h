@@ -120,13 +120,14 @@ struct EvaluateRequest {
   std::string effects;          // sensor effects JSON file (shot, read, ...); noise on top
   bool estimate_noise = false;  // noise-aware methods are told the noise estimated, not the truth
   std::string camera_error;     // --camera-error: JSON or file (optics/calibration.h); "" none
-  std::string flat_field;       // --flat-field: the camera's white frame (read_flat_field); "" none
-  std::string cfa;       // --cfa: a Bayer pattern or a JSON file (optics/cfa.h); "" a grey sensor
-  uint64_t seed = 0;     // noise seed
-  int64_t stride = 5;    // patch stride
-  int64_t batch = 1024;  // patches per forward pass
-  bool window = false;   // weight patch estimates by a smooth window when stitching
-  int64_t tile = 0;      // whole-image methods' spatial tile (0: their default, 256)
+  bool tell_camera_error = false;  // lfnet nets are told the camera's Phi with that error
+  std::string flat_field;  // --flat-field: the camera's white frame (read_flat_field); "" none
+  std::string cfa;         // --cfa: a Bayer pattern or a JSON file (optics/cfa.h); "" a grey sensor
+  uint64_t seed = 0;       // noise seed
+  int64_t stride = 5;      // patch stride
+  int64_t batch = 1024;    // patches per forward pass
+  bool window = false;     // weight patch estimates by a smooth window when stitching
+  int64_t tile = 0;        // whole-image methods' spatial tile (0: their default, 256)
   std::string device = "cpu";                         // cpu or cuda[:K] for a checkpoint's network
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   bool keep_estimate = false;                         // return the reconstruction too
