@@ -318,7 +318,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
                    "--tell-camera-error: the model must be a checkpoint of the lfnet architecture");
     LFNET_CHECK_AS(ConfigError, !a.self_calibrate,
                    "--tell-camera-error and --self-calibrate: give one, not both");
-    for (auto net : {context.net, context.noisy_net}) {
+    for (const auto& net : {context.net, context.noisy_net}) {
       if (!net.is_empty()) recon::tell_camera(net, *phi, camera_error);
     }
   }
