@@ -259,9 +259,14 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
         VARIANT=$name record "$tmp" --model models/$name.ckpt "${src[@]}" --method net \
           "${camera[@]}"
       done
-      # The default told the angular shift it estimates from the sensor image itself.
+      # The default told the angular shift it estimates from the sensor image itself, and (for
+      # the errors a Phi of one period holds) told the camera's error as if measured.
       VARIANT="lfnet-asp-n2, self-calibrated" record "$tmp" --model models/lfnet-asp-n2.ckpt \
         "${src[@]}" --method net "${camera[@]}" --self-calibrate
+      if [[ $error == *depth* || $error == *angular* ]]; then
+        VARIANT="lfnet-asp-n2, told" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+          "${src[@]}" --method net "${camera[@]}" --tell-camera-error
+      fi
     done
     # With noise of sigma 0.05, not told: the noise switch, with and without self-calibration.
     for error in '' '{"angular_shift_u": 0.1}' '{"angular_shift_u": 0.25}'; do
