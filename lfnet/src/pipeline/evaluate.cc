@@ -172,11 +172,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
             .size();
   }
   if (prepared.calibration) {
-    result.record["camera_error_estimated"] = prepared.calibration->to_json();
-    spdlog::info(
-        "{}: angular shift estimated from the sensor image: {:.3f} views along U, {:.3f} "
-        "along V",
-        label, prepared.calibration->angular_shift_u, prepared.calibration->angular_shift_v);
+    record_estimated_camera_error(result.record, *prepared.calibration, label + ": ");
   }
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
@@ -187,6 +183,15 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   }
   if (estimate) *estimate = result.estimate;
   return result.record;
+}
+
+void record_estimated_camera_error(nlohmann::json& record, const optics::CalibrationError& error,
+                                   const std::string& what) {
+  record["camera_error_estimated"] = error.to_json();
+  spdlog::info(
+      "{}angular shift estimated from the sensor image: {:.3f} views along U, {:.3f} "
+      "along V",
+      what, error.angular_shift_u, error.angular_shift_v);
 }
 
 void use_model(MethodContext& context, const ModelFile& model) {

@@ -296,13 +296,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     r.record["noise_switch"] = model->noise_switch_record();
   }
   if (!options_used.empty()) r.record["method_options"] = options_used;
-  if (calibration) {
-    r.record["camera_error_estimated"] = calibration->to_json();
-    spdlog::info(
-        "angular shift estimated from the sensor image: {:.3f} views along U, {:.3f} "
-        "along V",
-        calibration->angular_shift_u, calibration->angular_shift_v);
-  }
+  if (calibration) record_estimated_camera_error(r.record, *calibration, "");
   if (noise_aware) r.record["noise_sigma"] = noise_told ? nlohmann::json(told_sigma) : estimated;
   if (!estimated.empty()) {
     r.record["noise_sigma_estimated"] = true;

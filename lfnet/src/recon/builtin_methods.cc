@@ -103,16 +103,7 @@ class NetworkMethod : public Method {
           const auto calibration = estimate_angular_shift(net, *phi, sensor, noise_sigma);
           if (found) *found = calibration.error;
           tell_camera(net, *phi, calibration.error);
-          struct Nominal {
-            nn::LightFieldNet net;
-            const optics::Phi* phi;
-            ~Nominal() {
-              try {
-                tell_camera(net, *phi, {});
-              } catch (...) {  // a destructor must not throw
-              }
-            }
-          } nominal{net, phi};
+          const NominalPhiOnExit nominal(net, *phi);
           return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded);
         };
       }

@@ -29,19 +29,14 @@ bool shift_matters(const optics::Phi& phi, int axis, double shift) {
          1e-9 * std::max(1.0, nominal.abs().max().item<double>());
 }
 
-// Puts the nominal Phi back into the net when the search ends, normally or not.
-struct NominalOnExit {
-  nn::LightFieldNet net;
-  const optics::Phi& phi;
-  ~NominalOnExit() {
-    try {
-      tell_camera(net, phi, {});
-    } catch (...) {  // a destructor must not throw; the nominal Phi was set before
-    }
-  }
-};
-
 }  // namespace
+
+NominalPhiOnExit::~NominalPhiOnExit() {
+  try {
+    tell_camera(net_, phi_, {});
+  } catch (...) {  // a destructor must not throw; the nominal Phi was set before
+  }
+}
 
 void SelfCalibrationOptions::validate() const {
   LFNET_CHECK_AS(ConfigError, std::isfinite(max_shift) && max_shift > 0 && max_shift <= 1,
@@ -93,7 +88,7 @@ SelfCalibration estimate_angular_shift(nn::LightFieldNet net, const optics::Phi&
   const int64_t margin = std::min({options.margin, (ch - 1) / 2, (cw - 1) / 2});
 
   SelfCalibration found;
-  NominalOnExit restore{net, phi};
+  const NominalPhiOnExit restore(net, phi);
   for (int axis = 0; axis < 2; ++axis) {
     if (!shift_matters(phi, axis, options.max_shift)) continue;
     std::map<double, double> seen;  // shift -> roughness

@@ -81,6 +81,11 @@ void check_method_options(const nlohmann::json& by_method, const std::vector<std
 // The model's networks (a checkpoint's, an exported one, a noise switch's two) in `context`.
 void use_model(MethodContext& context, const ModelFile& model);
 
+// A self-calibration's estimate (PreparedMethod::calibration) into `record`, as
+// camera_error_estimated, and said in the log; `what` opens the line ("" none).
+void record_estimated_camera_error(nlohmann::json& record, const optics::CalibrationError& error,
+                                   const std::string& what);
+
 // Puts a model's network where the command asked (the flags every reconstructing command
 // shares): a checkpoint's net moved to `device` with `precision`; an exported file, which runs
 // on the CPU in float32, refuses other values. `model` is named in the error.

@@ -16,6 +16,7 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <utility>
 
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/calibration.h"
@@ -45,6 +46,21 @@ double angular_roughness(const torch::Tensor& lf, int axis, int64_t margin = 0);
 // `error` (its pixel weights over one period; an empty error: the nominal Phi itself).
 void tell_camera(nn::LightFieldNet net, const optics::Phi& phi,
                  const optics::CalibrationError& error);
+
+// Tells `net` the nominal `phi` again when it goes out of scope, whether the scope ends normally
+// or by an exception: what telling it another camera for a while needs.
+class NominalPhiOnExit {
+ public:
+  NominalPhiOnExit(nn::LightFieldNet net, const optics::Phi& phi)
+      : net_(std::move(net)), phi_(phi) {}
+  ~NominalPhiOnExit();
+  NominalPhiOnExit(const NominalPhiOnExit&) = delete;
+  NominalPhiOnExit& operator=(const NominalPhiOnExit&) = delete;
+
+ private:
+  nn::LightFieldNet net_;
+  const optics::Phi& phi_;
+};
 
 // The angular shift (along U, then V; an axis along which the Phi's weights do not change is
 // left at 0) of the camera that took `sensor` (N, H, W), estimated with `net`, a whole-image
