@@ -2,7 +2,8 @@
 #
 # The numerical core (core, optics, nn, recon) needs LibTorch and header-only nlohmann_json
 # alone, so it builds on any machine that has LibTorch (a CUDA one included). OpenImageIO,
-# CLI11 and spdlog are needed only by the I/O library and the program (LFNET_BUILD_APPS).
+# CLI11, spdlog and libdeflate (the PNG encoder's compressor, io/png.h) are needed only by the
+# I/O library and the program (LFNET_BUILD_APPS).
 # OpenCV (its core and photo modules) is linked by the cv area alone (lfnet/cv/opencv.h:
 # OpenCV's non-local means for pinv-nlm), which the program links; the core never does.
 
@@ -32,6 +33,14 @@ if(LFNET_BUILD_APPS)
   find_package(OpenImageIO REQUIRED)
   find_package(spdlog REQUIRED)
   find_package(CLI11 REQUIRED)
+  # libdeflate 1.14 (Debian: libdeflate-dev) installs no CMake package file.
+  find_path(LFNET_LIBDEFLATE_INCLUDE libdeflate.h REQUIRED)
+  find_library(LFNET_LIBDEFLATE_LIBRARY deflate REQUIRED)
+  if(NOT TARGET lfnet_libdeflate)
+    add_library(lfnet_libdeflate INTERFACE)
+    target_include_directories(lfnet_libdeflate INTERFACE ${LFNET_LIBDEFLATE_INCLUDE})
+    target_link_libraries(lfnet_libdeflate INTERFACE ${LFNET_LIBDEFLATE_LIBRARY})
+  endif()
   find_package(OpenCV REQUIRED COMPONENTS core photo imgproc)  # imgproc: tests' reference demosaic
 endif()
 

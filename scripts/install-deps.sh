@@ -9,7 +9,7 @@ packages=(
   build-essential cmake ninja-build pkg-config clang-format clang-tidy
   libtorch-dev libopenblas0-openmp libgloo-dev
   libopencv-dev libopenimageio-dev openimageio-tools
-  nlohmann-json3-dev libspdlog-dev libfmt-dev catch2 libcli11-dev zlib1g-dev
+  nlohmann-json3-dev libspdlog-dev libfmt-dev catch2 libcli11-dev zlib1g-dev libdeflate-dev
   python3 python3-numpy python3-skimage python3-sklearn python3-torch python3-imageio
   python3-matplotlib python3-pil
   chromium

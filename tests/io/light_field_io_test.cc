@@ -205,6 +205,22 @@ TEST_CASE("grid images and EPIs place the views", "[io]") {
   lfnet::test::require_close(vepi[0][2], lf.data()[0][2][2].select(1, 6), 0.0);
 }
 
+TEST_CASE("grid.png holds the grid of the preview in 8 bits", "[io]") {
+  lfnet::test::TempDir tmp;
+  torch::manual_seed(3);
+  for (const int64_t c : {1, 3}) {
+    LightField lf(torch::rand({c, 3, 4, 9, 7}));
+    const lfnet::LightFieldViews coded(lfnet::encode_codes(lf.data()));
+    const auto dir = tmp / ("c" + std::to_string(c));
+    io::write_previews(coded, dir);
+    const auto grid = io::read_image(fs::path(dir) / "grid.png");
+    const auto want = io::grid_image(io::preview_light_field(coded));
+    REQUIRE(grid.sizes() == want.sizes());
+    CHECK(torch::equal((grid * 255).round(), (want * 255).round()));
+    CHECK(fs::exists(fs::path(dir) / "epi_h.png"));
+  }
+}
+
 TEST_CASE("a preview grid wider than its limit shows block averages of the views", "[io]") {
   LightField lf(torch::rand({1, 2, 3, 12, 20}));
   // 3 x (20 + 2) - 2 = 64 columns fit 64: the light field itself.

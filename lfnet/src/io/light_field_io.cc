@@ -1,6 +1,5 @@
 #include "lfnet/io/light_field_io.h"
 
-#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
@@ -21,6 +20,7 @@
 #include "lfnet/core/file_backed.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/parallel.h"
+#include "lfnet/io/png.h"
 #include "lfnet/io/sensor_io.h"
 
 namespace fs = std::filesystem;
@@ -44,15 +44,6 @@ std::string to_string(NamingScheme scheme) {
   }
   return "unknown";
 }
-
-namespace {
-
-// zlib's level for the PNGs lfnet writes, and one row filter (Sub) instead of libpng's
-// adaptive choice among five (docs/performance.md, "End to end").
-constexpr int kPngCompressionLevel = 1;
-constexpr int kPngFilterSub = 0x10;  // libpng's PNG_FILTER_SUB
-
-}  // namespace
 
 namespace {
 
@@ -545,11 +536,29 @@ LightFieldViews read_light_field_views(const std::string& dir, int threads,
 }
 
 namespace {
-// Measured on a 593 x 840 16-bit view: 24 ms and 784 KB, against 31 ms and 780 KB with the
-// adaptive filter at the same level, 36 ms and 776 KB at level 3, 85 ms at libpng's default 6.
-void png_options(OIIO::ImageSpec& spec) {
-  spec.attribute("png:compressionLevel", kPngCompressionLevel);
-  spec.attribute("png:filter", kPngFilterSub);
+bool is_png(const std::string& path) {
+  auto ext = fs::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext == ".png";
+}
+
+// A (C, H, W) image in [0, 1] as (H, W, C) 8- or 16-bit samples, rounded as OpenImageIO does
+// (x * max + 0.5, truncated; NaN as 0). 16-bit samples are held in int16 (their bits).
+torch::Tensor integer_samples(const torch::Tensor& chw, int bits) {
+  const double max = bits == 16 ? 65535.0 : 255.0;
+  // One float32 copy, changed in place (a 12-megapixel image: 48 MB, not four such).
+  auto scaled = chw.to(torch::kFloat32, /*non_blocking=*/false, /*copy=*/true);
+  scaled.nan_to_num_(0.0, 1.0, 0.0).clamp_(0, 1).mul_(max).add_(0.5);
+  scaled = scaled.permute({1, 2, 0});
+  return bits == 16 ? scaled.to(torch::kInt32).to(torch::kInt16).contiguous()
+                    : scaled.to(torch::kUInt8).contiguous();
+}
+
+// (H, W, C) samples of `bits` (integer_samples, or 16-bit codes) as a PNG file, atomically.
+void write_png(const std::string& path, const torch::Tensor& hwc, int bits) {
+  write_bytes_file(path,
+                   encode_png_samples(hwc.data_ptr(), hwc.size(0), hwc.size(1), hwc.size(2), bits));
 }
 }  // namespace
 
@@ -557,9 +566,13 @@ void write_image(const std::string& path, const torch::Tensor& image, int bits) 
   LFNET_CHECK(image.dim() == 2 || image.dim() == 3, "write_image takes (H, W) or (C, H, W)");
   auto chw = image.dim() == 2 ? image.unsqueeze(0) : image;
   const int64_t c = chw.size(0), h = chw.size(1), w = chw.size(2);
-  auto hwc = chw.to(torch::kFloat32).permute({1, 2, 0}).contiguous();
   const std::string ext = fs::path(path).extension().string();
   const bool is_float = ext == ".exr" || ext == ".pfm" || bits == 32;
+  if (!is_float && is_png(path) && c <= 4) {
+    write_png(path, integer_samples(chw, bits == 16 ? 16 : 8), bits == 16 ? 16 : 8);
+    return;
+  }
+  auto hwc = chw.to(torch::kFloat32).permute({1, 2, 0}).contiguous();
   if (!is_float) hwc = hwc.clamp(0, 1);
   OIIO::TypeDesc type = is_float ? OIIO::TypeDesc::FLOAT
                                  : (bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::UINT8);
@@ -567,7 +580,6 @@ void write_image(const std::string& path, const torch::Tensor& image, int bits) 
   if (!out) throw IoError("cannot write " + path + ": unknown image format " + ext);
   OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), static_cast<int>(c), type);
   spec.attribute("oiio:UnassociatedAlpha", 1);
-  png_options(spec);
   write_file_atomically(path, [&](const std::string& tmp) {
     const bool ok = out->open(tmp, spec) &&
                     out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
@@ -581,11 +593,14 @@ namespace {
 void write_bits16(const std::string& path, const torch::Tensor& bits) {
   const int64_t c = bits.size(0), h = bits.size(1), w = bits.size(2);
   auto hwc = bits.permute({1, 2, 0}).contiguous();
+  if (is_png(path) && c <= 4) {
+    write_png(path, hwc, 16);
+    return;
+  }
   auto out = OIIO::ImageOutput::create(path);
   LFNET_CHECK_AS(IoError, out, "cannot write ", path, ": ", OIIO::geterror());
   OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), static_cast<int>(c),
                        OIIO::TypeDesc::UINT16);
-  png_options(spec);
   write_file_atomically(path, [&](const std::string& tmp) {
     const bool ok = out->open(tmp, spec) &&
                     out->write_image(OIIO::TypeDesc::UINT16, hwc.data_ptr<int16_t>()) &&
@@ -597,21 +612,8 @@ void write_bits16(const std::string& path, const torch::Tensor& bits) {
 
 std::string encode_png(const torch::Tensor& image) {
   LFNET_CHECK(image.dim() == 2 || image.dim() == 3, "encode_png takes (H, W) or (C, H, W)");
-  auto chw = image.dim() == 2 ? image.unsqueeze(0) : image;
-  const int64_t c = chw.size(0), h = chw.size(1), w = chw.size(2);
-  auto hwc = chw.to(torch::kFloat32).clamp(0, 1).permute({1, 2, 0}).contiguous();
-  std::vector<unsigned char> bytes;
-  OIIO::Filesystem::IOVecOutput proxy(bytes);
-  auto out = OIIO::ImageOutput::create("image.png");
-  LFNET_CHECK_AS(IoError, out, "cannot encode PNG: ", OIIO::geterror());
-  out->set_ioproxy(&proxy);
-  OIIO::ImageSpec spec(static_cast<int>(w), static_cast<int>(h), static_cast<int>(c),
-                       OIIO::TypeDesc::UINT8);
-  png_options(spec);
-  const bool ok = out->open("image.png", spec) &&
-                  out->write_image(OIIO::TypeDesc::FLOAT, hwc.data_ptr<float>()) && out->close();
-  LFNET_CHECK_AS(IoError, ok, "cannot encode PNG: ", out->geterror());
-  return {bytes.begin(), bytes.end()};
+  const auto hwc = integer_samples(image.dim() == 2 ? image.unsqueeze(0) : image, 8);
+  return encode_png_samples(hwc.data_ptr(), hwc.size(0), hwc.size(1), hwc.size(2), 8);
 }
 
 void write_parallax_gif(const LightField& lf, const std::string& path, int64_t crop) {
@@ -733,7 +735,9 @@ LightField downscale_views(const LightFieldViews& lf, int64_t f) {
   return LightField(small);
 }
 
-LightField preview_light_field(const LightFieldViews& lf, int64_t max_side, int64_t gap) {
+namespace {
+// preview_light_field's factor.
+int64_t preview_factor(const LightFieldViews& lf, int64_t max_side, int64_t gap) {
   LFNET_CHECK(max_side >= 1, "preview_light_field: max_side must be positive");
   const int64_t u = lf.rows(), v = lf.cols(), h = lf.height(), w = lf.width();
   int64_t f = 1;
@@ -741,13 +745,35 @@ LightField preview_light_field(const LightFieldViews& lf, int64_t max_side, int6
          f < std::min(h, w)) {
     ++f;
   }
-  return downscale_views(lf, f);
+  return f;
+}
+}  // namespace
+
+LightField preview_light_field(const LightFieldViews& lf, int64_t max_side, int64_t gap) {
+  return downscale_views(lf, preview_factor(lf, max_side, gap));
 }
 
 void write_previews(const LightFieldViews& lf, const std::string& dir) {
   std::error_code ec;
   fs::create_directories(dir, ec);
-  write_image((fs::path(dir) / "grid.png").string(), grid_image(preview_light_field(lf)));
+  // grid_image(preview_light_field(lf)) in 8-bit samples, placed a view at a time on LibTorch's
+  // thread count: no float copy of the whole light field or of the grid is made.
+  constexpr int64_t kGap = 2;
+  const int64_t f = preview_factor(lf, kPreviewMaxSide, kGap);
+  const int64_t h = lf.height() / f, w = lf.width() / f, cols = lf.cols();
+  auto grid = torch::full({lf.rows() * (h + kGap) - kGap, cols * (w + kGap) - kGap, lf.channels()},
+                          255, torch::kUInt8);
+  parallel_chunks(lf.rows() * cols, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t i = begin; i < end; ++i) {
+      const int64_t u = i / cols, v = i % cols;
+      auto view = lf.view(u, v);
+      if (f > 1) view = torch::avg_pool2d(view.unsqueeze(1), {f, f}, {f, f}).squeeze(1);
+      grid.slice(0, u * (h + kGap), u * (h + kGap) + h)
+          .slice(1, v * (w + kGap), v * (w + kGap) + w)
+          .copy_(integer_samples(view, 8));
+    }
+  });
+  write_png((fs::path(dir) / "grid.png").string(), grid, 8);
   write_image((fs::path(dir) / "epi_h.png").string(), horizontal_epi(lf));
   write_image((fs::path(dir) / "epi_v.png").string(), vertical_epi(lf));
 }
