@@ -31,13 +31,13 @@ void run_reconstruct(const ReconstructArgs& a) {
   policy.inputs.insert(policy.inputs.end(), {a.request.model, a.request.dictionary, a.request.phi,
                                              a.request.flat_field});
   check_output_folder(a.out, policy);
-  // A whole-image model reconstructs colour channels, not patches (the model, read here to
-  // know, is read once: the cache passes it on).
+  // A whole-image model reconstructs whole sensor images, counted in pixels, not patches (the
+  // model, read here to know, is read once: the cache passes it on).
   pipeline::ModelCache cache;
   const bool whole_image = !a.request.model.empty() && recon::needs_network(a.request.method) &&
                            cache.model(a.request.model).network.arch().whole_image();
   // Its total is known once the work starts.
-  ProgressBar bar("reconstruct", 0, whole_image ? "channels" : "patches");
+  ProgressBar bar("reconstruct", 0, whole_image ? "pixels" : "patches");
   int64_t shown = 0;
   auto request = a.request;
   request.coded = true;  // a grey light field in 16-bit codes, what its files hold

@@ -3,12 +3,15 @@
 #include <catch2/catch.hpp>
 
 #include <filesystem>
+#include <utility>
+#include <vector>
 
 #include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/batch.h"
 #include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/train/checkpoint.h"
 #include "support/small_nets.h"
@@ -68,6 +71,21 @@ TEST_CASE("discover_items finds acquisitions and light fields, and records what 
                     Catch::Contains("does not exist"));
   CHECK_THROWS_WITH(pipeline::discover_items(tmp / "in/scenes/a/lf_1_1.png"),
                     Catch::Contains("is not a folder"));
+}
+
+TEST_CASE("a whole-image net's progress counts the sensor's pixels", "[pipeline][batch]") {
+  test::TempDir tmp;
+  write_inputs(tmp / "in");
+  save_small_lfnet(tmp / "net.ckpt");
+  pipeline::ReconstructRequest request;
+  request.sensor = tmp / "in/acq";
+  request.model = tmp / "net.ckpt";
+  std::vector<std::pair<int64_t, int64_t>> steps;
+  const auto r = pipeline::reconstruct_acquisition(
+      request, [&](int64_t done, int64_t total) { steps.emplace_back(done, total); });
+  const int64_t pixels = r.lf.height() * r.lf.width();  // the sensor's, as the views'
+  REQUIRE(steps.size() == 1);
+  CHECK(steps[0] == std::pair<int64_t, int64_t>{pixels, pixels});
 }
 
 TEST_CASE("run_batch writes one record per item and method and counts the failures",

@@ -224,7 +224,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
           estimated.push_back(sigma);
         }
         channels.push_back(image(sensor, sigma));
-        if (progress) progress(ch + 1, sensors);  // whole images: one step a colour channel
+        // Whole images: the sensor's pixels, one channel's at a time.
+        const int64_t pixels = sensor.size(-2) * sensor.size(-1);
+        if (progress) progress((ch + 1) * pixels, sensors * pixels);
         continue;
       }
       if (full) {
@@ -311,15 +313,21 @@ void write_reconstruction(const Reconstruction& r, const std::string& out,
   write_folder(out, policy, [&](const std::string& dir) {
     // What each step freed is returned before the next (the peak is one step's, not all).
     release_free_memory();
+    Stopwatch step;
     io::write_light_field(r.lf, dir);
+    spdlog::debug("views written in {:.2f} s", step.seconds());
+    step.reset();
     release_free_memory();
     io::write_previews(r.lf, dir);
+    spdlog::debug("grid and EPIs written in {:.2f} s", step.seconds());
+    step.reset();
     release_free_memory();
     io::ViewerPage page;
     page.title = r.record.value("method", "") + " reconstruction of " +
                  fs::path(r.record.value("sensor", "")).filename().string();
     page.record = r.record;
     io::write_viewer(r.lf, (fs::path(dir) / "index.html").string(), page);
+    spdlog::debug("viewer written in {:.2f} s", step.seconds());
     // Last: the command's time from its start, every other output written.
     auto record = r.record;
     if (end_to_end) record["end_to_end_seconds"] = process_seconds();

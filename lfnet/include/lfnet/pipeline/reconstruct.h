@@ -51,8 +51,9 @@ struct Reconstruction {
   nlohmann::json record;
 };
 
-// Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all);
-// with a `cache`, the model or dictionary is read once and reused by later calls.
+// Reconstructs one acquisition. `progress` (optional) gets (patches done, patches in all), or
+// for a whole-image network (sensor pixels done, sensor pixels in all); with a `cache`, the model
+// or dictionary is read once and reused by later calls.
 Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
                                        const recon::ProgressCallback& progress = {},
                                        ModelCache* cache = nullptr);
