@@ -6,9 +6,13 @@
 #   BINARY  COMMAND  reconstruction-seconds  end-to-end-seconds  ratio
 # for `reconstruct --out` (from its reconstruction.json) and `evaluate --json` (docs/performance.md,
 # "End to end").
-# The paper's scene is the one #43 times commands on; this script reads only seconds, never a
-# PSNR, so nothing is chosen by the scene's score.
-# Usage: scripts/end-to-end.sh [BINARY...]   (RUNS=5 scripts/end-to-end.sh ...)
+# With ALL=1 it also times, by the wall clock around each process, `evaluate --json --out`,
+# `reconstruct --method pinv --out` and `info --lf` (the commands a new user runs first), one line
+#   BINARY  COMMAND  seconds-lfnet-reports  wall-seconds
+# each ("info" reports the seconds it took to load the light field).
+# The paper's scene is the one timed; this script reads only seconds, never a PSNR, so nothing
+# is chosen by the scene's score.
+# Usage: scripts/end-to-end.sh [BINARY...]   (RUNS=5 scripts/end-to-end.sh ...; ALL=1 ...)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data=../shared/data/mit_dragons_bunnies_5x5_ap5
@@ -25,6 +29,25 @@ e = r.get("end_to_end_seconds", float("nan"))
 print("%s\t%s\t%.2f\t%.2f\t%.2f" % (sys.argv[1], sys.argv[2], r["seconds"], e, e / r["seconds"]))
 PY
 }
+# wall BINARY LABEL RECORD ARGS...: runs BINARY ARGS on two threads, prints the seconds the
+# record (or, without one, info's "loaded in") reports and the wall seconds of the process.
+wall() {
+  local bin=$1 label=$2 record=$3
+  shift 3
+  local start end
+  start=$(date +%s.%N)
+  "$bin" --threads 2 --log-level off "$@" > "$work/stdout" 2>&1
+  end=$(date +%s.%N)
+  /usr/bin/python3 - "$bin" "$label" "$record" "$work/stdout" "$start" "$end" <<'PY'
+import json, re, sys
+bin_, label, record, stdout, start, end = sys.argv[1:]
+if record:
+    reported = json.load(open(record))["seconds"]
+else:
+    reported = float(re.search(r"loaded in:\s*([0-9.]+) s", open(stdout).read()).group(1))
+print("%s\t%s\t%.2f\t%.2f" % (bin_, label, reported, float(end) - float(start)))
+PY
+}
 for ((run = 1; run <= ${RUNS:-3}; run++)); do
   for bin in "$@"; do
     "$bin" --threads 2 --log-level off reconstruct --model "$model" --sensor "$work/acq" \
@@ -33,5 +56,11 @@ for ((run = 1; run <= ${RUNS:-3}; run++)); do
     "$bin" --threads 2 --log-level off evaluate --model "$model" --lf "$data" \
       --json "$work/eval.json" --force > /dev/null
     line "$bin" "evaluate --json" "$work/eval.json"
+    [[ -n ${ALL:-} ]] || continue
+    wall "$bin" "evaluate --json --out" "$work/eval-out.json" evaluate --model "$model" \
+      --lf "$data" --json "$work/eval-out.json" --out "$work/eval-out" --force
+    wall "$bin" "reconstruct --method pinv --out" "$work/pinv/reconstruction.json" reconstruct \
+      --method pinv --sensor "$work/acq" --out "$work/pinv" --force
+    wall "$bin" "info --lf" "" info --lf "$data"
   done
 done

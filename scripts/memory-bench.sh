@@ -104,16 +104,16 @@ for c in commands:
     print(f"| {c} | " + " | ".join(cells) + " |")
 if not sys.argv[2]:
     sys.exit(0)
-fig, ax = plt.subplots(figsize=(6.4, 4))
+fig, ax = plt.subplots(figsize=(8, 4))
 for c in commands:
     pts = [(s, by[(c, s)]["peak_mb"]) for s in sizes if (c, s) in by and by[(c, s)]["exit"] == 0]
     ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", label=c)
 ax.axhline(2048, color="grey", linestyle="--", linewidth=1)
-ax.text(sizes[0], 2048, " 2 GB", va="bottom", color="grey")
+ax.text(sizes[-1], 2048, "2 GB ", va="bottom", ha="right", color="grey")
 ax.set_xlabel("megapixels per view (5 x 5 grey views)")
 ax.set_ylabel("peak resident memory (MB)")
 ax.set_title("Peak memory against light-field size")
-ax.legend(fontsize=8)
+ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1))
 ax.grid(alpha=0.3)
 fig.tight_layout()
 fig.savefig(sys.argv[2], dpi=110)
