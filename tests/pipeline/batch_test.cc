@@ -85,7 +85,7 @@ TEST_CASE("a whole-image net's progress counts the sensor's pixels", "[pipeline]
       request, [&](int64_t done, int64_t total) { steps.emplace_back(done, total); });
   const int64_t pixels = r.lf.height() * r.lf.width();  // the sensor's, as the views'
   REQUIRE(steps.size() == 1);
-  CHECK(steps[0] == std::pair<int64_t, int64_t>{pixels, pixels});
+  CHECK((steps[0] == std::pair<int64_t, int64_t>{pixels, pixels}));
 }
 
 TEST_CASE("run_batch writes one record per item and method and counts the failures",

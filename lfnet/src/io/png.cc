@@ -79,9 +79,10 @@ std::string encode_png_samples(const void* samples, int64_t height, int64_t widt
 
   std::string png("\x89PNG\r\n\x1a\n", 8);
   std::array<uint8_t, 13> header{};
-  for (int i = 0; i < 4; ++i) {
-    header[static_cast<size_t>(i)] = static_cast<uint8_t>(width >> (24 - 8 * i));
-    header[static_cast<size_t>(4 + i)] = static_cast<uint8_t>(height >> (24 - 8 * i));
+  for (size_t i = 0; i < 4; ++i) {
+    const auto shift = 24 - 8 * static_cast<int>(i);
+    header[i] = static_cast<uint8_t>(width >> shift);
+    header[4 + i] = static_cast<uint8_t>(height >> shift);
   }
   header[8] = static_cast<uint8_t>(bits);
   header[9] = colour_type(channels);  // compression, filter method, interlace: 0
