@@ -687,15 +687,27 @@ void write_light_field(const LightFieldViews& lf, const std::string& dir,
   });
 }
 
+namespace {
+// The cell of view (u, v) in a grid of h x w views `gap` pixels apart, whose rows run along
+// dimension `row_dim` and columns along the next.
+torch::Tensor grid_cell(const torch::Tensor& grid, int64_t row_dim, int64_t u, int64_t v, int64_t h,
+                        int64_t w, int64_t gap) {
+  return grid.slice(row_dim, u * (h + gap), u * (h + gap) + h)
+      .slice(row_dim + 1, v * (w + gap), v * (w + gap) + w);
+}
+
+// A (C, H, W) view's area averages of f x f pixels (the last rows and columns that do not fill a
+// block dropped).
+torch::Tensor downscale_view(const torch::Tensor& view, int64_t f) {
+  return f == 1 ? view : torch::avg_pool2d(view.unsqueeze(1), {f, f}, {f, f}).squeeze(1);
+}
+}  // namespace
+
 torch::Tensor grid_image(const LightField& lf, int64_t gap) {
   const int64_t c = lf.channels(), u = lf.rows(), v = lf.cols(), h = lf.height(), w = lf.width();
   auto out = torch::ones({c, u * (h + gap) - gap, v * (w + gap) - gap});
   for (int64_t i = 0; i < u; ++i) {
-    for (int64_t j = 0; j < v; ++j) {
-      out.slice(1, i * (h + gap), i * (h + gap) + h)
-          .slice(2, j * (w + gap), j * (w + gap) + w)
-          .copy_(lf.view(i, j));
-    }
+    for (int64_t j = 0; j < v; ++j) grid_cell(out, 1, i, j, h, w, gap).copy_(lf.view(i, j));
   }
   return out;
 }
@@ -722,14 +734,11 @@ LightField downscale_views(const LightFieldViews& lf, int64_t f) {
   LFNET_CHECK(f >= 1 && f <= lf.height() && f <= lf.width(), "downscale_views: factor ", f,
               " for views of ", lf.height(), "x", lf.width());
   if (f == 1) return lf.decode();
-  // Area averages of f x f pixels (the last rows and columns that do not fill a block dropped),
-  // a view at a time.
+  // A view at a time.
   auto small = torch::empty({lf.channels(), lf.rows(), lf.cols(), lf.height() / f, lf.width() / f});
   for (int64_t u = 0; u < lf.rows(); ++u) {
     for (int64_t v = 0; v < lf.cols(); ++v) {
-      small.select(axis::kU, u)
-          .select(axis::kU, v)
-          .copy_(torch::avg_pool2d(lf.view(u, v).unsqueeze(1), {f, f}, {f, f}).squeeze(1));
+      small.select(axis::kU, u).select(axis::kU, v).copy_(downscale_view(lf.view(u, v), f));
     }
   }
   return LightField(small);
@@ -766,11 +775,8 @@ void write_previews(const LightFieldViews& lf, const std::string& dir) {
   parallel_chunks(lf.rows() * cols, 1, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
       const int64_t u = i / cols, v = i % cols;
-      auto view = lf.view(u, v);
-      if (f > 1) view = torch::avg_pool2d(view.unsqueeze(1), {f, f}, {f, f}).squeeze(1);
-      grid.slice(0, u * (h + kGap), u * (h + kGap) + h)
-          .slice(1, v * (w + kGap), v * (w + kGap) + w)
-          .copy_(integer_samples(view, 8));
+      grid_cell(grid, 0, u, v, h, w, kGap)
+          .copy_(integer_samples(downscale_view(lf.view(u, v), f), 8));
     }
   });
   write_png((fs::path(dir) / "grid.png").string(), grid, 8);

@@ -4,8 +4,8 @@
 
 #include <algorithm>
 #include <array>
-#include <cstring>
 #include <memory>
+#include <string_view>
 #include <vector>
 
 #include "lfnet/core/error.h"
@@ -27,12 +27,14 @@ void put_u32(std::string& out, uint32_t v) {
 constexpr size_t kMaxChunk = 0x7fffffff;
 
 // A chunk: length, type, data, CRC-32 of type and data.
-void put_chunk(std::string& out, const char (&type)[5], const uint8_t* data, size_t size) {
-  put_u32(out, static_cast<uint32_t>(size));
+void put_chunk(std::string& out, const char (&type)[5], std::string_view data) {
+  LFNET_CHECK_AS(IoError, data.size() <= kMaxChunk, "cannot encode PNG: ", data.size(),
+                 " bytes of image data, more than one PNG chunk holds");
+  put_u32(out, static_cast<uint32_t>(data.size()));
   const size_t at = out.size();
   out.append(type, 4);
-  if (size > 0) out.append(reinterpret_cast<const char*>(data), size);
-  put_u32(out, libdeflate_crc32(0, out.data() + at, size + 4));
+  out.append(data);
+  put_u32(out, libdeflate_crc32(0, out.data() + at, data.size() + 4));
 }
 
 // Colour types of the PNG specification by channel count.
@@ -77,32 +79,25 @@ std::string encode_png_samples(const void* samples, int64_t height, int64_t widt
       libdeflate_alloc_compressor(kDeflateLevel), &libdeflate_free_compressor);
   LFNET_CHECK_AS(IoError, compressor, "cannot encode PNG: out of memory");
 
-  std::string png("\x89PNG\r\n\x1a\n", 8);
-  std::array<uint8_t, 13> header{};
-  for (size_t i = 0; i < 4; ++i) {
-    const auto shift = 24 - 8 * static_cast<int>(i);
-    header[i] = static_cast<uint8_t>(width >> shift);
-    header[4 + i] = static_cast<uint8_t>(height >> shift);
-  }
-  header[8] = static_cast<uint8_t>(bits);
-  header[9] = colour_type(channels);  // compression, filter method, interlace: 0
-  put_chunk(png, "IHDR", header.data(), header.size());
-  // One IDAT chunk, compressed in place after its length and type.
-  const size_t at = png.size();
-  const size_t bound = libdeflate_zlib_compress_bound(compressor.get(), filtered.size());
-  png.resize(at + 8 + bound);
+  // One IDAT chunk; the filtered rows are freed before the file is assembled.
+  std::vector<uint8_t> idat(libdeflate_zlib_compress_bound(compressor.get(), filtered.size()));
   const size_t size = libdeflate_zlib_compress(compressor.get(), filtered.data(), filtered.size(),
-                                               png.data() + at + 8, bound);
+                                               idat.data(), idat.size());
   LFNET_CHECK_AS(IoError, size > 0, "cannot encode PNG: the compressor ran out of room");
-  LFNET_CHECK_AS(IoError, size <= kMaxChunk, "cannot encode PNG: ", size,
-                 " bytes of image data, more than one PNG chunk holds");
-  for (int i = 0; i < 4; ++i) {
-    png[at + static_cast<size_t>(i)] = static_cast<char>((size >> (24 - 8 * i)) & 0xff);
-  }
-  std::memcpy(png.data() + at + 4, "IDAT", 4);
-  png.resize(at + 8 + size);
-  put_u32(png, libdeflate_crc32(0, png.data() + at + 4, size + 4));
-  put_chunk(png, "IEND", nullptr, 0);
+  std::vector<uint8_t>().swap(filtered);
+
+  std::string header;  // IHDR
+  put_u32(header, static_cast<uint32_t>(width));
+  put_u32(header, static_cast<uint32_t>(height));
+  header.push_back(static_cast<char>(bits));
+  header.push_back(static_cast<char>(colour_type(channels)));
+  header.append(3, '\0');  // compression, filter method, interlace
+  std::string png("\x89PNG\r\n\x1a\n", 8);
+  constexpr size_t kChunkFrame = 12;  // length, type and CRC
+  png.reserve(png.size() + 3 * kChunkFrame + header.size() + size);
+  put_chunk(png, "IHDR", header);
+  put_chunk(png, "IDAT", {reinterpret_cast<const char*>(idat.data()), size});
+  put_chunk(png, "IEND", {});
   return png;
 }
 
