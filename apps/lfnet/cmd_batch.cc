@@ -69,6 +69,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--window", o.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");
   cmd->add_flag("--match-mean", o.match_mean, "scale real measurements to the training mean");
+  add_demosaic_option(cmd, o.demosaic);
   cmd->add_option("--flat-field", o.flat_field,
                   "the camera's white frame, divided out of every acquisition's sensor image "
                   "(docs/acquisition.md, \"Flat field\")");

@@ -106,6 +106,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--cfa", q.cfa,
                   "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
                   "JSON, inline or a file; scores colour and luma (docs/acquisition.md)");
+  add_demosaic_option(cmd, q.demosaic);
   auto* camera_error = cmd->add_option(
       "--camera-error", q.camera_error,
       "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "

@@ -85,6 +85,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                 "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", q.post_filter,
                 "suppress artefacts that repeat with the patch stride (a spectral notch per view)");
+  add_demosaic_option(cmd, q.demosaic);
   cmd->add_option("--flat-field", q.flat_field,
                   "the camera's white frame (an acquisition folder, or an image of its N "
                   "channels): its gain across the sensor, such as vignetting, is divided out "

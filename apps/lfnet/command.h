@@ -136,6 +136,13 @@ CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, E& value,
       flag, [&value, flag](const std::string& text) { value = parse_enum_option<E>(flag, text); },
       help);
 }
+// --demosaic of evaluate, reconstruct and batch.
+inline CLI::Option* add_demosaic_option(CLI::App* cmd, optics::Demosaic& value) {
+  return add_enum_option(cmd, "--demosaic", value,
+                         "behind a colour filter array, how the views of pinv and adjoint are "
+                         "demosaiced: bilinear (default) or malvar, gradient-corrected "
+                         "(docs/acquisition.md); colour nets demosaic inside themselves");
+}
 template <typename E>
 CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, std::vector<E>& values,
                              const std::string& help) {

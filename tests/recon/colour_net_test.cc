@@ -76,6 +76,35 @@ TEST_CASE("an untrained colour net returns the pseudo-inverse demosaiced as pinv
   }
 }
 
+TEST_CASE("an untrained colour net with malvar demosaicing returns pinv's malvar demosaic",
+          "[recon][image][colour]") {
+  for (const std::string name : {"asp", "mask"}) {
+    for (const std::string pattern : {"RGGB", "GRBG"}) {
+      INFO(name << ", " << pattern);
+      const auto phi = optics::make_phi(optics::PhiSpec::parse(name + ":2"));
+      const auto cfa = optics::ColourFilterArray::bayer(pattern);
+      const auto sensor = colour_sensor(*phi, colour_light_field(*phi, 37, 30, 5), cfa);
+      auto grey = net_of(colour_options(*phi, ""), *phi);
+      const auto mosaicked = recon::reconstruct_sensor_tiled(grey, sensor, 256, false)[0];
+      const auto want = optics::demosaic(mosaicked, cfa, optics::Demosaic::kMalvar);
+      auto o = colour_options(*phi, pattern);
+      o.demosaic = optics::Demosaic::kMalvar;
+      auto net = net_of(o, *phi);
+      CHECK(nn::NetworkOptions::from_json(o.to_json()).demosaic == optics::Demosaic::kMalvar);
+      // Both mirror the image at its edges; tiles of 8 start at every phase, their halos keep
+      // a tile's own edges away from its core.
+      for (int64_t tile : {8, 256}) {
+        INFO("tile " << tile);
+        const auto got = recon::reconstruct_sensor_tiled(net, sensor, tile, false);
+        REQUIRE(got.sizes() == want.sizes());
+        CHECK(torch::allclose(got, want, 1e-5, 1e-5));
+      }
+      // Not the bilinear demosaic.
+      CHECK((want - optics::demosaic(mosaicked, cfa)).abs().max().item<double>() > 0.01);
+    }
+  }
+}
+
 TEST_CASE("tiled inference of a colour net equals one pass over the whole image",
           "[recon][image][colour]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("mask:2"));

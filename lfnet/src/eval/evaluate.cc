@@ -134,7 +134,7 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
     if (progress) progress(pixels, pixels);
   } else {
     const auto mosaicked = recon::reconstruct_sensor(phi, sensor, solver, ro, progress);
-    estimate = optics::demosaic(mosaicked[0], cfa);  // (3, U, V, H, W)
+    estimate = optics::demosaic(mosaicked[0], cfa, options.demosaic);  // (3, U, V, H, W)
   }
   LFNET_CHECK(estimate.dim() == 5 && estimate.size(0) == 3, "method '", method, "' returned ",
               estimate.sizes(), " behind a colour filter array, not (3, U, V, H, W)");
@@ -145,6 +145,7 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
   if (image) record["whole_image"] = true;
   add_equivalent_sigma(record, options, signal);
   record["cfa"] = cfa.to_json();
+  if (!image) record["demosaic"] = optics::to_string(options.demosaic);
   if (!options.camera_error.empty()) record["camera_error"] = options.camera_error.to_json();
   if (options.flat_field.defined()) record["flat_field"] = true;
   record.update(colour_score(LightField(estimate), truth));

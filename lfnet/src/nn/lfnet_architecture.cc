@@ -151,12 +151,18 @@ torch::Tensor demosaic_base(const torch::Tensor& base, const torch::Tensor& resp
 }
 
 // The per-pixel pseudo-inverse (B, U V, h, w) of crops of phase `phase` (B, undefined: 0) as
-// the U-Net's base: itself for a grey net, demosaiced for a colour net (B, 3 U V, h, w).
+// the U-Net's base: itself for a grey net, demosaiced for a colour net (B, 3 U V, h, w), by
+// `network.demosaic`: bilinear within the crop, or malvar with the crop's edges mirrored.
 torch::Tensor colour_base(const LightFieldNetImpl& net, const torch::Tensor& pinv,
                           const torch::Tensor& phase) {
   if (net.options().colours() == 1) return pinv;
-  return demosaic_base(
-      pinv, response_maps(net.cfa_response, phase, pinv.size(0), pinv.size(2), pinv.size(3)));
+  const auto response =
+      response_maps(net.cfa_response, phase, pinv.size(0), pinv.size(2), pinv.size(3));
+  if (net.options().demosaic == optics::Demosaic::kMalvar) {
+    const auto rgb = optics::demosaic_malvar(pinv, response.to(pinv.options()));
+    return rgb.reshape({pinv.size(0), 3 * pinv.size(1), pinv.size(2), pinv.size(3)});
+  }
+  return demosaic_base(pinv, response);
 }
 
 // The parameters of a grey net's input and output layers that a colour net of the same U-Net

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <vector>
 
+#include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 
@@ -15,7 +16,28 @@ namespace lfnet::optics {
 namespace {
 constexpr const char* kBayerPatterns[] = {"RGGB", "BGGR", "GRBG", "GBRG"};
 constexpr int64_t kMaxPeriod = 16;
+constexpr EnumName<Demosaic> kDemosaics[] = {{Demosaic::kBilinear, "bilinear"},
+                                             {Demosaic::kMalvar, "malvar"}};
+
+// Malvar, He and Cutler's four 5 x 5 filters, in eighths, on the mosaic: a green value at a red
+// or blue pixel; a red (blue) value at a green pixel whose row holds red (blue) pixels, and the
+// same at one whose column does (the transpose); a red value at a blue pixel and back.
+torch::Tensor malvar_filters(const torch::TensorOptions& options) {
+  const double g_at_rb[25] = {0, 0, -1, 0, 0, 0, 0, 2, 0, 0, -1, 2, 4, 2, -1, 0, 0, 2, 0, 0, 0, 0, -1, 0, 0};
+  const double along_row[25] = {0,  0, 0.5, 0,  0, 0, -1, 0,   -1, 0, -1, 4, 5,
+                                4, -1, 0,   -1, 0, -1, 0, 0,  0,  0.5, 0, 0};
+  const double across[25] = {0, 0, -1.5, 0, 0, 0, 2, 0, 2, 0, -1.5, 0, 6,
+                             0, -1.5, 0, 2, 0, 2, 0, 0, 0, -1.5, 0, 0};
+  const auto f = [&](const double* k) {
+    return torch::from_blob(const_cast<double*>(k), {5, 5}, torch::kFloat64).clone();
+  };
+  const auto row = f(along_row);
+  return torch::stack({f(g_at_rb), row, row.t(), f(across)}).unsqueeze(1).to(options) / 8.0;
+}
 }  // namespace
+
+std::string to_string(Demosaic value) { return name_of(value, kDemosaics); }
+Demosaic from_string(const std::string& name, Demosaic) { return value_of(name, kDemosaics); }
 
 ColourFilterArray ColourFilterArray::bayer(const std::string& pattern) {
   const bool known = std::find(std::begin(kBayerPatterns), std::end(kBayerPatterns), pattern) !=
@@ -130,8 +152,51 @@ torch::Tensor mosaic(const torch::Tensor& colour_sensor, const ColourFilterArray
   return (colour_sensor * r).sum(0, /*keepdim=*/true);
 }
 
-torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa) {
+torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& response) {
+  LFNET_CHECK(own.dim() == 4 && response.dim() == 4 && response.size(1) == 3 &&
+                  response.size(0) == own.size(0) && response.size(2) == own.size(2) &&
+                  response.size(3) == own.size(3),
+              "demosaic_malvar: expected (B, K, h, w) and (B, 3, h, w), got ", own.sizes(), " and ",
+              response.sizes());
+  const int64_t b = own.size(0), k = own.size(1), h = own.size(2), w = own.size(3);
+  LFNET_CHECK_AS(ConfigError, h >= 3 && w >= 3, "demosaic: an image of ", h, " x ", w,
+                 " pixels is too small for malvar demosaicing (3 x 3 at least)");
+  const auto is = (response > 0).to(own.options());  // (B, 3, h, w)
+  const auto red = is.select(1, 0).unsqueeze(1), green = is.select(1, 1).unsqueeze(1),
+             blue = is.select(1, 2).unsqueeze(1);  // (B, 1, h, w)
+  // Whether a pixel's row holds red (else blue) pixels: a Bayer pattern alternates them.
+  const auto red_row = std::get<0>(red.max(3, /*keepdim=*/true)).expand({b, 1, h, w});
+  const auto blue_row = 1 - red_row;
+  const auto padded = torch::nn::functional::pad(
+      own.reshape({b * k, 1, h, w}),
+      torch::nn::functional::PadFuncOptions({2, 2, 2, 2}).mode(torch::kReflect));
+  const auto f = torch::conv2d(padded, malvar_filters(own.options())).view({b, k, 4, h, w});
+  const auto g_at_rb = f.select(2, 0), along_row = f.select(2, 1), along_column = f.select(2, 2),
+             across = f.select(2, 3);  // (B, K, h, w)
+  const auto at_green = [&](const torch::Tensor& in_row) {
+    return in_row * along_row + (1 - in_row) * along_column;
+  };
+  auto r = red * own + green * at_green(red_row) + blue * across;
+  auto g = green * own + (1 - green) * g_at_rb;
+  auto bl = blue * own + green * at_green(blue_row) + red * across;
+  return torch::stack({r, g, bl}, 1);
+}
+
+torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa,
+                       Demosaic method) {
   cfa.check_demosaicable();
+  if (method == Demosaic::kMalvar) {
+    LFNET_CHECK_AS(ConfigError, cfa.pattern() != "custom",
+                   "malvar demosaicing needs a Bayer pattern, not a custom colour response");
+    LFNET_CHECK_AS(ConfigError, mosaicked.dim() >= 2, "demosaic: expected (..., H, W), got ",
+                   mosaicked.sizes());
+    const int64_t h = mosaicked.size(-2), w = mosaicked.size(-1);
+    const auto images = mosaicked.reshape({1, -1, h, w});
+    const auto response = cfa.response_image(h, w).to(mosaicked.options()).unsqueeze(0);
+    auto shape = mosaicked.sizes().vec();
+    shape.insert(shape.begin(), 3);
+    return demosaic_malvar(images, response).reshape(shape);
+  }
   LFNET_CHECK_AS(ConfigError, mosaicked.dim() >= 2, "demosaic: expected (..., H, W), got ",
                  mosaicked.sizes());
   const int64_t h = mosaicked.size(-2), w = mosaicked.size(-1);

@@ -172,6 +172,7 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         q.post_filter = a.post_filter;
         q.match_mean = a.match_mean;
         q.flat_field = a.flat_field;
+        q.demosaic = a.demosaic;
         q.self_ensemble = a.self_ensemble;
         q.self_ensemble_passes = a.self_ensemble_passes;
         q.self_calibrate = a.self_calibrate;
@@ -244,6 +245,9 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
       }
       auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
       o.cfa = cfa;
+      // A colour net demosaics inside itself: --demosaic is for the other methods.
+      check_demosaic_argument(a.demosaic, cfa.has_value(), false, method);
+      o.demosaic = a.demosaic;
       context.coded = o.reconstruct.coded = !cfa;  // as evaluate: a grey estimate in 16-bit codes
       auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
       record["item"] = item.name;
@@ -296,6 +300,7 @@ nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::stri
                             {"mode", optics::to_string(a.mode)},
                             {"noise", a.noise},
                             {"cfa", a.cfa},
+                            {"demosaic", optics::to_string(a.demosaic)},
                             {"seed", a.seed},
                             {"stride", a.stride},
                             {"window", a.window},
@@ -366,7 +371,8 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   const auto method_options = method_options_argument(a.method_options, methods);
   resolved.method_options = method_options.empty() ? "" : method_options.dump();
   // --cfa, or the one a calibrated Phi's folder names.
-  if (const auto cfa = cfa_of_arguments(a.cfa, a.phi)) {
+  const auto cfa = cfa_of_arguments(a.cfa, a.phi);
+  if (cfa) {
     cfa->check_demosaicable();
     resolved.cfa = cfa->to_json().dump();
   }

@@ -251,6 +251,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
                    "--cfa is simulated in sensor mode only");
     cfa->check_demosaicable();
   }
+  check_demosaic_argument(a.demosaic, cfa.has_value(), recon::needs_network(method), method);
   parse_device(a.device);  // a clear error before any work
   MethodContext context;
   optics::PhiSpec spec;
@@ -328,6 +329,7 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
     }
   }
   o.cfa = cfa;
+  o.demosaic = a.demosaic;
   if (flat_field.defined()) {
     const auto views = truths[0].views();
     LFNET_CHECK_AS(ConfigError,

@@ -197,6 +197,16 @@ const dict::Dictionary& ModelCache::dictionary(const std::string& path) {
   return it->second;
 }
 
+void check_demosaic_argument(optics::Demosaic demosaic, bool cfa, bool network,
+                             const std::string& method) {
+  if (demosaic == optics::Demosaic::kBilinear) return;
+  LFNET_CHECK_AS(ConfigError, cfa, "--demosaic ", optics::to_string(demosaic),
+                 " needs a colour filter array (--cfa)");
+  LFNET_CHECK_AS(ConfigError, !network, "--demosaic: method '", method,
+                 "' reconstructs the colours itself (a colour net demosaics inside, by its "
+                 "network.demosaic)");
+}
+
 std::optional<optics::ColourFilterArray> cfa_of_arguments(const std::string& cfa,
                                                           const std::string& phi) {
   const auto spec = !phi.empty() && phi_argument_is_file(phi) ? phi_from_argument(phi).to_json()

@@ -187,6 +187,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
     cfa->check_demosaicable();
   }
   const bool network_method = model && needs == recon::MethodNeeds::kNetwork;
+  check_demosaic_argument(a.demosaic, cfa.has_value(), network_method, method);
   if (network_method) model->check_cfa(cfa ? cfa->pattern() : "");
   if (cfa && !network_method) {
     LFNET_CHECK_AS(ConfigError, needs != recon::MethodNeeds::kNetwork && !image, "method '", method,
@@ -241,7 +242,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
             if (progress) progress(ch * per_channel + done, sensors * total);
           }));
     }
-    if (cfa && !image) channels = {optics::demosaic(channels[0][0], *cfa)};  // (3, U, V, H, W)
+    if (cfa && !image) {
+      channels = {optics::demosaic(channels[0][0], *cfa, a.demosaic)};  // (3, U, V, H, W)
+    }
   } else {
     LFNET_CHECK_AS(ConfigError, !a.match_mean,
                    "--match-mean applies to sensor images, not to per_patch measurements");
@@ -293,6 +296,7 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
               {"precision", nn::to_string(a.precision)},
               {"lfnet_version", kVersion}};
   if (cfa) r.record["cfa"] = cfa->to_json();
+  if (cfa && !network_method) r.record["demosaic"] = optics::to_string(a.demosaic);
   if (!a.flat_field.empty()) r.record["flat_field"] = true;
   if (model && needs == recon::MethodNeeds::kNetwork && model->noise_switch()) {
     r.record["noise_switch"] = model->noise_switch_record();

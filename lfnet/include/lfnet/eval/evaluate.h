@@ -39,6 +39,8 @@ struct EvalOptions {
   // method reconstructs the mosaicked light field, each of its views then demosaiced; the
   // record scores colour (psnr_db, ssim) and luma (luma_psnr_db).
   std::optional<optics::ColourFilterArray> cfa;
+  // How those views are demosaiced (a colour net demosaics inside itself, network.demosaic).
+  optics::Demosaic demosaic = optics::Demosaic::kBilinear;
 };
 
 // The outcome of one evaluation, as `lfnet evaluate --json` writes it.

@@ -32,6 +32,7 @@
 #include "lfnet/nn/architecture.h"
 #include "lfnet/nn/conv4d.h"
 #include "lfnet/nn/image_net.h"
+#include "lfnet/optics/cfa.h"
 
 namespace lfnet::nn {
 
@@ -132,6 +133,9 @@ struct NetworkOptions {
   // image and reconstructs the three colours of every view jointly (docs/architectures.md,
   // "Colour"). Empty: a grey net.
   std::string cfa;
+  // How a colour net demosaics its per-pixel pseudo-inverse into its U-Net's input:
+  // "bilinear" or "malvar" (gradient-corrected, optics/cfa.h). Grey nets ignore it.
+  optics::Demosaic demosaic = optics::Demosaic::kBilinear;
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -148,6 +152,7 @@ struct NetworkOptions {
     f("architecture", architecture);
     f("image", image);
     f("cfa", cfa);
+    f("demosaic", demosaic);
   }
   // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");

@@ -55,10 +55,25 @@ std::optional<ColourFilterArray> resolve_cfa(const std::string& given,
 // its colours' measurements weighted by its response. Sensor effects come after.
 torch::Tensor mosaic(const torch::Tensor& colour_sensor, const ColourFilterArray& cfa);
 
-// Bilinear demosaicing of images (..., H, W) whose pixels each measure one colour of `cfa`:
-// (3, ..., H, W). A pixel keeps its own colour's value; each missing colour is the
-// bilinear-weighted mean of that colour's pixels in its 3 x 3 neighbourhood (the edges
-// mirrored), which for a Bayer pattern is OpenCV's bilinear demosaicing.
-torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa);
+// How a demosaic fills in a pixel's missing colours: "bilinear", the weighted mean of that
+// colour's pixels among its 3 x 3 neighbours, or "malvar", Malvar, He and Cutler's
+// gradient-corrected bilinear interpolation (ICASSP 2004; Bayer patterns only), which adds to
+// the bilinear estimate a share of the pixel's own colour's Laplacian over 5 x 5 pixels, so that
+// an edge in one colour is an edge in all three.
+enum class Demosaic { kBilinear, kMalvar };
+std::string to_string(Demosaic value);
+Demosaic from_string(const std::string& name, Demosaic);
+
+// Demosaicing of images (..., H, W) whose pixels each measure one colour of `cfa`:
+// (3, ..., H, W). A pixel keeps its own colour's value; the missing colours are interpolated
+// by `method`, the edges mirrored. Bilinear is, for a Bayer pattern, OpenCV's bilinear
+// demosaicing; "malvar" needs a Bayer pattern (a ConfigError otherwise).
+torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa,
+                       Demosaic method = Demosaic::kBilinear);
+
+// Malvar-He-Cutler demosaicing of `own` (B, K, h, w), each pixel's K values in the one colour
+// that `response` (B, 3, h, w) gives it (a Bayer pattern at any phase): (B, 3, K, h, w), the
+// edges mirrored (h, w >= 3). The core of demosaic(..., kMalvar) and of a colour net's input.
+torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& response);
 
 }  // namespace lfnet::optics

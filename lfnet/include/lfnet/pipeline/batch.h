@@ -34,6 +34,7 @@ struct BatchOptions {
   int64_t batch = 1024;                                           // patches per solver call
   double noise = 0;     // Gaussian noise sigma of evaluations
   std::string cfa;      // evaluations behind a colour filter array (a Bayer pattern or a JSON file)
+  optics::Demosaic demosaic = optics::Demosaic::kBilinear;  // of pinv's views behind one
   uint64_t seed = 0;    // noise seed of evaluations
   bool window = false;  // weight patch estimates by a smooth window when stitching
   bool post_filter = false;  // suppress artefacts with the stride's period

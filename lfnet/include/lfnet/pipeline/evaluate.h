@@ -128,6 +128,7 @@ struct EvaluateRequest {
   bool tell_camera_error = false;  // lfnet nets are told the camera's Phi with that error
   std::string flat_field;  // --flat-field: the camera's white frame (read_flat_field); "" none
   std::string cfa;         // --cfa: a Bayer pattern or a JSON file (optics/cfa.h); "" a grey sensor
+  optics::Demosaic demosaic = optics::Demosaic::kBilinear;  // --demosaic: of pinv's views
   uint64_t seed = 0;       // noise seed
   int64_t stride = 5;      // patch stride
   int64_t batch = 1024;    // patches per forward pass

@@ -92,6 +92,13 @@ optics::PhiSpec phi_from_argument(const std::string& text, const std::string& op
 std::optional<optics::ColourFilterArray> cfa_of_arguments(const std::string& cfa,
                                                           const std::string& phi);
 
+// --demosaic (`demosaic`) checked against the command: it demosaics the views of a method that
+// reconstructs the mosaicked light field behind a colour filter array (`cfa`), so it needs one,
+// and a network method (`network`, such as a colour net, which demosaics inside itself)
+// refuses any but the default. ConfigErrors naming the option.
+void check_demosaic_argument(optics::Demosaic demosaic, bool cfa, bool network,
+                             const std::string& method);
+
 // True when `text` names a file or folder (a spec, a calibrated Phi, a model) rather than
 // NAME[:N].
 bool phi_argument_is_file(const std::string& text);

@@ -26,6 +26,8 @@ struct ReconstructRequest {
   std::string dictionary;             // dictionary file for dict
   std::string method_options;         // --method-options: JSON or file, keyed by method
   std::string flat_field;             // the camera's white frame (read_flat_field); "" none
+  // How a patch method's views of a colour filter array's sensor image are demosaiced.
+  optics::Demosaic demosaic = optics::Demosaic::kBilinear;
   recon::ReconstructOptions options;  // stride (sensor mode), batch, window
   bool match_mean = false;            // scale the measurements to the training mean
   bool post_filter = false;           // suppress artefacts with the stride's period
