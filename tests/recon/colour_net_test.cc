@@ -182,7 +182,44 @@ TEST_CASE("colour nets are checked", "[recon][image][colour]") {
   CHECK_NOTHROW(o.validate());
   CHECK(nn::NetworkOptions::from_json(o.to_json()).cfa == "RGGB");
   auto net = net_of(o, *phi);
-  // The self-ensemble mirrors the sensor image, which moves the CFA's colours.
-  CHECK_THROWS_WITH(recon::check_self_ensemble("net", net, nullptr),
-                    Catch::Contains("CFA does not mirror"));
+  CHECK_NOTHROW(recon::check_self_ensemble("net", net, nullptr));
+  // Distillation's self-ensemble of training crops takes grey nets only.
+  CHECK_THROWS_WITH(recon::reconstruct_crops_mirrored(net, torch::rand({1, 2, 16, 16}), {}, {}),
+                    Catch::Contains("grey nets only"));
+}
+
+TEST_CASE("a colour net's self-ensemble reads each mirror image at its CFA's phase",
+          "[recon][image][colour]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  for (const std::string pattern : {"RGGB", "GBRG"}) {
+    // Even and odd sides: a mirror image moves the pattern by one pixel or by none.
+    for (const auto& [h, w] : {std::pair<int64_t, int64_t>{36, 30}, {32, 29}, {37, 29}}) {
+      INFO(pattern << ", " << h << " x " << w);
+      const auto cfa = optics::ColourFilterArray::bayer(pattern);
+      auto net = net_of(colour_options(*phi, pattern), *phi);
+      // The code of period 1 gives the colour net the four mirrors of asp:2.
+      REQUIRE(recon::ensemble_mirrors(recon::mirror_weights(net)).size() == 4);
+      CHECK(recon::mirror_weights(net).sizes() == torch::IntArrayRef({2, 5, 5, 1, 1}));
+      const auto lf = colour_light_field(*phi, h, w, 9);
+      const auto sensor = colour_sensor(*phi, lf, cfa);
+      // Untrained, every pass is the demosaiced pseudo-inverse of what it reads, which a
+      // mirror image read at the wrong phase would give with its colours swapped.
+      const auto single = recon::reconstruct_sensor_tiled(net, sensor, 256, false);
+      CHECK(torch::allclose(recon::reconstruct_sensor_mirrored(net, sensor, 256, false), single,
+                            1e-4, 1e-4));
+      // Trained (here: random), the passes differ; on odd sides a mirror keeps the CFA where
+      // it was, so the mirrored light field's sensor image is the sensor image's mirror image:
+      // its ensemble estimate is the mirror image of the light field's.
+      test::randomise_image_net(net, 31);
+      const auto ensemble = recon::reconstruct_sensor_mirrored(net, sensor, 16, false);
+      REQUIRE(ensemble.sizes() == torch::IntArrayRef({3, 5, 5, h, w}));
+      CHECK_FALSE(torch::allclose(ensemble, recon::reconstruct_sensor_tiled(net, sensor, 16, false),
+                                  1e-3, 1e-3));
+      if (h % 2 == 1 && w % 2 == 1) {
+        const auto flipped = colour_sensor(*phi, lf.flip({2, 4}), cfa);
+        CHECK(torch::allclose(recon::reconstruct_sensor_mirrored(net, flipped, 16, false),
+                              ensemble.flip({2, 4}), 1e-4, 1e-4));
+      }
+    }
+  }
 }

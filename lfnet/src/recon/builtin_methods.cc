@@ -77,7 +77,8 @@ class NetworkMethod : public Method {
         return [script, tile, mirrors, maybe_coded](const torch::Tensor& sensor,
                                                     double noise_sigma) {
           return maybe_coded(reconstruct_mirrored(
-              mirrors, sensor, [&](const torch::Tensor& mirrored, const ProgressCallback&) {
+              mirrors, sensor,
+              [&](const torch::Tensor& mirrored, const SensorMirror&, const ProgressCallback&) {
                 return script->reconstruct_image(mirrored, tile, false, noise_sigma).unsqueeze(0);
               }));
         };

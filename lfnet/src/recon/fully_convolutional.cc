@@ -113,7 +113,8 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
 
 torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tensor& sensor,
                                        int64_t tile, bool clamp, double noise_sigma,
-                                       const ProgressCallback& progress, bool coded) {
+                                       const ProgressCallback& progress, bool coded,
+                                       int64_t origin) {
   const auto& o = net->options();
   const auto& arch = net->architecture();
   LFNET_CHECK_AS(ConfigError, arch.whole_image(), "whole-image reconstruction needs a model of ",
@@ -127,6 +128,9 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   const auto tiling = arch.image_tiling(o);
   const int64_t m = tiling.multiple, h = sensor.size(1), w = sensor.size(2);
   const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->period();
+  LFNET_CHECK(origin >= 0 && origin < t * t, "reconstruct_sensor_tiled: origin ", origin,
+              " outside the net's period of ", t, " x ", t);
+  const int64_t oy = origin / t, ox = origin % t;
   const auto device = net->phi.device();
   // The image is zero-padded to (hp, wp) tile by tile: crops that reach past it are padded by
   // forward_image, the image itself is not copied.
@@ -146,7 +150,7 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
                     .slice(2, c.b0, std::min(c.b1, w))
                     .unsqueeze(0)
                     .to(device);
-    auto est = net->forward_image(crop, (c.a0 % t) * t + c.b0 % t, noise_sigma)
+    auto est = net->forward_image(crop, ((c.a0 + oy) % t) * t + (c.b0 + ox) % t, noise_sigma)
                    .to(torch::kCPU)
                    .reshape({colours, o.patch.rows, o.patch.cols, crop.size(2), crop.size(3)});
     const int64_t th = std::min(c.y0 + step, h) - c.y0, tw = std::min(c.x0 + step, w) - c.x0;
@@ -197,6 +201,27 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights) {
   return mirrors;
 }
 
+torch::Tensor mirror_weights(const nn::LightFieldNet& net) {
+  const auto& w = net->phi;
+  if (net->options().colours() == 1 || w.dim() != 5) return w;
+  const auto first = w.narrow(3, 0, 1).narrow(4, 0, 1);
+  const bool period_one = (w - first).abs().max().item<double>() <=
+                          1e-6 * std::max(w.abs().max().item<double>(), 1e-30);
+  return period_one ? first : w;
+}
+
+int64_t mirrored_origin(const nn::LightFieldNet& net, const SensorMirror& m, int64_t height,
+                        int64_t width) {
+  if (net->options().colours() == 1) return 0;
+  // Pixel (y, x) of the image mirrored top to bottom is pixel (H - 1 - y, x) of the sensor
+  // image; over a period T that divides 2, phase (H - 1 - y) mod T is (y + H - 1) mod T.
+  const int64_t t = net->period();
+  LFNET_CHECK(t <= 2 || (!m.flip_x && !m.flip_y), "mirrored_origin: a colour net of period ", t,
+              " has no mirrors");
+  const int64_t oy = m.flip_y ? (height - 1) % t : 0, ox = m.flip_x ? (width - 1) % t : 0;
+  return oy * t + ox;
+}
+
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
                          const nn::ScriptedNetwork* script) {
   const bool image = (!net.is_empty() && net->architecture().whole_image()) ||
@@ -204,8 +229,6 @@ void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net
   LFNET_CHECK_AS(ConfigError, method == "net" && image,
                  "--self-ensemble applies to --method net with a model of a whole-image "
                  "architecture (lfnet)");
-  LFNET_CHECK_AS(ConfigError, net.is_empty() || net->options().colours() == 1,
-                 "--self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
 }
 
 void check_ensemble_passes(bool self_ensemble, int64_t passes) {
@@ -242,7 +265,7 @@ torch::Tensor reconstruct_mirrored(const std::vector<SensorMirror>& mirrors,
         progress(i * total + done, count * total);
       };
     }
-    auto est = pass(mirrored, part);
+    auto est = pass(mirrored, m, part);
     if (m.flip_y) est = est.flip({1, 3});
     if (m.flip_x) est = est.flip({2, 4});
     sum = sum.defined() ? sum.add_(est) : est;
@@ -257,13 +280,12 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
                                           const ProgressCallback& progress, int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
-  LFNET_CHECK_AS(
-      ConfigError, net->options().colours() == 1,
-      "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
   return reconstruct_mirrored(
-      ensemble_mirrors(net->phi, max_passes), sensor,
-      [&](const torch::Tensor& mirrored, const ProgressCallback& part) {
-        return reconstruct_sensor_tiled(net, mirrored, tile, false, noise_sigma, part);
+      ensemble_mirrors(mirror_weights(net), max_passes), sensor,
+      [&](const torch::Tensor& mirrored, const SensorMirror& m, const ProgressCallback& part) {
+        const auto origin = mirrored_origin(net, m, sensor.size(1), sensor.size(2));
+        return reconstruct_sensor_tiled(net, mirrored, tile, false, noise_sigma, part, false,
+                                        origin);
       },
       clamp, progress);
 }
@@ -273,9 +295,8 @@ torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Ten
                                          int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
-  LFNET_CHECK_AS(
-      ConfigError, net->options().colours() == 1,
-      "the self-ensemble mirrors grey sensor images; a colour net's CFA does not mirror");
+  LFNET_CHECK_AS(ConfigError, net->options().colours() == 1,
+                 "the self-ensemble of training crops (distillation) takes grey nets only");
   LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == net->options().measurements,
               "reconstruct_crops_mirrored: expected sensor crops (B, ", net->options().measurements,
               ", h, w), got ", sensor.sizes());

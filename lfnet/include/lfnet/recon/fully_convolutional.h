@@ -69,11 +69,13 @@ constexpr int64_t kDefaultImageTile = 256;
 // Runs on the device of the net's weights; returns float32 on the CPU, clamped to [0, 1]
 // when `clamp`. `noise_sigma` conditions a noise-aware net. `progress` gets (tiles done,
 // tiles in all). `coded`: the result is 16-bit codes (int16, clamped; core/light_field.h),
-// each tile encoded as it is done, so the light field is held in half the memory.
+// each tile encoded as it is done, so the light field is held in half the memory. `origin`:
+// the phase of the sensor image's pixel (0, 0) in the net's period (row * T + column).
 torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tensor& sensor,
                                        int64_t tile = kDefaultImageTile, bool clamp = true,
                                        double noise_sigma = 0.0,
-                                       const ProgressCallback& progress = {}, bool coded = false);
+                                       const ProgressCallback& progress = {}, bool coded = false,
+                                       int64_t origin = 0);
 
 // A mirror image under which a Phi is symmetric: it measures the mirrored light field (x and
 // v reversed with `flip_x`, y and u with `flip_y`) as the mirrored sensor image with its
@@ -92,6 +94,18 @@ struct SensorMirror {
 // images would depend on the image's size).
 std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
 
+// The pixel weights whose mirrors a net's self-ensemble uses: its `phi` buffer, or for a colour
+// net whose code has period 1 (its weights repeated over the CFA's period) one period of the
+// code: a Bayer pattern's mirror image is the same pattern at another phase
+// (mirrored_origin), so the colour net's mirrors are its code's.
+torch::Tensor mirror_weights(const nn::LightFieldNet& net);
+
+// The phase (row * T + column in the net's period T) at which a net reads the mirror image `m`
+// of an H x W sensor image whose pixel (0, 0) has phase 0: 0 for a grey net's code of period
+// 1; for a colour net, the phase at which its CFA pattern shows what the mirror image holds.
+int64_t mirrored_origin(const nn::LightFieldNet& net, const SensorMirror& m, int64_t height,
+                        int64_t width);
+
 // Throws a ConfigError unless the self-ensemble applies: `method` "net" with a model of the
 // lfnet architecture, a checkpoint's network (`net`, empty without one) or an exported one
 // (`script`, null without one).
@@ -108,10 +122,10 @@ void check_ensemble_passes(bool self_ensemble, int64_t passes);
 std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights,
                                            int64_t max_passes = 0);
 
-// A whole-image reconstruction, sensor (N, H, W) -> (1, U, V, H, W), given a progress
-// callback for its own part of the work.
-using SensorPass =
-    std::function<torch::Tensor(const torch::Tensor& sensor, const ProgressCallback& progress)>;
+// A whole-image reconstruction, sensor (N, H, W) -> (C, U, V, H, W), of the mirror image
+// `mirror` of a sensor image, given a progress callback for its own part of the work.
+using SensorPass = std::function<torch::Tensor(
+    const torch::Tensor& sensor, const SensorMirror& mirror, const ProgressCallback& progress)>;
 
 // The self-ensemble of any whole-image reconstruction `pass`: the sensor image and its mirror
 // images under `mirrors` (ensemble_mirrors) are reconstructed, mirrored back and averaged;
@@ -121,7 +135,8 @@ torch::Tensor reconstruct_mirrored(const std::vector<SensorMirror>& mirrors,
                                    bool clamp = true, const ProgressCallback& progress = {});
 
 // The self-ensemble of reconstruct_sensor_tiled: the sensor image and its mirror images under
-// the Phi's mirrors (ensemble_mirrors of the net's Phi, at most `max_passes` of them; 0: all)
+// the Phi's mirrors (ensemble_mirrors of mirror_weights(net), at most `max_passes` of them; 0:
+// all; a colour net reads each mirror image at its mirrored_origin)
 // are reconstructed, mirrored back and averaged, up to 4 passes. With every mirror it is
 // equivariant: the mirror image of a light field reconstructs as the mirror image of its
 // reconstruction.
