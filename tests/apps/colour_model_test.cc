@@ -64,6 +64,14 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
   CHECK((inner(net) - inner(pinv)).abs().max().item<double>() < 1e-4);
   const auto record = lfnet::read_json_file(tmp / "net/reconstruction.json");
   CHECK(record["cfa"]["pattern"] == "GRBG");
+  CHECK_FALSE(record.contains("demosaic"));  // the net's own
+  CHECK(lfnet::read_json_file(tmp / "pinv/reconstruction.json")["demosaic"] == "bilinear");
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --demosaic malvar --sensor " +
+                          (tmp / "acq") + " --out " + (tmp / "malvar"),
+                      out) == 0);
+  CHECK(lfnet::read_json_file(tmp / "malvar/reconstruction.json")["demosaic"] == "malvar");
+  CHECK((lfnet::io::read_light_field(tmp / "malvar").data() - pinv).abs().max().item<double>() >
+        1e-3);
 
   // evaluate scores it in colour and luma, as a whole image.
   const std::string evaluate = lfnet + "evaluate --lf " + (tmp / "in/lf") + " --model " + model;
@@ -77,6 +85,21 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
   CHECK(e["whole_image"] == true);
   CHECK(e.contains("luma_psnr_db"));
   CHECK(e["psnr_db"].get<double>() == Approx(p["psnr_db"].get<double>()).margin(1.0));
+  CHECK(p["demosaic"] == "bilinear");
+  // pinv's views demosaiced the gradient-corrected way.
+  REQUIRE(run_command(lfnet + "evaluate --lf " + (tmp / "in/lf") +
+                          " --phi asp:2 --method pinv --cfa GRBG --demosaic malvar --json " +
+                          (tmp / "m.json"),
+                      out) == 0);
+  const auto m = lfnet::read_json_file(tmp / "m.json");
+  CHECK(m["demosaic"] == "malvar");
+  CHECK(m["psnr_db"].get<double>() != Approx(p["psnr_db"].get<double>()).margin(1e-6));
+  // The colour net's self-ensemble: four passes, each mirror image read at its phase, which
+  // untrained are each the demosaiced pseudo-inverse (tests/recon/colour_net_test.cc).
+  REQUIRE(run_command(evaluate + " --cfa GRBG --self-ensemble --json " + (tmp / "s.json"), out) ==
+          0);
+  const auto s = lfnet::read_json_file(tmp / "s.json");
+  CHECK(s["psnr_db"].get<double>() == Approx(e["psnr_db"].get<double>()).margin(0.01));
 
   // batch runs it on light-field folders behind the same array.
   REQUIRE(run_command(lfnet + "batch --input " + (tmp / "in") + " --out " + (tmp / "batch") +
@@ -89,7 +112,14 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
   const std::vector<std::pair<std::string, std::string>> bad = {
       {evaluate + " --json " + (tmp / "x.json"), "give --cfa GRBG"},
       {evaluate + " --cfa RGGB --json " + (tmp / "x.json"), "not RGGB"},
-      {evaluate + " --cfa GRBG --self-ensemble --json " + (tmp / "x.json"), "does not mirror"},
+      {evaluate + " --cfa GRBG --demosaic malvar --json " + (tmp / "x.json"),
+       "reconstructs the colours itself"},
+      {lfnet + "evaluate --lf " + (tmp / "in/lf") + " --phi asp:2 --method pinv --demosaic malvar " +
+           "--json " + (tmp / "x.json"),
+       "needs a colour filter array"},
+      {lfnet + "evaluate --lf " + (tmp / "in/lf") + " --phi asp:2 --method pinv --cfa GRBG " +
+           "--demosaic vng --json " + (tmp / "x.json"),
+       "bilinear, malvar"},
       {lfnet + "evaluate --lf " + (tmp / "in/lf") + " --model " +
            (std::string(LFNET_SOURCE_DIR) + "/models/lfnet-asp-n2.ckpt") + " --cfa GRBG --json " +
            (tmp / "x.json"),
