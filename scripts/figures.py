@@ -13,7 +13,8 @@ folder, and "title"; image paths in a spec are relative to that folder too):
   views     panels [{label, psnr_db, view, epi}] (16-bit PNG crops); the first is the truth
   sweep     series [{label, method, x, y, kind: ours|paper|baseline}], xlabel, xlog
   weights   tiles [rows][columns][h][w] in [0, 1] of a camera's code, signed, wrapped, wrap
-  margins   records (lfnet evaluate records), over (the baseline method), target (dB)
+  margins   records (lfnet evaluate records), over (the baseline method), over_variant (its
+            variant, "" none), series (the series drawn, [] all), target (dB)
 """
 import json
 import math
@@ -316,14 +317,19 @@ def training(log_path, stem):
 
 
 def margins(spec):
-    """Each method's PSNR margin over a baseline (pinv) per light field: the cross-scene
-    benchmark, with its target as a dashed line."""
+    """Each method's PSNR margin over a baseline (pinv; of the variant over_variant, if given)
+    per light field: the cross-scene benchmark, with its target as a dashed line. `series`, if
+    given, names the series drawn (method, or "method (variant)")."""
     rows = spec["records"]
     over = spec.get("over", "pinv")
+    over_variant = spec.get("over_variant") or ""
     scenes = list(dict.fromkeys(r["light_field"] for r in rows))
     base = {r["light_field"]: r["psnr_db"] for r in rows
-            if r["method"] == over and not r.get("variant")}
-    series = [s for s in dict.fromkeys(series_name(r) for r in rows) if s != over]
+            if r["method"] == over and (r.get("variant") or "") == over_variant}
+    baseline = f"{over} ({over_variant})" if over_variant else over
+    series = [s for s in dict.fromkeys(series_name(r) for r in rows) if s != baseline]
+    if spec.get("series"):
+        series = [s for s in spec["series"] if s in series]
     colour = Colours()
     fig, ax = plt.subplots(figsize=(8.5, 4.6), dpi=120)
     width = 0.8 / max(len(series), 1)
@@ -343,7 +349,7 @@ def margins(spec):
                    label=f"target: {spec['target']:+g} dB")
     ax.set_xticks(range(len(scenes)), scenes)
     ax.set_xlabel("held-out light field")
-    ax.set_ylabel(f"PSNR margin over {over} (dB)")
+    ax.set_ylabel(f"PSNR margin over {baseline} (dB)")
     ax.set_title(spec["title"], fontsize=10)
     ax.legend(fontsize=8, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.14), frameon=False)
     save(fig, spec["stem"])

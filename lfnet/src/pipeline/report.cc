@@ -671,9 +671,14 @@ void write_results_report(const std::string& results_dir, const std::string& out
                         {"stem", stem},
                         {"title", m.value("title", s.meta.value("title", s.name))},
                         {"over", m.value("over", "pinv")},
+                        {"over_variant", m.value("over_variant", "")},
+                        {"series", m.value("series", nlohmann::json::array())},
                         {"target", m.contains("target") ? m["target"] : nlohmann::json()},
                         {"records", s.records}});
-        md << figure_markdown("margins over " + m.value("over", "pinv"), figures_link, stem)
+        const std::string over_variant = m.value("over_variant", "");
+        md << figure_markdown("margins over " + m.value("over", "pinv") +
+                                  (over_variant.empty() ? "" : " (" + over_variant + ")"),
+                              figures_link, stem)
            << "\n\n";
       }
       // Training curves of the models a section names ("training": [{"log": ..., "label": ...}]).
