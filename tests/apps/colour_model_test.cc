@@ -114,8 +114,8 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
       {evaluate + " --cfa RGGB --json " + (tmp / "x.json"), "not RGGB"},
       {evaluate + " --cfa GRBG --demosaic malvar --json " + (tmp / "x.json"),
        "reconstructs the colours itself"},
-      {lfnet + "evaluate --lf " + (tmp / "in/lf") + " --phi asp:2 --method pinv --demosaic malvar " +
-           "--json " + (tmp / "x.json"),
+      {lfnet + "evaluate --lf " + (tmp / "in/lf") +
+           " --phi asp:2 --method pinv --demosaic malvar " + "--json " + (tmp / "x.json"),
        "needs a colour filter array"},
       {lfnet + "evaluate --lf " + (tmp / "in/lf") + " --phi asp:2 --method pinv --cfa GRBG " +
            "--demosaic vng --json " + (tmp / "x.json"),

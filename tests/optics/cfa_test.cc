@@ -71,7 +71,7 @@ torch::Tensor malvar_by_pixel(const torch::Tensor& raw, const ColourFilterArray&
   const auto colour_at = [&](int64_t y, int64_t x) {
     return cfa.response()[0][y % 2][x % 2].item<float>() > 0   ? 0
            : cfa.response()[1][y % 2][x % 2].item<float>() > 0 ? 1
-                                                              : 2;
+                                                               : 2;
   };
   const auto m = [&](int64_t y, int64_t x) {
     y = y < 0 ? -y : y >= h ? 2 * (h - 1) - y : y;
@@ -84,8 +84,7 @@ torch::Tensor malvar_by_pixel(const torch::Tensor& raw, const ColourFilterArray&
       const double c = m(y, x);
       const double cross = m(y - 1, x) + m(y + 1, x) + m(y, x - 1) + m(y, x + 1);
       const double far = m(y - 2, x) + m(y + 2, x) + m(y, x - 2) + m(y, x + 2);
-      const double diagonal =
-          m(y - 1, x - 1) + m(y - 1, x + 1) + m(y + 1, x - 1) + m(y + 1, x + 1);
+      const double diagonal = m(y - 1, x - 1) + m(y - 1, x + 1) + m(y + 1, x - 1) + m(y + 1, x + 1);
       const double row = m(y, x - 1) + m(y, x + 1), column = m(y - 1, x) + m(y + 1, x);
       const double far_row = m(y, x - 2) + m(y, x + 2), far_column = m(y - 2, x) + m(y + 2, x);
       // At a green pixel, the colour of its row's other pixels and the other colour.
@@ -126,7 +125,9 @@ TEST_CASE("malvar demosaicing follows the paper's formulas and is exact for line
     colour = torch::stack({colour, colour * 0.5}, 1);  // (3, 2, H, W)
     const auto ramps = (colour * cfa.response_image(h, w).to(torch::kFloat64).unsqueeze(1)).sum(0);
     const auto inner = [](const torch::Tensor& t) { return t.slice(-2, 2, -2).slice(-1, 2, -2); };
-    CHECK((inner(demosaic(ramps, cfa, Demosaic::kMalvar)) - inner(colour)).abs().max()
+    CHECK((inner(demosaic(ramps, cfa, Demosaic::kMalvar)) - inner(colour))
+              .abs()
+              .max()
               .item<double>() < 1e-12);
     const auto flat = torch::tensor({0.2, 0.6, 0.9}, torch::kFloat64).view({3, 1, 1});
     const auto flat_raw = (flat * cfa.response_image(h, w).to(torch::kFloat64)).sum(0);
@@ -146,8 +147,8 @@ TEST_CASE("malvar demosaicing follows the paper's formulas and is exact for line
   CHECK_THROWS_WITH(optics::from_string("vng", Demosaic{}), Catch::Contains("bilinear, malvar"));
   CHECK_THROWS_WITH(demosaic(torch::rand({2, 6}), cfa, Demosaic::kMalvar),
                     Catch::Contains("too small"));
-  const auto custom = ColourFilterArray::from_json(nlohmann::json::parse(
-      R"({"response": [[[1, 0, 0], [0, 1, 0]], [[0, 1, 0], [0, 0, 1]]]})"));
+  const auto custom = ColourFilterArray::from_json(
+      nlohmann::json::parse(R"({"response": [[[1, 0, 0], [0, 1, 0]], [[0, 1, 0], [0, 0, 1]]]})"));
   CHECK_THROWS_WITH(demosaic(torch::rand({6, 6}), custom, Demosaic::kMalvar),
                     Catch::Contains("Bayer"));
 }

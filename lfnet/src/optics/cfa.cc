@@ -23,11 +23,26 @@ constexpr EnumName<Demosaic> kDemosaics[] = {{Demosaic::kBilinear, "bilinear"},
 // or blue pixel; a red (blue) value at a green pixel whose row holds red (blue) pixels, and the
 // same at one whose column does (the transpose); a red value at a blue pixel and back.
 torch::Tensor malvar_filters(const torch::TensorOptions& options) {
-  const double g_at_rb[25] = {0, 0, -1, 0, 0, 0, 0, 2, 0, 0, -1, 2, 4, 2, -1, 0, 0, 2, 0, 0, 0, 0, -1, 0, 0};
-  const double along_row[25] = {0,  0, 0.5, 0,  0, 0, -1, 0,   -1, 0, -1, 4, 5,
-                                4, -1, 0,   -1, 0, -1, 0, 0,  0,  0.5, 0, 0};
-  const double across[25] = {0, 0, -1.5, 0, 0, 0, 2, 0, 2, 0, -1.5, 0, 6,
-                             0, -1.5, 0, 2, 0, 2, 0, 0, 0, -1.5, 0, 0};
+  // clang-format off
+  const double g_at_rb[25] = {
+       0,  0, -1,  0,  0,
+       0,  0,  2,  0,  0,
+      -1,  2,  4,  2, -1,
+       0,  0,  2,  0,  0,
+       0,  0, -1,  0,  0};
+  const double along_row[25] = {
+       0,    0,  0.5,  0,    0,
+       0,   -1,  0,   -1,    0,
+      -1,    4,  5,    4,   -1,
+       0,   -1,  0,   -1,    0,
+       0,    0,  0.5,  0,    0};
+  const double across[25] = {
+       0,    0, -1.5,  0,    0,
+       0,    2,  0,    2,    0,
+      -1.5,  0,  6,    0, -1.5,
+       0,    2,  0,    2,    0,
+       0,    0, -1.5,  0,    0};
+  // clang-format on
   const auto f = [&](const double* k) {
     return torch::from_blob(const_cast<double*>(k), {5, 5}, torch::kFloat64).clone();
   };

@@ -32,11 +32,11 @@ struct BatchOptions {
   optics::SimulationMode mode = optics::SimulationMode::kSensor;  // of evaluations
   int64_t stride = 5;                                             // patch stride
   int64_t batch = 1024;                                           // patches per solver call
-  double noise = 0;     // Gaussian noise sigma of evaluations
-  std::string cfa;      // evaluations behind a colour filter array (a Bayer pattern or a JSON file)
+  double noise = 0;  // Gaussian noise sigma of evaluations
+  std::string cfa;   // evaluations behind a colour filter array (a Bayer pattern or a JSON file)
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;  // of pinv's views behind one
-  uint64_t seed = 0;    // noise seed of evaluations
-  bool window = false;  // weight patch estimates by a smooth window when stitching
+  uint64_t seed = 0;                                        // noise seed of evaluations
+  bool window = false;       // weight patch estimates by a smooth window when stitching
   bool post_filter = false;  // suppress artefacts with the stride's period
   bool match_mean = false;   // scale real measurements to the training mean
   std::string flat_field;    // the camera's white frame, divided out of every acquisition; "" none

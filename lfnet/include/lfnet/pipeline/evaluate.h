@@ -129,12 +129,12 @@ struct EvaluateRequest {
   std::string flat_field;  // --flat-field: the camera's white frame (read_flat_field); "" none
   std::string cfa;         // --cfa: a Bayer pattern or a JSON file (optics/cfa.h); "" a grey sensor
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;  // --demosaic: of pinv's views
-  uint64_t seed = 0;       // noise seed
-  int64_t stride = 5;      // patch stride
-  int64_t batch = 1024;    // patches per forward pass
-  bool window = false;     // weight patch estimates by a smooth window when stitching
-  int64_t tile = 0;        // whole-image methods' spatial tile (0: their default, 256)
-  std::string device = "cpu";                         // cpu or cuda[:K] for a checkpoint's network
+  uint64_t seed = 0;                                        // noise seed
+  int64_t stride = 5;                                       // patch stride
+  int64_t batch = 1024;                                     // patches per forward pass
+  bool window = false;         // weight patch estimates by a smooth window when stitching
+  int64_t tile = 0;            // whole-image methods' spatial tile (0: their default, 256)
+  std::string device = "cpu";  // cpu or cuda[:K] for a checkpoint's network
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch (lfnet: the U-Net)
   bool keep_estimate = false;                         // return the reconstruction too
   bool self_ensemble = false;        // lfnet architecture: average over the Phi's mirror images

@@ -22,10 +22,10 @@ struct ReconstructRequest {
   std::string sensor;
   std::string phi;  // Phi spec for plain images: NAME[:N] or a JSON file ("" = the model's)
   std::string method = "net";
-  std::string model;                  // checkpoint for net, ae, cnn
-  std::string dictionary;             // dictionary file for dict
-  std::string method_options;         // --method-options: JSON or file, keyed by method
-  std::string flat_field;             // the camera's white frame (read_flat_field); "" none
+  std::string model;           // checkpoint for net, ae, cnn
+  std::string dictionary;      // dictionary file for dict
+  std::string method_options;  // --method-options: JSON or file, keyed by method
+  std::string flat_field;      // the camera's white frame (read_flat_field); "" none
   // How a patch method's views of a colour filter array's sensor image are demosaiced.
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;
   recon::ReconstructOptions options;  // stride (sensor mode), batch, window
