@@ -260,8 +260,10 @@
     if (r.whole_image) facts.push('whole image');
     else if (r.stride) facts.push(`stride ${r.stride}`);
     if (r.mode) facts.push(`${r.mode} mode`);
-    // A colour net reconstructs the colours with the views; pinv's views are demosaiced.
-    const colourWay = r.whole_image ? 'colours reconstructed jointly' : 'demosaiced';
+    // A colour net reconstructs the colours with the views; pinv's views are demosaiced (the
+    // record says how).
+    const colourWay = r.whole_image ? 'colours reconstructed jointly'
+      : 'demosaiced' + (r.demosaic ? ` (${r.demosaic})` : '');
     if (r.cfa) facts.push(r.cfa.pattern ? `Bayer ${r.cfa.pattern}, ${colourWay}` : `colour filter array, ${colourWay}`);
     if (r.camera_error) facts.push('camera off its Phi');
     if (typeof r.psnr_db === 'number') facts.push(`PSNR ${r.psnr_db.toFixed(2)} dB` + (r.cfa ? ' (colour)' : ''));
