@@ -201,21 +201,31 @@ noise-blind() {
 # A colour sensor behind a Bayer colour filter array (docs/acquisition.md, "Colour filter
 # arrays"): on the colour light fields of the cross-scene benchmark, pinv of the mosaicked
 # sensor image, each view then demosaiced, against the grey pinv of a grey sensor and the
-# colour no-parallax; colour PSNR and luma PSNR. Against them the colour network
-# lfnet-asp-n2-bayer, which reconstructs the colours with the views from the same sensor image,
-# and the grey default on a grey sensor.
+# colour no-parallax; colour PSNR and luma PSNR. Against them the colour networks
+# lfnet-asp-n2-bayer-malvar (one pass and its self-ensemble) and lfnet-asp-n2-bayer, which
+# reconstruct the colours with the views from the same sensor image, and the grey default on a
+# grey sensor; pinv also with the gradient-corrected (malvar) demosaic.
 colour() {
   local tmp i
   need_model models/lfnet-asp-n2-bayer.ckpt
+  need_model models/lfnet-asp-n2-bayer-malvar.ckpt
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor --phi asp:2)
-    VARIANT="Bayer RGGB" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl record "$tmp" \
-      "${src[@]}" --model models/lfnet-asp-n2-bayer.ckpt --cfa RGGB
+    local malvar=(--model models/lfnet-asp-n2-bayer-malvar.ckpt --cfa RGGB)
+    VARIANT="Bayer RGGB, malvar" TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
+      record "$tmp" "${src[@]}" "${malvar[@]}"
+    VARIANT="Bayer RGGB, malvar, self-ensemble" \
+      TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
+      record "$tmp" "${src[@]}" "${malvar[@]}" --self-ensemble
+    VARIANT="Bayer RGGB, bilinear" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl \
+      record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer.ckpt --cfa RGGB
     VARIANT="grey sensor" record "$tmp" "${src[@]}" --model models/lfnet-asp-n2.ckpt
     for pattern in RGGB GRBG; do
       VARIANT="Bayer $pattern" record "$tmp" "${src[@]}" --method pinv --cfa "$pattern"
     done
+    VARIANT="Bayer RGGB, malvar" record "$tmp" "${src[@]}" --method pinv --cfa RGGB \
+      --demosaic malvar
     VARIANT="colour" record "$tmp" "${src[@]}" --method no-parallax --cfa RGGB
     VARIANT="grey sensor" record "$tmp" "${src[@]}" --method pinv
     VARIANT="grey" record "$tmp" "${src[@]}" --method no-parallax
