@@ -130,12 +130,21 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
   // The checkpoint records what taught it.
   const auto config = nlohmann::json::parse(std::ifstream(tmp / "run/config.json"));
   CHECK(config["distill"]["passes"] == 2);
+  // A colour net learns from a colour teacher's self-ensemble (its crops' mirror images read at
+  // their phases of the pattern).
+  REQUIRE(run_command(train + " --set network.cfa=RGGB --set distill.teacher=" + models +
+                          "lfnet-asp-n2-bayer-malvar.ckpt --out " + (tmp / "colour"),
+                      out) == 0);
+  CHECK(out.find("(4 passes)") != std::string::npos);
 
   // Teachers that cannot teach, and bad values, are one error each before any training.
   const std::pair<std::string, std::string> bad[] = {
       {"distill.teacher=" + models + "asp-n2.ckpt", "must be of a whole-image architecture"},
       {"distill.teacher=" + models + "lfnet-asp-n15.ckpt", "Phi"},
       {"distill.teacher=" + (tmp / "missing.ckpt"), "missing.ckpt: no such file"},
+      // A colour net teaches colour nets of its pattern only.
+      {"distill.teacher=" + models + "lfnet-asp-n2-bayer-malvar.ckpt",
+       "behind a Bayer RGGB filter, the net reconstructs grey sensor images"},
       {"distill.weight=1.5", "$.distill.weight: must lie in [0, 1]"},
       {"distill.passes=-1", "$.distill.passes: must be >= 0"},
       {"distill.precision=half", "half"},

@@ -183,9 +183,43 @@ TEST_CASE("colour nets are checked", "[recon][image][colour]") {
   CHECK(nn::NetworkOptions::from_json(o.to_json()).cfa == "RGGB");
   auto net = net_of(o, *phi);
   CHECK_NOTHROW(recon::check_self_ensemble("net", net, nullptr));
-  // Distillation's self-ensemble of training crops takes grey nets only.
-  CHECK_THROWS_WITH(recon::reconstruct_crops_mirrored(net, torch::rand({1, 2, 16, 16}), {}, {}),
-                    Catch::Contains("grey nets only"));
+}
+
+TEST_CASE("a colour net's self-ensemble of crops reads each crop's mirror images at their phases",
+          "[recon][image][colour]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  const auto cfa = optics::ColourFilterArray::bayer("GRBG");
+  auto net = net_of(colour_options(*phi, "GRBG"), *phi);
+  const auto sensor = colour_sensor(*phi, colour_light_field(*phi, 33, 36, 12), cfa);
+  // Crops of odd and even sides at every phase of the pattern, in one batch.
+  std::vector<torch::Tensor> parts;
+  std::vector<int64_t> phases;
+  for (const auto& [y0, x0] : {std::pair<int64_t, int64_t>{0, 0}, {1, 0}, {0, 3}, {5, 7}}) {
+    parts.push_back(sensor.slice(1, y0, y0 + 15).slice(2, x0, x0 + 16));
+    phases.push_back((y0 % 2) * 2 + x0 % 2);
+  }
+  const auto crops = torch::stack(parts).contiguous();
+  const auto phase = torch::tensor(phases, torch::kInt64);
+  // Untrained, every pass is its crop's demosaiced pseudo-inverse, which a mirror image read
+  // at the wrong phase would give with its colours swapped.
+  torch::Tensor single;
+  {
+    torch::NoGradGuard no_grad;
+    std::vector<torch::Tensor> one;
+    for (int64_t b = 0; b < crops.size(0); ++b) {
+      one.push_back(net->forward_image(crops.narrow(0, b, 1), phases[static_cast<size_t>(b)], 0));
+    }
+    single = torch::cat(one);
+  }
+  const auto ensemble = recon::reconstruct_crops_mirrored(net, crops, phase, {});
+  REQUIRE(ensemble.sizes() == torch::IntArrayRef({4, 3, 5, 5, 15, 16}));
+  CHECK(torch::allclose(ensemble, single, 1e-4, 1e-4));
+  CHECK_FALSE(
+      torch::allclose(recon::reconstruct_crops_mirrored(net, crops, {}, {}), single, 1e-3, 1e-3));
+  // Trained (here: random), the whole image's crop is the whole image's self-ensemble.
+  test::randomise_image_net(net, 33);
+  CHECK(torch::allclose(recon::reconstruct_crops_mirrored(net, sensor.unsqueeze(0), {}, {})[0],
+                        recon::reconstruct_sensor_mirrored(net, sensor, 256, false), 1e-4, 1e-4));
 }
 
 TEST_CASE("a colour net's self-ensemble reads each mirror image at its CFA's phase",

@@ -349,8 +349,6 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
     // A colour net trains on its own colour crops, measured by the code of $.phi.
     LFNET_CHECK_AS(ConfigError, !c.code.enabled, source,
                    ": $.network.cfa: a colour net learns no code ($.code) yet");
-    LFNET_CHECK_AS(ConfigError, c.distill.teacher.empty(), source,
-                   ": $.network.cfa: a colour net cannot distil a teacher ($.distill)");
   }
   return c;
 }

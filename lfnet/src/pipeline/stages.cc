@@ -51,6 +51,13 @@ nn::LightFieldNet load_teacher(const ExperimentConfig& config, const std::string
   LFNET_CHECK_AS(ConfigError, model.network.arch().whole_image(), what,
                  ": the teacher must be of a whole-image architecture such as lfnet (its "
                  "self-ensemble teaches)");
+  const auto sensor_of = [](const std::string& cfa) {
+    return cfa.empty() ? std::string("grey sensor images")
+                       : "sensor images behind a Bayer " + cfa + " filter";
+  };
+  LFNET_CHECK_AS(ConfigError, model.network.cfa == config.network.cfa, what, ": it reconstructs ",
+                 sensor_of(model.network.cfa), ", the net reconstructs ",
+                 sensor_of(config.network.cfa));
   try {
     model.check_phi(config.phi.to_json());
   } catch (const Error& e) {
@@ -161,7 +168,7 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
       spdlog::info(
           "distillation: targets {:g} x the self-ensemble of {} ({} passes), {:g} x the truth",
           config.distill.weight, config.distill.teacher,
-          recon::ensemble_mirrors(teacher->phi, config.distill.passes).size(),
+          recon::ensemble_mirrors(recon::mirror_weights(teacher), config.distill.passes).size(),
           1.0 - config.distill.weight);
     }
   }

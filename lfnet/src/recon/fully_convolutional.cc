@@ -211,15 +211,16 @@ torch::Tensor mirror_weights(const nn::LightFieldNet& net) {
 }
 
 int64_t mirrored_origin(const nn::LightFieldNet& net, const SensorMirror& m, int64_t height,
-                        int64_t width) {
-  if (net->options().colours() == 1) return 0;
+                        int64_t width, int64_t origin) {
+  if (net->options().colours() == 1) return origin;
   // Pixel (y, x) of the image mirrored top to bottom is pixel (H - 1 - y, x) of the sensor
-  // image; over a period T that divides 2, phase (H - 1 - y) mod T is (y + H - 1) mod T.
+  // image, of phase (oy + H - 1 - y) mod T, which over a period T that divides 2 is
+  // (oy + H - 1 + y) mod T.
   const int64_t t = net->period();
   LFNET_CHECK(t <= 2 || (!m.flip_x && !m.flip_y), "mirrored_origin: a colour net of period ", t,
               " has no mirrors");
-  const int64_t oy = m.flip_y ? (height - 1) % t : 0, ox = m.flip_x ? (width - 1) % t : 0;
-  return oy * t + ox;
+  const int64_t oy = origin / t, ox = origin % t;
+  return ((oy + (m.flip_y ? height - 1 : 0)) % t) * t + (ox + (m.flip_x ? width - 1 : 0)) % t;
 }
 
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
@@ -295,8 +296,6 @@ torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Ten
                                          int64_t max_passes) {
   LFNET_CHECK_AS(ConfigError, net->architecture().whole_image(),
                  "the self-ensemble needs a model of a whole-image architecture (lfnet)");
-  LFNET_CHECK_AS(ConfigError, net->options().colours() == 1,
-                 "the self-ensemble of training crops (distillation) takes grey nets only");
   LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == net->options().measurements,
               "reconstruct_crops_mirrored: expected sensor crops (B, ", net->options().measurements,
               ", h, w), got ", sensor.sizes());
@@ -313,34 +312,41 @@ torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Ten
   // forward_image takes one phase and one sigma per call: crops that share both run together.
   const bool uniform = (!phases.defined() || (phases == phases[0]).all().item<bool>()) &&
                        (!sigmas.defined() || (sigmas == sigmas[0]).all().item<bool>());
-  auto run = [&](const torch::Tensor& crops) {
+  const int64_t h = sensor.size(2), w = sensor.size(3);
+  // A crop's phase in the mirror image `m` (a colour net's CFA moves with it).
+  const auto phase_of = [&](const SensorMirror& m, int64_t b) {
+    return mirrored_origin(net, m, h, w, phases.defined() ? phases[b].item<int64_t>() : 0);
+  };
+  auto run = [&](const torch::Tensor& crops, const SensorMirror& m) {
     if (uniform) {
-      return net->forward_image(crops, phases.defined() ? phases[0].item<int64_t>() : 0,
+      return net->forward_image(crops, phase_of(m, 0),
                                 sigmas.defined() ? sigmas[0].item<double>() : 0.0);
     }
     std::vector<torch::Tensor> parts;
     parts.reserve(static_cast<size_t>(batch));
     for (int64_t b = 0; b < batch; ++b) {
-      parts.push_back(net->forward_image(crops.narrow(0, b, 1),
-                                         phases.defined() ? phases[b].item<int64_t>() : 0,
+      parts.push_back(net->forward_image(crops.narrow(0, b, 1), phase_of(m, b),
                                          sigmas.defined() ? sigmas[b].item<double>() : 0.0));
     }
     return torch::cat(parts, 0);
   };
-  const auto mirrors = ensemble_mirrors(net->phi, max_passes);
+  const auto mirrors = ensemble_mirrors(mirror_weights(net), max_passes);
   const auto input = sensor.to(device, torch::kFloat32);
+  // Light fields (B, U, V, h, w), or (B, 3, U, V, h, w) of a colour net: their u and y, v and x.
+  const int64_t c = net->options().colours() == 1 ? 0 : 1;
   torch::Tensor sum;
   for (const auto& m : mirrors) {
-    // Crops (B, N, h, w); light fields (B, U, V, h, w).
+    // Crops (B, N, h, w).
     auto mirrored = input.index_select(1, torch::tensor(m.measurements, torch::kInt64).to(device));
     if (m.flip_y) mirrored = mirrored.flip({2});
     if (m.flip_x) mirrored = mirrored.flip({3});
-    auto est = run(mirrored).to(torch::kFloat32);
-    if (m.flip_y) est = est.flip({1, 3});
-    if (m.flip_x) est = est.flip({2, 4});
+    auto est = run(mirrored, m).to(torch::kFloat32);
+    if (m.flip_y) est = est.flip({1 + c, 3 + c});
+    if (m.flip_x) est = est.flip({2 + c, 4 + c});
     sum = sum.defined() ? sum.add_(est) : est;
   }
-  return sum.div_(static_cast<double>(mirrors.size())).unsqueeze(1);
+  sum.div_(static_cast<double>(mirrors.size()));
+  return c == 0 ? sum.unsqueeze(1) : sum;
 }
 
 }  // namespace lfnet::recon

@@ -101,10 +101,11 @@ std::vector<SensorMirror> phi_mirrors(const torch::Tensor& pixel_weights);
 torch::Tensor mirror_weights(const nn::LightFieldNet& net);
 
 // The phase (row * T + column in the net's period T) at which a net reads the mirror image `m`
-// of an H x W sensor image whose pixel (0, 0) has phase 0: 0 for a grey net's code of period
-// 1; for a colour net, the phase at which its CFA pattern shows what the mirror image holds.
+// of an H x W sensor image (or crop) whose pixel (0, 0) has phase `origin`: `origin` for a grey
+// net (whose mirrors need a code of period 1); for a colour net, the phase at which its CFA
+// pattern shows what the mirror image holds.
 int64_t mirrored_origin(const nn::LightFieldNet& net, const SensorMirror& m, int64_t height,
-                        int64_t width);
+                        int64_t width, int64_t origin = 0);
 
 // Throws a ConfigError unless the self-ensemble applies: `method` "net" with a model of the
 // lfnet architecture, a checkpoint's network (`net`, empty without one) or an exported one
@@ -148,9 +149,10 @@ torch::Tensor reconstruct_sensor_mirrored(nn::LightFieldNet net, const torch::Te
 
 // The self-ensemble of a batch of sensor crops (B, N, h, w), as training sees them: each
 // crop's pixel (0, 0) has phase `phase` (B) (undefined: 0) and its measurements noise `noise`
-// (B) (undefined: 0). The crops and their mirror images under ensemble_mirrors(net->phi,
-// max_passes) run through net->forward_image, are mirrored back and averaged: (B, 1, U, V, h,
-// w), not clamped, on the device of the net. For a whole image it equals
+// (B) (undefined: 0). The crops and their mirror images under
+// ensemble_mirrors(mirror_weights(net), max_passes) run through net->forward_image (each at its
+// mirrored_origin), are mirrored back and averaged: (B, C, U, V, h, w) (C = 1, or 3 for a
+// colour net), not clamped, on the device of the net. For a whole image it equals
 // reconstruct_sensor_mirrored without the clamp. It is the teacher of distillation
 // (pipeline::DistillConfig).
 torch::Tensor reconstruct_crops_mirrored(nn::LightFieldNet net, const torch::Tensor& sensor,
