@@ -202,22 +202,26 @@ noise-blind() {
 # arrays"): on the colour light fields of the cross-scene benchmark, pinv of the mosaicked
 # sensor image, each view then demosaiced, against the grey pinv of a grey sensor and the
 # colour no-parallax; colour PSNR and luma PSNR. Against them the colour networks
-# lfnet-asp-n2-bayer-malvar (one pass and its self-ensemble) and lfnet-asp-n2-bayer, which
-# reconstruct the colours with the views from the same sensor image, and the grey default on a
-# grey sensor; pinv also with the gradient-corrected (malvar) demosaic.
+# lfnet-asp-n2-bayer-distilled (one pass and its self-ensemble), lfnet-asp-n2-bayer-malvar (its
+# teacher) and lfnet-asp-n2-bayer, which reconstruct the colours with the views from the same
+# sensor image, and the grey default on a grey sensor; pinv also with the gradient-corrected
+# (malvar) demosaic.
 colour() {
   local tmp i
   need_model models/lfnet-asp-n2-bayer.ckpt
   need_model models/lfnet-asp-n2-bayer-malvar.ckpt
+  need_model models/lfnet-asp-n2-bayer-distilled.ckpt
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor --phi asp:2)
-    local malvar=(--model models/lfnet-asp-n2-bayer-malvar.ckpt --cfa RGGB)
+    local distilled=(--model models/lfnet-asp-n2-bayer-distilled.ckpt --cfa RGGB)
+    VARIANT="Bayer RGGB, distilled" TRAINING=models/lfnet-asp-n2-bayer-distilled.training.jsonl \
+      record "$tmp" "${src[@]}" "${distilled[@]}"
+    VARIANT="Bayer RGGB, distilled, self-ensemble" \
+      TRAINING=models/lfnet-asp-n2-bayer-distilled.training.jsonl \
+      record "$tmp" "${src[@]}" "${distilled[@]}" --self-ensemble
     VARIANT="Bayer RGGB, malvar" TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
-      record "$tmp" "${src[@]}" "${malvar[@]}"
-    VARIANT="Bayer RGGB, malvar, self-ensemble" \
-      TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
-      record "$tmp" "${src[@]}" "${malvar[@]}" --self-ensemble
+      record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer-malvar.ckpt --cfa RGGB
     VARIANT="Bayer RGGB, bilinear" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl \
       record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer.ckpt --cfa RGGB
     VARIANT="grey sensor" record "$tmp" "${src[@]}" --model models/lfnet-asp-n2.ckpt
