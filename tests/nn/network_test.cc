@@ -42,7 +42,8 @@ TEST_CASE("each branch and the two-branch net give (B, 1, U, V, h, w)", "[nn][ne
 }
 
 TEST_CASE("the default net has the documented parameter count and names", "[nn][network]") {
-  LightFieldNet net(NetworkOptions{});
+  const NetworkOptions defaults;
+  LightFieldNet net(defaults);
   const int64_t ae = (162 * 256 + 256) + (256 * 128 + 128) + (128 * 256 + 256) + (256 * 128 + 128) +
                      (128 * 256 + 256) + (256 * 2025 + 2025) + (81 + 1);
   const int64_t cnn = (16 * 81 + 16) + 3 * (16 * 16 * 81 + 16) + (16 * 81 + 1);
