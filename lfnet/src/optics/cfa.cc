@@ -200,21 +200,17 @@ torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& res
 torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa,
                        Demosaic method) {
   cfa.check_demosaicable();
-  if (method == Demosaic::kMalvar) {
-    LFNET_CHECK_AS(ConfigError, cfa.pattern() != "custom",
-                   "malvar demosaicing needs a Bayer pattern, not a custom colour response");
-    LFNET_CHECK_AS(ConfigError, mosaicked.dim() >= 2, "demosaic: expected (..., H, W), got ",
-                   mosaicked.sizes());
-    const int64_t h = mosaicked.size(-2), w = mosaicked.size(-1);
-    const auto images = mosaicked.reshape({1, -1, h, w});
-    const auto response = cfa.response_image(h, w).to(mosaicked.options()).unsqueeze(0);
-    auto shape = mosaicked.sizes().vec();
-    shape.insert(shape.begin(), 3);
-    return demosaic_malvar(images, response).reshape(shape);
-  }
   LFNET_CHECK_AS(ConfigError, mosaicked.dim() >= 2, "demosaic: expected (..., H, W), got ",
                  mosaicked.sizes());
   const int64_t h = mosaicked.size(-2), w = mosaicked.size(-1);
+  auto shape = mosaicked.sizes().vec();  // (3, ..., H, W)
+  shape.insert(shape.begin(), 3);
+  if (method == Demosaic::kMalvar) {
+    LFNET_CHECK_AS(ConfigError, cfa.pattern() != "custom",
+                   "malvar demosaicing needs a Bayer pattern, not a custom colour response");
+    const auto response = cfa.response_image(h, w).to(mosaicked.options()).unsqueeze(0);
+    return demosaic_malvar(mosaicked.reshape({1, -1, h, w}), response).reshape(shape);
+  }
   LFNET_CHECK_AS(ConfigError, h >= 2 && w >= 2, "demosaic: an image of ", h, " x ", w,
                  " pixels is too small");
   const auto options = mosaicked.options();
@@ -237,8 +233,6 @@ torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& 
     const auto mean = torch::conv2d(reflect(images * mask), kernel) / weight;
     colours.push_back(torch::where(mask > 0, images, mean));
   }
-  auto shape = mosaicked.sizes().vec();
-  shape.insert(shape.begin(), 3);
   return torch::stack(colours).reshape(shape);
 }
 

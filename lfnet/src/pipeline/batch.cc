@@ -371,8 +371,7 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   const auto method_options = method_options_argument(a.method_options, methods);
   resolved.method_options = method_options.empty() ? "" : method_options.dump();
   // --cfa, or the one a calibrated Phi's folder names.
-  const auto cfa = cfa_of_arguments(a.cfa, a.phi);
-  if (cfa) {
+  if (const auto cfa = cfa_of_arguments(a.cfa, a.phi)) {
     cfa->check_demosaicable();
     resolved.cfa = cfa->to_json().dump();
   }
