@@ -304,6 +304,18 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     blind["noise_sigma_estimated"] = 0.0987;
     d << blind.dump() << "\n";
   }
+  // A margins chart over a section with noisy records draws the noiseless ones.
+  fs::create_directories(tmp / "results/e");
+  std::ofstream(tmp / "results/e/section.json")
+      << R"({"title": "Codes", "order": 5, "margins": {"over": "pinv"}})";
+  {
+    std::ofstream e(tmp / "results/e/records.jsonl");
+    auto noisy = nlohmann::json::parse(record("net", 25.0, 1.0, "x"));
+    noisy["noise_sigma"] = 0.05;
+    e << record("net", 30.0, 1.0, "x") << "\n"
+      << record("pinv", 29.0, 1.0, "x") << "\n"
+      << noisy.dump() << "\n";
+  }
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
                           (tmp / "docs/RESULTS.md"),
@@ -379,6 +391,17 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(by_stem["a_margins"]["records"].size() == 4);
   CHECK(by_stem["a_margins"]["over"] == "pinv");
   CHECK(by_stem["a_margins"]["target"] == 1.5);
+  // Of each record only what the chart reads: not the per-view PSNRs, not the Phi.
+  for (const auto& r : by_stem["a_margins"]["records"]) {
+    CHECK(r.size() == 3);
+    CHECK(r.contains("light_field"));
+    CHECK(r.contains("method"));
+    CHECK(r.contains("psnr_db"));
+  }
+  REQUIRE(by_stem.count("e_margins"));
+  REQUIRE(by_stem["e_margins"]["records"].size() == 2);
+  for (const auto& r : by_stem["e_margins"]["records"]) CHECK(r["psnr_db"] != 25.0);
+  CHECK(fs::file_size(figures / "e_margins.png") > 1000);
   // A heatmap chosen by a selector; one that matches no record adds no panel.
   REQUIRE(by_stem.count("b_views"));
   REQUIRE(by_stem["b_views"]["panels"].size() == 1);
