@@ -36,7 +36,8 @@ from PIL import Image  # noqa: E402
 # second model of one method) take the spare colours.
 REGISTRY_PALETTE = ["C0", "C2", "C1", "C4", "C3", "C5", "C7", "C6", "C8", "C9"]
 METHOD_COLOURS = {}
-SPARE_COLOURS = ["#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d"]
+SPARE_COLOURS = ["#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02", "#a6761d",
+                 "#666666", "#1f78b4", "#fb9a99"]
 
 
 def set_method_colours(methods):
@@ -245,13 +246,16 @@ def sweep(spec):
 
 def weights(spec):
     """A camera's code: one tile per (pixel, measurement) showing measurement n's weight on each
-    view (u down, v across); rows are the first pixels of the sensor's top row, unless one
-    pixel's measurements are wrapped into rows."""
+    view (u down, v across); rows are the first pixels of the sensor's top row (or every pixel of
+    a small period, `pixels` giving each row's (y, x)), unless one pixel's measurements are
+    wrapped into rows."""
     tiles = np.array(spec["tiles"], dtype=float)  # (rows, columns, h, w)
     rows, cols = tiles.shape[:2]
     size = 1.15 if tiles.shape[2] <= 9 else 1.6
-    fig, axes = plt.subplots(rows, cols, figsize=(size * cols + 1.6, size * rows + 0.9),
-                             dpi=120, squeeze=False)
+    height = size * rows + 1.2
+    fig, axes = plt.subplots(rows, cols, figsize=(size * cols + 1.6, height), dpi=120,
+                             squeeze=False)
+    fig.subplots_adjust(top=1 - 0.8 / height)  # room for the two lines of the title
     signed = spec.get("signed", False)
     cmap = "gray"  # signed weights: 0.5 (mid grey) is zero
     for i in range(rows):
@@ -269,7 +273,11 @@ def weights(spec):
             elif i == 0:
                 ax.set_title(f"n = {j + 1}", fontsize=8)
             if not spec.get("wrapped") and j == 0:
-                ax.set_ylabel(f"pixel x = {i}", fontsize=8)
+                pixels = spec.get("pixels") or [[0, k] for k in range(rows)]
+                y, x = pixels[i]
+                two_d = any(q[0] != 0 for q in pixels)
+                ax.set_ylabel(f"pixel (y, x) = ({y}, {x})" if two_d else f"pixel x = {x}",
+                              fontsize=8)
     bar = fig.colorbar(image, ax=axes.ravel().tolist(), shrink=0.8)
     if signed:
         bar.set_ticks([0, 0.5, 1], labels=["-max |w|", "0", "+max |w|"])

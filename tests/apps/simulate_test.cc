@@ -156,6 +156,19 @@ TEST_CASE("simulate describes a Phi and plots its weights", "[app][simulate]") {
   CHECK(tiles[0][0][0][0] == 1.0);
   CHECK(tiles[0][0][0][1] == 0.0);
   CHECK(spec["figures"][0]["signed"] == false);
+  CHECK(spec["figures"][0]["pixels"] == nlohmann::json::parse("[[0,0],[0,1],[0,2],[0,3]]"));
+  // A code of a 2 x 2 period (the learned ASP's tile) shows all four pixels, row by row: its
+  // second row measures differently from its first.
+  const std::string learned =
+      (fs::path(LFNET_SOURCE_DIR) / "models" / "lfnet-learned-asp-n2.ckpt").string();
+  REQUIRE(run_command(simulate("--phi " + learned + " --plot-weights " + (tmp / "tile")), out) ==
+          0);
+  const auto tile = nlohmann::json::parse(lfnet::test::read_bytes(tmp / "tile/calibrated-n2.json"));
+  const auto& rows = tile["figures"][0]["tiles"];
+  REQUIRE(rows.size() == 4);
+  CHECK(tile["figures"][0]["pixels"] == nlohmann::json::parse("[[0,0],[0,1],[1,0],[1,1]]"));
+  CHECK(rows[0] != rows[2]);
+  CHECK(fs::file_size(tmp / "tile/calibrated-n2.png") > 1000);
   CHECK(run_command(simulate("--phi prism:2 --describe"), out) != 0);
   CHECK(out.find("known: aperture, asp, calibrated, lenslet, mask, random") != std::string::npos);
   CHECK(run_command(simulate("--phi asp:2"), out) != 0);

@@ -14,16 +14,22 @@ WeightTiles weight_tiles(const Phi& phi, int64_t pixels, int64_t wrap) {
   WeightTiles out;
   out.wrap = wrap;
   if (phi.local()) {
-    const int64_t p = std::min(pixels, phi.period());
-    auto w = phi.pixel_weights(0, 0, 1, p, torch::kFloat64).select(3, 0);  // (N, U, V, p)
+    const int64_t t = phi.period();
+    // The whole period when it fits, row by row; else the first pixels of the top row.
+    const int64_t h = t > 1 && t * t <= pixels ? t : 1, p = h > 1 ? t : std::min(pixels, t);
+    auto w = phi.pixel_weights(0, 0, h, p, torch::kFloat64).reshape({n, u, v, h * p});
     w = w / w.max();
-    auto views = w.permute({3, 0, 1, 2});  // (p, N, U, V)
-    if (p == 1 && n > wrap) {              // wrap one pixel's measurements into rows
+    auto views = w.permute({3, 0, 1, 2});  // (h p, N, U, V)
+    for (int64_t y = 0; y < h; ++y) {
+      for (int64_t x = 0; x < p; ++x) out.pixels.push_back({y, x});
+    }
+    if (p == 1 && n > wrap) {  // wrap one pixel's measurements into rows
       const int64_t rows = (n + wrap - 1) / wrap;
       auto padded = torch::full({rows * wrap, u, v}, 0.5, torch::kFloat64);
       padded.slice(0, 0, n).copy_(views[0]);
       views = padded.view({rows, wrap, u, v});
       out.wrapped = true;
+      out.pixels.clear();
     }
     out.tiles = views.contiguous();
     return out;
@@ -31,6 +37,7 @@ WeightTiles weight_tiles(const Phi& phi, int64_t pixels, int64_t wrap) {
   const int64_t b = phi.block();
   auto a = phi.patch_matrix(0, 0, b, b, torch::kFloat64).view({n, b, b, u, v, b, b});
   const int64_t p = std::min(pixels, b);
+  for (int64_t x = 0; x < p; ++x) out.pixels.push_back({0, x});
   auto rows = a.select(1, 0).slice(1, 0, p).permute({1, 0, 2, 3, 4, 5});  // (p, N, U, V, b, b)
   rows = 0.5 + 0.5 * rows / rows.abs().max();
   // (p, N, U, V, b, b) -> (p, N, U b, V b), a line of 1 between views.

@@ -261,6 +261,7 @@ std::string plot_weights(const optics::Phi& phi, const std::string& dir,
                {"signed", t.signed_weights},
                {"wrapped", t.wrapped},
                {"wrap", t.wrap},
+               {"pixels", t.pixels},
                {"measurements", phi.measurements()},
                {"views", std::to_string(phi.rows()) + " x " + std::to_string(phi.cols())},
                {"block", phi.local() ? 0 : phi.block()}});
