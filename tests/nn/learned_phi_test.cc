@@ -4,6 +4,9 @@
 
 #include <catch2/catch.hpp>
 
+#include <cmath>
+#include <set>
+
 #include "lfnet/core/error.h"
 #include "lfnet/optics/phi.h"
 
@@ -60,6 +63,43 @@ TEST_CASE("a learnable ASP starts as the built-in quadrature pair", "[nn][learne
   CHECK(p["family"] == "asp");
   CHECK(p["depth"][0].get<double>() == Approx(0.98));
   CHECK(p["alpha"][0].get<double>() == Approx(std::acos(-1.0) / 2));
+}
+
+TEST_CASE("a randomly started learnable ASP draws a grating per pixel from its seed",
+          "[nn][learned_phi]") {
+  const double pi = std::acos(-1.0);
+  LearnedPhiOptions o;
+  o.family = "asp";
+  o.period = 2;
+  o.init = "random";
+  o.seed = 5;
+  LearnedPhi a(o, 2, 5, 5), b(o, 2, 5, 5);
+  // The same seed draws the same code.
+  CHECK(torch::equal(a->weights().detach(), b->weights().detach()));
+  o.seed = 6;
+  LearnedPhi c(o, 2, 5, 5);
+  CHECK_FALSE(torch::allclose(a->weights().detach(), c->weights().detach()));
+  // Each of the 2 x 2 x 2 gratings in its documented range (docs/acquisition.md): frequency
+  // beta in [pi / 2, 2 pi], orientation gamma in [0, pi], phase alpha in [0, 2 pi], depth just
+  // below its ceiling.
+  const auto p = a->physical();
+  REQUIRE(p["beta"].size() == 8);
+  std::set<double> betas;
+  for (size_t i = 0; i < 8; ++i) {
+    const double beta = p["beta"][i], gamma = p["gamma"][i], alpha = p["alpha"][i];
+    CHECK(beta >= pi / 2 - 1e-6);
+    CHECK(beta <= 2 * pi + 1e-6);
+    CHECK(gamma >= 0);
+    CHECK(gamma <= pi + 1e-6);
+    CHECK(alpha >= 0);
+    CHECK(alpha <= 2 * pi + 1e-6);
+    CHECK(p["depth"][i].get<double>() == Approx(0.98));
+    betas.insert(beta);
+  }
+  // Not one grating repeated: the pixels of the period measure differently.
+  CHECK(betas.size() == 8);
+  const auto w = a->weights().detach();  // (N, U, V, T, T)
+  CHECK_FALSE(torch::allclose(w.select(3, 0).select(3, 0), w.select(3, 1).select(3, 1)));
 }
 
 TEST_CASE("a mask binarises to 0 and 1, and bad options are refused", "[nn][learned_phi]") {
