@@ -301,8 +301,9 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 # levels) and one training budget (models/lfnet-asp-n2-first20.ckpt finetuned for 10 epochs of
 # 8,000 crops at lr 5e-4 on the same data) for a fixed code and for a code learned with it: the
 # random binary mask (and a hand-designed variant) against a learned mask of its period, the ASP
-# quadrature pair against learned ASP gratings; a binary mask learned from the start (straight
-# through its rounding); the masks
+# quadrature pair against learned ASP gratings (from random gratings, and from the pair), a random
+# coded aperture against a learned one; a binary mask learned from the start (straight through its
+# rounding); the masks and ASPs
 # trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05; the shipped default lfnet-asp-n2 and a
 # mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
@@ -310,9 +311,10 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 learned-codes() {
   local tmp i m sigma
   local clean=(lfnet-mask-n2 lfnet-mask-n2-s2 lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2
-    lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-mask-n2-l4
-    lfnet-learned-mask-n2-l4-e20)
-  local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise)
+    lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-asp-n2-pair lfnet-aperture-n2
+    lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 lfnet-learned-mask-n2-l4-e20)
+  local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-asp-n2-c32-e10-noise
+    lfnet-learned-asp-n2-noise)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -340,7 +342,8 @@ learned-codes() {
   done
   mv "$tmp" results/learned-codes/records.jsonl
   for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
-    lfnet-learned-mask-n2-l4 lfnet-learned-mask-n2-l4-e20; do
+    lfnet-learned-asp-n2-pair lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 \
+    lfnet-learned-mask-n2-l4-e20; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
