@@ -7,6 +7,7 @@
 #include <map>
 #include <sstream>
 
+#include "lfnet/core/json.h"
 #include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
 
