@@ -16,7 +16,7 @@ WeightTiles weight_tiles(const Phi& phi, int64_t pixels, int64_t wrap) {
   if (phi.local()) {
     const int64_t t = phi.period();
     // The whole period when it fits, row by row; else the first pixels of the top row.
-    const int64_t h = t > 1 && t * t <= pixels ? t : 1, p = h > 1 ? t : std::min(pixels, t);
+    const int64_t p = std::min(pixels, t), h = t > 1 && t * t <= pixels ? t : 1;
     auto w = phi.pixel_weights(0, 0, h, p, torch::kFloat64).reshape({n, u, v, h * p});
     w = w / w.max();
     auto views = w.permute({3, 0, 1, 2});  // (h p, N, U, V)
