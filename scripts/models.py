@@ -2,7 +2,8 @@
 """Makes the models of models/ from their recipes (configs/recipes.json; docs/models.md, "Recipes").
 
 Every model is one config run by one lfnet command at one scale. A config may extend another
-($.extends) and start from a model ($.init) or distil one ($.distill.teacher): those inputs are
+($.extends) and start from a model ($.init), distil one ($.distill.teacher) or start its learned
+code from one ($.code.from): those inputs are
 found in the resolved config (`lfnet train CONFIG --show-config`), and a recipe whose model is
 an input of another is made first.
 
@@ -72,13 +73,16 @@ def resolved_config(recipe):
 
 
 def inputs_of(config):
-    """The model files a config starts from or distils."""
+    """The model files a config starts from, distils or takes its code from."""
     found = []
     if config.get("init"):
         found.append(("starts from", config["init"]))
     teacher = config.get("distill", {}).get("teacher")
     if teacher:
         found.append(("distils", teacher))
+    code_from = config.get("code", {}).get("from")
+    if code_from:
+        found.append(("takes its code from", code_from))
     return found
 
 

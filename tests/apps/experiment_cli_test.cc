@@ -208,12 +208,21 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   CHECK(code["transmittance"].size() == size_t{2} * 5 * 5 * 3 * 3);
   CHECK(code["options"]["period"] == 3);
 
+  // Another run's code starts from this model's ($.code.from), and its config records where.
+  REQUIRE(run_command(lfnet + "train " + (tmp / "code.json") + " --set code.from=" + model +
+                          " --out " + (tmp / "next"),
+                      out) == 0);
+  CHECK(out.find("the code starts from the learned code of " + model) != std::string::npos);
+  const auto next = nlohmann::json::parse(std::ifstream(tmp / "next/config.json"));
+  CHECK(next["code"]["from"] == model);
+
   // A code that cannot be trained is one error before any training.
   const std::pair<std::string, std::string> bad[] = {
       {"code.family=asp", "$.code.binarise: an ASP's response is a cosine"},
       {"code.colour=red", "$.code.colour"},
       {"code.freeze_epochs=5", "freeze_epochs"},
       {"code.family=lens", "lens"},
+      {"code.from=" + (tmp / "missing.ckpt"), "$.code.from"},
   };
   for (const auto& [set, message] : bad) {
     INFO(set);

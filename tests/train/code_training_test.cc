@@ -214,6 +214,56 @@ TEST_CASE("a run that learns a code resumes bit for bit", "[train][code]") {
   CHECK(a.phi == b.phi);
 }
 
+TEST_CASE("a code starts from another model's learned code, whatever the net starts from",
+          "[train][code]") {
+  test::TempDir dir;
+  auto learned = mask_code();
+  auto source = code_source(learned);
+  train::CodeTrainingOptions c;
+  c.lr = 0.05;
+  {
+    auto trainer = make_trainer(learned, options(dir / "learned", 2), 36);
+    trainer.set_code(learned, c);
+    trainer.fit(*source);
+  }
+  const auto donor = train::last_checkpoint_path(dir / "learned");
+  const auto donor_logits = train::load_checkpoint(donor).model.at("code.logits");
+  // Another run's net, and a code of another start (seed 4).
+  nn::LearnedPhiOptions o;
+  o.family = "mask";
+  o.period = kPeriod;
+  o.seed = 4;
+  nn::LearnedPhi code(o, 2, 3, 3);
+  REQUIRE_FALSE(torch::equal(logits(code), donor_logits));
+  auto trainer = make_trainer(code, options(dir / "next", 1), 37);
+  trainer.set_code(code, c);
+  const auto taken = trainer.init_code_from(donor);
+  CHECK(taken == std::vector<std::string>{"code.logits"});
+  CHECK(torch::equal(logits(code), donor_logits));
+  {
+    // The net measures with that code from the first batch on.
+    torch::NoGradGuard no_grad;
+    CHECK(torch::equal(trainer.code_weights(), code->weights()));
+    CHECK(torch::equal(trainer.net()->phi, code->weights()));
+  }
+  CHECK(trainer.state().origin.at("code").at("checkpoint") == donor);
+
+  SECTION("a code of another family or shape is refused") {
+    nn::LearnedPhiOptions a;
+    a.family = "aperture";
+    nn::LearnedPhi aperture(a, 2, 3, 3);
+    auto other = make_trainer(aperture, options("", 1), 38);
+    other.set_code(aperture, c);
+    CHECK_THROWS_WITH(other.init_code_from(donor), Catch::Contains("lacks logits"));
+  }
+  SECTION("a model that learned no code is refused") {
+    auto plain = make_trainer(code, options(dir / "plain", 1), 39);
+    plain.fit(*source);
+    CHECK_THROWS_AS(trainer.init_code_from(train::last_checkpoint_path(dir / "plain")),
+                    CheckpointError);
+  }
+}
+
 TEST_CASE("a code is refused where it cannot train", "[train][code]") {
   test::TempDir dir;
   auto code = mask_code();

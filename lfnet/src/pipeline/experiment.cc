@@ -177,6 +177,9 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
   // A new run starts from $.init: it must be there (a resumed run may no longer need it).
   LFNET_CHECK_AS(ConfigError, config.init.empty() || fs::is_regular_file(config.init), path,
                  ": $.init: ", config.init, " is not a file: give a checkpoint to start from");
+  LFNET_CHECK_AS(ConfigError, config.code.from.empty() || fs::is_regular_file(config.code.from),
+                 path, ": $.code.from: ", config.code.from,
+                 " is not a file: give a model that learned a code of this family and shape");
   return config;
 }
 
@@ -192,6 +195,7 @@ nlohmann::json DistillConfig::to_json() const { return fields_to_json(*this); }
 
 void CodeConfig::read(JsonReader& r) {
   enabled = true;
+  r.get("from", from);
   read_fields(r, phi);
   read_fields(r, training);
   r.finish();
@@ -207,6 +211,7 @@ void CodeConfig::read(JsonReader& r) {
 nlohmann::json CodeConfig::to_json() const {
   auto out = fields_to_json(phi);
   out.update(fields_to_json(training));
+  if (!from.empty()) out["from"] = from;
   return out;
 }
 

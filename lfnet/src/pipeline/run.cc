@@ -148,6 +148,7 @@ TrainResult train_experiment(const TrainRequest& request,
     policy.inputs = {request.config, request.init, config.init};
     for (const auto& lf : config.train_data.light_fields) policy.inputs.push_back(lf);
     if (config.distill.enabled()) policy.inputs.push_back(config.distill.teacher);
+    if (config.code.enabled) policy.inputs.push_back(config.code.from);
     folder = std::make_unique<RunFolder>(out, policy, continue_in_place);
     fs::create_directories(fs::path(out) / "models");
   }

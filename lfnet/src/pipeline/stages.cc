@@ -134,6 +134,12 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
       spdlog::warn("joint stage without pretrained ae.ckpt and cnn.ckpt: training from scratch");
     }
   }
+  if (lead && resume.empty() && config.code.enabled && !config.code.from.empty() &&
+      stage.name == config.stages.front().name) {
+    // $.code.from: the first stage's code starts from another model's learned code.
+    trainer.init_code_from(config.code.from);
+    spdlog::info("the code starts from the learned code of {}", config.code.from);
+  }
   train::TrainerHooks hooks;
   hooks.on_epoch = [&](const train::EpochRecord& r) {
     if (!lead) return;

@@ -591,6 +591,19 @@ void Trainer::resume(const std::string& path) {
   last_written_ = path;
 }
 
+std::vector<std::string> Trainer::init_code_from(const std::string& path) {
+  LFNET_CHECK_AS(ConfigError, static_cast<bool>(code_),
+                 "a code's start from another model needs a code (set_code)");
+  const std::string what = "checkpoint " + path;
+  auto ck = load_checkpoint(path);
+  auto copied = load_code_state(code_, ck.model, what, /*strict=*/true);
+  code_optimizer_ = make_code_adam(code_, options_, code_options_);
+  fixed_code_ = torch::Tensor();
+  sync_code_phi();
+  state_.origin["code"] = {{"checkpoint", path}, {"phi", ck.phi}};
+  return copied;
+}
+
 InitReport Trainer::init_from(const std::string& path, const std::string& prefix) {
   const std::string what = "checkpoint " + path;
   auto ck = load_checkpoint(path);

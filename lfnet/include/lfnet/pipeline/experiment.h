@@ -67,9 +67,12 @@ struct DistillConfig {
 // the keys of nn::LearnedPhiOptions (family, period, max_depth, init, seed, init_spread) and of
 // train::CodeTrainingOptions (lr, freeze_epochs, binarise). $.phi then gives only the code's N
 // and views; the config's Phi becomes the code's start (a `calibrated` spec), and each model
-// the run writes records the code it was trained with.
+// the run writes records the code it was trained with. `from` names a model that learned a code
+// of the same family and shape: the code starts from that one instead (after $.init, whose own
+// code it replaces), so a code learned with one network can go on with another.
 struct CodeConfig {
   bool enabled = false;  // $.code is present
+  std::string from;      // $.code.from: a checkpoint whose learned code starts this one
   nn::LearnedPhiOptions phi;
   train::CodeTrainingOptions training;
 

@@ -246,6 +246,11 @@ class Trainer {
   // (ImageNetImpl::start_new_levels). Other shape mismatches are a CheckpointError.
   InitReport init_from(const std::string& path, const std::string& prefix = "");
 
+  // The code's start from a model that learned a code of the same family and shape (after
+  // init_from, whose own code it replaces), with a fresh Adam for the code. Returns the code's
+  // parameters taken; anything missing or of another shape is a CheckpointError. Needs set_code.
+  std::vector<std::string> init_code_from(const std::string& path);
+
   // The joint stage's start: the autoencoder from one checkpoint, the CNN from another.
   InitReport init_branches(const std::string& ae_path, const std::string& cnn_path);
 
