@@ -3,9 +3,9 @@
 
 Every model is one config run by one lfnet command at one scale. A config may extend another
 ($.extends) and start from a model ($.init), distil one ($.distill.teacher) or start its learned
-code from one ($.code.from): those inputs are
-found in the resolved config (`lfnet train CONFIG --show-config`), and a recipe whose model is
-an input of another is made first.
+code from one ($.code.from): those inputs are read from the config, its bases and its scale,
+and a recipe whose model is an input of another is made first. A model that only starts others
+(a step of a long chain) may live in out/ rather than models/; it is made again where missing.
 
     scripts/models.py list                 # every recipe, its inputs, whether its model exists
     scripts/models.py check                # every config valid, every model in models/ has a recipe
@@ -63,13 +63,36 @@ def scale_args(recipe):
     return ["--scale", recipe["scale"]] if recipe["scale"] else []
 
 
-def resolved_config(recipe):
-    """The config as lfnet resolves it (bases, scale); a clear error when it is not valid."""
-    cmd = [lfnet(), "--log-level", "error", "train", recipe["config"]] + scale_args(recipe)
-    out = subprocess.run(cmd + ["--show-config"], capture_output=True, text=True)
-    if out.returncode != 0:
-        fail(f"{recipe['name']}: {recipe['config']}: {out.stderr.strip()}")
-    return json.loads(out.stdout)
+def merged(base, over):
+    """`over` merged into `base` as lfnet merges a config into the one it extends."""
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = merged(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def written_config(path, scale):
+    """A config as lfnet resolves it at `scale`, read without lfnet (a model it starts from may
+    not be made yet): its base ($.extends, relative to it) at the same scale, then its own keys,
+    then its own patch for the scale."""
+    with open(path) as f:
+        config = json.load(f)
+    base = config.pop("extends", None)
+    patch = config.get("scales", {}).get(scale, {})
+    if base is not None:
+        config = merged(written_config(os.path.join(os.path.dirname(path), base), scale), config)
+    return merged(config, patch)
+
+
+def recipe_config(recipe):
+    """The recipe's config at its scale (the config's default scale where it names none)."""
+    scale = recipe["scale"] or written_config(recipe["config"], "").get("default_scale", "")
+    config = written_config(recipe["config"], scale)
+    config["scale"] = scale
+    return config
 
 
 def inputs_of(config):
@@ -87,31 +110,35 @@ def inputs_of(config):
 
 
 def dependencies(recipe, by_model):
-    return [by_model[path] for _, path in inputs_of(resolved_config(recipe)) if path in by_model]
+    return [by_model[path] for _, path in inputs_of(recipe_config(recipe)) if path in by_model]
 
 
 def cmd_list(recipes, by_name):
     for r in recipes:
-        config = resolved_config(r)
+        config = recipe_config(r)
         state = "exists" if os.path.isfile(r["model"]) else "missing"
         inputs = "; ".join(f"{how} {path}" for how, path in inputs_of(config))
-        scale = r["scale"] or config.get("scale", "") or "default"
+        scale = config["scale"] or "default"
         print(f"{r['name']:<36} {state:<8} {r['command']} {r['config']} ({scale})"
               + (f"; {inputs}" if inputs else ""))
 
 
 def cmd_check(recipes, by_name):
     problems = []
+    waiting = []  # recipes whose inputs other recipes have not made yet: lfnet cannot check them
     by_model = {r["model"]: r for r in recipes}
     for r in recipes:
+        inputs = inputs_of(recipe_config(r))
+        for how, path in inputs:
+            if path not in by_model and not os.path.isfile(path):
+                problems.append(f"{r['name']}: {how} {path}, which no recipe makes")
+        if any(path in by_model and not os.path.isfile(path) for _, path in inputs):
+            waiting.append(r["name"])
+            continue
         check = subprocess.run([lfnet(), "--log-level", "error", "train", r["config"]]
                                + scale_args(r) + ["--check"], capture_output=True, text=True)
         if check.returncode != 0:
             problems.append(f"{r['name']}: {check.stderr.strip()}")
-            continue
-        for how, path in inputs_of(resolved_config(r)):
-            if path not in by_model and not os.path.isfile(path):
-                problems.append(f"{r['name']}: {how} {path}, which no recipe makes")
     shipped = []
     for folder, _, files in os.walk("models"):
         shipped += [os.path.join(folder, f) for f in files if f.endswith(".ckpt")]
@@ -124,6 +151,9 @@ def cmd_check(recipes, by_name):
         fail(f"{len(problems)} problem(s) in {len(recipes)} recipes")
     print(f"{len(recipes)} recipes: every config is valid at its scale, every input is made by a "
           f"recipe, and each of the {len(shipped)} models in models/ has one")
+    if waiting:
+        print(f"{len(waiting)} recipes wait for models that other recipes make (`make` makes "
+              f"those first); lfnet checks their configs once those exist: {', '.join(waiting)}")
 
 
 def compose_log(recipe, by_name, out):
