@@ -35,7 +35,8 @@ def psnr(model, source):
         run = subprocess.run(cmd, capture_output=True, text=True)
         if run.returncode != 0:
             fail(f"{' '.join(cmd)}: {run.stderr.strip()}")
-        return json.load(open(out.name))["psnr_db"]
+        with open(out.name) as f:
+            return json.load(f)["psnr_db"]
 
 
 def training_seconds(model):
@@ -57,6 +58,7 @@ def main():
     print("| step | model | " + " | ".join(name for name, _ in LIGHT_FIELDS)
           + " | training s |")
     print("|---" * (len(LIGHT_FIELDS) + 3) + "|")
+    row_of = {}  # model -> its row's cells: a default step shared by two chains runs once
     for chain in chains:
         steps = [r for r in recipes if r["name"].startswith(chain + "-") or r["name"] == chain]
         if not steps:
@@ -67,10 +69,11 @@ def main():
             for model in (r["model"], default):
                 if not os.path.isfile(model):
                     continue
-                values = [f"{psnr(model, source):.2f}" for _, source in LIGHT_FIELDS]
-                seconds = training_seconds(model)
-                seconds = "" if seconds is None else f"{seconds:.0f}"
-                print(f"| {step} | {model} | " + " | ".join(values) + f" | {seconds} |")
+                if model not in row_of:
+                    values = [f"{psnr(model, source):.2f}" for _, source in LIGHT_FIELDS]
+                    seconds = training_seconds(model)
+                    row_of[model] = values + ["" if seconds is None else f"{seconds:.0f}"]
+                print(f"| {step} | {model} | " + " | ".join(row_of[model]) + " |")
 
 
 if __name__ == "__main__":
