@@ -596,11 +596,17 @@ std::vector<std::string> Trainer::init_code_from(const std::string& path) {
                  "a code's start from another model needs a code (set_code)");
   const std::string what = "checkpoint " + path;
   auto ck = load_checkpoint(path);
-  auto copied = load_code_state(code_, ck.model, what, /*strict=*/true);
+  auto copied = start_code_from(ck.model, what, /*strict=*/true);
+  state_.origin["code"] = {{"checkpoint", path}, {"phi", ck.phi}};
+  return copied;
+}
+
+std::vector<std::string> Trainer::start_code_from(const TensorMap& model, const std::string& what,
+                                                  bool strict) {
+  auto copied = load_code_state(code_, model, what, strict);
   code_optimizer_ = make_code_adam(code_, options_, code_options_);
   fixed_code_ = torch::Tensor();
   sync_code_phi();
-  state_.origin["code"] = {{"checkpoint", path}, {"phi", ck.phi}};
   return copied;
 }
 
@@ -653,12 +659,9 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   if (code_) {
     // A model that learned a code of this family and shape hands it on (the code's own Adam
     // starts afresh, like the net's).
-    for (auto& name : load_code_state(code_, ck.model, what, /*strict=*/false)) {
+    for (auto& name : start_code_from(ck.model, what, /*strict=*/false)) {
       report.copied.push_back(std::move(name));
     }
-    code_optimizer_ = make_code_adam(code_, options_, code_options_);
-    fixed_code_ = torch::Tensor();
-    sync_code_phi();
   }
   for (const auto& name : arch.finish_warm_start(*net_, from)) {
     auto& re = report.reinitialised;

@@ -313,6 +313,11 @@ class Trainer {
   // `source`'s validation, when asked), and sets the net's Phi to the weights in use.
   void prepare_code(int64_t epoch, BatchSource& source);
   void sync_code_phi();
+  // The code's parameters from a checkpoint's `model` (all of them when `strict`, else those it
+  // holds in this code's shapes), a fresh Adam for the code, and the net's Phi set to it: the
+  // start of init_from and init_code_from. Returns the names taken.
+  std::vector<std::string> start_code_from(const TensorMap& model, const std::string& what,
+                                           bool strict);
   // Makes every rank hold rank 0's weights, buffers, Adam state and training position.
   void synchronise();
   // Sums the gradients over the ranks and divides by `patches` (the global batch).
