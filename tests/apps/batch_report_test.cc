@@ -305,16 +305,19 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     blind["noise_sigma_estimated"] = 0.0987;
     d << blind.dump() << "\n";
   }
-  // A margins chart over a section with noisy records draws the noiseless ones.
+  // A margins chart over a section with noisy records draws the noiseless ones; an array of
+  // charts draws each, the second over a baseline of its own.
   fs::create_directories(tmp / "results/e");
   std::ofstream(tmp / "results/e/section.json")
-      << R"({"title": "Codes", "order": 5, "margins": {"over": "pinv"}})";
+      << R"({"title": "Codes", "order": 5, "margins": [{"over": "pinv"},)"
+      << R"( {"over": "no-parallax", "target": 1, "title": "Over the mean"}]})";
   {
     std::ofstream e(tmp / "results/e/records.jsonl");
     auto noisy = nlohmann::json::parse(record("net", 25.0, 1.0, "x"));
     noisy["noise_sigma"] = 0.05;
     e << record("net", 30.0, 1.0, "x") << "\n"
       << record("pinv", 29.0, 1.0, "x") << "\n"
+      << record("no-parallax", 27.0, 0.1, "x") << "\n"
       << noisy.dump() << "\n";
   }
   std::string out;
@@ -400,9 +403,17 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     CHECK(r.contains("psnr_db"));
   }
   REQUIRE(by_stem.count("e_margins"));
-  REQUIRE(by_stem["e_margins"]["records"].size() == 2);
+  REQUIRE(by_stem["e_margins"]["records"].size() == 3);
   for (const auto& r : by_stem["e_margins"]["records"]) CHECK(r["psnr_db"] != 25.0);
   CHECK(fs::file_size(figures / "e_margins.png") > 1000);
+  REQUIRE(by_stem.count("e_margins_1"));
+  CHECK(by_stem["e_margins_1"]["over"] == "no-parallax");
+  CHECK(by_stem["e_margins_1"]["target"] == 1);
+  CHECK(by_stem["e_margins_1"]["title"] == "Over the mean");
+  CHECK(by_stem["e_margins"]["title"] == "Codes");
+  CHECK(fs::file_size(figures / "e_margins_1.png") > 1000);
+  CHECK(text.find("![margins over no-parallax](images/results/e_margins_1.png)") !=
+        std::string::npos);
   // A heatmap chosen by a selector; one that matches no record adds no panel.
   REQUIRE(by_stem.count("b_views"));
   REQUIRE(by_stem["b_views"]["panels"].size() == 1);

@@ -663,12 +663,12 @@ void write_results_report(const std::string& results_dir, const std::string& out
       const auto m = margins(s);
       if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
       // A bar chart of each model's margin over a baseline per light field ("margins":
-      // {"over": "pinv", "target": 1.5, "stem": ...}): the cross-scene benchmark. It draws the
-      // noiseless records, and of each only what the chart reads (a record can hold a whole
-      // calibrated Phi).
+      // {"over": "pinv", "target": 1.5, "stem": ...}, or an array of such charts): the
+      // cross-scene benchmark. It draws the noiseless records, and of each only what the chart
+      // reads (a record can hold a whole calibrated Phi).
       if (s.meta.contains("margins")) {
-        const auto& m = s.meta["margins"];
-        const std::string stem = m.value("stem", s.name + "_margins");
+        const auto& all = s.meta["margins"];
+        const auto charts = all.is_array() ? all : nlohmann::json::array({all});
         nlohmann::json drawn = nlohmann::json::array();
         for (const auto& r : s.records) {
           if (noise_level(r) != 0) continue;
@@ -677,19 +677,24 @@ void write_results_report(const std::string& results_dir, const std::string& out
             if (r.contains(key)) slim[key] = r[key];
           drawn.push_back(slim);
         }
-        figure_set.add({{"kind", "margins"},
-                        {"stem", stem},
-                        {"title", m.value("title", s.meta.value("title", s.name))},
-                        {"over", m.value("over", "pinv")},
-                        {"over_variant", m.value("over_variant", "")},
-                        {"series", m.value("series", nlohmann::json::array())},
-                        {"target", m.contains("target") ? m["target"] : nlohmann::json()},
-                        {"records", drawn}});
-        const std::string over_variant = m.value("over_variant", "");
-        md << figure_markdown("margins over " + m.value("over", "pinv") +
-                                  (over_variant.empty() ? "" : " (" + over_variant + ")"),
-                              figures_link, stem)
-           << "\n\n";
+        for (std::size_t k = 0; k < charts.size(); ++k) {
+          const auto& m = charts[k];
+          const std::string stem =
+              m.value("stem", s.name + "_margins" + (k == 0 ? "" : "_" + std::to_string(k)));
+          figure_set.add({{"kind", "margins"},
+                          {"stem", stem},
+                          {"title", m.value("title", s.meta.value("title", s.name))},
+                          {"over", m.value("over", "pinv")},
+                          {"over_variant", m.value("over_variant", "")},
+                          {"series", m.value("series", nlohmann::json::array())},
+                          {"target", m.contains("target") ? m["target"] : nlohmann::json()},
+                          {"records", drawn}});
+          const std::string over_variant = m.value("over_variant", "");
+          md << figure_markdown("margins over " + m.value("over", "pinv") +
+                                    (over_variant.empty() ? "" : " (" + over_variant + ")"),
+                                figures_link, stem)
+             << "\n\n";
+        }
       }
       // Training curves of the models a section names ("training": [{"log": ..., "label": ...}]).
       if (s.meta.contains("training")) {
