@@ -305,14 +305,16 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 # coded aperture against a learned one; a binary mask learned from the start (straight through its
 # rounding); the masks and ASPs
 # trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05; the shipped default lfnet-asp-n2 and a
-# mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more). Each net
+# mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more); the
+# learned mask and ASP given the default's whole training, their codes held (the -full chains). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
   local tmp i m sigma
   local clean=(lfnet-mask-n2 lfnet-mask-n2-s2 lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2
     lfnet-asp-n2-c32-e10 lfnet-learned-asp-n2 lfnet-learned-asp-n2-pair lfnet-aperture-n2
-    lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 lfnet-learned-mask-n2-l4-e20)
+    lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 lfnet-learned-mask-n2-l4-e20
+    lfnet-learned-mask-n2-full lfnet-learned-mask-n2-full-l3 lfnet-learned-asp-n2-full)
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-asp-n2-c32-e10-noise
     lfnet-learned-asp-n2-noise)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
