@@ -316,7 +316,7 @@ learned-codes() {
     lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 lfnet-learned-mask-n2-l4-e20
     lfnet-learned-mask-n2-full lfnet-learned-mask-n2-full-l3 lfnet-learned-asp-n2-full)
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-asp-n2-c32-e10-noise
-    lfnet-learned-asp-n2-noise)
+    lfnet-learned-asp-n2-noise lfnet-learned-asp-n2-noise-from-clean)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
