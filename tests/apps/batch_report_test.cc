@@ -306,19 +306,24 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     d << blind.dump() << "\n";
   }
   // A margins chart over a section with noisy records draws the noiseless ones; an array of
-  // charts draws each, the second over a baseline of its own.
+  // charts draws each, the second over a baseline of its own, the third at a noise sigma of
+  // its own.
   fs::create_directories(tmp / "results/e");
   std::ofstream(tmp / "results/e/section.json")
       << R"({"title": "Codes", "order": 5, "margins": [{"over": "pinv"},)"
-      << R"( {"over": "no-parallax", "target": 1, "title": "Over the mean"}]})";
+      << R"( {"over": "no-parallax", "target": 1, "title": "Over the mean"},)"
+      << R"( {"over": "pinv", "noise": 0.05, "stem": "e_noisy"}]})";
   {
     std::ofstream e(tmp / "results/e/records.jsonl");
     auto noisy = nlohmann::json::parse(record("net", 25.0, 1.0, "x"));
     noisy["noise_sigma"] = 0.05;
+    auto noisy_pinv = nlohmann::json::parse(record("pinv", 21.0, 1.0, "x"));
+    noisy_pinv["noise_sigma"] = 0.05;
     e << record("net", 30.0, 1.0, "x") << "\n"
       << record("pinv", 29.0, 1.0, "x") << "\n"
       << record("no-parallax", 27.0, 0.1, "x") << "\n"
-      << noisy.dump() << "\n";
+      << noisy.dump() << "\n"
+      << noisy_pinv.dump() << "\n";
   }
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
@@ -404,7 +409,8 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   }
   REQUIRE(by_stem.count("e_margins"));
   REQUIRE(by_stem["e_margins"]["records"].size() == 3);
-  for (const auto& r : by_stem["e_margins"]["records"]) CHECK(r["psnr_db"] != 25.0);
+  for (const auto& r : by_stem["e_margins"]["records"])
+    CHECK((r["psnr_db"] != 25.0 && r["psnr_db"] != 21.0));
   CHECK(fs::file_size(figures / "e_margins.png") > 1000);
   REQUIRE(by_stem.count("e_margins_1"));
   CHECK(by_stem["e_margins_1"]["over"] == "no-parallax");
@@ -413,6 +419,14 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
   CHECK(by_stem["e_margins"]["title"] == "Codes");
   CHECK(fs::file_size(figures / "e_margins_1.png") > 1000);
   CHECK(text.find("![margins over no-parallax](images/results/e_margins_1.png)") !=
+        std::string::npos);
+  // The noisy chart reads the two records at sigma 0.05 and no other.
+  REQUIRE(by_stem.count("e_noisy"));
+  REQUIRE(by_stem["e_noisy"]["records"].size() == 2);
+  for (const auto& r : by_stem["e_noisy"]["records"])
+    CHECK((r["psnr_db"] == 25.0 || r["psnr_db"] == 21.0));
+  CHECK(fs::file_size(figures / "e_noisy.png") > 1000);
+  CHECK(text.find("![margins over pinv at noise sigma 0.05](images/results/e_noisy.png)") !=
         std::string::npos);
   // A heatmap chosen by a selector; one that matches no record adds no panel.
   REQUIRE(by_stem.count("b_views"));
