@@ -4,7 +4,8 @@
 Every model is one config run by one lfnet command at one scale. A config may extend another
 ($.extends) and start from a model ($.init), distil one ($.distill.teacher) or start its learned
 code from one ($.code.from): those inputs are read from the config, its bases and its scale,
-and a recipe whose model is an input of another is made first. A model that only starts others
+and a recipe whose model is an input of another is made first. A `blend` recipe's config names
+a finetuned model, its base and alpha ($.blend; `lfnet blend`) instead of training. A model that only starts others
 (a step of a long chain) may live in out/ rather than models/; it is made again where missing.
 
     scripts/models.py list                 # every recipe, its inputs, whether its model exists
@@ -49,8 +50,8 @@ def load_recipes():
                 fail(f"{RECIPES}: recipe {r.get('name', '?')} has no '{key}'")
         if r["name"] in by_name:
             fail(f"{RECIPES}: two recipes are called {r['name']}")
-        if r["command"] not in ("train", "experiment"):
-            fail(f"{RECIPES}: {r['name']}: command must be train or experiment")
+        if r["command"] not in ("train", "experiment", "blend"):
+            fail(f"{RECIPES}: {r['name']}: command must be train, experiment or blend")
         by_name[r["name"]] = r
     for r in recipes:
         after = r.get("log", {}).get("after")
@@ -106,7 +107,23 @@ def inputs_of(config):
     code_from = config.get("code", {}).get("from")
     if code_from:
         found.append(("takes its code from", code_from))
+    blend = config.get("blend", {})
+    if blend.get("model"):
+        found.append(("blends", blend["model"]))
+    if blend.get("base"):
+        found.append(("with", blend["base"]))
     return found
+
+
+def blend_args(recipe):
+    """`lfnet blend` arguments of a blend recipe ($.blend: model, base, alpha), checked."""
+    blend = recipe_config(recipe).get("blend")
+    if not isinstance(blend, dict) or not blend.get("model") or not blend.get("base"):
+        fail(f"{recipe['name']}: a blend recipe's config needs $.blend.model and $.blend.base")
+    alpha = blend.get("alpha", 0.5)
+    if not isinstance(alpha, (int, float)) or not 0 <= alpha <= 1:
+        fail(f"{recipe['name']}: $.blend.alpha must be a number in [0, 1], got {alpha!r}")
+    return ["--model", blend["model"], "--base", blend["base"], "--alpha", repr(float(alpha))]
 
 
 def dependencies(recipe, by_model):
@@ -134,6 +151,9 @@ def cmd_check(recipes, by_name):
                 problems.append(f"{r['name']}: {how} {path}, which no recipe makes")
         if any(path in by_model and not os.path.isfile(path) for _, path in inputs):
             waiting.append(r["name"])
+            continue
+        if r["command"] == "blend":
+            blend_args(r)  # lfnet checks the two models when it blends them
             continue
         check = subprocess.run([lfnet(), "--log-level", "error", "train", r["config"]]
                                + scale_args(r) + ["--check"], capture_output=True, text=True)
@@ -190,6 +210,15 @@ def make(recipe, by_name, by_model, force, making):
         return
     for dep in dependencies(recipe, by_model):
         make(dep, by_name, by_model, False, making + [name])
+    if recipe["command"] == "blend":
+        os.makedirs(os.path.dirname(recipe["model"]) or ".", exist_ok=True)
+        cmd = [lfnet(), "blend"] + blend_args(recipe) + ["--out", recipe["model"], "--force"]
+        print(f"== {name}: {' '.join(cmd[1:])}", flush=True)
+        if subprocess.run(cmd).returncode != 0:  # lfnet writes the model whole or not at all
+            fail(f"{name}: {' '.join(cmd)} failed")
+        compose_log(recipe, by_name, os.path.join("out", "models", name))
+        print(f"== {name}: {recipe['model']}", flush=True)
+        return
     out = os.path.join("out", "models", name)
     threads = os.environ.get("LFNET_THREADS", "1")
     base = [lfnet(), "--threads", threads, recipe["command"]]

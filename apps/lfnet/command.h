@@ -290,5 +290,6 @@ void add_export_command(CLI::App& app, const GlobalOptions& global);
 void add_launch_command(CLI::App& app, const GlobalOptions& global);
 void add_bench_command(CLI::App& app, const GlobalOptions& global);
 void add_phi_command(CLI::App& app, const GlobalOptions& global);
+void add_blend_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app

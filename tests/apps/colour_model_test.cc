@@ -16,26 +16,6 @@ namespace fs = std::filesystem;
 using lfnet::test::lfnet_binary;
 using lfnet::test::run_command;
 
-namespace {
-
-// An untrained colour net for asp:2 behind `cfa`: it returns the demosaiced pseudo-inverse.
-void save_colour_net(const std::string& cfa, const std::string& path) {
-  const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
-  lfnet::nn::NetworkOptions o;
-  o.architecture = lfnet::nn::kLfnetArchitecture;
-  o.measurements = 2;
-  o.patch = {5, 5, 16, 16};
-  o.image.channels = 6;
-  o.image.levels = 2;
-  o.image.blocks = 1;
-  o.cfa = cfa;
-  lfnet::nn::LightFieldNet net(o);
-  net->set_phi(phi->pixel_weights(0, 0, 1, 1));
-  lfnet::test::save_net(net, *phi, "joint", path);
-}
-
-}  // namespace
-
 TEST_CASE("a colour model reconstructs the sensor image of its colour filter array",
           "[app][colour]") {
   lfnet::test::TempDir tmp;
@@ -43,7 +23,7 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
   lfnet::io::write_light_field(lfnet::LightField(torch::rand({3, 5, 5, 32, 36})), tmp / "in/lf",
                                {"png", 16});
   const std::string model = tmp / "colour.ckpt";
-  save_colour_net("GRBG", model);
+  lfnet::test::save_small_image_net("GRBG", 0, model);
   std::string out;
   const std::string lfnet = lfnet_binary() + " --threads 1 --log-level warn ";
   REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "in/lf") +

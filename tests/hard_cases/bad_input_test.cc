@@ -521,6 +521,8 @@ TEST_CASE("on a full disk every command that writes fails with the reason and le
       "experiment " + (tmp / "c.json") + " --out " + f + "x",
       "export --model " + (tmp / "asp.ckpt") + " --out " + f + "old.pt --force",
       "phi export --phi mask:2 --out " + f + "cam",
+      "blend --model " + (tmp / "asp.ckpt") + " --base " + (tmp / "asp.ckpt") + " --out " + f +
+          "blend.ckpt",
       "bench --phi asp:2 --methods pinv --reps 1 --strides 9 --height 24 --width 24 "
       "--skip-kernels --json " +
           f + "bench.json",
