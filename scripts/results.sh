@@ -202,7 +202,9 @@ noise-blind() {
 # arrays"): on the colour light fields of the cross-scene benchmark, pinv of the mosaicked
 # sensor image, each view then demosaiced, against the grey pinv of a grey sensor and the
 # colour no-parallax; colour PSNR and luma PSNR. Against them the colour networks
-# lfnet-asp-n2-bayer-distilled (one pass and its self-ensemble), lfnet-asp-n2-bayer-malvar (its
+# lfnet-asp-n2-bayer-blend (lfnet-asp-n2-bayer-distilled blended with the grey default it was
+# finetuned from; one pass and its self-ensemble), lfnet-asp-n2-bayer-distilled (one pass and
+# its self-ensemble), lfnet-asp-n2-bayer-malvar (its
 # teacher) and lfnet-asp-n2-bayer, which reconstruct the colours with the views from the same
 # sensor image, and the grey default on a grey sensor; pinv also with the gradient-corrected
 # (malvar) demosaic.
@@ -211,6 +213,7 @@ colour() {
   need_model models/lfnet-asp-n2-bayer.ckpt
   need_model models/lfnet-asp-n2-bayer-malvar.ckpt
   need_model models/lfnet-asp-n2-bayer-distilled.ckpt
+  need_model models/lfnet-asp-n2-bayer-blend.ckpt
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor --phi asp:2)
@@ -220,6 +223,12 @@ colour() {
     VARIANT="Bayer RGGB, distilled, self-ensemble" \
       TRAINING=models/lfnet-asp-n2-bayer-distilled.training.jsonl \
       record "$tmp" "${src[@]}" "${distilled[@]}" --self-ensemble
+    local blend=(--model models/lfnet-asp-n2-bayer-blend.ckpt --cfa RGGB)
+    VARIANT="Bayer RGGB, blend" TRAINING=models/lfnet-asp-n2-bayer-blend.training.jsonl \
+      record "$tmp" "${src[@]}" "${blend[@]}"
+    VARIANT="Bayer RGGB, blend, self-ensemble" \
+      TRAINING=models/lfnet-asp-n2-bayer-blend.training.jsonl \
+      record "$tmp" "${src[@]}" "${blend[@]}" --self-ensemble
     VARIANT="Bayer RGGB, malvar" TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
       record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer-malvar.ckpt --cfa RGGB
     VARIANT="Bayer RGGB, bilinear" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl \
