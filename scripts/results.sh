@@ -217,18 +217,14 @@ colour() {
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor --phi asp:2)
-    local distilled=(--model models/lfnet-asp-n2-bayer-distilled.ckpt --cfa RGGB)
-    VARIANT="Bayer RGGB, distilled" TRAINING=models/lfnet-asp-n2-bayer-distilled.training.jsonl \
-      record "$tmp" "${src[@]}" "${distilled[@]}"
-    VARIANT="Bayer RGGB, distilled, self-ensemble" \
-      TRAINING=models/lfnet-asp-n2-bayer-distilled.training.jsonl \
-      record "$tmp" "${src[@]}" "${distilled[@]}" --self-ensemble
-    local blend=(--model models/lfnet-asp-n2-bayer-blend.ckpt --cfa RGGB)
-    VARIANT="Bayer RGGB, blend" TRAINING=models/lfnet-asp-n2-bayer-blend.training.jsonl \
-      record "$tmp" "${src[@]}" "${blend[@]}"
-    VARIANT="Bayer RGGB, blend, self-ensemble" \
-      TRAINING=models/lfnet-asp-n2-bayer-blend.training.jsonl \
-      record "$tmp" "${src[@]}" "${blend[@]}" --self-ensemble
+    local kind
+    for kind in distilled blend; do
+      local net=(--model "models/lfnet-asp-n2-bayer-$kind.ckpt" --cfa RGGB)
+      local log=models/lfnet-asp-n2-bayer-$kind.training.jsonl
+      VARIANT="Bayer RGGB, $kind" TRAINING=$log record "$tmp" "${src[@]}" "${net[@]}"
+      VARIANT="Bayer RGGB, $kind, self-ensemble" TRAINING=$log \
+        record "$tmp" "${src[@]}" "${net[@]}" --self-ensemble
+    done
     VARIANT="Bayer RGGB, malvar" TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
       record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer-malvar.ckpt --cfa RGGB
     VARIANT="Bayer RGGB, bilinear" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl \

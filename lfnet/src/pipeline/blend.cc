@@ -7,7 +7,6 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/output.h"
-#include "lfnet/nn/script.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/train/checkpoint.h"
 
@@ -15,11 +14,14 @@ namespace lfnet::pipeline {
 
 namespace {
 
+// An exported file or a noise switch is refused by name; anything else but a checkpoint is
+// refused by load_checkpoint with what is wrong with it.
 void check_checkpoint_file(const std::string& path, const std::string& option) {
-  LFNET_CHECK_AS(ConfigError, !nn::is_script_file(path), option, " ", path,
+  const auto kind = model_file_kind(path);
+  LFNET_CHECK_AS(ConfigError, kind != ModelFileKind::kExported, option, " ", path,
                  " is an exported file; blend takes checkpoints");
-  LFNET_CHECK_AS(ConfigError, model_file_kind(path) != ModelFileKind::kNoiseSwitch, option, " ",
-                 path, " is a noise switch of two checkpoints: blend each of them");
+  LFNET_CHECK_AS(ConfigError, kind != ModelFileKind::kNoiseSwitch, option, " ", path,
+                 " is a noise switch of two checkpoints: blend each of them");
 }
 
 }  // namespace
