@@ -5,8 +5,9 @@ Every model is one config run by one lfnet command at one scale. A config may ex
 ($.extends) and start from a model ($.init), distil one ($.distill.teacher) or start its learned
 code from one ($.code.from): those inputs are read from the config, its bases and its scale,
 and a recipe whose model is an input of another is made first. A `blend` recipe's config names
-a finetuned model, its base and alpha ($.blend; `lfnet blend`) instead of training. A model that only starts others
-(a step of a long chain) may live in out/ rather than models/; it is made again where missing.
+a finetuned model, its base and alpha ($.blend; `lfnet blend`) instead of training. A model
+that only starts others (a step of a long chain) may live in out/ rather than models/; it is
+made again where missing.
 
     scripts/models.py list                 # every recipe, its inputs, whether its model exists
     scripts/models.py check                # every config valid, every model in models/ has a recipe
