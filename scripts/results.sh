@@ -312,7 +312,8 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 # learned ones also from their noiseless codes; the shipped default lfnet-asp-n2 and a
 # mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more); the
 # learned mask and ASP given the default's whole training, their codes held (the -full chains), and
-# those two ASPs finetuned with noise for 44 epochs (the learned one's code learning on). Each net
+# those two ASPs finetuned with noise for 44 epochs (the learned one's code learning on), and the
+# mask's -l3 step finetuned with noise for 20 (its code learning on). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
@@ -323,7 +324,8 @@ learned-codes() {
     lfnet-learned-mask-n2-full lfnet-learned-mask-n2-full-l3 lfnet-learned-asp-n2-full)
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-learned-mask-n2-noise-from-clean
     lfnet-asp-n2-c32-e10-noise lfnet-learned-asp-n2-noise lfnet-learned-asp-n2-noise-from-clean
-    lfnet-asp-n2-full-noise-long lfnet-learned-asp-n2-full-noise-long)
+    lfnet-asp-n2-full-noise-long lfnet-learned-asp-n2-full-noise-long
+    lfnet-learned-mask-n2-full-l3-noise-e20)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -352,7 +354,8 @@ learned-codes() {
   mv "$tmp" results/learned-codes/records.jsonl
   for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
     lfnet-learned-asp-n2-pair lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 \
-    lfnet-learned-mask-n2-l4-e20 lfnet-learned-mask-n2-noise-from-clean; do
+    lfnet-learned-mask-n2-l4-e20 lfnet-learned-mask-n2-noise-from-clean \
+    lfnet-learned-mask-n2-full-l3-noise-e20; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
