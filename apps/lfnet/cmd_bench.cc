@@ -5,6 +5,7 @@
 
 #include <csignal>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "command.h"
@@ -43,6 +44,11 @@ void run_bench(const BenchArgs& args) {
     policy.inputs = {a.dictionary, a.scene};
     policy.inputs.insert(policy.inputs.end(), a.models.begin(), a.models.end());
     check_output_file(args.json, policy);
+  }
+  // Makes --json's missing folders (gone again if no report comes) and keeps other writers off.
+  std::optional<OutputLock> json_lock;
+  if (!args.json.empty() && args.json != "-" && args.one_case.empty()) {
+    json_lock.emplace(args.json, "--json");
   }
   if (!args.one_case.empty()) {
     ::prctl(PR_SET_PDEATHSIG, SIGKILL);  // a case dies with the bench that started it

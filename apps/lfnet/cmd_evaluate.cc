@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "command.h"
 #include "lfnet/core/json.h"
@@ -35,6 +36,9 @@ void run_evaluate(EvaluateArgs& a) {
     json_policy.inputs.push_back(a.out);
     check_output_file(a.json, json_policy);
   }
+  // Makes --json's missing folders (gone again if no record comes) and keeps other writers off.
+  std::optional<OutputLock> json_lock;
+  if (!a.json.empty()) json_lock.emplace(a.json, "--json");
   q.keep_estimate = !a.out.empty();
   const auto r = pipeline::evaluate_request(q);
   auto record = r.record;

@@ -88,6 +88,10 @@ TEST_CASE("lfnet bench --json - writes the JSON alone, and a bench with no case 
                       out) == 0);
   const auto report = nlohmann::json::parse(out);
   CHECK(report["cases"].size() == 1);
+  // A --json file in folders not made yet: they are made.
+  REQUIRE(run_command(lfnet_binary() + small + " --methods pinv --json " + (tmp / "new/r.json"),
+                      out) == 0);
+  CHECK(lfnet::read_json_file(tmp / "new/r.json")["cases"].size() == 1);
   // Every case failing (each in its child process: a JSON file is no dictionary): non-zero,
   // with the reason.
   lfnet::write_json_file(tmp / "json.json", {{"not", "a dictionary"}});
