@@ -36,6 +36,9 @@ struct BenchArgs {
 
 void run_bench(const BenchArgs& args) {
   const auto& a = args.options;
+  // The lock makes --json's missing folders (gone again if no report comes) and keeps other
+  // writers off.
+  std::optional<OutputLock> json_lock;
   if (!args.json.empty() && args.json != "-" && args.one_case.empty()) {
     // The report may not be one of the files the bench reads, nor replace a file unasked.
     OutputFolderPolicy policy;
@@ -44,10 +47,6 @@ void run_bench(const BenchArgs& args) {
     policy.inputs = {a.dictionary, a.scene};
     policy.inputs.insert(policy.inputs.end(), a.models.begin(), a.models.end());
     check_output_file(args.json, policy);
-  }
-  // Makes --json's missing folders (gone again if no report comes) and keeps other writers off.
-  std::optional<OutputLock> json_lock;
-  if (!args.json.empty() && args.json != "-" && args.one_case.empty()) {
     json_lock.emplace(args.json, "--json");
   }
   if (!args.one_case.empty()) {

@@ -30,15 +30,16 @@ void run_evaluate(EvaluateArgs& a) {
   policy.force = a.force;
   policy.inputs = {q.lf, q.scene, q.model, q.dictionary, q.effects, q.flat_field};
   if (!a.out.empty()) check_output_folder(a.out, policy);
+  // The lock makes --json's missing folders (gone again if no record comes) and keeps other
+  // writers off.
+  std::optional<OutputLock> json_lock;
   if (!a.json.empty()) {
     OutputFolderPolicy json_policy = policy;
     json_policy.option = "--json";
     json_policy.inputs.push_back(a.out);
     check_output_file(a.json, json_policy);
+    json_lock.emplace(a.json, "--json");
   }
-  // Makes --json's missing folders (gone again if no record comes) and keeps other writers off.
-  std::optional<OutputLock> json_lock;
-  if (!a.json.empty()) json_lock.emplace(a.json, "--json");
   q.keep_estimate = !a.out.empty();
   const auto r = pipeline::evaluate_request(q);
   auto record = r.record;
