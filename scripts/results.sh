@@ -325,7 +325,7 @@ learned-codes() {
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-learned-mask-n2-noise-from-clean
     lfnet-asp-n2-c32-e10-noise lfnet-learned-asp-n2-noise lfnet-learned-asp-n2-noise-from-clean
     lfnet-asp-n2-full-noise-long lfnet-learned-asp-n2-full-noise-long
-    lfnet-learned-mask-n2-full-l3-noise-e20)
+    lfnet-learned-mask-n2-full-l3-noise-long)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -355,7 +355,7 @@ learned-codes() {
   for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
     lfnet-learned-asp-n2-pair lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 \
     lfnet-learned-mask-n2-l4-e20 lfnet-learned-mask-n2-noise-from-clean \
-    lfnet-learned-mask-n2-full-l3-noise-e20; do
+    lfnet-learned-mask-n2-full-l3-noise-long; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
