@@ -308,12 +308,13 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 # random binary mask (and a hand-designed variant) against a learned mask of its period, the ASP
 # quadrature pair against learned ASP gratings (from random gratings, and from the pair), a random
 # coded aperture against a learned one; a binary mask learned from the start (straight through its
-# rounding); the masks and ASPs trained with noise (sigma 0 to 0.1) at sigma 0 and 0.05, the
-# learned ones also from their noiseless codes; the shipped default lfnet-asp-n2 and a
+# rounding); the masks, ASPs and apertures trained with noise (sigma 0 to 0.1) at sigma 0 and
+# 0.05, the learned ones also from their noiseless codes, and the pair and the learned ASP so
+# trained given 10 noise epochs more; the shipped default lfnet-asp-n2 and a
 # mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more); the
 # learned mask and ASP given the default's whole training, their codes held (the -full chains), and
 # those two ASPs finetuned with noise for 44 epochs (the learned one's code learning on), and the
-# mask's -l3 step finetuned with noise for 20 (its code learning on). Each net
+# mask's -l3 step finetuned with noise for 44 (its code learning on). Each net
 # beside pinv of its own camera (pinv-nlm with noise) and no-parallax, on the light fields of the
 # cross-scene benchmark, sensor mode. Then the learned codes' pictures (docs/images/learned-codes).
 learned-codes() {
@@ -325,7 +326,9 @@ learned-codes() {
   local noisy=(lfnet-mask-n2-noise lfnet-learned-mask-n2-noise lfnet-learned-mask-n2-noise-from-clean
     lfnet-asp-n2-c32-e10-noise lfnet-learned-asp-n2-noise lfnet-learned-asp-n2-noise-from-clean
     lfnet-asp-n2-full-noise-long lfnet-learned-asp-n2-full-noise-long
-    lfnet-learned-mask-n2-full-l3-noise-long)
+    lfnet-learned-mask-n2-full-l3-noise-long lfnet-aperture-n2-noise
+    lfnet-learned-aperture-n2-noise-from-clean lfnet-asp-n2-c32-e10-noise-e20
+    lfnet-learned-asp-n2-noise-from-clean-e20)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -355,7 +358,7 @@ learned-codes() {
   for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
     lfnet-learned-asp-n2-pair lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 \
     lfnet-learned-mask-n2-l4-e20 lfnet-learned-mask-n2-noise-from-clean \
-    lfnet-learned-mask-n2-full-l3-noise-long; do
+    lfnet-learned-mask-n2-full-l3-noise-long lfnet-learned-aperture-n2-noise-from-clean; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
