@@ -80,6 +80,7 @@ TEST_CASE("a colour model reconstructs the sensor image of its colour filter arr
           0);
   const auto s = lfnet::read_json_file(tmp / "s.json");
   CHECK(s["psnr_db"].get<double>() == Approx(e["psnr_db"].get<double>()).margin(0.01));
+  CHECK(s["self_ensemble_passes"] == 4);  // the code's mirrors, not those of the CFA's period
 
   // batch runs it on light-field folders behind the same array.
   REQUIRE(run_command(lfnet + "batch --input " + (tmp / "in") + " --out " + (tmp / "batch") +

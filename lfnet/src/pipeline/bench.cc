@@ -225,8 +225,7 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
     context.self_ensemble = true;
     context.self_ensemble_passes = a.self_ensemble_passes;
     passes = static_cast<int64_t>(
-        recon::ensemble_mirrors(net ? net->phi : script->pixel_weights(), a.self_ensemble_passes)
-            .size());
+        recon::ensemble_mirrors(net, script.get(), a.self_ensemble_passes).size());
     extra["self_ensemble_passes"] = passes;
   }
   const auto prepared = prepare_method(method, context, patch, patch);

@@ -167,8 +167,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   if (context.self_ensemble) {
     result.record["self_ensemble"] = true;
     result.record["self_ensemble_passes"] =
-        recon::ensemble_mirrors(context.net ? context.net->phi : context.script->pixel_weights(),
-                                context.self_ensemble_passes)
+        recon::ensemble_mirrors(context.net, context.script.get(), context.self_ensemble_passes)
             .size();
   }
   if (prepared.calibration) {

@@ -248,6 +248,13 @@ std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights, i
   return mirrors;
 }
 
+std::vector<SensorMirror> ensemble_mirrors(const nn::LightFieldNet& net,
+                                           const nn::ScriptedNetwork* script, int64_t max_passes) {
+  LFNET_CHECK(!net.is_empty() || script != nullptr, "ensemble_mirrors: no network");
+  return ensemble_mirrors(net.is_empty() ? script->pixel_weights() : mirror_weights(net),
+                          max_passes);
+}
+
 torch::Tensor reconstruct_mirrored(const std::vector<SensorMirror>& mirrors,
                                    const torch::Tensor& sensor, const SensorPass& pass, bool clamp,
                                    const ProgressCallback& progress) {

@@ -123,6 +123,11 @@ void check_ensemble_passes(bool self_ensemble, int64_t passes);
 std::vector<SensorMirror> ensemble_mirrors(const torch::Tensor& pixel_weights,
                                            int64_t max_passes = 0);
 
+// The mirrors the self-ensemble of a net uses: ensemble_mirrors of mirror_weights(net) for a
+// checkpoint's network (`net`), of the pixel weights of an exported one (`script`) otherwise.
+std::vector<SensorMirror> ensemble_mirrors(const nn::LightFieldNet& net,
+                                           const nn::ScriptedNetwork* script, int64_t max_passes);
+
 // A whole-image reconstruction, sensor (N, H, W) -> (C, U, V, H, W), of the mirror image
 // `mirror` of a sensor image, given a progress callback for its own part of the work.
 using SensorPass = std::function<torch::Tensor(
