@@ -271,7 +271,12 @@ TEST_CASE(
       result["torch_version"].get<std::string>().c_str());
 }
 
-TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[app][export]") {
+namespace {
+
+// Exports every `shards`-th checkpoint of models/ (sorted by name), from the `shard`-th on, and
+// checks the file against its checkpoint. The shipped models are split over several test cases
+// so that each stays well within CTest's timeout as models/ grows.
+void export_shipped_models(size_t shard, size_t shards) {
   std::vector<fs::path> models;
   const fs::path dir = fs::path(LFNET_SOURCE_DIR) / "models";
   if (fs::is_directory(dir)) {
@@ -287,7 +292,8 @@ TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[ap
   }
   std::sort(models.begin(), models.end());
   lfnet::test::TempDir tmp;
-  for (const auto& model : models) {
+  for (size_t i = shard; i < models.size(); i += shards) {
+    const auto& model = models[i];
     INFO(model.string());
     const std::string pt = tmp / (model.stem().string() + ".pt");
     std::string out;
@@ -314,6 +320,30 @@ TEST_CASE("every checkpoint in models/ exports and matches its checkpoint", "[ap
     const auto loaded = lfnet::nn::load_script(pt);
     CHECK(loaded.meta.phi == lfnet::train::load_checkpoint(model.string()).phi);
   }
+}
+
+constexpr size_t kExportShards = 4;
+
+}  // namespace
+
+TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (1st quarter)",
+          "[app][export]") {
+  export_shipped_models(0, kExportShards);
+}
+
+TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (2nd quarter)",
+          "[app][export]") {
+  export_shipped_models(1, kExportShards);
+}
+
+TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (3rd quarter)",
+          "[app][export]") {
+  export_shipped_models(2, kExportShards);
+}
+
+TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (4th quarter)",
+          "[app][export]") {
+  export_shipped_models(3, kExportShards);
 }
 
 TEST_CASE(
