@@ -310,7 +310,8 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 # coded aperture against a learned one; a binary mask learned from the start (straight through its
 # rounding); the masks, ASPs and apertures trained with noise (sigma 0 to 0.1) at sigma 0 and
 # 0.05, the learned ones also from their noiseless codes, and the pair and the learned ASP so
-# trained given 10 noise epochs more; the shipped default lfnet-asp-n2 and a
+# trained given 10 noise epochs more (the learned ASP's gratings at code lr 0.01 and at 0.05);
+# the shipped default lfnet-asp-n2 and a
 # mask learned with its network (4 levels, finetuned from it for 6 epochs, then 14 more); the
 # learned mask and ASP given the default's whole training, their codes held (the -full chains), and
 # those two ASPs finetuned with noise for 44 epochs (the learned one's code learning on), and the
@@ -328,7 +329,7 @@ learned-codes() {
     lfnet-asp-n2-full-noise-long lfnet-learned-asp-n2-full-noise-long
     lfnet-learned-mask-n2-full-l3-noise-long lfnet-aperture-n2-noise
     lfnet-learned-aperture-n2-noise-from-clean lfnet-asp-n2-c32-e10-noise-e20
-    lfnet-learned-asp-n2-noise-from-clean-e20)
+    lfnet-learned-asp-n2-noise-from-clean-e20 lfnet-learned-asp-n2-noise-from-clean-e20-codelr05)
   for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
@@ -358,7 +359,8 @@ learned-codes() {
   for m in lfnet-learned-mask-n2 lfnet-learned-binary-mask-n2 lfnet-learned-asp-n2 \
     lfnet-learned-asp-n2-pair lfnet-learned-aperture-n2 lfnet-learned-mask-n2-l4 \
     lfnet-learned-mask-n2-l4-e20 lfnet-learned-mask-n2-noise-from-clean \
-    lfnet-learned-mask-n2-full-l3-noise-long lfnet-learned-aperture-n2-noise-from-clean; do
+    lfnet-learned-mask-n2-full-l3-noise-long lfnet-learned-aperture-n2-noise-from-clean \
+    lfnet-learned-asp-n2-noise-from-clean-e20-codelr05; do
     "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
