@@ -136,6 +136,10 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "write the reconstruction as a light-field folder with a viewer (index.html)");
   cmd->add_flag("--force", a->force, "replace an existing --out folder and --json file");
   cmd->add_option("--seed", q.seed, "noise seed")->check(kSeed);
+  cmd->add_option("--choice", q.choice,
+                  "what this evaluation decides (an alpha, an epoch, which model ships), kept in "
+                  "the record; made on a test-set light field, lfnet report marks it "
+                  "(docs/protocol.md)");
   cmd->add_option("--batch", q.batch, "patches per forward pass")->check(kCount);
   cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
   cmd->callback([a] { run_evaluate(*a); });

@@ -291,5 +291,6 @@ void add_launch_command(CLI::App& app, const GlobalOptions& global);
 void add_bench_command(CLI::App& app, const GlobalOptions& global);
 void add_phi_command(CLI::App& app, const GlobalOptions& global);
 void add_blend_command(CLI::App& app, const GlobalOptions& global);
+void add_sets_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app

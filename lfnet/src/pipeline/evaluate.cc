@@ -14,6 +14,7 @@
 #include "lfnet/core/text.h"
 #include "lfnet/cv/opencv.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/pipeline/sets.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/method_registry.h"
@@ -230,6 +231,14 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   LFNET_CHECK_AS(ConfigError, a.lf.empty() != a.scene.empty(),
                  "give exactly one of --lf DIR and --scene SCENE.json");
   LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
+  // Where the light field sits in the protocol (docs/protocol.md), read before any work.
+  const nlohmann::json set = folder_set_record(a.lf);
+  if (!a.choice.empty() && !set.is_null() && set.value("role", "") == "test") {
+    spdlog::warn(
+        "--choice '{}' on {}, a light field of the test set: choices are made on the validation "
+        "set (docs/protocol.md); lfnet report marks this record",
+        a.choice, set.value("name", a.lf));
+  }
   std::optional<optics::SensorOptions> effects;  // read before any work
   if (!a.effects.empty()) {
     // As lfnet simulate reads them: the file, then --noise as its Gaussian sigma.
@@ -347,6 +356,12 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   if (!a.model.empty()) result.record["model"] = a.model;
   if (!noise_switch.is_null()) result.record["noise_switch"] = noise_switch;
   result.record["device"] = a.device;
+  if (!set.is_null()) {
+    result.record["set"] = {{"name", set.value("set", "")},
+                            {"role", set.value("role", "")},
+                            {"classes", set.value("classes", nlohmann::json::array())}};
+  }
+  if (!a.choice.empty()) result.record["choice"] = a.choice;
   if (a.tell_camera_error) result.record["camera_error_told"] = true;
   if (recon::needs_network(method)) result.record["precision"] = nn::to_string(a.precision);
   result.light_field = truths[0].name;

@@ -23,6 +23,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/figures.h"
+#include "lfnet/pipeline/sets.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace fs = std::filesystem;
@@ -271,6 +272,13 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   for (const auto& r : rows) has_shift |= r.contains("camera_error_estimated");
   bool has_luma = false;  // colour records: the luma's PSNR beside the colour one
   for (const auto& r : rows) has_luma |= r.contains("luma_psnr_db");
+  // Records that decided something (evaluate --choice); one made on the test set is marked.
+  bool has_choice = false;
+  int64_t test_choices = 0;
+  for (const auto& r : rows) {
+    has_choice |= r.contains("choice");
+    test_choices += r.contains("choice") && record_role(r) == "test";
+  }
   // Records of a camera whose Phi is off: what the error costs against the same record (every
   // other setting equal) of the nominal camera.
   const bool has_cost = std::find(columns.begin(), columns.end(), "camera_error") != columns.end();
@@ -302,11 +310,14 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
   if (has_shift) md << " estimated shift |";
   if (has_training) md << " training s |";
   if (has_paper) md << " paper PSNR dB | paper seconds |";
+  if (has_choice) md << " choice |";
   md << "\n|";
   const size_t n_columns = columns.size() + 3 + (has_luma ? 1 : 0) + (has_cost ? 1 : 0) +
                            (has_estimate ? 1 : 0) + (has_shift ? 1 : 0) + (has_training ? 1 : 0) +
                            (has_paper ? 2 : 0);
+  // The choice column is text: left-aligned after the numbers.
   for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
+  if (has_choice) md << "---|";
   md << "\n";
   for (const auto& r : rows) {
     md << "|";
@@ -364,7 +375,20 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
         md << " | |";
       }
     }
+    if (has_choice) {
+      const std::string choice = r.value("choice", "");
+      md << " "
+         << (choice.empty()             ? ""
+             : record_role(r) == "test" ? "**made on the test set:** " + choice
+                                        : choice)
+         << " |";
+    }
     md << "\n";
+  }
+  if (test_choices > 0) {
+    md << "\n**" << test_choices
+       << " record(s) here decided a choice on a light field of the test set**: choices are made "
+          "on the validation set, and the test set is only reported (docs/protocol.md).\n";
   }
   bool baseline = false;
   for (const auto& r : rows) baseline |= r.value("method", "") == "no-parallax";

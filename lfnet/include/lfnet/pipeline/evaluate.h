@@ -140,6 +140,9 @@ struct EvaluateRequest {
   bool self_ensemble = false;        // lfnet architecture: average over the Phi's mirror images
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   bool self_calibrate = false;       // lfnet architecture: estimate the camera's angular shift
+  // What this evaluation decides (a sweep's value, a training step, which model ships), written
+  // into the record as "choice": lfnet report marks a choice made on the test set.
+  std::string choice;
 };
 
 // One evaluation's outcome.
