@@ -427,3 +427,80 @@ TEST_CASE("calibration ranges give every patch its own camera", "[data]") {
   o.calibration.depth = 1.5;
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("depth"));
 }
+
+TEST_CASE("noise in the views is in the truth and the measurements, on training patches only",
+          "[data]") {
+  // A constant light field: any spread in a target is the views' own noise.
+  const LightField flat(torch::full({1, 5, 5, 60, 60}, 0.5f));
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.view_noise_range = {0.05, 0.05};
+  o.view_noise_fraction = 0.5;
+  data::PatchDataset ds({flat}, *phi, o, 32);
+  ds.start_epoch(0, 200);
+  const auto b = ds.next_train();
+  const auto spread = b.target.flatten(1).std(1);  // per patch
+  const auto noisy = spread > 0.01;
+  const double share = noisy.to(torch::kFloat32).mean().item<double>();
+  CHECK(share > 0.35);
+  CHECK(share < 0.65);
+  // The noisy patches' spread is the sigma asked for; the others' is none.
+  CHECK(spread.masked_select(noisy).mean().item<double>() == Approx(0.05).epsilon(0.1));
+  CHECK(spread.masked_select(~noisy).max().item<double>() < 1e-6);
+  // The measurements are of the noisy views: a flat field's two ASP measurements vary only
+  // where the views do.
+  CHECK(b.y.flatten(1).std(1).masked_select(~noisy).max().item<double>() < 1e-5);
+  CHECK(b.y.flatten(1).std(1).masked_select(noisy).min().item<double>() > 1e-3);
+  for (const auto& v : ds.validation()) CHECK(v.target.std().item<double>() < 1e-6);
+  // An epoch's noise follows from the seed.
+  data::PatchDataset again({flat}, *phi, o, 32);
+  again.start_epoch(0, 200);
+  CHECK(torch::equal(again.next_train().target, b.target));
+}
+
+TEST_CASE("correlated view noise is shared by neighbouring views and by the colours", "[data]") {
+  const LightField flat(torch::full({3, 5, 5, 200, 60}, 0.5f));
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.cfa = "RGGB";
+  o.augment = false;
+  o.patch_h = o.patch_w = 24;  // enough pixels that chance correlations stay small
+  o.view_noise_range = {0.05, 0.05};
+  auto correlation = [](const torch::Tensor& a, const torch::Tensor& b) {
+    const auto x = a.flatten() - a.mean(), y = b.flatten() - b.mean();
+    return ((x * y).sum() / (x.norm() * y.norm())).item<double>();
+  };
+  for (double fraction : {0.0, 1.0}) {
+    o.view_noise_correlated_fraction = fraction;
+    data::PatchDataset ds({flat}, *phi, o, 32);
+    ds.start_epoch(0, 8);
+    const auto t = ds.next_train().target[0];  // (3, 5, 5, h, w)
+    const double views = correlation(t[1][2][2], t[1][2][3]);
+    const double colours = correlation(t[0][2][2], t[1][2][2]);
+    INFO("correlated fraction " << fraction << ": views " << views << ", colours " << colours);
+    if (fraction == 0) {
+      CHECK(std::abs(views) < 0.1);
+      CHECK(std::abs(colours) < 0.1);
+    } else {
+      CHECK(views > 0.3);
+      CHECK(torch::equal(t[0], t[1]));  // the same noise in every colour
+    }
+  }
+}
+
+TEST_CASE("downscales add each light field at a finer scale", "[data]") {
+  // Rows marked by their index: a downscaled copy's rows are the means of row pairs.
+  auto rows =
+      torch::arange(120, torch::kFloat32).view({1, 1, 1, 120, 1}).expand({1, 5, 5, 120, 40});
+  const LightField lf(rows.clone() / 200.0);
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.patch_h = o.patch_w = 9;
+  data::PatchDataset one({lf}, *phi, o, 32);
+  CHECK(one.light_fields() == 1);
+  o.downscales = {1, 2, 8};  // 8 leaves 15 x 5 pixels, too few for 9 x 9 patches: skipped
+  data::PatchDataset two({lf}, *phi, o, 32);
+  CHECK(two.light_fields() == 2);
+  o.downscales = {};
+  CHECK_THROWS_AS(data::PatchDataset({lf}, *phi, o, 32), ConfigError);
+}

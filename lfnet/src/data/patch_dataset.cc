@@ -7,6 +7,7 @@
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/view_noise.h"
 #include "lfnet/dist/communicator.h"
 #include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
@@ -87,6 +88,26 @@ void DatasetOptions::validate() const {
     throw ConfigError("clean_fraction needs a noise_range: it is the share of noiseless patches");
   }
   calibration.validate();
+  if (!view_noise_range.empty() &&
+      (view_noise_range.size() != 2 ||
+       !(view_noise_range[0] >= 0 && view_noise_range[1] >= view_noise_range[0] &&
+         view_noise_range[1] <= 1))) {
+    throw ConfigError("view_noise_range must be [lo, hi] with 0 <= lo <= hi <= 1, or empty");
+  }
+  if (!(view_noise_fraction >= 0 && view_noise_fraction <= 1)) {
+    throw ConfigError("view_noise_fraction must lie in [0, 1]");
+  }
+  if (!(view_noise_correlated_fraction >= 0 && view_noise_correlated_fraction <= 1)) {
+    throw ConfigError("view_noise_correlated_fraction must lie in [0, 1]");
+  }
+  if (view_noise_angular < 0 || view_noise_angular > 4 || view_noise_spatial < 0 ||
+      view_noise_spatial > 8) {
+    throw ConfigError("view_noise_angular must lie in 0..4 and view_noise_spatial in 0..8");
+  }
+  if (downscales.empty()) throw ConfigError("downscales must list at least one factor (1: as is)");
+  for (int64_t f : downscales) {
+    if (f < 1 || f > 8) throw ConfigError("downscales must lie in 1..8");
+  }
   if (angular_steps.empty()) throw ConfigError("angular_steps must list at least one step");
   for (int64_t step : angular_steps) {
     if (step < 1 || step > 8) throw ConfigError("angular_steps must lie in 1..8");
@@ -116,6 +137,25 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
   LFNET_CHECK_AS(ConfigError, !lfs_.empty(), "the training data holds no light field");
   LFNET_CHECK_AS(ConfigError, validation_batch_size >= 1, "validation batch size must be >= 1");
   const int64_t nu = phi.rows(), nv = phi.cols();
+  // The downscaled copies after every light field as loaded, so that indices of the light
+  // fields as loaded stay as they were.
+  const size_t loaded = lfs_.size();
+  for (int64_t f : options_.downscales) {
+    if (f == 1) continue;
+    for (size_t i = 0; i < loaded; ++i) {
+      const torch::Tensor x = lfs_[i].data();
+      // Only where the copy still splits into training and validation rows of whole patches.
+      const int64_t h = x.size(3) / f, w = x.size(4) / f;
+      const auto split = static_cast<int64_t>(
+          std::floor(static_cast<double>(h) * (1.0 - options_.validation_fraction)));
+      if (split < options_.patch_h || h - split < options_.patch_h || w < options_.patch_w) continue;
+      const auto c = x.size(0), u = x.size(1), v = x.size(2);
+      LightField small(torch::avg_pool2d(x.reshape({c * u * v, 1, x.size(3), x.size(4)}), f)
+                           .reshape({c, u, v, x.size(3) / f, x.size(4) / f})
+                           .contiguous());
+      lfs_.push_back(std::move(small));
+    }
+  }
   for (size_t i = 0; i < lfs_.size(); ++i) {
     auto& lf = lfs_[i];
     if (options_.cfa.empty()) {
@@ -202,7 +242,9 @@ PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
           part(photons),
           part(read_electrons),
           part(calibration),
-          part(placement)};
+          part(placement),
+          part(view_sigma),
+          part(view_correlated)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
@@ -299,6 +341,17 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
       d.placement.push_back({y0, x0, sensor_h, sensor_w});
     }
   }
+  // Noise in the truth, after every other draw; training patches only.
+  if (!validation && !options_.view_noise_range.empty()) {
+    const double lo = options_.view_noise_range[0], hi = options_.view_noise_range[1];
+    for (int64_t i = 0; i < count; ++i) {
+      const bool noisy = 0.5 * (unit(rng) + 1.0) < options_.view_noise_fraction;
+      const double sigma = lo + (hi - lo) * 0.5 * (unit(rng) + 1.0);
+      const bool correlated = 0.5 * (unit(rng) + 1.0) < options_.view_noise_correlated_fraction;
+      d.view_sigma.push_back(noisy ? static_cast<float>(sigma) : 0.0f);
+      d.view_correlated.push_back(correlated ? 1.0f : 0.0f);
+    }
+  }
   return d;
 }
 
@@ -321,6 +374,14 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
       p = p.pow(d.gamma[i]);
       const auto mean = p.mean();
       p = ((p - mean) * d.contrast[i] + mean + d.brightness[i]).clamp(0.0, 1.0);
+    }
+    if (!d.view_sigma.empty() && d.view_sigma[i] > 0) {
+      auto gen = torch::make_generator<at::CPUGeneratorImpl>(
+          noise_seed ^ (0x766965776eULL + static_cast<uint64_t>(i)));
+      const bool correlated = d.view_correlated[i] > 0;
+      const auto noise = view_noise(p.sizes(), correlated ? options_.view_noise_angular : 0,
+                                    correlated ? options_.view_noise_spatial : 0, gen);
+      p = (p + noise * d.view_sigma[i]).clamp(0.0, 1.0);
     }
     patches.push_back(augment_patch(p, d.aug[i]));
     code_phases.push_back(phi_.local() ? optics::patch_phase(phi_, d.y0[i], d.x0[i]) : 0);

@@ -68,6 +68,22 @@ struct DatasetOptions {
   // whose Phi has its own small error drawn from these ranges (optics/calibration.h); the net
   // is told the nominal Phi. Empty (all 0): every patch is measured by the nominal Phi.
   optics::CalibrationRanges calibration;
+  // Noise in the truth: this share of training patches has Gaussian noise of a sigma drawn
+  // uniformly in `view_noise_range` added to every view (independently per view, pixel and
+  // colour, clipped to [0, 1]) before it is measured, and the net is scored against the noisy
+  // views: a light-field camera whose sub-aperture images carry its own noise. Empty: off.
+  std::vector<double> view_noise_range;
+  double view_noise_fraction = 1.0;
+  // The share of those noisy patches whose noise is correlated as a plenoptic camera's
+  // (core/view_noise.h): averaged over the views within `view_noise_angular` steps and the
+  // pixels within `view_noise_spatial` pixels. 0: all independent.
+  double view_noise_correlated_fraction = 0.0;
+  int64_t view_noise_angular = 1;
+  int64_t view_noise_spatial = 1;
+  // Each training light field also at these downscales (f x f area average, where the copy
+  // still splits into training and validation rows of whole patches): f times finer texture at
+  // 1/f the disparity. {1}: as loaded.
+  std::vector<int64_t> downscales = {1};
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
   // A colour net's Bayer pattern (network.cfa, not a dataset key): the patches keep their three
@@ -101,6 +117,12 @@ struct DatasetOptions {
     f("read_electrons_range", read_electrons_range);
     f("clean_fraction", clean_fraction);
     f("calibration", calibration);
+    f("view_noise_range", view_noise_range);
+    f("view_noise_fraction", view_noise_fraction);
+    f("view_noise_correlated_fraction", view_noise_correlated_fraction);
+    f("view_noise_angular", view_noise_angular);
+    f("view_noise_spatial", view_noise_spatial);
+    f("downscales", downscales);
     f("seed", seed);
     f("effects", effects);
   }
@@ -147,6 +169,8 @@ class PatchDataset : public train::BatchSource {
     // sensor; else empty.
     std::vector<optics::CalibrationError> calibration;
     std::vector<optics::SensorPlacement> placement;
+    std::vector<float> view_sigma;       // per patch with view_noise_range (0: clean), else empty
+    std::vector<float> view_correlated;  // per patch with view_noise_range: 1 correlated noise
     Draw slice(int64_t begin, int64_t end) const;
   };
   // An angular window: views u0, u0 + step, ... (U of them), and likewise v.
