@@ -50,6 +50,22 @@ heldout-asp-n2() {
   rm -rf "$tmp"
 }
 
+# Replaces the records of records file $1 whose variant is among those of records file $2 by
+# $2's records.
+replace_variants() {
+  "$py" - "$1" "$2" <<'PY'
+import json, sys
+old_path, new_path = sys.argv[1], sys.argv[2]
+new = [json.loads(l) for l in open(new_path) if l.strip()]
+variants = {r.get("variant") for r in new}
+kept = [l for l in open(old_path) if l.strip() and json.loads(l).get("variant") not in variants]
+with open(old_path + ".tmp", "w") as f:
+    f.writelines(kept)
+    f.writelines(json.dumps(r) + "\n" for r in new)
+PY
+  mv "$1.tmp" "$1"
+}
+
 # Stops the run unless model file $1 exists: a section never loses rows silently.
 need_model() {
   if [[ ! -f $1 ]]; then
@@ -196,6 +212,114 @@ noise-blind() {
     done
   done
   mv "$tmp" results/noise-blind/records.jsonl
+}
+
+# The validation and test sets (docs/protocol.md, configs/sets/), made into out/sets/, and on
+# every light field of both: the grey default, its noise-aware sibling and the learned codes
+# against pinv and no-parallax; the noise switch told nothing (noiseless, and at sigma 0.05
+# against pinv-nlm told it); the colour
+# sibling behind an RGGB array against pinv with either demosaic. ASP N = 2 (the learned codes
+# their own camera), sensor mode; the noisy-views light fields carry their noise in the truth.
+# scripts/holdout-margins.py prints the margins, per light field and as each set's worst case.
+holdout_sets() {
+  local s
+  for s in validation test; do
+    "$lfnet" sets make "configs/sets/$s.json" --out "out/sets/$s" --force
+  done
+}
+
+# Appends to $1 the records of the grey network $2 (a model path; its variant the file's name)
+# on light-field folder $3.
+holdout_net() {
+  local name
+  name=$(basename "$2" .ckpt)
+  VARIANT=$name record "$1" --model "$2" --lf "$3" --method net --mode sensor --stride 5
+}
+
+holdout() {
+  local tmp dir m
+  need_model models/lfnet-asp-n2.ckpt
+  need_model models/lfnet-asp-n2-bayer-blend.ckpt
+  holdout_sets
+  tmp=$(mktemp)
+  for dir in out/sets/validation/* out/sets/test/*; do
+    [[ -f $dir/set.json ]] || continue
+    local src=(--lf "$dir" --mode sensor --stride 5)
+    for method in no-parallax pinv; do
+      record "$tmp" --phi asp:2 "${src[@]}" --method "$method"
+    done
+    for m in models/lfnet-asp-n2.ckpt models/lfnet-asp-n2-noise.ckpt \
+      models/lfnet-learned-mask-n2-full-l3.ckpt models/lfnet-learned-asp-n2-full.ckpt; do
+      holdout_net "$tmp" "$m" "$dir"
+    done
+    for sigma in 0 0.05; do
+      VARIANT="lfnet-asp-n2-auto, estimated" record "$tmp" \
+        --model models/lfnet-asp-n2-auto.json "${src[@]}" --method net --noise "$sigma" \
+        --estimate-noise
+    done
+    holdout_told "$tmp" "$dir"
+    record "$tmp" --phi asp:2 "${src[@]}" --method pinv-nlm --noise 0.05
+    VARIANT="Bayer RGGB, blend" record "$tmp" "${src[@]}" \
+      --model models/lfnet-asp-n2-bayer-blend.ckpt --cfa RGGB
+    VARIANT="Bayer RGGB" record "$tmp" --phi asp:2 "${src[@]}" --method pinv --cfa RGGB
+    VARIANT="Bayer RGGB, malvar" record "$tmp" --phi asp:2 "${src[@]}" --method pinv --cfa RGGB \
+      --demosaic malvar
+  done
+  mv "$tmp" results/holdout/records.jsonl
+}
+
+# Appends to $1 the noise switch told sigma 0.05 on light-field folder $2.
+holdout_told() {
+  VARIANT="lfnet-asp-n2-auto, told" record "$1" --model models/lfnet-asp-n2-auto.json --lf "$2" \
+    --mode sensor --method net --noise 0.05
+}
+
+# Adds the colour networks of $MODELS (checkpoint paths, behind RGGB) to the holdout records,
+# each as variant "Bayer RGGB, NAME", replacing the records of the same variant.
+holdout-colour-add() {
+  local tmp dir model name
+  read -r -a models <<< "${MODELS:?MODELS names the checkpoints to add}"
+  tmp=$(mktemp)
+  for dir in out/sets/validation/* out/sets/test/*; do
+    [[ -f $dir/set.json ]] || continue
+    for model in "${models[@]}"; do
+      need_model "$model"
+      name=$(basename "$model" .ckpt)
+      VARIANT="Bayer RGGB, $name" record "$tmp" --model "$model" --lf "$dir" --mode sensor \
+        --cfa RGGB
+    done
+  done
+  replace_variants results/holdout/records.jsonl "$tmp"
+  rm -f "$tmp"
+}
+
+# The holdout records of the noise switch told the sigma, made again.
+holdout-told() {
+  local tmp dir
+  tmp=$(mktemp)
+  for dir in out/sets/validation/* out/sets/test/*; do
+    [[ -f $dir/set.json ]] && holdout_told "$tmp" "$dir"
+  done
+  replace_variants results/holdout/records.jsonl "$tmp"
+  rm -f "$tmp"
+}
+
+# Adds the grey networks of $MODELS (checkpoint paths, space-separated) to the holdout records,
+# replacing the records of the same variant.
+holdout-add() {
+  local tmp dir model
+  read -r -a models <<< "${MODELS:?MODELS names the checkpoints to add}"
+  [[ -d out/sets/test ]] || holdout_sets
+  tmp=$(mktemp)
+  for dir in out/sets/validation/* out/sets/test/*; do
+    [[ -f $dir/set.json ]] || continue
+    for model in "${models[@]}"; do
+      need_model "$model"
+      holdout_net "$tmp" "$model" "$dir"
+    done
+  done
+  replace_variants results/holdout/records.jsonl "$tmp"
+  rm -f "$tmp"
 }
 
 # A colour sensor behind a Bayer colour filter array (docs/acquisition.md, "Colour filter
@@ -515,17 +639,7 @@ cross-scene-add() {
         --mode sensor --stride 5
     done
   done
-  "$py" - "$records" "$tmp" <<'PY'
-import json, sys
-old_path, new_path = sys.argv[1], sys.argv[2]
-new = [json.loads(l) for l in open(new_path) if l.strip()]
-variants = {r.get("variant") for r in new}
-kept = [l for l in open(old_path) if l.strip() and json.loads(l).get("variant") not in variants]
-with open(old_path + ".tmp", "w") as f:
-    f.writelines(kept)
-    f.writelines(json.dumps(r) + "\n" for r in new)
-PY
-  mv "$records.tmp" "$records"
+  replace_variants "$records" "$tmp"
   rm -f "$tmp"
 }
 
