@@ -15,6 +15,7 @@
 #include "lfnet/core/version.h"
 #include "lfnet/nn/auto_precision.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/pipeline/zoo.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
@@ -209,15 +210,18 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
     throw std::logic_error("add_reconstruction_flags: every shared flag needs one target");
   }
   const std::string model =
-      "trained model for net, ae and cnn: a checkpoint or a file lfnet "
-      "export wrote";
+      "trained model for net, ae and cnn: a checkpoint, a file lfnet export wrote, or the name "
+      "of a zoo model (lfnet models)";
+  // A zoo name stands for its file (pipeline/zoo.h).
+  auto zoo_name = [](std::string text) { return pipeline::resolve_model_name(text); };
   if (f.models) {
     cmd->add_option("--model", *f.models,
                     model +
                         "; repeatable, the network methods run with each (default: an "
-                        "untrained network of --architecture)");
+                        "untrained network of --architecture)")
+        ->transform(zoo_name);
   } else {
-    cmd->add_option("--model", *f.model, model);
+    cmd->add_option("--model", *f.model, model)->transform(zoo_name);
   }
   cmd->add_option("--phi", *f.phi,
                   "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "
@@ -292,5 +296,6 @@ void add_bench_command(CLI::App& app, const GlobalOptions& global);
 void add_phi_command(CLI::App& app, const GlobalOptions& global);
 void add_blend_command(CLI::App& app, const GlobalOptions& global);
 void add_sets_command(CLI::App& app, const GlobalOptions& global);
+void add_models_command(CLI::App& app, const GlobalOptions& global);
 
 }  // namespace lfnet::app

@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
       add_info_command,       add_render_command,   add_simulate_command,    add_train_command,
       add_experiment_command, add_evaluate_command, add_reconstruct_command, add_batch_command,
       add_report_command,     add_export_command,   add_launch_command,      add_bench_command,
-      add_phi_command,        add_blend_command,    add_sets_command};
+      add_phi_command,        add_blend_command,    add_sets_command,        add_models_command};
   for (const auto& add : commands) add(app, global);
 
   try {

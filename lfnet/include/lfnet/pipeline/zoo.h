@@ -1,0 +1,42 @@
+// The model zoo (docs/models.md): models/zoo.json holds one card per shipped model, and a card's
+// name stands for its file wherever a model is taken (`--model lfnet-asp-n2`).
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace lfnet::pipeline {
+
+struct ZooCard {
+  std::string name, file;  // file: relative to the zoo's folder
+  nlohmann::json card;     // the whole card as zoo.json holds it
+};
+
+struct Zoo {
+  std::string dir;  // the folder of zoo.json and the models
+  std::vector<ZooCard> models;
+  const ZooCard* find(const std::string& name) const;
+};
+
+// The zoo's folder: $LFNET_MODELS when set, else ./models when it holds zoo.json, else the
+// source tree's models/ (where the program was built).
+std::string zoo_dir();
+
+// Reads DIR/zoo.json. A missing or malformed file is an IoError or ConfigError naming it.
+Zoo read_zoo(const std::string& dir = zoo_dir());
+
+// `text` itself when it names an existing file or folder or the zoo cannot be read; else the
+// path of the zoo model it names, if any. Never throws.
+std::string resolve_model_name(const std::string& text);
+
+// The table `lfnet models` prints: name, camera, colour, noise, architecture, parameters, MB,
+// worst margins over pinv on the validation and test sets, use.
+std::string zoo_table(const Zoo& zoo);
+
+// One card with what is measured on the file itself (parameters, MB) added, as JSON text.
+std::string zoo_card(const Zoo& zoo, const std::string& name);
+
+}  // namespace lfnet::pipeline

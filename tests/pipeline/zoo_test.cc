@@ -1,0 +1,67 @@
+// The model zoo (pipeline/zoo.h, models/zoo.json): every card names a file that exists, its
+// measured block is what scripts/zoo.py makes of the records, and a zoo name stands for its file.
+#include <catch2/catch.hpp>
+
+#include <cstdlib>
+#include <filesystem>
+#include <set>
+
+#include "lfnet/core/error.h"
+#include "lfnet/pipeline/zoo.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+using namespace lfnet;
+
+namespace {
+const std::string kModels = (fs::path(LFNET_SOURCE_DIR) / "models").string();
+}
+
+TEST_CASE("every zoo card names a shipped file, one card per name, one default per camera",
+          "[zoo]") {
+  const auto zoo = pipeline::read_zoo(kModels);
+  REQUIRE(zoo.models.size() >= 8);
+  CHECK(zoo.models.size() <= 16);
+  std::set<std::string> defaults;
+  for (const auto& m : zoo.models) {
+    INFO(m.name);
+    CHECK(fs::exists(fs::path(kModels) / m.file));
+    for (const char* key : {"use", "camera", "colour", "noise", "architecture", "recipe"}) {
+      CHECK(m.card.contains(key));
+    }
+    if (m.card.value("default", false)) {
+      const auto camera = m.card.value("camera", "") + " " + m.card.value("colour", "");
+      CHECK(defaults.insert(camera).second);
+    }
+  }
+  CHECK(defaults.count("asp:2 grey") == 1);
+  CHECK(defaults.count("asp:2 RGGB") == 1);
+  const auto table = pipeline::zoo_table(zoo);
+  for (const auto& m : zoo.models) CHECK_THAT(table, Catch::Contains(m.name));
+  CHECK_THAT(pipeline::zoo_card(zoo, "lfnet-asp-n2"), Catch::Contains("\"parameters\""));
+  CHECK_THROWS_WITH(pipeline::zoo_card(zoo, "lfnet-asp-n3"),
+                    Catch::Contains("no model 'lfnet-asp-n3' in the zoo"));
+}
+
+TEST_CASE("a zoo name stands for its file; paths and unknown names stay as given", "[zoo]") {
+  ::setenv("LFNET_MODELS", kModels.c_str(), 1);
+  CHECK(pipeline::resolve_model_name("lfnet-asp-n2") ==
+        (fs::path(kModels) / "lfnet-asp-n2.ckpt").string());
+  CHECK(pipeline::resolve_model_name("lfnet-asp-n2-auto") ==
+        (fs::path(kModels) / "lfnet-asp-n2-auto.json").string());
+  CHECK(pipeline::resolve_model_name("no-such-model") == "no-such-model");
+  CHECK(pipeline::resolve_model_name("x/lfnet-asp-n2") == "x/lfnet-asp-n2");
+  test::TempDir tmp;
+  ::setenv("LFNET_MODELS", tmp.path().c_str(), 1);  // no zoo there: names stay names
+  CHECK(pipeline::resolve_model_name("lfnet-asp-n2") == "lfnet-asp-n2");
+  CHECK_THROWS_AS(pipeline::read_zoo(tmp.path().string()), IoError);
+  ::unsetenv("LFNET_MODELS");
+}
+
+TEST_CASE("the cards' measured blocks are what scripts/zoo.py makes of the records", "[zoo]") {
+  std::string out;
+  const int rc = test::run_command(
+      std::string(LFNET_TEST_PYTHON) + " " + LFNET_SOURCE_DIR + "/scripts/zoo.py --check", out);
+  INFO(out);
+  CHECK(rc == 0);
+}
