@@ -247,6 +247,12 @@ TEST_CASE("a set's folders say their role, evaluate records it and report marks 
   CHECK_THROWS_WITH(pipeline::write_set(set, tmp / "test.json", tmp / "sets", {"t-b"}, true),
                     Catch::Contains("--only t-b"));
 
+  // Training on it is refused; the source folder is not a set's.
+  CHECK_THROWS_WITH(pipeline::check_not_held_out({tmp / "src", tmp / "sets/t-a"}, "$.data"),
+                    Catch::Contains("$.data.light_fields[1]") &&
+                        Catch::Contains("the test set's light field t-a"));
+  CHECK_NOTHROW(pipeline::check_not_held_out({tmp / "src"}, "$.data"));
+
   pipeline::EvaluateRequest q;
   q.lf = tmp / "sets/t-a";
   q.phi = "asp:2";

@@ -15,6 +15,7 @@
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
+#include "lfnet/pipeline/sets.h"
 #include "lfnet/pipeline/stages.h"
 #include "lfnet/recon/method_registry.h"
 #include "lfnet/train/checkpoint.h"
@@ -43,6 +44,7 @@ void recover_run_folder(const std::string& dir) {
 
 void check_config_inputs(const ExperimentConfig& config) {
   check_sources(config.train_data, "$.data");
+  check_not_held_out(config.train_data.light_fields, "$.data");
   check_sources(config.evaluation.data, "$.evaluation.data");
 }
 

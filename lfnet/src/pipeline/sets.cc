@@ -246,6 +246,17 @@ nlohmann::json folder_set_record(const std::string& dir) {
   return doc;
 }
 
+void check_not_held_out(const std::vector<std::string>& folders, const std::string& where) {
+  for (size_t i = 0; i < folders.size(); ++i) {
+    const auto set = folder_set_record(folders[i]);
+    if (set.is_null()) continue;
+    throw ConfigError(where + ".light_fields[" + std::to_string(i) + "]: " + folders[i] +
+                      " is the " + set.value("role", "") + " set's light field " +
+                      set.value("name", "") +
+                      ": no config trains on the validation or test sets (docs/protocol.md)");
+  }
+}
+
 std::string record_role(const nlohmann::json& record) {
   if (!record.contains("set") || !record["set"].is_object()) return "";
   return record["set"].value("role", "");

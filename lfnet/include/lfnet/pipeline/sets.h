@@ -116,6 +116,10 @@ nlohmann::json set_record(const LightFieldSet& set, const SetEntry& entry,
 // malformed one is an IoError naming it.
 nlohmann::json folder_set_record(const std::string& dir);
 
+// Refuses (ConfigError naming `where`) any folder of `folders` that a set made: no config
+// trains on a validation or test light field (docs/protocol.md).
+void check_not_held_out(const std::vector<std::string>& folders, const std::string& where);
+
 // Where a record's light field sits in the protocol: its "set" object's role ("validation",
 // "test"), or "" for a light field of no set.
 std::string record_role(const nlohmann::json& record);
