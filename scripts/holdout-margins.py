@@ -71,8 +71,9 @@ def rows_of(psnr):
         rows.append((f"{v} - lfnet-asp-n2", lambda p, v=v: diff(get(p, "net", v),
                                                                  get(p, "net", "lfnet-asp-n2"))))
     for v in learned:
-        rows.append((f"{v} - lfnet-asp-n2-hard",
-                     lambda p, v=v: diff(get(p, "net", v), get(p, "net", "lfnet-asp-n2-hard"))))
+        for base in ("lfnet-asp-n2", "lfnet-asp-n2-hard"):
+            rows.append((f"{v} - {base}",
+                         lambda p, v=v, base=base: diff(get(p, "net", v), get(p, "net", base))))
     colour = sorted({k[1] for p in psnr.values() for k in p
                      if k[0] == "net" and k[1].startswith("Bayer RGGB, ")
                      and k[1] != "Bayer RGGB, blend"})
