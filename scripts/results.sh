@@ -221,6 +221,8 @@ noise-blind() {
 # sibling behind an RGGB array against pinv with either demosaic. ASP N = 2 (the learned codes
 # their own camera), sensor mode; the noisy-views light fields carry their noise in the truth.
 # scripts/holdout-margins.py prints the margins, per light field and as each set's worst case.
+# The candidates that were not shipped join with holdout-add (grey) and holdout-colour-add
+# (colour) after `scripts/models.py make NAME` (their models go to out/hard/).
 holdout_sets() {
   local s
   for s in validation test; do
@@ -249,7 +251,8 @@ holdout() {
       record "$tmp" --phi asp:2 "${src[@]}" --method "$method"
     done
     for m in models/lfnet-asp-n2.ckpt models/lfnet-asp-n2-noise.ckpt \
-      models/lfnet-learned-mask-n2-full-l3.ckpt models/lfnet-learned-asp-n2-full.ckpt; do
+      models/lfnet-asp-n2-hard-blend.ckpt models/lfnet-learned-mask-n2-full-l3.ckpt \
+      models/lfnet-learned-asp-n2-full.ckpt; do
       holdout_net "$tmp" "$m" "$dir"
     done
     for sigma in 0 0.05; do
