@@ -148,7 +148,8 @@ PatchDataset::PatchDataset(std::vector<LightField> light_fields, const optics::P
       const int64_t h = x.size(3) / f, w = x.size(4) / f;
       const auto split = static_cast<int64_t>(
           std::floor(static_cast<double>(h) * (1.0 - options_.validation_fraction)));
-      if (split < options_.patch_h || h - split < options_.patch_h || w < options_.patch_w) continue;
+      if (split < options_.patch_h || h - split < options_.patch_h || w < options_.patch_w)
+        continue;
       const auto c = x.size(0), u = x.size(1), v = x.size(2);
       LightField small(torch::avg_pool2d(x.reshape({c * u * v, 1, x.size(3), x.size(4)}), f)
                            .reshape({c, u, v, x.size(3) / f, x.size(4) / f})
