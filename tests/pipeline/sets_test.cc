@@ -247,6 +247,17 @@ TEST_CASE("a set's folders say their role, evaluate records it and report marks 
   CHECK_THROWS_WITH(pipeline::write_set(set, tmp / "test.json", tmp / "sets", {"t-b"}, true),
                     Catch::Contains("--only t-b"));
 
+  // An entry that cannot be made names the set file and itself, and leaves no folder.
+  write_json_file(
+      tmp / "bad.json",
+      {{"name", "v"},
+       {"role", "validation"},
+       {"light_fields", {{{"name", "gone"}, {"classes", {"plain"}}, {"lf", tmp / "nope"}}}}});
+  CHECK_THROWS_WITH(pipeline::write_set(pipeline::read_set(tmp / "bad.json"), tmp / "bad.json",
+                                        tmp / "bad-out", {}, false),
+                    Catch::Contains("bad.json: gone: "));
+  CHECK_FALSE(fs::exists(tmp / "bad-out/gone"));
+
   // Training on it is refused; the source folder is not a set's.
   CHECK_THROWS_WITH(pipeline::check_not_held_out({tmp / "src", tmp / "sets/t-a"}, "$.data"),
                     Catch::Contains("$.data.light_fields[1]") &&

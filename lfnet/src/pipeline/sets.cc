@@ -217,7 +217,18 @@ void write_set(const LightFieldSet& set, const std::string& set_path, const std:
   for (const auto* e : chosen) check_output_folder((fs::path(out) / e->name).string(), policy);
   ProgressBar bar("making " + set.name + " light fields", static_cast<int64_t>(chosen.size()));
   for (const auto* e : chosen) {
-    const LightField lf = make_set_entry(*e);
+    LightField lf;
+    // The set file and the entry named once, whichever step failed.
+    auto where = [&](const std::string& what) {
+      return set_path + ": " + (what.rfind(e->name + ": ", 0) == 0 ? what : e->name + ": " + what);
+    };
+    try {
+      lf = make_set_entry(*e);
+    } catch (const ConfigError& err) {
+      throw ConfigError(where(err.what()));
+    } catch (const IoError& err) {
+      throw IoError(where(err.what()));
+    }
     const auto record = set_record(set, *e, set_path);
     write_folder((fs::path(out) / e->name).string(), policy, [&](const std::string& dir) {
       io::write_light_field(lf, dir, {"png", 16});
