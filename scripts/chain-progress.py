@@ -66,7 +66,7 @@ def main():
         for r in steps:
             step = r["name"][len(chain) + 1:] or "last"
             default = "models/lfnet-asp-n2" + ("" if step == "last" else "-" + step) + ".ckpt"
-            for model in (r["model"], default):
+            for model in (r["model"], default, default.replace("models/", "out/cache/", 1)):
                 if not os.path.isfile(model):
                     continue
                 if model not in row_of:

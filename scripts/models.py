@@ -6,8 +6,9 @@ Every model is one config run by one lfnet command at one scale. A config may ex
 code from one ($.code.from): those inputs are read from the config, its bases and its scale,
 and a recipe whose model is an input of another is made first. A `blend` recipe's config names
 a finetuned model, its base and alpha ($.blend; `lfnet blend`) instead of training. A model
-that only starts others (a step of a long chain) may live in out/ rather than models/; it is
-made again where missing.
+outside the zoo (models/zoo.json) -- a research variant, or a step of a long chain -- is made into
+out/ (out/cache/ or out/chains/, the recipe's model path) rather than models/; it is made again
+where missing.
 
     scripts/models.py list                 # every recipe, its inputs, whether its model exists
     scripts/models.py check                # every config valid, every model in models/ has a recipe
@@ -166,12 +167,27 @@ def cmd_check(recipes, by_name):
     for path in sorted(shipped):
         if path not in by_model:
             problems.append(f"{path} has no recipe in {RECIPES}")
+    # The zoo's checkpoints are made where the zoo reads them; its cards name their recipes.
+    with open(os.path.join("models", "zoo.json")) as f:
+        cards = json.load(f)["models"]
+    for card in cards:
+        file = os.path.join("models", card["file"])
+        if not os.path.isfile(file):
+            problems.append(f"models/zoo.json: {card['name']}: {file} does not exist")
+        for recipe in (name.strip() for name in card.get("recipe", "").split(",")):
+            if recipe not in by_name:
+                problems.append(f"models/zoo.json: {card['name']}: no recipe is called {recipe}")
+            elif file.endswith(".ckpt") and len(card["recipe"].split(",")) == 1 \
+                    and by_name[recipe]["model"] != file:
+                problems.append(f"models/zoo.json: {card['name']}: its recipe {recipe} makes "
+                                f"{by_name[recipe]['model']}, not {file}")
     for p in problems:
         print(p, file=sys.stderr)
     if problems:
         fail(f"{len(problems)} problem(s) in {len(recipes)} recipes")
     print(f"{len(recipes)} recipes: every config is valid at its scale, every input is made by a "
-          f"recipe, and each of the {len(shipped)} models in models/ has one")
+          f"recipe, each of the {len(shipped)} models in models/ has one, and each of the "
+          f"{len(cards)} zoo cards names its file and recipe")
     if waiting:
         print(f"{len(waiting)} recipes wait for models that other recipes make (`make` makes "
               f"those first); lfnet checks their configs once those exist: {', '.join(waiting)}")

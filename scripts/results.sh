@@ -4,7 +4,8 @@
 # `pictures` remakes only the reconstructions the report shows, and `report` nothing;
 # `MODELS="models/X.ckpt ..." scripts/results.sh cross-scene-add` adds networks to the
 # cross-scene table without measuring the others again).
-# Needs the trained models (models/, scripts/models.py) and ../shared/data.
+# Needs the zoo's models (models/), the research models their recipes make into out/cache/
+# (scripts/models.py make NAME; need_model names the recipe of a missing one) and ../shared/data.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 lfnet=${LFNET:-build/apps/lfnet}
@@ -40,7 +41,7 @@ heldout-asp-n2() {
     for method in net ae cnn dict pinv adjoint no-parallax; do
       local extra=()
       [[ $mode == sensor ]] && extra=(--out "$pics/$method")
-      "$lfnet" evaluate --model models/asp-n2.ckpt --dictionary models/dictionary.ckpt \
+      "$lfnet" evaluate --model "$(model_file asp-n2)" --dictionary "$(model_file dictionary)" \
         --lf ../shared/data/hci_antinous --method "$method" --mode "$mode" --stride 5 \
         --json "$tmp/r.json" "${extra[@]}"
       append_record "$tmp/records.jsonl" "$tmp/r.json"
@@ -67,10 +68,27 @@ PY
 }
 
 # Stops the run unless model file $1 exists: a section never loses rows silently.
+# The file of model NAME (a path under models/ without .ckpt): the zoo's file in models/, else
+# the research model that its recipe makes into out/cache/ (scripts/models.py make).
+model_file() {
+  if [[ -f models/$1.ckpt ]]; then echo "models/$1.ckpt"; else echo "out/cache/$1.ckpt"; fi
+}
+
+# The training log beside model NAME's file.
+model_log() {
+  local file
+  file=$(model_file "$1")
+  echo "${file%.ckpt}.training.jsonl"
+}
+
 need_model() {
   if [[ ! -f $1 ]]; then
-    echo "results.sh: $1 is missing, so ${FUNCNAME[1]} would lose its rows; make it first" \
-      "(docs/models.md says how each model is made) or restore it from git" >&2
+    local recipe
+    recipe=$("$py" -c 'import json, sys
+print(" ".join(r["name"] for r in json.load(open("configs/recipes.json"))["recipes"]
+               if r["model"] == sys.argv[1]) or "?")' "$1")
+    echo "results.sh: $1 is missing, so ${FUNCNAME[1]} would lose its rows; make it first:" \
+      "scripts/models.py make $recipe" >&2
     exit 1
   fi
 }
@@ -106,7 +124,7 @@ compression-sweep() {
   tmp=$(mktemp)
   for n in 2 15 25; do
     for method in net dict pinv no-parallax; do
-      record "$tmp" --model "$pq/asp-n$n.ckpt" --dictionary models/dictionary.ckpt \
+      record "$tmp" --model "$pq/asp-n$n.ckpt" --dictionary "$(model_file dictionary)" \
         --lf ../shared/data/hci_antinous --method "$method" --mode sensor --stride 9
     done
   done
@@ -122,7 +140,7 @@ noise-sweep() {
       local variant=""
       [[ $method == net || $method == dict ]] && variant="trained without noise"
       VARIANT=$variant record "$tmp" --model $pq/asp-n2.ckpt \
-        --dictionary models/dictionary.ckpt --lf ../shared/data/hci_antinous --method "$method" \
+        --dictionary "$(model_file dictionary)" --lf ../shared/data/hci_antinous --method "$method" \
         --mode sensor --stride 5 --noise "$sigma"
     done
     VARIANT="trained at sigma 0.1" record "$tmp" --model $pq/noise-trained.ckpt \
@@ -133,7 +151,7 @@ noise-sweep() {
     local name model
     for name in lfnet-asp-n2 lfnet-asp-n2-first20 lfnet-asp-n2-noise lfnet-noise/aware-s0.025 \
       lfnet-noise/aware-s0.1 lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2; do
-      model=models/$name.ckpt
+      model="$(model_file "$name")"
       need_model "$model"
       case $name in
         lfnet-asp-n2) variant="lfnet-asp-n2, trained without noise" ;;
@@ -155,7 +173,7 @@ noise-sweep() {
 sensor-noise() {
   local tmp sensor method name model i
   tmp=$(mktemp)
-  need_model models/lfnet-asp-n2-robust.ckpt
+  need_model "$(model_file lfnet-asp-n2-robust)"
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     for sensor in daylight indoor dim; do
       local src=("${heldout[@]:i:2}" --mode sensor --effects configs/sensors/$sensor.json)
@@ -166,12 +184,12 @@ sensor-noise() {
       # The models trained at one noise level, and on Gaussian noise alone, on the first only.
       ((i == 0)) && names+=(lfnet-noise/aware-s0.1 lfnet-noise/sigma-0.1 lfnet-noise/sigma-0.2)
       for name in "${names[@]}"; do
-        model=models/$name.ckpt
+        model="$(model_file "$name")"
         need_model "$model"
         VARIANT=$name record "$tmp" --model "$model" "${src[@]}" --method net
       done
       VARIANT="lfnet-asp-n2-robust, estimated" record "$tmp" \
-        --model models/lfnet-asp-n2-robust.ckpt "${src[@]}" --method net --estimate-noise
+        --model "$(model_file lfnet-asp-n2-robust)" "${src[@]}" --method net --estimate-noise
       VARIANT="lfnet-asp-n2-auto, estimated" record "$tmp" \
         --model models/lfnet-asp-n2-auto.json "${src[@]}" --method net --estimate-noise
     done
@@ -187,25 +205,25 @@ sensor-noise() {
 noise-blind() {
   local tmp i sigma
   tmp=$(mktemp)
-  need_model models/lfnet-asp-n2-noise.ckpt
-  need_model models/lfnet-asp-n2-robust.ckpt
+  need_model "$(model_file lfnet-asp-n2-noise)"
+  need_model "$(model_file lfnet-asp-n2-robust)"
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor)
     for sigma in 0 0.05 0.1 0.2; do
       for method in pinv pinv-nlm no-parallax; do
         record "$tmp" --phi asp:2 "${src[@]}" --method "$method" --noise "$sigma"
       done
-      VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt "${src[@]}" \
+      VARIANT=lfnet-asp-n2 record "$tmp" --model "$(model_file lfnet-asp-n2)" "${src[@]}" \
         --method net --noise "$sigma"
-      VARIANT="lfnet-asp-n2-noise, told" record "$tmp" --model models/lfnet-asp-n2-noise.ckpt \
+      VARIANT="lfnet-asp-n2-noise, told" record "$tmp" --model "$(model_file lfnet-asp-n2-noise)" \
         "${src[@]}" --method net --noise "$sigma"
       VARIANT="lfnet-asp-n2-noise, estimated" record "$tmp" \
-        --model models/lfnet-asp-n2-noise.ckpt "${src[@]}" --method net --noise "$sigma" \
+        --model "$(model_file lfnet-asp-n2-noise)" "${src[@]}" --method net --noise "$sigma" \
         --estimate-noise
-      VARIANT="lfnet-asp-n2-robust, told" record "$tmp" --model models/lfnet-asp-n2-robust.ckpt \
+      VARIANT="lfnet-asp-n2-robust, told" record "$tmp" --model "$(model_file lfnet-asp-n2-robust)" \
         "${src[@]}" --method net --noise "$sigma"
       VARIANT="lfnet-asp-n2-robust, estimated" record "$tmp" \
-        --model models/lfnet-asp-n2-robust.ckpt "${src[@]}" --method net --noise "$sigma" \
+        --model "$(model_file lfnet-asp-n2-robust)" "${src[@]}" --method net --noise "$sigma" \
         --estimate-noise
       VARIANT="lfnet-asp-n2-auto, estimated" record "$tmp" --model models/lfnet-asp-n2-auto.json \
         "${src[@]}" --method net --noise "$sigma" --estimate-noise
@@ -240,8 +258,8 @@ holdout_net() {
 
 holdout() {
   local tmp dir m
-  need_model models/lfnet-asp-n2.ckpt
-  need_model models/lfnet-asp-n2-bayer-blend.ckpt
+  need_model "$(model_file lfnet-asp-n2)"
+  need_model "$(model_file lfnet-asp-n2-bayer-blend)"
   holdout_sets
   tmp=$(mktemp)
   for dir in out/sets/validation/* out/sets/test/*; do
@@ -250,9 +268,9 @@ holdout() {
     for method in no-parallax pinv; do
       record "$tmp" --phi asp:2 "${src[@]}" --method "$method"
     done
-    for m in models/lfnet-asp-n2.ckpt models/lfnet-asp-n2-noise.ckpt \
-      models/lfnet-asp-n2-hard-blend.ckpt models/lfnet-learned-mask-n2-full-l3.ckpt \
-      models/lfnet-learned-asp-n2-full.ckpt; do
+    for m in "$(model_file lfnet-asp-n2)" "$(model_file lfnet-asp-n2-noise)" \
+      "$(model_file lfnet-asp-n2-hard-blend)" "$(model_file lfnet-learned-mask-n2-full-l3)" \
+      "$(model_file lfnet-learned-asp-n2-full)"; do
       holdout_net "$tmp" "$m" "$dir"
     done
     for sigma in 0 0.05; do
@@ -263,7 +281,7 @@ holdout() {
     holdout_told "$tmp" "$dir"
     record "$tmp" --phi asp:2 "${src[@]}" --method pinv-nlm --noise 0.05
     VARIANT="Bayer RGGB, blend" record "$tmp" "${src[@]}" \
-      --model models/lfnet-asp-n2-bayer-blend.ckpt --cfa RGGB
+      --model "$(model_file lfnet-asp-n2-bayer-blend)" --cfa RGGB
     VARIANT="Bayer RGGB" record "$tmp" --phi asp:2 "${src[@]}" --method pinv --cfa RGGB
     VARIANT="Bayer RGGB, malvar" record "$tmp" --phi asp:2 "${src[@]}" --method pinv --cfa RGGB \
       --demosaic malvar
@@ -337,26 +355,26 @@ holdout-add() {
 # (malvar) demosaic.
 colour() {
   local tmp i
-  need_model models/lfnet-asp-n2-bayer.ckpt
-  need_model models/lfnet-asp-n2-bayer-malvar.ckpt
-  need_model models/lfnet-asp-n2-bayer-distilled.ckpt
-  need_model models/lfnet-asp-n2-bayer-blend.ckpt
+  need_model "$(model_file lfnet-asp-n2-bayer)"
+  need_model "$(model_file lfnet-asp-n2-bayer-malvar)"
+  need_model "$(model_file lfnet-asp-n2-bayer-distilled)"
+  need_model "$(model_file lfnet-asp-n2-bayer-blend)"
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor --phi asp:2)
     local kind
     for kind in distilled blend; do
-      local net=(--model "models/lfnet-asp-n2-bayer-$kind.ckpt" --cfa RGGB)
-      local log=models/lfnet-asp-n2-bayer-$kind.training.jsonl
+      local net=(--model "$(model_file "lfnet-asp-n2-bayer-$kind")" --cfa RGGB)
+      local log="$(model_log "lfnet-asp-n2-bayer-$kind")"
       VARIANT="Bayer RGGB, $kind" TRAINING=$log record "$tmp" "${src[@]}" "${net[@]}"
       VARIANT="Bayer RGGB, $kind, self-ensemble" TRAINING=$log \
         record "$tmp" "${src[@]}" "${net[@]}" --self-ensemble
     done
-    VARIANT="Bayer RGGB, malvar" TRAINING=models/lfnet-asp-n2-bayer-malvar.training.jsonl \
-      record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer-malvar.ckpt --cfa RGGB
-    VARIANT="Bayer RGGB, bilinear" TRAINING=models/lfnet-asp-n2-bayer.training.jsonl \
-      record "$tmp" "${src[@]}" --model models/lfnet-asp-n2-bayer.ckpt --cfa RGGB
-    VARIANT="grey sensor" record "$tmp" "${src[@]}" --model models/lfnet-asp-n2.ckpt
+    VARIANT="Bayer RGGB, malvar" TRAINING="$(model_log lfnet-asp-n2-bayer-malvar)" \
+      record "$tmp" "${src[@]}" --model "$(model_file lfnet-asp-n2-bayer-malvar)" --cfa RGGB
+    VARIANT="Bayer RGGB, bilinear" TRAINING="$(model_log lfnet-asp-n2-bayer)" \
+      record "$tmp" "${src[@]}" --model "$(model_file lfnet-asp-n2-bayer)" --cfa RGGB
+    VARIANT="grey sensor" record "$tmp" "${src[@]}" --model "$(model_file lfnet-asp-n2)"
     for pattern in RGGB GRBG; do
       VARIANT="Bayer $pattern" record "$tmp" "${src[@]}" --method pinv --cfa "$pattern"
     done
@@ -379,7 +397,7 @@ calibration() {
   local tmp work i error size
   tmp=$(mktemp)
   work=$(mktemp -d)
-  need_model models/lfnet-asp-n2-robust.ckpt
+  need_model "$(model_file lfnet-asp-n2-robust)"
   local vignetting='{"vignetting": 0.1}'
   local errors=('' '{"depth": -0.1}' '{"depth": 0.1}' '{"angular_shift_u": 0.1}'
     '{"angular_shift_u": 0.25}' "$vignetting" flat)
@@ -402,15 +420,15 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
       fi
       record "$tmp" --phi asp:2 "${src[@]}" --method pinv "${camera[@]}"
       for name in lfnet-asp-n2 lfnet-asp-n2-robust; do
-        VARIANT=$name record "$tmp" --model models/$name.ckpt "${src[@]}" --method net \
+        VARIANT=$name record "$tmp" --model "$(model_file "$name")" "${src[@]}" --method net \
           "${camera[@]}"
       done
       # The default told the angular shift it estimates from the sensor image itself, and (for
       # the errors a Phi of one period holds) told the camera's error as if measured.
-      VARIANT="lfnet-asp-n2, self-calibrated" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+      VARIANT="lfnet-asp-n2, self-calibrated" record "$tmp" --model "$(model_file lfnet-asp-n2)" \
         "${src[@]}" --method net "${camera[@]}" --self-calibrate
       if [[ $error == *depth* || $error == *angular* ]]; then
-        VARIANT="lfnet-asp-n2, told" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+        VARIANT="lfnet-asp-n2, told" record "$tmp" --model "$(model_file lfnet-asp-n2)" \
           "${src[@]}" --method net "${camera[@]}" --tell-camera-error
       fi
     done
@@ -457,27 +475,27 @@ learned-codes() {
     lfnet-learned-mask-n2-full-l3-noise-long lfnet-aperture-n2-noise
     lfnet-learned-aperture-n2-noise-from-clean lfnet-asp-n2-c32-e10-noise-e20
     lfnet-learned-asp-n2-noise-from-clean-e20 lfnet-learned-asp-n2-noise-from-clean-e20-codelr05)
-  for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "models/$m.ckpt"; done
+  for m in "${clean[@]}" "${noisy[@]}" lfnet-asp-n2; do need_model "$(model_file "$m")"; done
   tmp=$(mktemp)
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}" --mode sensor)
     record "$tmp" --phi asp:2 "${src[@]}" --method no-parallax
-    VARIANT=lfnet-asp-n2 TRAINING=models/lfnet-asp-n2.training.jsonl record "$tmp" \
-      --model models/lfnet-asp-n2.ckpt "${src[@]}" --method net
+    VARIANT=lfnet-asp-n2 TRAINING="$(model_log lfnet-asp-n2)" record "$tmp" \
+      --model "$(model_file lfnet-asp-n2)" "${src[@]}" --method net
     for m in "${clean[@]}"; do
-      VARIANT=$m TRAINING=models/$m.training.jsonl record "$tmp" --model "models/$m.ckpt" \
+      VARIANT=$m TRAINING="$(model_log "$m")" record "$tmp" --model "$(model_file "$m")" \
         "${src[@]}" --method net
-      VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv
+      VARIANT="$m camera" record "$tmp" --model "$(model_file "$m")" "${src[@]}" --method pinv
     done
     for sigma in 0 0.05; do
       for m in "${noisy[@]}"; do
-        VARIANT=$m TRAINING=models/$m.training.jsonl record "$tmp" --model "models/$m.ckpt" \
+        VARIANT=$m TRAINING="$(model_log "$m")" record "$tmp" --model "$(model_file "$m")" \
           "${src[@]}" --method net --noise "$sigma"
         if [[ $sigma == 0 ]]; then
-          VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv
+          VARIANT="$m camera" record "$tmp" --model "$(model_file "$m")" "${src[@]}" --method pinv
           continue
         fi
-        VARIANT="$m camera" record "$tmp" --model "models/$m.ckpt" "${src[@]}" --method pinv-nlm \
+        VARIANT="$m camera" record "$tmp" --model "$(model_file "$m")" "${src[@]}" --method pinv-nlm \
           --noise "$sigma"
       done
     done
@@ -488,10 +506,10 @@ learned-codes() {
     lfnet-learned-mask-n2-l4-e20 lfnet-learned-mask-n2-noise-from-clean \
     lfnet-learned-mask-n2-full-l3-noise-long lfnet-learned-aperture-n2-noise-from-clean \
     lfnet-learned-asp-n2-noise-from-clean-e20-codelr05; do
-    "$lfnet" simulate --phi "models/$m.ckpt" --plot-weights "docs/images/learned-codes/$m" --force
+    "$lfnet" simulate --phi "$(model_file "$m")" --plot-weights "docs/images/learned-codes/$m" --force
   done
   # The binary mask as a calibrated-Phi folder with its patterns to print (mask_<n>.png).
-  "$lfnet" phi export --phi models/lfnet-learned-binary-mask-n2.ckpt \
+  "$lfnet" phi export --phi "$(model_file lfnet-learned-binary-mask-n2)" \
     --out docs/images/learned-codes/printable --force
 }
 
@@ -504,12 +522,12 @@ stride-sweep() {
     # Stride 1 is 254,000 patches: the linear baselines only, to keep the run in minutes.
     [[ $stride == 1 ]] && methods=(pinv no-parallax)
     for method in "${methods[@]}"; do
-      record "$tmp" --model models/asp-n2.ckpt --lf ../shared/data/hci_antinous \
+      record "$tmp" --model "$(model_file asp-n2)" --lf ../shared/data/hci_antinous \
         --method "$method" --mode sensor --stride "$stride"
     done
   done
   # lfnet's architecture reconstructs the whole sensor image at once: one point, no stride.
-  VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt \
+  VARIANT=lfnet-asp-n2 record "$tmp" --model "$(model_file lfnet-asp-n2)" \
     --lf ../shared/data/hci_antinous --method net --mode sensor
   mv "$tmp" results/stride-sweep/records.jsonl
 }
@@ -574,8 +592,8 @@ paper-scale-asp-n2() {
   for stride in 9 5; do
     for method in net ae cnn pinv no-parallax; do
       local training=
-      [[ $method == net ]] && training=models/asp-n2-paper.training.jsonl
-      VARIANT="paper scale" TRAINING=$training record "$tmp" --model models/asp-n2-paper.ckpt \
+      [[ $method == net ]] && training="$(model_log asp-n2-paper)"
+      VARIANT="paper scale" TRAINING=$training record "$tmp" --model "$(model_file asp-n2-paper)" \
         "${lf[@]}" --stride "$stride" --method "$method"
     done
     VARIANT="quick scale" record "$tmp" --model $pq/asp-n2.ckpt "${lf[@]}" --stride "$stride" \
@@ -592,32 +610,43 @@ heldout=(--lf ../shared/data/hci_antinous --lf ../shared/data/lytro_Begonia
 # that no model of configs/models/ trained on, from two cameras and a renderer: HCI
 # hci_antinous, Lytro Illum lytro_Begonia, the rendered heldout_window (disparities up to
 # 2.9 px) and heldout_wide (up to 4 px). Every network of $CROSS_SCENE_MODELS (default: the
-# ASP N = 2 models in models/ and the quick-scale paper-quick/asp-n2), each named by its path
-# under models/, against no-parallax, pinv and the dictionary; then the bar
+# ASP N = 2 models listed below, shipped or made into out/cache/), each named by its path
+# under models/ or out/cache/, against no-parallax, pinv and the dictionary; then the bar
 # chart of margins over pinv (the section's "margins" figure, drawn by lfnet report).
 cross-scene() {
   local tmp models
-  read -r -a models <<< "${CROSS_SCENE_MODELS:-$(ls models/asp-n2.ckpt models/asp-n2-*.ckpt \
-    $pq/asp-n2.ckpt models/lfnet-asp-n2*.ckpt 2>/dev/null | tr '\n' ' ')}"
+  local name
+  if [[ -n ${CROSS_SCENE_MODELS:-} ]]; then
+    read -r -a models <<< "$CROSS_SCENE_MODELS"
+  else
+    models=()
+    for name in asp-n2-paper asp-n2 lfnet-asp-n2-c32 lfnet-asp-n2-c48 lfnet-asp-n2-f10 \
+      lfnet-asp-n2-first20 lfnet-asp-n2-l3 lfnet-asp-n2-l4 lfnet-asp-n2-noise lfnet-asp-n2 \
+      paper-quick/asp-n2 lfnet-asp-n2-robust lfnet-asp-n2-hard-blend; do
+      models+=("$(model_file "$name")")
+      need_model "${models[-1]}"
+    done
+  fi
   tmp=$(mktemp)
   local i
   for ((i = 0; i < ${#heldout[@]}; i += 2)); do
     local src=("${heldout[@]:i:2}")
     for method in no-parallax pinv dict; do
-      record "$tmp" --model "${models[0]}" --dictionary models/dictionary.ckpt "${src[@]}" \
+      record "$tmp" --model "${models[0]}" --dictionary "$(model_file dictionary)" "${src[@]}" \
         --method "$method" --mode sensor --stride 5
     done
     for model in "${models[@]}"; do
       local name training=
       name=${model#models/}
+      name=${name#out/cache/}
       name=${name%.ckpt}
-      [[ -f models/$name.training.jsonl ]] && training=models/$name.training.jsonl
+      [[ -f ${model%.ckpt}.training.jsonl ]] && training=${model%.ckpt}.training.jsonl
       VARIANT=$name TRAINING=$training record "$tmp" --model "$model" "${src[@]}" --method net \
         --mode sensor --stride 5
     done
     # The shipped paper-architecture model at stride 2 as well: lfnet's bar.
-    VARIANT="asp-n2, stride 2" TRAINING=models/asp-n2.training.jsonl record "$tmp" \
-      --model models/asp-n2.ckpt "${src[@]}" --method net --mode sensor --stride 2
+    VARIANT="asp-n2, stride 2" TRAINING="$(model_log asp-n2)" record "$tmp" \
+      --model "$(model_file asp-n2)" "${src[@]}" --method net --mode sensor --stride 2
   done
   mv "$tmp" results/cross-scene/records.jsonl
 }
@@ -635,9 +664,10 @@ cross-scene-add() {
     for model in "${models[@]}"; do
       need_model "$model"
       name=${model#models/}
+      name=${name#out/cache/}
       name=${name%.ckpt}
       training=
-      [[ -f models/$name.training.jsonl ]] && training=models/$name.training.jsonl
+      [[ -f ${model%.ckpt}.training.jsonl ]] && training=${model%.ckpt}.training.jsonl
       VARIANT=$name TRAINING=$training record "$tmp" --model "$model" "${src[@]}" --method net \
         --mode sensor --stride 5
     done
@@ -658,15 +688,15 @@ self-ensemble() {
     for method in no-parallax pinv; do
       record "$tmp" --phi asp:2 "${src[@]}" --method "$method" --mode sensor
     done
-    VARIANT=lfnet-asp-n2 record "$tmp" --model models/lfnet-asp-n2.ckpt "${src[@]}" \
+    VARIANT=lfnet-asp-n2 record "$tmp" --model "$(model_file lfnet-asp-n2)" "${src[@]}" \
       --method net --mode sensor
     VARIANT="lfnet-asp-n2, self-ensemble of 2 passes" record "$tmp" \
-      --model models/lfnet-asp-n2.ckpt "${src[@]}" --method net --mode sensor --self-ensemble \
+      --model "$(model_file lfnet-asp-n2)" "${src[@]}" --method net --mode sensor --self-ensemble \
       --ensemble-passes 2
     VARIANT="lfnet-asp-n2, self-ensemble of 2 passes, bfloat16" record "$tmp" \
-      --model models/lfnet-asp-n2.ckpt "${src[@]}" --method net --mode sensor --self-ensemble \
+      --model "$(model_file lfnet-asp-n2)" "${src[@]}" --method net --mode sensor --self-ensemble \
       --ensemble-passes 2 --precision bfloat16
-    VARIANT="lfnet-asp-n2, self-ensemble" record "$tmp" --model models/lfnet-asp-n2.ckpt \
+    VARIANT="lfnet-asp-n2, self-ensemble" record "$tmp" --model "$(model_file lfnet-asp-n2)" \
       "${src[@]}" --method net --mode sensor --self-ensemble
   done
   mv "$tmp" results/self-ensemble/records.jsonl
@@ -690,15 +720,15 @@ other-phi() {
       for method in no-parallax pinv net; do
         local variant=
         [[ $method == net ]] && variant="paper architecture ($phi)"
-        VARIANT=$variant TRAINING=$([[ $method == net ]] && echo "models/$phi.training.jsonl") \
-          record "$tmp" --model "models/$phi.ckpt" "${src[@]}" --method "$method" \
+        VARIANT=$variant TRAINING=$([[ $method == net ]] && echo "$(model_log "$phi")") \
+          record "$tmp" --model "$(model_file "$phi")" "${src[@]}" --method "$method" \
           --mode "$mode" --stride 5
       done
       # lfnet's architecture has models for these two cameras only.
       [[ $phi == asp-n15 || $phi == mask-n2 ]] || continue
-      need_model "models/lfnet-$phi.ckpt"
-      VARIANT="lfnet-$phi" TRAINING=models/lfnet-$phi.training.jsonl record "$tmp" \
-        --model "models/lfnet-$phi.ckpt" "${src[@]}" --method net --mode sensor --stride 5
+      need_model "$(model_file "lfnet-$phi")"
+      VARIANT="lfnet-$phi" TRAINING="$(model_log "lfnet-$phi")" record "$tmp" \
+        --model "$(model_file "lfnet-$phi")" "${src[@]}" --method net --mode sensor --stride 5
     done
   done
   mv "$tmp" results/other-phi/records.jsonl
@@ -743,9 +773,9 @@ paper-scene() {
     joint-from-scratch l2; do
     need_model "$pq/$m.ckpt"
   done
-  need_model models/asp-n2-paper.ckpt
-  need_model models/lfnet-asp-n2.ckpt
-  need_model models/lfnet-asp-n2-noise.ckpt
+  need_model "$(model_file asp-n2-paper)"
+  need_model "$(model_file lfnet-asp-n2)"
+  need_model "$(model_file lfnet-asp-n2-noise)"
   # Fig. 5: the three cameras at N = 2, stride 5, per patch (random projections have no sensor
   # image at stride 5).
   for ap in "${apertures[@]}"; do
@@ -762,7 +792,7 @@ paper-scene() {
     lf=(--lf "../shared/data/mit_dragons_bunnies_5x5_ap$ap")
     for n in 2 15 25; do
       for method in net dict pinv no-parallax; do
-        scene_record paper-table1 --model "$pq/asp-n$n.ckpt" --dictionary models/dictionary.ckpt \
+        scene_record paper-table1 --model "$pq/asp-n$n.ckpt" --dictionary "$(model_file dictionary)" \
           "${lf[@]}" --method "$method" --mode sensor --stride 9
       done
     done
@@ -780,13 +810,13 @@ paper-scene() {
     VARIANT="quick scale, plain L2" scene_record paper-branches --model $pq/l2.ckpt "${lf[@]}" \
       --stride 5 --method net
     for method in net ae cnn; do
-      VARIANT="paper scale" scene_record paper-branches --model models/asp-n2-paper.ckpt \
+      VARIANT="paper scale" scene_record paper-branches --model "$(model_file asp-n2-paper)" \
         "${lf[@]}" --stride 5 --method "$method"
     done
-    VARIANT=lfnet-asp-n2 scene_record paper-branches --model models/lfnet-asp-n2.ckpt \
+    VARIANT=lfnet-asp-n2 scene_record paper-branches --model "$(model_file lfnet-asp-n2)" \
       "${lf[@]}" --method net
     VARIANT="lfnet-asp-n2, self-ensemble of 2 passes" scene_record paper-branches \
-      --model models/lfnet-asp-n2.ckpt "${lf[@]}" --method net --self-ensemble \
+      --model "$(model_file lfnet-asp-n2)" "${lf[@]}" --method net --self-ensemble \
       --ensemble-passes 2
   done
   # Table 2: Gaussian noise 0, 0.1 and 0.2, ASP N = 2, stride 5; the paper's nets trained
@@ -798,7 +828,7 @@ paper-scene() {
         local variant=""
         [[ $method == net || $method == dict ]] && variant="trained without noise"
         VARIANT=$variant scene_record paper-table2 --model $pq/asp-n2.ckpt \
-          --dictionary models/dictionary.ckpt "${lf[@]}" --method "$method" --stride 5 \
+          --dictionary "$(model_file dictionary)" "${lf[@]}" --method "$method" --stride 5 \
           --noise "$sigma"
       done
       VARIANT="trained at sigma 0.1" scene_record paper-table2 --model $pq/noise-trained.ckpt \
@@ -806,9 +836,9 @@ paper-scene() {
       VARIANT="trained at sigma 0.2" scene_record paper-table2 \
         --model $pq/noise-trained-0.2.ckpt "${lf[@]}" --method net --stride 5 --noise "$sigma"
       VARIANT="lfnet-asp-n2, trained without noise" scene_record paper-table2 \
-        --model models/lfnet-asp-n2.ckpt "${lf[@]}" --method net --noise "$sigma"
+        --model "$(model_file lfnet-asp-n2)" "${lf[@]}" --method net --noise "$sigma"
       VARIANT="lfnet-asp-n2-noise, noise-aware" scene_record paper-table2 \
-        --model models/lfnet-asp-n2-noise.ckpt "${lf[@]}" --method net --noise "$sigma"
+        --model "$(model_file lfnet-asp-n2-noise)" "${lf[@]}" --method net --noise "$sigma"
     done
   done
 }
@@ -820,7 +850,7 @@ pictures() {
   tmp=$(mktemp)
   rm -rf "$pics" out/results/lytro && mkdir -p "$pics" out/results/lytro
   for method in net dict pinv no-parallax; do
-    "$lfnet" evaluate --model models/asp-n2.ckpt --dictionary models/dictionary.ckpt \
+    "$lfnet" evaluate --model "$(model_file asp-n2)" --dictionary "$(model_file dictionary)" \
       --lf ../shared/data/hci_antinous --method "$method" --mode sensor --stride 5 \
       --json "$tmp" --force --out "$pics/$method"
   done
