@@ -29,8 +29,9 @@ PY
 }
 
 # The paper's experiments (configs/paper/) compare quick-scale models of one schedule and one
-# data set; they sit in models/paper-quick/ (docs/models.md), most with their training logs.
-pq=models/paper-quick
+# data set; their recipes make them into out/cache/paper-quick/ (scripts/models.py make NAME),
+# most with their training logs.
+pq=out/cache/paper-quick
 
 heldout-asp-n2() {
   local dir=results/heldout-asp-n2 pics=out/results/heldout-asp-n2 tmp
