@@ -273,24 +273,14 @@ TEST_CASE(
 
 namespace {
 
-// Exports every `shards`-th checkpoint of models/ (sorted by name), from the `shard`-th on, and
-// checks the file against its checkpoint. The shipped models are split over several test cases
-// so that each stays well within CTest's timeout as models/ grows.
+// Exports every `shards`-th network checkpoint of the model zoo (sorted by path), from the
+// `shard`-th on, and checks the file against its checkpoint. The zoo is split over several test
+// cases so that each stays well within CTest's timeout.
 void export_shipped_models(size_t shard, size_t shards) {
-  std::vector<fs::path> models;
-  const fs::path dir = fs::path(LFNET_SOURCE_DIR) / "models";
-  if (fs::is_directory(dir)) {
-    for (const auto& entry : fs::directory_iterator(dir)) {
-      // dictionary.ckpt is the K-SVD baseline's dictionary, not a network.
-      if (entry.path().extension() == ".ckpt" && entry.path().stem() != "dictionary") {
-        models.push_back(entry.path());
-      }
-    }
-  }
+  const auto models = lfnet::test::zoo_checkpoints();
   if (models.empty()) {
-    LFNET_SKIP("no models/*.ckpt in the source tree: nothing to export");
+    LFNET_SKIP("no models/zoo.json in the source tree: nothing to export");
   }
-  std::sort(models.begin(), models.end());
   lfnet::test::TempDir tmp;
   for (size_t i = shard; i < models.size(); i += shards) {
     const auto& model = models[i];
@@ -322,28 +312,18 @@ void export_shipped_models(size_t shard, size_t shards) {
   }
 }
 
-constexpr size_t kExportShards = 4;
+constexpr size_t kExportShards = 2;
 
 }  // namespace
 
-TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (1st quarter)",
+TEST_CASE("every checkpoint of the zoo exports and matches its checkpoint (1st half)",
           "[app][export]") {
   export_shipped_models(0, kExportShards);
 }
 
-TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (2nd quarter)",
+TEST_CASE("every checkpoint of the zoo exports and matches its checkpoint (2nd half)",
           "[app][export]") {
   export_shipped_models(1, kExportShards);
-}
-
-TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (3rd quarter)",
-          "[app][export]") {
-  export_shipped_models(2, kExportShards);
-}
-
-TEST_CASE("every checkpoint in models/ exports and matches its checkpoint (4th quarter)",
-          "[app][export]") {
-  export_shipped_models(3, kExportShards);
 }
 
 TEST_CASE(

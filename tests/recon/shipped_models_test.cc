@@ -1,6 +1,6 @@
-// Every network checkpoint in models/ reconstructs what it reconstructed when
-// tests/recon/model_outputs.json was recorded: changes to the architectures (nn/architecture.h),
-// checkpoints or methods must not change a shipped model's numbers. Each model reconstructs,
+// Every network checkpoint of the model zoo (models/zoo.json) reconstructs what it reconstructed
+// when tests/recon/model_outputs.json was recorded: changes to the architectures
+// (nn/architecture.h), checkpoints or methods must not change a shipped model's numbers. Each model reconstructs,
 // through the method registry as the commands do, the sensor image its own Phi makes of one
 // analytic light field with parallax. The record holds the sum, the sum of squares and 16
 // samples of every reconstruction.
@@ -11,7 +11,6 @@
 
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -32,21 +31,6 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr int64_t kHeight = 45, kWidth = 54;  // multiples of 9: random:N's blocks tile it
-
-// Network checkpoints (not dictionaries) under models/, sorted.
-std::vector<fs::path> shipped_checkpoints() {
-  std::vector<fs::path> files;
-  for (const auto& entry :
-       fs::recursive_directory_iterator(fs::path(LFNET_SOURCE_DIR) / "models")) {
-    if (!entry.is_regular_file() || entry.path().extension() != ".ckpt") continue;
-    std::ifstream in(entry.path(), std::ios::binary);
-    char magic[8] = {0};
-    in.read(magic, 8);
-    if (in.gcount() == 8 && std::memcmp(magic, "LFNETCKP", 8) == 0) files.push_back(entry.path());
-  }
-  std::sort(files.begin(), files.end());
-  return files;
-}
 
 // A U x V light field of smooth texture whose views shift by 0.7 pixels per view step.
 torch::Tensor analytic_light_field(int64_t rows, int64_t cols) {
@@ -108,8 +92,8 @@ nlohmann::json reconstruct_summary(const fs::path& path) {
 
 }  // namespace
 
-TEST_CASE("every checkpoint in models/ reconstructs as recorded", "[recon][models]") {
-  const auto files = shipped_checkpoints();
+TEST_CASE("every checkpoint of the zoo reconstructs as recorded", "[recon][models]") {
+  const auto files = lfnet::test::zoo_checkpoints();
   REQUIRE(files.size() >= 10);
   const fs::path record_path = fs::path(LFNET_SOURCE_DIR) / "tests/recon/model_outputs.json";
   nlohmann::json got = nlohmann::json::object();

@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -83,6 +84,22 @@ std::string lfnet_binary() { return LFNET_BINARY; }
 std::string read_bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+std::vector<std::filesystem::path> zoo_checkpoints() {
+  const auto dir = std::filesystem::path(LFNET_SOURCE_DIR) / "models";
+  std::ifstream in(dir / "zoo.json");
+  std::vector<std::filesystem::path> files;
+  if (!in) return files;
+  const auto zoo = nlohmann::json::parse(in);
+  for (const auto& card : zoo.at("models")) {
+    const auto file = dir / card.at("file").get<std::string>();
+    if (file.extension() == ".ckpt" && card.value("architecture", "") != "dictionary") {
+      files.push_back(file);
+    }
+  }
+  std::sort(files.begin(), files.end());
+  return files;
 }
 
 std::string lfnet_program(const std::string& args) {

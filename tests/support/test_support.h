@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include "lfnet/core/file_backed.h"
 #include "lfnet/core/light_field.h"
@@ -87,6 +88,11 @@ std::string read_bytes(const std::string& path);
 
 // Writes `bytes` to a file, replacing it.
 void write_bytes(const std::string& path, const std::string& bytes);
+
+// The network checkpoints of the model zoo (models/zoo.json's cards, the dictionary and noise
+// switches left out), sorted by path. Models outside the zoo are research models that their
+// recipes make again: the tests that cover every shipped model cover these.
+std::vector<std::filesystem::path> zoo_checkpoints();
 
 // A grey rows x cols x h x w light field of known parallax, in lfnet's orientation: a random
 // texture whose left half moves by `left` and right half by `right` pixels per view step
