@@ -13,8 +13,11 @@ void add_blend_command(CLI::App& app, const GlobalOptions&) {
   auto a = std::make_shared<pipeline::BlendRequest>();
   cmd->add_option("--model", a->model,
                   "the finetuned model (checkpoint): its camera and layers of its own are kept")
-      ->required();
-  cmd->add_option("--base", a->base, "the model it was finetuned from (checkpoint)")->required();
+      ->required()
+      ->transform(zoo_model_file);
+  cmd->add_option("--base", a->base, "the model it was finetuned from (checkpoint or zoo name)")
+      ->required()
+      ->transform(zoo_model_file);
   cmd->add_option(
       "--alpha", a->alpha,
       "each shared weight becomes (1 - alpha) base + alpha model: 0 to 1 (default 0.5)");

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "command.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/nn/architecture.h"
@@ -22,13 +23,34 @@ struct ReconstructArgs {
   pipeline::ReconstructRequest request;
   std::string out;
   bool force = false;
+  bool method_given = false;
 };
 
-void run_reconstruct(const ReconstructArgs& a) {
+// Neither --model nor --method: the zoo's default model for the sensor's camera and colour
+// (pipeline/zoo.h), else pinv; said either way.
+void choose_default_model(pipeline::ReconstructRequest& q) {
+  const auto d = pipeline::zoo_default_model(q.sensor, q.phi);
+  if (!d.path.empty()) {
+    q.model = d.path;
+    spdlog::info("no --model: the zoo's default for {} ({}) is {} ({})", d.camera, d.colour,
+                 d.name, d.path);
+    return;
+  }
+  q.method = "pinv";
+  if (!d.camera.empty()) {
+    spdlog::info("no --model, and the zoo has no default for {} ({}): pinv", d.camera, d.colour);
+  }
+}
+
+void run_reconstruct(ReconstructArgs a) {
+  if (a.request.model.empty() && !a.method_given) choose_default_model(a.request);
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = split_paths(a.request.sensor);
-  policy.inputs.insert(policy.inputs.end(), {a.request.model, a.request.dictionary, a.request.phi,
+  // Every file it reads: a noise switch's members and the --method-options file too.
+  policy.inputs = pipeline::model_input_files(a.request.model);
+  for (const auto& path : split_paths(a.request.sensor)) policy.inputs.push_back(path);
+  policy.inputs.insert(policy.inputs.end(), {json_argument_file(a.request.method_options),
+                                             a.request.dictionary, a.request.phi,
                                              a.request.flat_field});
   check_output_folder(a.out, policy);
   // A whole-image model reconstructs whole sensor images, counted in pixels, not patches (the
@@ -75,9 +97,11 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.options.stride, nullptr,
             &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
   add_self_calibrate_flag(cmd, q.self_calibrate);
-  cmd->add_option(
+  auto* method = cmd->add_option(
       "--method", q.method,
-      recon::method_list(recon::MethodNeeds::kTruth) + " (default net with --model, pinv without)");
+      recon::method_list(recon::MethodNeeds::kTruth) +
+          " (default net; without --model, net with the zoo's default model for the sensor's "
+          "camera and colour, pinv where the zoo has none)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
       ->check(kCount);
@@ -101,7 +125,10 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "what the acquisition's sensor.json records, else estimated from the sensor "
                   "image, docs/acquisition.md)")
       ->check(kNoiseSigma);
-  cmd->callback([a] { run_reconstruct(*a); });
+  cmd->callback([a, method] {
+    a->method_given = method->count() > 0;
+    run_reconstruct(*a);
+  });
 }
 
 }  // namespace lfnet::app

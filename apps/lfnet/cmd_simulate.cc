@@ -134,8 +134,9 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                   "procedural scene spec to render and simulate (configs/scenes)");
   cmd->add_option("--phi", args->phi,
                   "Phi model NAME[:N] (asp, mask, aperture, random, lenslet), a PHI.json spec, a "
-                  "calibrated-Phi folder or a model file")
-      ->capture_default_str();
+                  "calibrated-Phi folder, a model file or a zoo model's name")
+      ->capture_default_str()
+      ->transform(zoo_model_file);
   add_enum_option(cmd, "--mode", args->mode,
                   "sensor (the default): one sensor image; per_patch: every patch measured alone "
                   "(the paper's protocol)");

@@ -82,7 +82,9 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
                   "cpu or cuda[:K]: where to train (default: the config's training.device, cpu)");
   cmd->add_option("--init", r.init,
                   "start the first stage from a checkpoint: finetuning, or Phi switching when "
-                  "its Phi differs (overrides the config's $.init)");
+                  "its Phi differs (overrides the config's $.init); a zoo model's name stands "
+                  "for its file")
+      ->transform(zoo_model_file);
 }
 
 }  // namespace

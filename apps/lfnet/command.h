@@ -182,6 +182,10 @@ inline void add_self_calibrate_flag(CLI::App* cmd, bool& self_calibrate) {
                 "displaced (docs/acquisition.md, \"Self-calibration\")");
 }
 
+// The transform of every flag that takes a model file: a zoo model's name stands for its file
+// (pipeline/zoo.h, `lfnet models`).
+inline std::string zoo_model_file(std::string text) { return pipeline::resolve_model_name(text); }
+
 // The flags every command that reconstructs (evaluate, reconstruct, batch, bench) shares, bound
 // once here so that their names, checks and help are the same in all four (docs/reconstruction.md,
 // "Flags every command shares"). Each member points at the command's field, and every one must
@@ -212,16 +216,14 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
   const std::string model =
       "trained model for net, ae and cnn: a checkpoint, a file lfnet export wrote, or the name "
       "of a zoo model (lfnet models)";
-  // A zoo name stands for its file (pipeline/zoo.h).
-  auto zoo_name = [](std::string text) { return pipeline::resolve_model_name(text); };
   if (f.models) {
     cmd->add_option("--model", *f.models,
                     model +
                         "; repeatable, the network methods run with each (default: an "
                         "untrained network of --architecture)")
-        ->transform(zoo_name);
+        ->transform(zoo_model_file);
   } else {
-    cmd->add_option("--model", *f.model, model)->transform(zoo_name);
+    cmd->add_option("--model", *f.model, model)->transform(zoo_model_file);
   }
   cmd->add_option("--phi", *f.phi,
                   "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "

@@ -7,6 +7,7 @@
 #include <set>
 
 #include "lfnet/core/error.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/zoo.h"
 #include "support/test_support.h"
 
@@ -38,6 +39,10 @@ TEST_CASE("every zoo card names a shipped file, one card per name, one default p
   CHECK(defaults.count("asp:2 RGGB") == 1);
   const auto table = pipeline::zoo_table(zoo);
   for (const auto& m : zoo.models) CHECK_THAT(table, Catch::Contains(m.name));
+  // Every camera spec whole (aperture:2 is no learned code); learned codes and the dictionary
+  // in one word.
+  CHECK_THAT(table, Catch::Contains("aperture:2"));
+  CHECK_THAT(table, Catch::Contains("learned"));
   CHECK_THAT(pipeline::zoo_card(zoo, "lfnet-asp-n2"), Catch::Contains("\"parameters\""));
   CHECK_THROWS_WITH(pipeline::zoo_card(zoo, "lfnet-asp-n3"),
                     Catch::Contains("no model 'lfnet-asp-n3' in the zoo"));
@@ -64,4 +69,46 @@ TEST_CASE("the cards' measured blocks are what scripts/zoo.py makes of the recor
       std::string(LFNET_TEST_PYTHON) + " " + LFNET_SOURCE_DIR + "/scripts/zoo.py --check", out);
   INFO(out);
   CHECK(rc == 0);
+}
+
+TEST_CASE("the zoo's default model for a sensor follows its camera and colour", "[zoo]") {
+  ::setenv("LFNET_MODELS", kModels.c_str(), 1);
+  test::TempDir tmp;
+  // An acquisition folder says its camera (and colour filter array) in sensor.json.
+  auto acquisition = [&](const std::string& name, const std::string& phi,
+                         const nlohmann::json& cfa) {
+    const auto dir = tmp.path() / name;
+    fs::create_directories(dir);
+    nlohmann::json meta = {{"phi", pipeline::phi_from_argument(phi).to_json()}};
+    if (!cfa.is_null()) meta["cfa"] = cfa;
+    test::write_bytes((dir / "sensor.json").string(), meta.dump());
+    return dir.string();
+  };
+  auto grey = pipeline::zoo_default_model(acquisition("grey", "asp:2", nullptr), "");
+  CHECK(grey.camera == "asp:2");
+  CHECK(grey.colour == "grey");
+  CHECK(grey.name == "lfnet-asp-n2-auto");
+  CHECK(grey.path == (fs::path(kModels) / "lfnet-asp-n2-auto.json").string());
+  const auto colour =
+      pipeline::zoo_default_model(acquisition("colour", "asp:2", {{"pattern", "RGGB"}}), "");
+  CHECK(colour.colour == "RGGB");
+  CHECK(colour.name == "lfnet-asp-n2-bayer-blend");
+  // Another pattern, or a camera without a default: no model.
+  const auto grbg =
+      pipeline::zoo_default_model(acquisition("grbg", "asp:2", {{"pattern", "GRBG"}}), "");
+  CHECK(grbg.colour == "GRBG");
+  CHECK(grbg.name.empty());
+  CHECK(pipeline::zoo_default_model(acquisition("mask", "mask:2", nullptr), "").name ==
+        "lfnet-mask-n2");
+  const auto random = pipeline::zoo_default_model(acquisition("random", "random:2", nullptr), "");
+  CHECK(random.camera == "random:2");
+  CHECK(random.name.empty());
+  CHECK(random.path.empty());
+  // A plain sensor image's camera is its --phi; without one, or with an unreadable folder,
+  // nothing is known.
+  CHECK(pipeline::zoo_default_model(tmp / "image.png", "asp:15").name == "lfnet-asp-n15");
+  CHECK(pipeline::zoo_default_model(tmp / "image.png", "").camera.empty());
+  fs::create_directories(tmp.path() / "empty");
+  CHECK(pipeline::zoo_default_model(tmp / "empty", "").camera.empty());
+  ::unsetenv("LFNET_MODELS");
 }

@@ -125,6 +125,10 @@ nlohmann::json read_json_file(const std::string& path) {
 
 bool is_inline_json(const std::string& text) { return text.find('{') != std::string::npos; }
 
+std::string json_argument_file(const std::string& text) {
+  return is_inline_json(text) ? std::string() : text;
+}
+
 std::string json_argument_source(const std::string& text, const std::string& option) {
   return is_inline_json(text) ? option : option + " " + text;
 }

@@ -65,6 +65,23 @@ ModelFileKind model_file_kind(const std::string& path) {
   }
 }
 
+std::vector<std::string> model_input_files(const std::string& path) {
+  std::vector<std::string> files{path};
+  if (path.empty()) return files;
+  try {
+    if (model_file_kind(path) != ModelFileKind::kNoiseSwitch) return files;
+    const auto j = read_json_file(path);
+    const auto folder = fs::path(path).parent_path();
+    for (const char* key : {"quiet", "noisy"}) {
+      if (!j.contains(key) || !j[key].is_string()) continue;
+      const fs::path member = j[key].get<std::string>();
+      files.push_back((member.is_absolute() ? member : folder / member).string());
+    }
+  } catch (const Error&) {
+  }
+  return files;
+}
+
 namespace {
 
 // A noise switch: its two checkpoints, checked to fit together.

@@ -7,6 +7,8 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/optics/cfa.h"
+#include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/models.h"
 
 #ifndef LFNET_MODELS_DIR
@@ -20,6 +22,16 @@ namespace lfnet::pipeline {
 const ZooCard* Zoo::find(const std::string& name) const {
   for (const auto& m : models) {
     if (m.name == name) return &m;
+  }
+  return nullptr;
+}
+
+const ZooCard* Zoo::default_for(const std::string& camera, const std::string& colour) const {
+  for (const auto& m : models) {
+    if (m.card.value("default", false) && m.card.value("camera", "") == camera &&
+        m.card.value("colour", "") == colour) {
+      return &m;
+    }
   }
   return nullptr;
 }
@@ -64,6 +76,38 @@ std::string resolve_model_name(const std::string& text) {
     // Not a zoo name after all: the command reports the missing file as it would.
   }
   return text;
+}
+
+ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi) {
+  ZooDefault d;
+  d.colour = "grey";
+  try {
+    std::error_code ec;
+    optics::PhiSpec spec;
+    if (fs::is_directory(sensor, ec)) {
+      const auto meta = read_json_file((fs::path(sensor) / "sensor.json").string());
+      spec = optics::PhiSpec::from_json(meta.at("phi"), sensor + "/sensor.json:$.phi");
+      if (meta.contains("cfa")) {
+        d.colour = optics::ColourFilterArray::from_json(meta["cfa"], sensor + "/sensor.json:$.cfa")
+                       .pattern();
+      }
+    } else if (!phi.empty()) {
+      spec = phi_from_argument(phi);
+      if (const auto cfa = optics::camera_cfa(spec.to_json())) d.colour = cfa->pattern();
+    } else {
+      return d;
+    }
+    d.camera = spec.label();
+    const Zoo zoo = read_zoo();
+    if (const auto* m = zoo.default_for(d.camera, d.colour)) {
+      d.name = m->name;
+      d.path = (fs::path(zoo.dir) / m->file).string();
+    }
+  } catch (const Error&) {
+    // No default: the reconstruction reads the same files and reports what is wrong with them.
+  } catch (const nlohmann::json::exception&) {
+  }
+  return d;
 }
 
 namespace {
@@ -112,14 +156,16 @@ std::string worst(const nlohmann::json& card, const char* role) {
 std::string zoo_table(const Zoo& zoo) {
   std::ostringstream out;
   char line[512];
-  std::snprintf(line, sizeof line, "%-30s %-8s %-6s %-10s %-7s %-5s %-6s %-6s %s\n", "name",
+  std::snprintf(line, sizeof line, "%-30s %-10s %-6s %-10s %-7s %-5s %-6s %-6s %s\n", "name",
                 "camera", "colour", "params", "MB", "val", "test", "def", "use");
   out << line;
   for (const auto& m : zoo.models) {
     const auto f = file_facts(zoo, m);
+    // A learned code's camera is in its file, a dictionary's is any: one word each.
     std::string camera = m.card.value("camera", "");
-    if (camera.size() > 8) camera = "learned";
-    std::snprintf(line, sizeof line, "%-30s %-8s %-6s %-10s %-7s %-5s %-6s %-6s %s\n",
+    if (camera.rfind("learned", 0) == 0) camera = "learned";
+    if (camera.rfind("any", 0) == 0) camera = "any";
+    std::snprintf(line, sizeof line, "%-30s %-10s %-6s %-10s %-7s %-5s %-6s %-6s %s\n",
                   m.name.c_str(), camera.c_str(), m.card.value("colour", "").c_str(),
                   f.parameters.c_str(), f.megabytes.c_str(), worst(m.card, "validation").c_str(),
                   worst(m.card, "test").c_str(), m.card.value("default", false) ? "yes" : "",

@@ -110,6 +110,8 @@ nlohmann::json read_json_file(const std::string& path);
 // file it names. Errors are ConfigErrors that start with `option`.
 bool is_inline_json(const std::string& text);
 nlohmann::json read_json_argument(const std::string& text, const std::string& option);
+// The file such an option names, "" for inline JSON: an input its command must not overwrite.
+std::string json_argument_file(const std::string& text);
 // Where that JSON came from, for a JsonReader's path: "--opt" or "--opt FILE".
 std::string json_argument_source(const std::string& text, const std::string& option);
 

@@ -62,6 +62,11 @@ enum class ModelFileKind { kCheckpoint, kExported, kDictionary, kNoiseSwitch, kO
 constexpr const char* kNoiseSwitchFormat = "lfnet-noise-switch";
 ModelFileKind model_file_kind(const std::string& path);
 
+// The files a model argument reads, for the inputs an output policy protects: the file itself
+// and, for a noise switch, its two member checkpoints. Never throws: a path that cannot be read
+// as a switch is itself alone (loading it says what is wrong).
+std::vector<std::string> model_input_files(const std::string& path);
+
 // Loads --model; `network`: build the checkpoint's network too (exported files always are).
 // A dictionary given as a model is a ConfigError that says to give it as --dictionary.
 ModelFile load_model(const std::string& path, bool network);

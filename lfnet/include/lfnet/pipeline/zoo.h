@@ -19,6 +19,9 @@ struct Zoo {
   std::string dir;  // the folder of zoo.json and the models
   std::vector<ZooCard> models;
   const ZooCard* find(const std::string& name) const;
+  // The card marked `default` for a camera (a Phi spec's label, "asp:2") and colour ("grey", or
+  // a colour filter array's pattern, "RGGB"); nullptr when the zoo has none.
+  const ZooCard* default_for(const std::string& camera, const std::string& colour) const;
 };
 
 // The zoo's folder: $LFNET_MODELS when set, else ./models when it holds zoo.json, else the
@@ -31,6 +34,15 @@ Zoo read_zoo(const std::string& dir = zoo_dir());
 // `text` itself when it names an existing file or folder or the zoo cannot be read; else the
 // path of the zoo model it names, if any. Never throws.
 std::string resolve_model_name(const std::string& text);
+
+// The zoo's default model for a sensor image: its camera and colour read from `sensor` (an
+// acquisition folder's sensor.json) or from `phi` (a plain sensor image's --phi), and the card
+// marked default for them. `name` and `path` are empty when the zoo has no default for the
+// camera, and `camera` too when the camera cannot be read (the reconstruction then says why).
+struct ZooDefault {
+  std::string camera, colour, name, path;
+};
+ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi);
 
 // The table `lfnet models` prints: name, camera, colour, noise, architecture, parameters, MB,
 // worst margins over pinv on the validation and test sets, use.
