@@ -64,7 +64,8 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--seed", o.seed, "noise seed of evaluations")->check(kSeed);
   cmd->add_option("--cfa", o.cfa,
                   "evaluations behind a colour filter array: RGGB, BGGR, GRBG, GBRG or JSON, "
-                  "inline or a file (colour light fields; pinv, adjoint, no-parallax)");
+                  "inline or a file (colour light fields; pinv, adjoint, no-parallax)")
+      ->check(kNotEmpty);
   cmd->add_option("--batch", o.batch, "patches per solver call")->check(kCount);
   cmd->add_flag("--window", o.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");

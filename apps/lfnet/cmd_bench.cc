@@ -45,7 +45,9 @@ void run_bench(const BenchArgs& args) {
     policy.option = "--json";
     policy.force = args.force;
     policy.inputs = {a.dictionary, a.scene};
-    policy.inputs.insert(policy.inputs.end(), a.models.begin(), a.models.end());
+    for (const auto& model : a.models) {
+      for (const auto& path : pipeline::model_input_files(model)) policy.inputs.push_back(path);
+    }
     check_output_file(args.json, policy);
     json_lock.emplace(args.json, "--json");
   }

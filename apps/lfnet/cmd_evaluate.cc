@@ -13,6 +13,7 @@
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
@@ -28,12 +29,18 @@ void run_evaluate(EvaluateArgs& a) {
   auto& q = a.request;
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = {q.lf, q.scene, q.model, q.dictionary, q.effects, q.flat_field};
+  // Every file it reads: a noise switch's members and the files of its JSON options too.
+  policy.inputs = pipeline::model_input_files(q.model);
+  policy.inputs.insert(
+      policy.inputs.end(),
+      {q.lf, q.scene, q.dictionary, q.effects, q.flat_field, json_argument_file(q.method_options),
+       json_argument_file(q.camera_error), json_argument_file(q.cfa)});
   if (!a.out.empty()) check_output_folder(a.out, policy);
   // The lock makes --json's missing folders (gone again if no record comes) and keeps other
   // writers off.
   std::optional<OutputLock> json_lock;
-  if (!a.json.empty()) {
+  const bool json_stdout = a.json == "-";  // the record on standard output, as bench writes it
+  if (!a.json.empty() && !json_stdout) {
     OutputFolderPolicy json_policy = policy;
     json_policy.option = "--json";
     json_policy.inputs.push_back(a.out);
@@ -64,6 +71,10 @@ void run_evaluate(EvaluateArgs& a) {
     });
   }
   record["end_to_end_seconds"] = process_seconds();
+  if (json_stdout) {
+    std::printf("%s\n", record.dump(2).c_str());
+    return;
+  }
   if (!a.json.empty()) write_json_file(a.json, record);
   const double psnr = record["psnr_db"].is_null() ? INFINITY : record["psnr_db"].get<double>();
   // Shot and read noise are named by the Gaussian sigma of the same variance.
@@ -110,7 +121,8 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                 "simulation's: a camera whose noise is unknown (docs/acquisition.md)");
   cmd->add_option("--cfa", q.cfa,
                   "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
-                  "JSON, inline or a file; scores colour and luma (docs/acquisition.md)");
+                  "JSON, inline or a file; scores colour and luma (docs/acquisition.md)")
+      ->check(kNotEmpty);
   add_demosaic_option(cmd, q.demosaic);
   auto* camera_error = cmd->add_option(
       "--camera-error", q.camera_error,
@@ -131,7 +143,8 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   recon::method_list() + " (default net with --model, pinv without)");
   cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
   cmd->add_option("--json", a->json,
-                  "write the evaluation record to this file (a new or empty file, or --force)");
+                  "write the evaluation record to this file (a new or empty file, or --force); "
+                  "- prints it on standard output instead of the summary line");
   cmd->add_option("--out", a->out,
                   "write the reconstruction as a light-field folder with a viewer (index.html)");
   cmd->add_flag("--force", a->force, "replace an existing --out folder and --json file");

@@ -37,7 +37,7 @@ std::pair<int64_t, int64_t> parse_grid(const std::string& text) {
 void run_phi_export(const PhiExportArgs& a) {
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = {a.phi};
+  policy.inputs = pipeline::model_input_files(a.phi);  // a switch's members too
   check_output_folder(a.out, policy);
   optics::PhiSpec spec;
   if (pipeline::phi_argument_is_file(a.phi)) {
@@ -73,6 +73,13 @@ void run_phi_export(const PhiExportArgs& a) {
               mask ? ", with its printable pattern (mask_<n>.png)" : "");
   if (!code.is_null()) {
     std::printf("the learned code's physical parameters are in %s/code.json\n", a.out.c_str());
+  } else if (spec.name == "calibrated" &&
+             spec.params.value("source", "").rfind("learned", 0) == 0) {
+    // A learned code whose parameters this file does not hold: its weights alone are written.
+    spdlog::warn(
+        "{} holds a {} code but not its physical parameters (it was trained on the code "
+        "fixed): no code.json; export the model that learned it for those",
+        a.phi, spec.params.value("source", ""));
   }
 }
 }  // namespace

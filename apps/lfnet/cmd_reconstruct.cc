@@ -32,8 +32,8 @@ void choose_default_model(pipeline::ReconstructRequest& q) {
   const auto d = pipeline::zoo_default_model(q.sensor, q.phi);
   if (!d.path.empty()) {
     q.model = d.path;
-    spdlog::info("no --model: the zoo's default for {} ({}) is {} ({})", d.camera, d.colour,
-                 d.name, d.path);
+    spdlog::info("no --model: the zoo's default for {} ({}) is {} ({})", d.camera, d.colour, d.name,
+                 d.path);
     return;
   }
   q.method = "pinv";
@@ -49,9 +49,9 @@ void run_reconstruct(ReconstructArgs a) {
   // Every file it reads: a noise switch's members and the --method-options file too.
   policy.inputs = pipeline::model_input_files(a.request.model);
   for (const auto& path : split_paths(a.request.sensor)) policy.inputs.push_back(path);
-  policy.inputs.insert(policy.inputs.end(), {json_argument_file(a.request.method_options),
-                                             a.request.dictionary, a.request.phi,
-                                             a.request.flat_field});
+  policy.inputs.insert(policy.inputs.end(),
+                       {json_argument_file(a.request.method_options), a.request.dictionary,
+                        a.request.phi, a.request.flat_field});
   check_output_folder(a.out, policy);
   // A whole-image model reconstructs whole sensor images, counted in pixels, not patches (the
   // model, read here to know, is read once: the cache passes it on).

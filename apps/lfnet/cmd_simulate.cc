@@ -74,8 +74,12 @@ void run_simulate(const SimulateArgs& given) {
 
   OutputFolderPolicy policy;
   policy.force = args.force;
-  policy.inputs = {source.lf, source.scene, args.effects};
-  if (std::filesystem::exists(args.phi)) policy.inputs.push_back(args.phi);  // a spec or model
+  // Every file it reads: a noise switch's members and the files of its JSON options too.
+  policy.inputs = {source.lf, source.scene, args.effects, json_argument_file(args.camera_error),
+                   json_argument_file(args.cfa)};
+  if (std::filesystem::exists(args.phi)) {  // a spec, a calibrated Phi or a model
+    for (const auto& path : pipeline::model_input_files(args.phi)) policy.inputs.push_back(path);
+  }
   // --plot-weights DIR receives files under the same policy, apart from the inputs and --out.
   OutputFolderPolicy weights_policy = policy;
   weights_policy.option = "--plot-weights";
@@ -159,7 +163,8 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   cmd->add_option("--cfa", args->cfa,
                   "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG "
                   "or per-pixel colour responses as JSON, inline or a file (implies --color; "
-                  "docs/acquisition.md)");
+                  "docs/acquisition.md)")
+      ->check(kNotEmpty);
   cmd->add_option("--camera-error", args->camera_error,
                   "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "
                   "'{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "

@@ -42,6 +42,10 @@ inline const CLI::Validator kNoiseSigma(
       return "";
     },
     "0..10");
+// A value that may not be empty: `--cfa ""` is no grey sensor, it is a mistake.
+inline const CLI::Validator kNotEmpty(
+    [](std::string& text) -> std::string { return text.empty() ? "may not be empty" : ""; },
+    "TEXT");
 // A seed: a whole number from 0 to 2^64 - 1, read exactly: -1 does not wrap around and larger
 // numbers do not saturate to the same seed.
 inline const CLI::Validator kSeed(

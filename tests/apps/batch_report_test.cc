@@ -134,6 +134,31 @@ TEST_CASE("batch --resume does only the pairs without a record of success", "[ap
   CHECK(without_seconds(tmp / "part/summary.csv") == without_seconds(tmp / "whole/summary.csv"));
 }
 
+TEST_CASE("batch --resume refuses a model replaced under the same path", "[app]") {
+  lfnet::test::TempDir tmp;
+  const std::string lfnet = lfnet_binary() + " --threads 1 ";
+  std::string out;
+  for (const char* name : {"a", "b"})
+    write_test_light_field(tmp / ("in/lf_" + std::string(name)), 27, 36);
+  const fs::path models = fs::path(LFNET_SOURCE_DIR) / "models";
+  fs::copy_file(models / "asp-n2.ckpt", tmp / "model.ckpt");
+  const std::string cmd = lfnet + "batch --input " + (tmp / "in") + " --model " +
+                          (tmp / "model.ckpt") + " --stride 9 --out " + (tmp / "run");
+  REQUIRE(run_command(cmd, out) == 0);
+  fs::remove(tmp / "run/records/lf_b__net.json");
+  // Another network at the same path: resuming would mix two networks in one summary.
+  fs::copy_file(models / "lfnet-asp-n2.ckpt", tmp / "model.ckpt",
+                fs::copy_options::overwrite_existing);
+  CHECK(run_command(cmd + " --resume", out) != 0);
+  CHECK(out.find("is not the file the batch in " + (tmp / "run") + " began with") !=
+        std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "run/records/lf_b__net.json"));
+  // The same content again, under the same path: it resumes.
+  fs::copy_file(models / "asp-n2.ckpt", tmp / "model.ckpt", fs::copy_options::overwrite_existing);
+  REQUIRE(run_command(cmd + " --resume", out) == 0);
+  CHECK(fs::exists(tmp / "run/records/lf_b__net.json"));
+}
+
 TEST_CASE("batch reads the model once for all its items", "[app]") {
   lfnet::test::TempDir tmp;
   write_test_light_field(tmp / "in/lf_a", 27, 27);

@@ -109,6 +109,14 @@ TEST_CASE("lfnet blend refuses bad input and writes nothing", "[app][blend]") {
     CHECK(out.find("different architectures") != std::string::npos);
     CHECK_FALSE(std::filesystem::exists(target));
   }
+  SECTION("networks of other widths: not one finetuned from the other") {
+    const std::string wider = tmp / "wider.ckpt";
+    lfnet::test::save_small_image_net("", 13, wider, 8);
+    CHECK(run_command(lfnet + "--model " + wider + " --base " + grey + " --out " + target, out) !=
+          0);
+    CHECK(out.find("they are not one network finetuned from the other") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(target));
+  }
   SECTION("a file that is not a checkpoint") {
     { std::ofstream(tmp / "junk.ckpt") << "not a checkpoint"; }
     CHECK(run_command(

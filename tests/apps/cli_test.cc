@@ -90,30 +90,29 @@ TEST_CASE("reconstruct without --model runs the zoo's default for the camera and
   lfnet::test::TempDir tmp;
   const std::string lfnet = lfnet_binary() + " --threads 2 --log-level info ";
   std::string out;
-  REQUIRE(run_command(lfnet + "render --random 7 --size 45x38 --grey --out " + (tmp / "lf"),
-                      out) == 0);
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " +
-                          (tmp / "asp"),
-                      out) == 0);
-  REQUIRE(run_command(lfnet + "reconstruct --sensor " + (tmp / "asp") + " --out " +
-                          (tmp / "rec"),
+  REQUIRE(run_command(lfnet + "render --random 7 --size 45x38 --grey --out " + (tmp / "lf"), out) ==
+          0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:2 --out " + (tmp / "asp"),
+                  out) == 0);
+  REQUIRE(run_command(lfnet + "reconstruct --sensor " + (tmp / "asp") + " --out " + (tmp / "rec"),
                       out) == 0);
   INFO(out);
   CHECK(out.find("no --model: the zoo's default for asp:2 (grey) is lfnet-asp-n2-auto") !=
         std::string::npos);
   CHECK(out.find("with net") != std::string::npos);
   // A camera the zoo has no model for: pinv, said as such.
-  REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:4 --out " +
-                          (tmp / "asp4"),
-                      out) == 0);
-  REQUIRE(run_command(lfnet + "reconstruct --sensor " + (tmp / "asp4") + " --out " +
-                          (tmp / "rec-asp4"),
-                      out) == 0);
+  REQUIRE(
+      run_command(lfnet + "simulate --lf " + (tmp / "lf") + " --phi asp:4 --out " + (tmp / "asp4"),
+                  out) == 0);
+  REQUIRE(
+      run_command(lfnet + "reconstruct --sensor " + (tmp / "asp4") + " --out " + (tmp / "rec-asp4"),
+                  out) == 0);
   CHECK(out.find("the zoo has no default for asp:4 (grey): pinv") != std::string::npos);
   CHECK(out.find("with pinv") != std::string::npos);
   // --method says what runs: no zoo model is chosen for it.
-  REQUIRE(run_command(lfnet + "reconstruct --method adjoint --sensor " + (tmp / "asp") +
-                          " --out " + (tmp / "rec-adjoint"),
+  REQUIRE(run_command(lfnet + "reconstruct --method adjoint --sensor " + (tmp / "asp") + " --out " +
+                          (tmp / "rec-adjoint"),
                       out) == 0);
   CHECK(out.find("zoo") == std::string::npos);
 }

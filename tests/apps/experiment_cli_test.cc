@@ -208,6 +208,30 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   CHECK(code["transmittance"].size() == size_t{2} * 5 * 5 * 3 * 3);
   CHECK(code["options"]["period"] == 3);
 
+  // A net trained on the learned code held fixed ($.phi names the model) exports the code of the
+  // model that learned it; without that model at hand it says what is missing.
+  {
+    auto fixed = nlohmann::json::parse(std::ifstream(tmp / "code.json"));
+    fixed.erase("code");
+    fixed.erase("evaluation");
+    fixed["phi"] = model;
+    std::ofstream(tmp / "fixed.json") << fixed.dump();
+  }
+  REQUIRE(run_command(lfnet + "train " + (tmp / "fixed.json") + " --out " + (tmp / "fixed"), out) ==
+          0);
+  const std::string fixed_model = tmp / "fixed/models/joint_scratch.ckpt";
+  REQUIRE(run_command(lfnet + "phi export --phi " + fixed_model + " --out " + (tmp / "fixed-phi"),
+                      out) == 0);
+  const auto learned_by = nlohmann::json::parse(std::ifstream(tmp / "fixed-phi/code.json"));
+  CHECK(learned_by["learned_by"] == model);
+  CHECK(learned_by["transmittance"] == code["transmittance"]);
+  fs::rename(model, tmp / "elsewhere.ckpt");
+  REQUIRE(run_command(lfnet + "phi export --phi " + fixed_model + " --out " + (tmp / "no-code"),
+                      out) == 0);
+  CHECK(out.find("but not its physical parameters") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "no-code/code.json"));
+  fs::rename(tmp / "elsewhere.ckpt", model);
+
   // Another run's code starts from this model's ($.code.from), and its config records where.
   REQUIRE(run_command(lfnet + "train " + (tmp / "code.json") + " --set code.from=" + model +
                           " --out " + (tmp / "next"),

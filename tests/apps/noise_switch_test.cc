@@ -91,6 +91,7 @@ TEST_CASE("a noise switch that cannot work is one clear error", "[app]") {
       {with("quiet", "missing.ckpt"), "missing.ckpt"},
       {with("quiet", kModels + "lfnet-asp-n15.ckpt"), "were trained for different Phis"},
       {with("noisy", kModels + "asp-n2.ckpt"), "not of a whole-image architecture"},
+      {with("noisy", kModels + "lfnet-asp-n2-bayer-blend.ckpt"), "reconstruct different colours"},
       {with("switch_sigma", -1), "$.switch_sigma: must be a finite sigma > 0"},
       {with("version", 2), "$.version: this lfnet reads version 1"},
       {with("colour", true), "colour"},

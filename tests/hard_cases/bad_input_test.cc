@@ -44,8 +44,9 @@ int count_lines(const std::string& text) {
 }
 
 // The program with quiet logs, so its only output on failure is the error line.
+// A command that blocks (a FIFO read) fails after two minutes instead of hanging the suite.
 std::string quiet_program(const std::string& args) {
-  return lfnet_binary() + " --threads 1 --log-level off " + args;
+  return "timeout 120 " + lfnet_binary() + " --threads 1 --log-level off " + args;
 }
 
 // Runs `args`; requires a non-zero exit, one line "lfnet: error: ..." that contains `what`, and
@@ -195,6 +196,18 @@ TEST_CASE("careless input, round 2: run names, resumes, starts, model paths, thr
   REQUIRE(mkfifo((tmp / "fifo").c_str(), 0600) == 0);
   expect_error("evaluate --model " + (tmp / "fifo") + " --lf " + (tmp / "lf"),
                "is not a regular file", tmp.path());
+  // Nor for any other file a command reads: JSON options, a white frame, a sensor image.
+  const std::string pinv = "evaluate --phi asp:2 --method pinv --lf " + (tmp / "lf") + " ";
+  for (const std::string flag :
+       {"--cfa", "--method-options", "--camera-error", "--effects", "--flat-field"}) {
+    expect_error(pinv + flag + " " + (tmp / "fifo"), "is not a regular file", tmp.path());
+  }
+  expect_error("simulate --lf " + (tmp / "lf") + " --phi asp:2 --cfa " + (tmp / "fifo") +
+                   " --out " + (tmp / "acq"),
+               "--cfa", tmp.path());
+  expect_error("reconstruct --phi asp:2 --method pinv --sensor " + (tmp / "fifo") + " --out " +
+                   (tmp / "rec"),
+               "is not a regular file", tmp.path());
   // --threads has a bound that the message states; an unknown command is named.
   std::string out;
   for (const std::string n : {"10000", "-1"}) {
@@ -214,12 +227,18 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
   write_light_field(lf);
   const std::string eval = "evaluate --phi asp:2 --lf " + lf + " --method pinv ";
   expect_error(eval + "--stride 0", "--stride", tmp.path());
+  expect_error(eval + "--cfa ''", "--cfa: may not be empty", tmp.path());
+  expect_error(eval + "--camera-error '{\"angular_shift_u\": 100}'",
+               "moves the views beyond the 5-view grid", tmp.path());
   expect_error(eval + "--stride 12", "1..9", tmp.path());
   expect_error(eval + "--noise nan", "--noise", tmp.path());
   expect_error(eval + "--noise inf", "--noise", tmp.path());
   expect_error(eval + "--noise -0.1", "--noise", tmp.path());
   const std::string sim = "simulate --lf " + lf + " --phi asp:2 --out " + (tmp / "acq") + " ";
   expect_error(sim + "--noise nan", "--noise", tmp.path());
+  // A size the machine cannot hold is refused before it is allocated, naming the flag.
+  expect_error("simulate --white 100000x100000 --phi asp:2 --out " + (tmp / "white"),
+               "--white 100000x100000 needs", tmp.path());
   // Overflowing noise would write infinities; seeds beyond 64 bits or negative would wrap or
   // saturate to one seed: each is refused with its flag and its range.
   expect_error(sim + "--noise 1e308", "--noise: must be a noise sigma from 0 to 10", tmp.path());

@@ -59,6 +59,16 @@ void expect_one_error(const std::string& out, const std::string& needle) {
   CHECK(out.find(".cc:") == std::string::npos);  // no source locations
 }
 
+// A small grey light field rendered into tmp/lf, its path.
+std::string rendered_light_field(const lfnet::test::TempDir& tmp) {
+  std::string out;
+  const std::string lf = tmp / "lf";
+  REQUIRE(
+      run_command(lfnet::test::lfnet_program("render --random 1 --size 24x24 --grey --out " + lf),
+                  out) == 0);
+  return lf;
+}
+
 pid_t dead_pid() {
   const pid_t pid = fork();
   if (pid == 0) _exit(0);
@@ -71,10 +81,7 @@ pid_t dead_pid() {
 TEST_CASE("no command writes over its inputs, even with --force", "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   std::string out;
-  const std::string lf = tmp / "lf";
-  REQUIRE(
-      run_command(lfnet::test::lfnet_program("render --random 1 --size 24x24 --grey --out " + lf),
-                  out) == 0);
+  const std::string lf = rendered_light_field(tmp);
   const std::string view = read_bytes(lf + "/lf_1_1.png");
   // evaluate --out into its own light field, or into a folder inside it.
   CHECK(
@@ -126,6 +133,63 @@ TEST_CASE("no command writes over its inputs, even with --force", "[app][bad_inp
                       out) == 0);
   CHECK_FALSE(fs::exists(stale));
   CHECK(fs::exists(tmp.path() / "rec/reconstruction.json"));
+}
+
+TEST_CASE("files read through other files and JSON options are inputs too, even with --force",
+          "[app][bad_input]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string lf = rendered_light_field(tmp);
+  // A noise switch in a folder of its own, beside its two members; the files of --method-options,
+  // --cfa and --camera-error in another.
+  const fs::path models = fs::path(LFNET_SOURCE_DIR) / "models";
+  fs::create_directories(tmp.path() / "sw");
+  for (const char* f : {"lfnet-asp-n2-auto.json", "lfnet-asp-n2.ckpt", "lfnet-asp-n2-noise.ckpt"}) {
+    fs::copy_file(models / f, tmp.path() / "sw" / f);
+  }
+  const std::string sw = tmp / "sw", opts = tmp / "opts";
+  fs::create_directories(opts);
+  lfnet::write_json_file(opts + "/options.json", {{"pinv", {{"lambda", 0.01}}}});
+  lfnet::write_json_file(opts + "/cfa.json", {{"pattern", "RGGB"}});
+  lfnet::write_json_file(opts + "/error.json", {{"depth", 0.05}});
+  const std::string noisy = read_bytes(sw + "/lfnet-asp-n2-noise.ckpt");
+  const std::string options = read_bytes(opts + "/options.json");
+  const std::string model = " --model " + sw + "/lfnet-asp-n2-auto.json ";
+  const std::string pinv = "evaluate --lf " + lf + " --phi asp:2 --method pinv ";
+  // Each command, and what its one error line names.
+  const std::pair<std::string, std::string> refused[] = {
+      {"evaluate --lf " + lf + model + "--out " + sw + " --force", "contains the input"},
+      {"evaluate --lf " + lf + model + "--json " + sw + "/lfnet-asp-n2-noise.ckpt --force",
+       "lfnet-asp-n2-noise.ckpt"},
+      {"phi export --phi " + sw + "/lfnet-asp-n2-auto.json --out " + sw + " --force",
+       "contains the input"},
+      {"batch --in " + lf + model + "--out " + sw + " --force", "contains the input"},
+      {pinv + "--method-options " + opts + "/options.json --out " + opts + " --force",
+       "contains the input"},
+      {pinv + "--method-options " + opts + "/options.json --json " + opts + "/options.json --force",
+       "options.json"},
+      {"simulate --lf " + lf + " --phi asp:2 --cfa " + opts + "/cfa.json --out " + opts +
+           " --force",
+       "contains the input"},
+      {"simulate --lf " + lf + " --phi asp:2 --camera-error " + opts + "/error.json --out " + opts +
+           " --force",
+       "contains the input"},
+  };
+  for (const auto& [args, needle] : refused) {
+    INFO(args);
+    CHECK(run_command(lfnet::test::lfnet_program(args), out) != 0);
+    expect_one_error(out, needle);
+  }
+  CHECK(read_bytes(sw + "/lfnet-asp-n2-noise.ckpt") == noisy);
+  CHECK(fs::exists(sw + "/lfnet-asp-n2.ckpt"));
+  CHECK(read_bytes(opts + "/options.json") == options);
+  CHECK(fs::exists(opts + "/cfa.json"));
+  CHECK(fs::exists(opts + "/error.json"));
+  // --json - is standard output, not a file named "-".
+  REQUIRE(run_command("cd " + opts + " && " + lfnet::test::lfnet_program(pinv + "--json -"), out) ==
+          0);
+  CHECK(nlohmann::json::parse(out.substr(out.find('{')))["method"] == "pinv");
+  CHECK_FALSE(fs::exists(opts + "/-"));
 }
 
 TEST_CASE("a training run that fails before its first checkpoint leaves nothing behind",
@@ -352,10 +416,7 @@ TEST_CASE("files named by --json and --plot-weights go through the output policy
           "[app][bad_input]") {
   lfnet::test::TempDir tmp;
   std::string out;
-  const std::string lf = tmp / "lf";
-  REQUIRE(
-      run_command(lfnet::test::lfnet_program("render --random 1 --size 24x24 --grey --out " + lf),
-                  out) == 0);
+  const std::string lf = rendered_light_field(tmp);
   const std::string eval = "evaluate --lf " + lf + " --phi asp:2 --method pinv --json ";
   // An existing record is replaced only with --force; an empty file (mktemp's) is written.
   lfnet::test::write_bytes(tmp / "r.json", "{\"kept\": true}\n");

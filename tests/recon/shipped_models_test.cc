@@ -1,8 +1,8 @@
 // Every network checkpoint of the model zoo (models/zoo.json) reconstructs what it reconstructed
 // when tests/recon/model_outputs.json was recorded: changes to the architectures
-// (nn/architecture.h), checkpoints or methods must not change a shipped model's numbers. Each model reconstructs,
-// through the method registry as the commands do, the sensor image its own Phi makes of one
-// analytic light field with parallax. The record holds the sum, the sum of squares and 16
+// (nn/architecture.h), checkpoints or methods must not change a shipped model's numbers. Each model
+// reconstructs, through the method registry as the commands do, the sensor image its own Phi makes
+// of one analytic light field with parallax. The record holds the sum, the sum of squares and 16
 // samples of every reconstruction.
 //
 // To record the outputs anew (after a change that is meant to change them, or for a new model):

@@ -34,13 +34,14 @@ void save_net(const nn::LightFieldNet& net, const optics::Phi& phi, const std::s
   train::save_checkpoint(ck, path);
 }
 
-void save_small_image_net(const std::string& cfa, uint64_t seed, const std::string& path) {
+void save_small_image_net(const std::string& cfa, uint64_t seed, const std::string& path,
+                          int64_t channels) {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   nn::NetworkOptions o;
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {5, 5, 16, 16};
-  o.image.channels = 6;
+  o.image.channels = channels;
   o.image.levels = 2;
   o.image.blocks = 1;
   o.cfa = cfa;

@@ -17,11 +17,12 @@ nn::NetworkOptions small_network_options(const std::string& branches = "net");
 // convolution included, so the net is not the identity on its pseudo-inverse.
 void randomise_image_net(nn::LightFieldNet& net, uint64_t seed);
 
-// A small net of lfnet's architecture for asp:2 (crops of 16 x 16, 6 channels, 2 levels, 1
-// block), saved as a checkpoint: a colour net behind the Bayer pattern `cfa` unless it is empty;
-// with `seed` 0 untrained (it returns the (demosaiced) pseudo-inverse), else with random U-Net
-// weights from that seed (randomise_image_net).
-void save_small_image_net(const std::string& cfa, uint64_t seed, const std::string& path);
+// A small net of lfnet's architecture for asp:2 (crops of 16 x 16, `channels` channels, 2
+// levels, 1 block), saved as a checkpoint: a colour net behind the Bayer pattern `cfa` unless it
+// is empty; with `seed` 0 untrained (it returns the (demosaiced) pseudo-inverse), else with
+// random U-Net weights from that seed (randomise_image_net).
+void save_small_image_net(const std::string& cfa, uint64_t seed, const std::string& path,
+                          int64_t channels = 6);
 
 // `net`, trained for `phi` up to `stage` as far as the file says, saved as a checkpoint with a
 // measurement mean of 0.3.

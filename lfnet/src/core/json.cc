@@ -116,6 +116,7 @@ nlohmann::json parse_json(const std::string& text, const std::string& source) {
 }
 
 nlohmann::json read_json_file(const std::string& path) {
+  check_regular_input(path);
   std::ifstream in(path);
   if (!in) throw IoError("cannot read " + path + ": no such file or not readable");
   std::stringstream buffer;

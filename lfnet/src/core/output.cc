@@ -191,6 +191,15 @@ void write_text_file(const std::string& target, const std::string& text) {
   write_bytes_file(target, text);
 }
 
+void check_regular_input(const std::string& path) {
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (ec || !fs::exists(status)) return;
+  LFNET_CHECK_AS(IoError, !fs::is_directory(status), path, " is a folder, not a file");
+  LFNET_CHECK_AS(IoError, fs::is_regular_file(status), path,
+                 " is not a regular file (a FIFO, socket or device), which lfnet does not read");
+}
+
 void check_output_apart(const std::string& output, const std::vector<std::string>& inputs,
                         const std::string& option) {
   const fs::path out = normalised(output);

@@ -2,7 +2,10 @@
 
 #include <torch/torch.h>
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <thread>
 
@@ -39,6 +42,14 @@ bool configure_allocator() {
 #else
   return false;
 #endif
+}
+
+void check_fits_in_memory(double bytes, const std::string& what) {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  if (pages <= 0 || page <= 0) return;
+  const double total = static_cast<double>(pages) * static_cast<double>(page);
+  LFNET_CHECK_AS(ConfigError, bytes <= total, what, " needs ", std::round(bytes / 1e8) / 10,
+                 " GB of memory, more than this machine's ", std::round(total / 1e8) / 10, " GB");
 }
 
 void release_free_memory() {

@@ -785,6 +785,7 @@ void write_previews(const LightFieldViews& lf, const std::string& dir) {
 }
 
 torch::Tensor read_pfm(const std::string& path) {
+  check_regular_input(path);
   std::ifstream in(path, std::ios::binary);
   LFNET_CHECK_AS(IoError, in, "cannot open PFM file ", path);
   std::string magic;

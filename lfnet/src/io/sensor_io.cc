@@ -13,6 +13,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
 #include "lfnet/io/light_field_io.h"
 
 namespace fs = std::filesystem;
@@ -86,6 +87,7 @@ std::unique_ptr<OIIO::ImageInput> open_image(const std::string& path) {
   // Keep alpha as stored: colour channels are read as they are, never premultiplied.
   OIIO::ImageSpec config;
   config.attribute("oiio:UnassociatedAlpha", 1);
+  check_regular_input(path);
   check_png_complete(path);
   auto input = OIIO::ImageInput::open(path, &config);
   if (!input) throw IoError("cannot read image " + path + ": " + OIIO::geterror());

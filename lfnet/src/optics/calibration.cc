@@ -93,6 +93,15 @@ torch::Tensor perturbed_pixel_weights(const Phi& phi, const CalibrationError& er
                                       const SensorPlacement& placement, torch::ScalarType dtype) {
   LFNET_CHECK_AS(ConfigError, phi.local(), "a calibration error needs a local Phi; '",
                  phi.spec().label(), "' is not");
+  // A camera displaced by half its grid or more no longer sees the scene it was made for.
+  const double max_u = 0.5 * static_cast<double>(phi.rows() - 1);
+  const double max_v = 0.5 * static_cast<double>(phi.cols() - 1);
+  LFNET_CHECK_AS(ConfigError, std::abs(error.angular_shift_u) < max_u, "angular_shift_u ",
+                 error.angular_shift_u, " moves the views beyond the ", phi.rows(),
+                 "-view grid: it must lie in (-", max_u, ", ", max_u, ") views");
+  LFNET_CHECK_AS(ConfigError, std::abs(error.angular_shift_v) < max_v, "angular_shift_v ",
+                 error.angular_shift_v, " moves the views beyond the ", phi.cols(),
+                 "-view grid: it must lie in (-", max_v, ", ", max_v, ") views");
   const int64_t t = phi.period();
   torch::Tensor weights;
   if (t > 1 && (error.shift_y != 0 || error.shift_x != 0 || error.period != 0)) {

@@ -10,6 +10,7 @@
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/output.h"
 
 namespace lfnet::optics {
 
@@ -121,6 +122,11 @@ ColourFilterArray ColourFilterArray::parse(const std::string& text) {
                      std::end(kBayerPatterns);
   if (named) return bayer(text);
   if (is_inline_json(text)) return from_json(read_json_argument(text, "--cfa"), "--cfa");
+  try {
+    check_regular_input(text);  // before opening: a FIFO would block
+  } catch (const IoError& e) {
+    throw ConfigError(std::string("--cfa ") + e.what());
+  }
   LFNET_CHECK_AS(ConfigError, std::ifstream(text).good(), "--cfa ", text,
                  ": neither a Bayer pattern (RGGB, BGGR, GRBG, GBRG), inline JSON nor a readable "
                  "JSON file");

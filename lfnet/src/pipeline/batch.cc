@@ -19,6 +19,7 @@
 #include "lfnet/core/text.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
+#include "lfnet/nn/auto_precision.h"
 #include "lfnet/optics/cfa.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/reconstruct.h"
@@ -31,6 +32,15 @@ namespace fs = std::filesystem;
 namespace lfnet::pipeline {
 
 namespace {
+
+// Every file a batch reads besides its items: the model (a noise switch's members too), the
+// dictionary, the flat field and the files of its JSON options; never overwritten.
+std::vector<std::string> batch_inputs(const BatchOptions& a) {
+  auto inputs = model_input_files(a.model);
+  inputs.insert(inputs.end(), {a.dictionary, a.flat_field, json_argument_file(a.method_options),
+                               json_argument_file(a.cfa)});
+  return inputs;
+}
 
 // "" for a light-field folder, why it cannot be read for a folder that holds view files but no
 // complete light field (a missing view, a view that is a folder, two naming schemes), nullopt
@@ -183,7 +193,8 @@ std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptio
         auto r = reconstruct_acquisition(q, {}, &cache);
         const std::string target = (fs::path(out_dir) / item.name / method).string();
         OutputFolderPolicy policy;
-        policy.inputs = {item.path, a.model, a.dictionary, a.flat_field};
+        policy.inputs = batch_inputs(a);
+        policy.inputs.push_back(item.path);
         policy.force = a.resume;  // an output without its record is an unfinished attempt
         write_reconstruction(r, target, policy,
                              /*end_to_end=*/false);  // the batch's, not the item's
@@ -310,6 +321,18 @@ nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::stri
                             {"self_ensemble_passes", a.self_ensemble_passes}};
   // Only when given, so that batches from before the option resume as they were.
   if (!a.flat_field.empty()) options["flat_field"] = absolute(a.flat_field);
+  // What the files hold, not only where they are: a model replaced under the same path would
+  // mix two networks in one summary (a noise switch: its members' contents too).
+  for (const auto& [key, path] : {std::pair<std::string, std::string>{"model_content", a.model},
+                                  {"dictionary_content", a.dictionary}}) {
+    if (path.empty() || !fs::is_regular_file(path)) continue;
+    std::string content;
+    for (const auto& file : model_input_files(path)) {
+      if (fs::is_regular_file(file))
+        content += (content.empty() ? "" : ",") + nn::file_fingerprint(file);
+    }
+    options[key] = content;
+  }
   if (a.self_calibrate) options["self_calibrate"] = true;
   return options;
 }
@@ -331,6 +354,15 @@ void check_resumable(const BatchOptions& a, const nlohmann::json& manifest) {
                  " holds no batch to continue (no batch.json); run without --resume to start one");
   const auto earlier = read_json_file(file.string());
   for (const auto& [key, value] : manifest.items()) {
+    // Batches whose batch.json predates the content fingerprints are checked by path alone.
+    if (key == "model_content" || key == "dictionary_content") {
+      if (!earlier.contains(key)) continue;
+      const auto& path = key == "model_content" ? a.model : a.dictionary;
+      LFNET_CHECK_AS(ConfigError, earlier[key] == value, "--resume: ", path,
+                     " is not the file the batch in ", a.out,
+                     " began with (its content differs): give that file, or another --out");
+      continue;
+    }
     LFNET_CHECK_AS(ConfigError, earlier.contains(key) && earlier[key] == value,
                    "--resume: the batch in ", a.out, " was run with ", key, " = ",
                    earlier.contains(key) ? earlier[key].dump() : std::string("nothing"),
@@ -378,7 +410,8 @@ BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator
   const auto manifest = batch_manifest(a, methods);
   OutputFolderPolicy policy;
   policy.force = a.force;
-  policy.inputs = {a.in, a.model, a.dictionary, a.flat_field};
+  policy.inputs = batch_inputs(a);
+  policy.inputs.push_back(a.in);
   if (a.resume) {
     check_resumable(a, manifest);
   } else {

@@ -50,12 +50,13 @@ BlendResult blend_models(const BlendRequest& a) {
   std::set<std::string> parameters;
   for (const auto& p : net->named_parameters()) parameters.insert(p.key());
   BlendResult result;
+  std::string first_kept;
   for (auto& [name, tensor] : model.model) {
     if (parameters.count(name) == 0) continue;
     const auto it = base.model.find(name);
     if (it == base.model.end() || it->second.sizes() != tensor.sizes() ||
         !it->second.is_floating_point()) {
-      ++result.kept;
+      if (result.kept++ == 0) first_kept = name;
       continue;
     }
     tensor = ((1 - a.alpha) * it->second.to(torch::kFloat64) + a.alpha * tensor.to(torch::kFloat64))
@@ -65,6 +66,12 @@ BlendResult blend_models(const BlendRequest& a) {
   }
   LFNET_CHECK_AS(CheckpointError, result.blended > 0, "--model ", a.model, " and --base ", a.base,
                  " share no parameter of the same name and shape: nothing to blend");
+  // A model finetuned from its base shares most of its layers (a colour net all but its input
+  // and output); two networks of other widths or depths share next to none.
+  LFNET_CHECK_AS(CheckpointError, result.blended >= result.kept, "--model ", a.model,
+                 " and --base ", a.base, " share ", result.blended, " of ",
+                 result.blended + result.kept, " parameters (", first_kept,
+                 " differs): they are not one network finetuned from the other; nothing written");
   model.optimizer.clear();
   model.training.origin["blend"] = {
       {"model", a.model}, {"base", a.base}, {"alpha", a.alpha}, {"blended", result.blended}};

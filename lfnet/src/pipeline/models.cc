@@ -124,6 +124,10 @@ ModelFile load_noise_switch(const std::string& path, bool network) {
   const auto above = member(noisy);
   LFNET_CHECK_AS(ConfigError, above.phi == model.phi, path, ": ", quiet, " and ", noisy,
                  " were trained for different Phis");
+  LFNET_CHECK_AS(ConfigError, above.network.cfa == model.network.cfa, path, ": ", quiet, " (",
+                 model.network.cfa.empty() ? "grey" : model.network.cfa, ") and ", noisy, " (",
+                 above.network.cfa.empty() ? "grey" : above.network.cfa,
+                 ") reconstruct different colours: a switch joins two models of one sensor");
   model.quiet_path = model.path;  // resolved against the switch's folder
   model.path = path;
   model.noisy_path = above.path;
@@ -236,14 +240,39 @@ bool phi_argument_is_file(const std::string& text) {
   return fs::path(text).extension() == ".json" || fs::exists(text, ec);
 }
 
+namespace {
+nlohmann::json learned_code_at(const std::string& phi_argument, int hops);
+}
+
 nlohmann::json learned_code_of(const std::string& phi_argument) {
+  return learned_code_at(phi_argument, 0);
+}
+
+namespace {
+
+// learned_code_of, `hops` models away from the one asked about (a chain of models trained on
+// one learned code is followed a few links, never round a cycle).
+nlohmann::json learned_code_at(const std::string& phi_argument, int hops) {
   std::error_code ec;
   if (!fs::is_regular_file(phi_argument, ec) ||
       model_file_kind(phi_argument) != ModelFileKind::kCheckpoint) {
     return nullptr;
   }
   const auto ck = train::load_checkpoint(phi_argument);
-  if (!ck.config.contains("code") || !ck.config["code"].is_object()) return nullptr;
+  if (!ck.config.contains("code") || !ck.config["code"].is_object()) {
+    // Trained on a code another model learned: that model holds the code's parameters.
+    const auto from = ck.config.value("phi", nlohmann::json());
+    if (hops < 4 && from.is_string() && from.get<std::string>() != phi_argument &&
+        fs::is_regular_file(from.get<std::string>(), ec) &&
+        fs::path(from.get<std::string>()).extension() == ".ckpt") {
+      // Only if that model's camera is this one's, weight for weight.
+      if (train::load_checkpoint(from.get<std::string>()).phi != ck.phi) return nullptr;
+      auto code = learned_code_at(from.get<std::string>(), hops + 1);
+      if (!code.is_null()) code["learned_by"] = from;
+      return code;
+    }
+    return nullptr;
+  }
   nn::LearnedPhiOptions options;
   {
     JsonReader r(ck.config["code"], phi_argument + ":$.config.code");
@@ -257,6 +286,8 @@ nlohmann::json learned_code_of(const std::string& phi_argument) {
   out["phi_source"] = spec.params.value("source", "");
   return out;
 }
+
+}  // namespace
 
 optics::PhiSpec phi_from_argument(const std::string& text, const std::string& option) {
   // A folder can only be a calibrated Phi: reading it says what is wrong with it.

@@ -123,6 +123,10 @@ SimulateInput load_simulate_input(const SimulateSource& args) {
                        h <= 100000 && w <= 100000,
                    "--white takes the sensor's size HxW, e.g. 593x840, not '", args.white, "'");
     const auto [rows, cols] = window_size(args.views);
+    // The white views and the sensor image simulated from them, in float32.
+    check_fits_in_memory(4.0 * (args.color ? 3 : 1) * static_cast<double>(rows * cols + 2) *
+                             static_cast<double>(h) * static_cast<double>(w),
+                         "--white " + args.white);
     lf = LightField(torch::ones({args.color ? 3 : 1, rows, cols, h, w}));
     in.source = {{"kind", "white"}, {"size", {h, w}}};
     in.views = {{"rows", {1, rows}}, {"cols", {1, cols}}, {"source_grid", {rows, cols}}};

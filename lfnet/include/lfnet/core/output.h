@@ -82,6 +82,11 @@ void check_output_folder(const std::string& out, const OutputFolderPolicy& polic
 // unless `force`.
 void check_output_file(const std::string& out, const OutputFolderPolicy& policy);
 
+// Refuses an input that exists but is not a regular file, before anything opens it: reading a
+// FIFO, socket or device may block forever, and a folder is no file. An IoError naming `path`
+// (the caller adds its flag); a missing path is left to the reader, which names it.
+void check_regular_input(const std::string& path);
+
 // Splits a comma-separated list of paths (e.g. --sensor a.tif,b.tif) for the inputs of a policy.
 std::vector<std::string> split_paths(const std::string& list);
 

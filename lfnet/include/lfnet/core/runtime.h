@@ -30,6 +30,11 @@ bool configure_allocator();
 // than 256 MB is free.
 void release_free_memory();
 
+// Refuses work whose arrays would not fit in this machine's memory before they are allocated:
+// a ConfigError that names `what` (the flag that asked for it), the bytes it needs and the bytes
+// the machine has. Where the machine's memory cannot be read, nothing is refused.
+void check_fits_in_memory(double bytes, const std::string& what);
+
 // "cpu" or "cuda" (or "cuda:K") as a device. Throws ConfigError for other names and for CUDA
 // when this LibTorch has no CUDA or the machine no GPU, saying which.
 c10::Device parse_device(const std::string& name);

@@ -9,6 +9,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "lfnet/dict/dictionary.h"
 #include "lfnet/dict/sparse_coding.h"
@@ -111,7 +112,9 @@ bool phi_argument_is_file(const std::string& text);
 // The learned code of a checkpoint trained with $.code (docs/training.md, "Learned codes") in
 // its physical units, nn::LearnedPhiImpl::physical(): the transmittances of a mask or aperture,
 // or each ASP pixel's grating (beta, gamma, alpha, depth), what a fabricated camera needs; with
-// the code's options as "options". Null for anything else (a Phi name, a file without a code).
+// the code's options as "options". A model trained on a code another model learned (its config's
+// $.phi names that checkpoint) gives that model's code. Null for anything else (a Phi name, a
+// file without a code, a code whose learning model is not at hand).
 nlohmann::json learned_code_of(const std::string& phi_argument);
 
 }  // namespace lfnet::pipeline
