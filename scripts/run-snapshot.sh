@@ -3,7 +3,7 @@
 # what `lfnet train --resume` needs from a run folder (config.json, training.jsonl, every
 # finished stage's model, and the unfinished stage's last.ckpt and best.ckpt) into a folder
 # that can be committed; `restore` puts it back as a run folder. Nothing else of the run
-# folder is needed to resume (docs/models.md, "Long runs across machines").
+# folder is needed to resume (docs/training.md, "Long runs across machines").
 # Usage: scripts/run-snapshot.sh save RUN_DIR SNAPSHOT_DIR
 #        scripts/run-snapshot.sh restore SNAPSHOT_DIR RUN_DIR
 set -euo pipefail

@@ -1,7 +1,9 @@
-// The README's "A first session" commands, run in order as a newcomer would: each must
-// succeed and leave what the README says it leaves.
+// The README and the docs as a newcomer reads them: the README's "A first session" commands
+// run in order and leave what it says they leave; the names the docs cite exist; both stay short.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <cctype>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -73,4 +75,54 @@ TEST_CASE("the README's first session runs in order on the shipped models", "[ap
   const auto config = lfnet::test::read_bytes(tour + "/finetuned/config.json");
   CHECK(config.find("\"calibrated\"") != std::string::npos);
   CHECK(config.find(tour + "/camera") == std::string::npos);
+}
+
+TEST_CASE("every name the docs cite in backticks exists in the tree", "[apps][readme]") {
+  std::string out;
+  const int rc = lfnet::test::run_command(
+      std::string(LFNET_TEST_PYTHON) + " " + LFNET_SOURCE_DIR + "/scripts/check-doc-names.py", out);
+  INFO(out);
+  CHECK(rc == 0);
+}
+
+TEST_CASE("the README stays a front page and the hand-written docs stay short", "[apps][readme]") {
+  const fs::path root = LFNET_SOURCE_DIR;
+  const std::string readme = lfnet::test::read_bytes((root / "README.md").string());
+  CHECK(std::count(readme.begin(), readme.end(), '\n') <= 120);
+  // Words as wc -w counts them, in README.md and docs/*.md but the generated docs/RESULTS.md.
+  auto words = [](const std::string& text) {
+    size_t n = 0;
+    bool in_word = false;
+    for (const unsigned char c : text) {
+      const bool space = std::isspace(c) != 0;
+      if (!space && !in_word) ++n;
+      in_word = !space;
+    }
+    return n;
+  };
+  size_t total = words(readme);
+  for (const auto& entry : fs::directory_iterator(root / "docs")) {
+    if (entry.path().extension() != ".md" || entry.path().filename() == "RESULTS.md") continue;
+    total += words(lfnet::test::read_bytes(entry.path().string()));
+  }
+  INFO(total << " words");
+  CHECK(total <= 25000);
+}
+
+TEST_CASE("the README's zoo table is what lfnet models prints", "[apps][readme]") {
+  std::string table;
+  REQUIRE(lfnet::test::run_command(lfnet::test::lfnet_binary() + " models", table) == 0);
+  const std::string readme =
+      lfnet::test::read_bytes((fs::path(LFNET_SOURCE_DIR) / "README.md").string());
+  std::istringstream lines(table);
+  std::string line;
+  int rows = 0;
+  while (std::getline(lines, line)) {
+    while (!line.empty() && line.back() == ' ') line.pop_back();
+    if (line.empty()) continue;
+    INFO(line);
+    CHECK(readme.find("    " + line + "\n") != std::string::npos);
+    ++rows;
+  }
+  CHECK(rows >= 10);
 }

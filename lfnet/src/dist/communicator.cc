@@ -103,8 +103,8 @@ std::string rank_list(const std::vector<int64_t>& ranks) {
 std::string alive_key(int64_t rank) { return "lfnet/alive/" + std::to_string(rank); }
 std::string joined_key(int64_t rank) { return "lfnet/joined/" + std::to_string(rank); }
 
-// Every rank's sign of life, through the job's store (docs/distributed.md, "When something
-// fails"): a thread of its own adds 1 to this rank's counter every second and reads the
+// Every rank's sign of life, through the job's store (docs/distributed.md, "Faults between
+// hosts"): a thread of its own adds 1 to this rank's counter every second and reads the
 // others'. A rank whose counter stops (its process ended, its host or link went down) is
 // named as lost, and so is rank 0 when the store it holds stops answering. The thread has its
 // own connection to the store, so a collective blocked on a lost peer does not block it.

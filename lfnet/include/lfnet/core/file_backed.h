@@ -1,5 +1,6 @@
 // Large tensors held in a temporary file rather than in anonymous memory, so that a phase that
-// does not read them can give their pages back (docs/reconstruction.md, "Memory").
+// does not read them can give their pages back (docs/reconstruction.md, "Large light fields in a
+// temporary file").
 //
 // The file is created in $TMPDIR, else /var/tmp, else /tmp (the first that is on a disk, not in
 // memory: tmpfs would hold the pages in memory all the same), unlinked at once, its blocks

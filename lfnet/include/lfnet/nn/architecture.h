@@ -1,6 +1,6 @@
 // The architectures of the reconstruction network by name (docs/architecture.md, "Adding an
-// architecture"): one class per architecture, registered in one line of
-// register_builtin_architectures (nn/architecture.cc).
+// architecture"): one class per architecture, registered in one line among the built-ins of
+// registry() (nn/architecture.cc) or, from outside, by register_architecture.
 //
 // LightFieldNet is the module that holds an architecture's layers and buffers (their registered
 // names are the checkpoint schema); everything that differs between architectures is asked of

@@ -56,7 +56,7 @@ struct CalibrationError {
   nlohmann::json to_json() const;
 };
 
-// The ranges training draws calibration errors from, one draw per patch (docs/training.md,
+// The ranges training draws calibration errors from, one draw per patch (docs/architectures.md,
 // "Calibration-robust training"): depth, each angular shift, each code shift and the period
 // uniformly in [-range, range]; vignetting uniformly in [0, vignetting], the patch placed
 // uniformly in a sensor `vignetting_sensor` times its size on each side.
