@@ -3,7 +3,7 @@
 # 3.8 hours of this 2-core machine; `--device cuda` trains on a GPU), resumably: run it again
 # after an interruption and `lfnet train --resume OUT` skips the stages whose model exists and
 # continues the interrupted one from its last.ckpt. The final model becomes
-# models/asp-n2-paper.ckpt and its training log models/asp-n2-paper.training.jsonl; then
+# out/cache/asp-n2-paper.ckpt and its training log out/cache/asp-n2-paper.training.jsonl; then
 # `scripts/results.sh paper-scale-asp-n2`.
 # Usage: scripts/paper-scale.sh [extra lfnet train arguments, e.g. --device cuda]
 # Pass lfnet's global options in LFNET_OPTS, e.g. LFNET_OPTS="--threads 1" beside other work;
@@ -17,7 +17,7 @@ lfnet=${LFNET:-build/apps/lfnet}
 config=${CONFIG:-configs/paper/phi-comparison/asp.json}
 scale=${SCALE:-paper}
 out=${OUT:-out/paper-scale/asp-n2}
-model=${MODEL:-models/asp-n2-paper.ckpt}
+model=${MODEL:-out/cache/asp-n2-paper.ckpt}
 snapshot=${SNAPSHOT:-}
 if [[ -n $snapshot && ! -e $out && -f $snapshot/config.json ]]; then
   scripts/run-snapshot.sh restore "$snapshot" "$out"

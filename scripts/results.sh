@@ -449,7 +449,7 @@ print(str(l["height"]) + "x" + str(l["width"]))' "$work/acq/sensor.json")
 }
 
 # Learned codes (docs/training.md, "Learned codes"): at N = 2, one lfnet network (32 channels, 3
-# levels) and one training budget (models/lfnet-asp-n2-first20.ckpt finetuned for 10 epochs of
+# levels) and one training budget (out/cache/lfnet-asp-n2-first20.ckpt finetuned for 10 epochs of
 # 8,000 crops at lr 5e-4 on the same data) for a fixed code and for a code learned with it: the
 # random binary mask (and a hand-designed variant) against a learned mask of its period, the ASP
 # quadrature pair against learned ASP gratings (from random gratings, and from the pair), a random
@@ -586,7 +586,7 @@ phi-switching() {
 }
 
 # The paper scale of ASP N = 2 (configs/paper/phi-comparison/asp.json --scale paper, 3.8
-# hours of this 2-core machine; its model is models/asp-n2-paper.ckpt) beside the quick-scale asp-n2.
+# hours of this 2-core machine; its model is out/cache/asp-n2-paper.ckpt) beside the quick-scale asp-n2.
 paper-scale-asp-n2() {
   local tmp lf=(--lf ../shared/data/hci_antinous --mode sensor)
   tmp=$(mktemp)

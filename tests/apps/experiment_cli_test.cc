@@ -208,8 +208,9 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   CHECK(code["transmittance"].size() == size_t{2} * 5 * 5 * 3 * 3);
   CHECK(code["options"]["period"] == 3);
 
-  // A net trained on the learned code held fixed ($.phi names the model) exports the code of the
-  // model that learned it; without that model at hand it says what is missing.
+  // A net trained on the learned code held fixed ($.phi names the model) carries the code of the
+  // model that learned it, so it exports the code without that model at hand; a checkpoint of
+  // the run that does not carry it (the stage's best.ckpt) says what is missing.
   {
     auto fixed = nlohmann::json::parse(std::ifstream(tmp / "code.json"));
     fixed.erase("code");
@@ -226,7 +227,14 @@ TEST_CASE("experiment with $.code learns a code, evaluates with it and exports i
   CHECK(learned_by["learned_by"] == model);
   CHECK(learned_by["transmittance"] == code["transmittance"]);
   fs::rename(model, tmp / "elsewhere.ckpt");
-  REQUIRE(run_command(lfnet + "phi export --phi " + fixed_model + " --out " + (tmp / "no-code"),
+  REQUIRE(run_command(lfnet + "phi export --phi " + fixed_model + " --out " + (tmp / "carried"),
+                      out) == 0);
+  const auto carried = nlohmann::json::parse(std::ifstream(tmp / "carried/code.json"));
+  CHECK(carried["learned_by"] == model);
+  CHECK(carried["transmittance"] == code["transmittance"]);
+  const std::string stage_best = tmp / "fixed/models/joint_scratch/best.ckpt";
+  REQUIRE(fs::exists(stage_best));
+  REQUIRE(run_command(lfnet + "phi export --phi " + stage_best + " --out " + (tmp / "no-code"),
                       out) == 0);
   CHECK(out.find("but not its physical parameters") != std::string::npos);
   CHECK_FALSE(fs::exists(tmp / "no-code/code.json"));

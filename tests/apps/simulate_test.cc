@@ -160,7 +160,7 @@ TEST_CASE("simulate describes a Phi and plots its weights", "[app][simulate]") {
   // A code of a 2 x 2 period (the learned ASP's tile) shows all four pixels, row by row: its
   // second row measures differently from its first.
   const std::string learned =
-      (fs::path(LFNET_SOURCE_DIR) / "models" / "lfnet-learned-asp-n2.ckpt").string();
+      (fs::path(LFNET_SOURCE_DIR) / "models" / "lfnet-learned-asp-n2-full.ckpt").string();
   REQUIRE(run_command(simulate("--phi " + learned + " --plot-weights " + (tmp / "tile")), out) ==
           0);
   const auto tile = nlohmann::json::parse(lfnet::test::read_bytes(tmp / "tile/calibrated-n2.json"));

@@ -9,6 +9,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/zoo.h"
+#include "lfnet/train/checkpoint.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -111,4 +112,23 @@ TEST_CASE("the zoo's default model for a sensor follows its camera and colour", 
   fs::create_directories(tmp.path() / "empty");
   CHECK(pipeline::zoo_default_model(tmp / "empty", "").camera.empty());
   ::unsetenv("LFNET_MODELS");
+}
+
+TEST_CASE("the zoo's learned codes carry what it takes to make them", "[pipeline][zoo]") {
+  // A shipped model trained on a code another model learned holds that code's physical
+  // parameters itself: phi export writes them with no other file at hand.
+  int learned = 0;
+  for (const auto& path : test::zoo_checkpoints()) {
+    const auto ck = train::load_checkpoint(path.string());
+    const std::string source = ck.phi.value("params", nlohmann::json::object()).value("source", "");
+    if (source.rfind("learned", 0) != 0) continue;
+    INFO(path);
+    ++learned;
+    const auto code = pipeline::learned_code_of(path.string());
+    REQUIRE(code.is_object());
+    const std::string family = source.find("mask") != std::string::npos ? "mask" : "asp";
+    CHECK(code["family"] == family);
+    CHECK(code.contains(family == "mask" ? "transmittance" : "alpha"));
+  }
+  CHECK(learned >= 2);
 }

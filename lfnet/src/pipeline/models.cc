@@ -260,7 +260,9 @@ nlohmann::json learned_code_at(const std::string& phi_argument, int hops) {
   }
   const auto ck = train::load_checkpoint(phi_argument);
   if (!ck.config.contains("code") || !ck.config["code"].is_object()) {
-    // Trained on a code another model learned: that model holds the code's parameters.
+    // Trained on a code another model learned: this model carries the code's parameters
+    // (written when it was trained), or else that model holds them.
+    if (ck.training.code.contains("physical")) return ck.training.code["physical"];
     const auto from = ck.config.value("phi", nlohmann::json());
     if (hops < 4 && from.is_string() && from.get<std::string>() != phi_argument &&
         fs::is_regular_file(from.get<std::string>(), ec) &&

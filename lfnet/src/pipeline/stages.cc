@@ -182,7 +182,17 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
   const std::string best = train::best_checkpoint_path(stage_dir);
   std::string target = (fs::path(models) / (stage.name + ".ckpt")).string();
   if (!lead) return target;
+  // Trained on a code another model learned ($.phi a checkpoint): the model carries that
+  // code's physical parameters, so `phi export` of it needs no other file.
+  auto code = learned_code_of(best);
+  if (!code.is_null() && !code.contains("learned_by")) code = nullptr;  // its own code
   write_file_atomically(target, [&](const std::string& tmp) {
+    if (!code.is_null()) {
+      auto ck = train::load_checkpoint(best);
+      ck.training.code["physical"] = code;
+      train::save_checkpoint(ck, tmp);
+      return;
+    }
     std::error_code ec;
     fs::copy_file(best, tmp, fs::copy_options::overwrite_existing, ec);
     LFNET_CHECK_AS(IoError, !ec, "cannot copy ", best, " to ", target, ": ", ec.message());
