@@ -29,7 +29,7 @@ struct ReconstructArgs {
 // Neither --model nor --method: the zoo's default model for the sensor's camera and colour
 // (pipeline/zoo.h), else pinv; said either way.
 void choose_default_model(pipeline::ReconstructRequest& q) {
-  const auto d = pipeline::zoo_default_model(q.sensor, q.phi);
+  const auto d = pipeline::zoo_default_model(q.sensor, q.phi, q.cfa);
   if (!d.path.empty()) {
     q.model = d.path;
     spdlog::info("no --model: the zoo's default for {} ({}) is {} ({})", d.camera, d.colour, d.name,
@@ -109,6 +109,11 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                 "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", q.post_filter,
                 "suppress artefacts that repeat with the patch stride (a spectral notch per view)");
+  cmd->add_option("--cfa", q.cfa,
+                  "the colour filter array a plain sensor image was taken behind: RGGB, BGGR, "
+                  "GRBG, GBRG or JSON, inline or a file (an acquisition folder records its own; "
+                  "docs/acquisition.md)")
+      ->check(kNotEmpty);
   add_demosaic_option(cmd, q.demosaic);
   cmd->add_option("--flat-field", q.flat_field,
                   "the camera's white frame (an acquisition folder, or an image of its N "

@@ -37,6 +37,14 @@ std::shared_ptr<dist::Communicator> join_job(const dist::DistOptions& options) {
     spdlog::info("rank {} of {}: joining the job at {}", options.rank, options.world_size,
                  options.master);
   }
+  if (options.world_size > 1 && options.rank == 0) {
+    // Rank 0 waits for the others: say how they join, so a missing --rank is not a silent wait.
+    spdlog::info(
+        "rank 0 waits up to {:g} s for ranks 1 .. {}: start each with --world-size {} --rank K "
+        "--master {}, or run the whole job with lfnet launch -n {} -- ...",
+        options.timeout_s, options.world_size - 1, options.world_size, options.master,
+        options.world_size);
+  }
   auto comm = dist::connect(options);
   if (comm->rank() != 0 && spdlog::get_level() < spdlog::level::warn) {
     spdlog::set_level(spdlog::level::warn);  // rank 0 reports for the job

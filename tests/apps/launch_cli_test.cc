@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include <unistd.h>
 
@@ -173,6 +174,17 @@ TEST_CASE("batch on 2 ranks shares the items and gathers one summary on rank 0",
   }
 }
 
+TEST_CASE("launch starts at most 4 ranks per core", "[app][dist]") {
+  const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  std::string out;
+  const auto start = std::chrono::steady_clock::now();
+  CHECK(run_command(lfnet_binary() + " launch -n " + std::to_string(4 * cores + 1) +
+                        " -- info --lf nothing",
+                    out) != 0);
+  CHECK(out.find("4 per core, " + std::to_string(cores) + " cores here") != std::string::npos);
+  CHECK(seconds_since(start) < 20);
+}
+
 TEST_CASE("a rank that never joins is named, and so is a store that never answers", "[app][dist]") {
   if (!fs::exists("/usr/include/torch/csrc/distributed/c10d/ProcessGroupGloo.hpp")) return;
   lfnet::test::TempDir tmp;
@@ -185,6 +197,9 @@ TEST_CASE("a rank that never joins is named, and so is a store that never answer
   auto start = std::chrono::steady_clock::now();
   CHECK(run_command(common + " --rank 0 --out " + (tmp / "r0"), out) != 0);
   CHECK(out.find("rank 0 of 2: rank 1 did not join within 4 s") != std::string::npos);
+  // While it waited, it said how the others join.
+  CHECK(out.find("start each with --world-size 2 --rank K --master 127.0.0.1:") !=
+        std::string::npos);
   CHECK(seconds_since(start) < 20);
   CHECK(!fs::exists(tmp / "r0"));
   start = std::chrono::steady_clock::now();

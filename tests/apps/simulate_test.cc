@@ -390,6 +390,25 @@ TEST_CASE("a white frame's flat field undoes vignetting in evaluate and reconstr
   CHECK(out.find("--flat-field") != std::string::npos);
   CHECK(std::count(out.begin(), out.end(), '\n') == 1);
   CHECK_FALSE(fs::exists(tmp / "bad"));
+  // A white frame of another camera, or behind another colour filter array (or none).
+  REQUIRE(run_command(simulate("--white 40x48 --phi mask:2 --out " + (tmp / "white-mask")), out) ==
+          0);
+  const std::pair<std::string, std::string> other[] = {
+      {reconstruct + " --sensor " + (tmp / "acq-off") + " --flat-field " + (tmp / "white-mask"),
+       "is a white frame of the camera mask:2; the sensor image's camera is asp:2"},
+      {reconstruct + " --sensor " + (tmp / "acq-off") + " --flat-field " + (tmp / "white-rggb"),
+       "was taken behind a colour filter array; the sensor image is grey"},
+      {evaluate + " --cfa RGGB --flat-field " + (tmp / "white"),
+       "is grey; the sensor image is behind a colour filter array"},
+      {evaluate + " --cfa BGGR --flat-field " + (tmp / "white-rggb"),
+       "behind another colour filter array"}};
+  for (const auto& [command, message] : other) {
+    INFO(command);
+    CHECK(run_command(command + " --out " + (tmp / "bad"), out) != 0);
+    CHECK(out.find(message) != std::string::npos);
+    CHECK(std::count(out.begin(), out.end(), '\n') == 1);
+    CHECK_FALSE(fs::exists(tmp / "bad"));
+  }
   CHECK(run_command(evaluate + " --flat-field " + (tmp / "nothing-here"), out) != 0);
   CHECK(out.find("nothing-here") != std::string::npos);
   CHECK(run_command(simulate("--white 40by48 --phi asp:2 --out " + (tmp / "w2")), out) != 0);
@@ -428,6 +447,20 @@ TEST_CASE("a colour filter array: one sensor image, reconstructed and scored in 
   CHECK(rec.channels() == 3);
   const auto record = lfnet::read_json_file(tmp / "rec/reconstruction.json");
   CHECK(record["cfa"]["pattern"] == "GRBG");
+  // The same sensor image as a camera writes it, its colour filter array given by --cfa: the
+  // same colour light field. An acquisition's --cfa may only repeat what it records.
+  REQUIRE(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq/sensor.tif") +
+                          " --phi asp:2 --cfa GRBG --out " + (tmp / "rec-plain"),
+                      out) == 0);
+  CHECK(torch::equal(lfnet::io::read_light_field(tmp / "rec-plain").data(), rec.data()));
+  CHECK(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") +
+                        " --cfa GRBG --out " + (tmp / "rec-same"),
+                    out) == 0);
+  CHECK(run_command(lfnet + "reconstruct --method pinv --sensor " + (tmp / "acq") +
+                        " --cfa RGGB --out " + (tmp / "rec-other"),
+                    out) != 0);
+  CHECK(out.find("--cfa RGGB contradicts") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "rec-other"));
   // A grey model refuses it.
   CHECK(run_command(lfnet + "reconstruct --method net --model " +
                         (std::string(LFNET_SOURCE_DIR) + "/models/lfnet-asp-n2.ckpt") +

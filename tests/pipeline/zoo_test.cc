@@ -108,6 +108,11 @@ TEST_CASE("the zoo's default model for a sensor follows its camera and colour", 
   // A plain sensor image's camera is its --phi; without one, or with an unreadable folder,
   // nothing is known.
   CHECK(pipeline::zoo_default_model(tmp / "image.png", "asp:15").name == "lfnet-asp-n15");
+  // Its colour is its --cfa.
+  const auto plain_colour = pipeline::zoo_default_model(tmp / "image.png", "asp:2", "RGGB");
+  CHECK(plain_colour.colour == "RGGB");
+  CHECK(plain_colour.name == "lfnet-asp-n2-bayer-blend");
+  CHECK(pipeline::zoo_default_model(tmp / "image.png", "asp:2", "").name == "lfnet-asp-n2-auto");
   CHECK(pipeline::zoo_default_model(tmp / "image.png", "").camera.empty());
   fs::create_directories(tmp.path() / "empty");
   CHECK(pipeline::zoo_default_model(tmp / "empty", "").camera.empty());

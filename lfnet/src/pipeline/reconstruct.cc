@@ -99,8 +99,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
                          : phi_from_argument(a.phi);
     spec = optics::make_phi(spec)->spec();
     acq = plain_sensor_acquisition(a.sensor, spec);
-    // A camera whose calibrated Phi names its colour filter array: one image behind it.
-    if (const auto cfa = optics::camera_cfa(spec.to_json())) {
+    // Behind a colour filter array (--cfa, or the one a calibrated Phi names): one image.
+    if (const auto cfa = optics::resolve_cfa(a.cfa, spec.to_json())) {
       LFNET_CHECK_AS(ConfigError, acq.sensor.size(0) == 1, "the camera of ", spec.label(),
                      " has a colour filter array: give its one sensor image of N channels");
       acq.meta["cfa"] = cfa->to_json();
@@ -114,6 +114,13 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   std::optional<optics::ColourFilterArray> cfa;
   if (acq.meta.contains("cfa")) {
     cfa = optics::ColourFilterArray::from_json(acq.meta["cfa"], a.sensor + "/sensor.json:$.cfa");
+  }
+  if (folder && !a.cfa.empty()) {
+    // An acquisition records its colour filter array: --cfa may only repeat it.
+    const auto given = optics::resolve_cfa(a.cfa, nlohmann::json());
+    LFNET_CHECK_AS(ConfigError, cfa && given && given->to_json() == cfa->to_json(), "--cfa ",
+                   a.cfa, " contradicts ", a.sensor, "/sensor.json, which records ",
+                   cfa ? "another colour filter array" : "a grey sensor");
   }
   if (!a.flat_field.empty()) {
     // The camera's gain across the sensor, measured by its white frame, divided out.

@@ -99,6 +99,19 @@ torch::Tensor read_flat_field(const std::string& path, const optics::Phi& phi,
     }
     LFNET_CHECK_AS(ConfigError, acq.sensor.defined() && acq.sensor.size(0) == 1, option, " ", path,
                    ": a white frame is a grey sensor image (an acquisition in sensor mode)");
+    // The white frame of this camera, behind this colour filter array (or none), or nothing.
+    const auto white_phi = optics::make_phi(
+        optics::PhiSpec::from_json(acq.meta.at("phi"), path + "/sensor.json:$.phi"));
+    LFNET_CHECK_AS(ConfigError, white_phi->spec() == phi.spec(), option, " ", path,
+                   " is a white frame of the camera ", white_phi->spec().label(),
+                   white_phi->spec().label() == phi.spec().label() ? " with other parameters" : "",
+                   "; the sensor image's camera is ", phi.spec().label());
+    const bool white_cfa = acq.meta.contains("cfa");
+    LFNET_CHECK_AS(ConfigError, white_cfa == cfa.has_value(), option, " ", path,
+                   white_cfa ? " was taken behind a colour filter array; the sensor image is grey"
+                             : " is grey; the sensor image is behind a colour filter array");
+    LFNET_CHECK_AS(ConfigError, !white_cfa || acq.meta["cfa"] == cfa->to_json(), option, " ", path,
+                   " was taken behind another colour filter array than the sensor image");
     white = acq.sensor[0];
   } else {
     LFNET_CHECK_AS(IoError, fs::exists(path), option, " ", path, ": no such file or folder");

@@ -78,7 +78,8 @@ std::string resolve_model_name(const std::string& text) {
   return text;
 }
 
-ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi) {
+ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
+                             const std::string& cfa) {
   ZooDefault d;
   d.colour = "grey";
   try {
@@ -93,7 +94,7 @@ ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi) 
       }
     } else if (!phi.empty()) {
       spec = phi_from_argument(phi);
-      if (const auto cfa = optics::camera_cfa(spec.to_json())) d.colour = cfa->pattern();
+      if (const auto given = optics::resolve_cfa(cfa, spec.to_json())) d.colour = given->pattern();
     } else {
       return d;
     }

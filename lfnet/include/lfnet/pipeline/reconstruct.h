@@ -26,6 +26,9 @@ struct ReconstructRequest {
   std::string dictionary;      // dictionary file for dict
   std::string method_options;  // --method-options: JSON or file, keyed by method
   std::string flat_field;      // the camera's white frame (read_flat_field); "" none
+  // The colour filter array a plain sensor image was taken behind (--cfa: a pattern, JSON or a
+  // file; "" none, or the one the camera's calibrated Phi names); an acquisition records its own.
+  std::string cfa;
   // How a patch method's views of a colour filter array's sensor image are demosaiced.
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;
   recon::ReconstructOptions options;  // stride (sensor mode), batch, window

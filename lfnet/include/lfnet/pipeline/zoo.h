@@ -36,13 +36,15 @@ Zoo read_zoo(const std::string& dir = zoo_dir());
 std::string resolve_model_name(const std::string& text);
 
 // The zoo's default model for a sensor image: its camera and colour read from `sensor` (an
-// acquisition folder's sensor.json) or from `phi` (a plain sensor image's --phi), and the card
+// acquisition folder's sensor.json) or from `phi` and `cfa` (a plain sensor image's --phi and
+// --cfa, or the colour filter array a calibrated Phi names), and the card
 // marked default for them. `name` and `path` are empty when the zoo has no default for the
 // camera, and `camera` too when the camera cannot be read (the reconstruction then says why).
 struct ZooDefault {
   std::string camera, colour, name, path;
 };
-ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi);
+ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
+                             const std::string& cfa = "");
 
 // The table `lfnet models` prints: name, camera, colour, noise, architecture, parameters, MB,
 // worst margins over pinv on the validation and test sets, use.
