@@ -47,9 +47,11 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
       "directory");
   auto a = std::make_shared<BatchArgs>();
   auto& o = a->options;
-  cmd->add_option("--input,--in", o.in, "folder to search (recursively) for items")->required();
-  cmd->add_option("--out", o.out,
-                  "output folder: reconstructions, records/, summary.csv, summary.json")
+  input_path(cmd->add_option("--input,--in", o.in, "folder to search (recursively) for items"))
+      ->required();
+  output_folder(
+      cmd->add_option("--out", o.out,
+                      "output folder: reconstructions, records/, summary.csv, summary.json"))
       ->required();
   cmd->add_option("--methods", a->methods,
                   "comma-separated methods: " + recon::method_list() +
@@ -58,22 +60,24 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
       cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile, &o.stride, nullptr,
             &o.self_ensemble, &o.self_ensemble_passes, &o.method_options});
   add_self_calibrate_flag(cmd, o.self_calibrate);
-  cmd->add_option("--dictionary", o.dictionary, "dictionary file for dict");
+  input_path(cmd->add_option("--dictionary", o.dictionary, "dictionary file for dict"));
   add_enum_option(cmd, "--mode", o.mode, "simulation mode of evaluations: sensor or per_patch");
   cmd->add_option("--noise", o.noise, "Gaussian noise sigma of evaluations")->check(kNoiseSigma);
   cmd->add_option("--seed", o.seed, "noise seed of evaluations")->check(kSeed);
-  cmd->add_option("--cfa", o.cfa,
-                  "evaluations behind a colour filter array: RGGB, BGGR, GRBG, GBRG or JSON, "
-                  "inline or a file (colour light fields; pinv, adjoint, no-parallax)")
+  input_path(
+      cmd->add_option("--cfa", o.cfa,
+                      "evaluations behind a colour filter array: RGGB, BGGR, GRBG, GBRG or JSON, "
+                      "inline or a file (colour light fields; pinv, adjoint, no-parallax)"))
       ->check(kNotEmpty);
   cmd->add_option("--batch", o.batch, "patches per solver call")->check(kCount);
   cmd->add_flag("--window", o.window, "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");
   cmd->add_flag("--match-mean", o.match_mean, "scale real measurements to the training mean");
   add_demosaic_option(cmd, o.demosaic);
-  cmd->add_option("--flat-field", o.flat_field,
-                  "the camera's white frame, divided out of every acquisition's sensor image "
-                  "(docs/acquisition.md, \"Flat field\")");
+  input_path(
+      cmd->add_option("--flat-field", o.flat_field,
+                      "the camera's white frame, divided out of every acquisition's sensor image "
+                      "(docs/acquisition.md, \"Flat field\")"));
   cmd->add_flag("--force", o.force, "write into an existing non-empty output folder");
   cmd->add_flag("--resume", o.resume,
                 "continue the batch in --out: only the item-method pairs without a record of "

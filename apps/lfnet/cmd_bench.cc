@@ -106,9 +106,10 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
       "bench", "Measure GEMM and Conv4d FLOP/s and whole-light-field reconstruction speed");
   auto args = std::make_shared<BenchArgs>();
   auto* a = &args->options;
-  cmd->add_option("--json", args->json,
-                  "also write the report as JSON to this file (a new or empty file, or --force; "
-                  "'-': stdout)");
+  output_file(cmd->add_option(
+      "--json", args->json,
+      "also write the report as JSON to this file (a new or empty file, or --force; "
+      "'-': stdout)"));
   cmd->add_flag("--force", args->force, "replace an existing --json file");
   cmd->add_option("--methods", a->methods,
                   "methods to time: " + recon::method_list(recon::MethodNeeds::kTruth))
@@ -129,12 +130,12 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_option("--height", a->height, "light-field height (default 593)")->check(kCount);
   cmd->add_option("--width", a->width, "light-field width (default 840)")->check(kCount);
   cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")->check(kCount);
-  cmd->add_option("--dictionary", a->dictionary,
-                  "dictionary file (default: a small K-SVD dictionary)");
-  cmd->add_option("--save-dictionary", a->save_dictionary,
-                  "write the bench's K-SVD dictionary to this file");
-  cmd->add_option("--scene", a->scene,
-                  "scene spec to render instead of a random scene (its own size)");
+  input_path(cmd->add_option("--dictionary", a->dictionary,
+                             "dictionary file (default: a small K-SVD dictionary)"));
+  output_file(cmd->add_option("--save-dictionary", a->save_dictionary,
+                              "write the bench's K-SVD dictionary to this file"));
+  input_path(cmd->add_option("--scene", a->scene,
+                             "scene spec to render instead of a random scene (its own size)"));
   cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")
       ->check(kCount);
   cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)")->check(kSeed);

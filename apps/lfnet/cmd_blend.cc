@@ -11,17 +11,19 @@ void add_blend_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd = app.add_subcommand(
       "blend", "Blend a finetuned model's weights with those of the model it was finetuned from");
   auto a = std::make_shared<pipeline::BlendRequest>();
-  cmd->add_option("--model", a->model,
-                  "the finetuned model (checkpoint): its camera and layers of its own are kept")
+  input_path(cmd->add_option(
+                 "--model", a->model,
+                 "the finetuned model (checkpoint): its camera and layers of its own are kept"))
       ->required()
       ->transform(zoo_model_file);
-  cmd->add_option("--base", a->base, "the model it was finetuned from (checkpoint or zoo name)")
+  input_path(cmd->add_option("--base", a->base,
+                             "the model it was finetuned from (checkpoint or zoo name)"))
       ->required()
       ->transform(zoo_model_file);
   cmd->add_option(
       "--alpha", a->alpha,
       "each shared weight becomes (1 - alpha) base + alpha model: 0 to 1 (default 0.5)");
-  cmd->add_option("--out", a->out, "checkpoint to write")->required();
+  output_file(cmd->add_option("--out", a->out, "checkpoint to write"))->required();
   cmd->add_flag("--force", a->force, "replace an existing file");
   cmd->callback([a] {
     a->command_line = "lfnet blend --model " + a->model + " --base " + a->base + " --alpha " +

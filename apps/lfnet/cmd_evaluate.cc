@@ -101,8 +101,8 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.stride, nullptr,
             &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
   add_self_calibrate_flag(cmd, q.self_calibrate);
-  cmd->add_option("--lf", q.lf, "light field folder with the truth");
-  cmd->add_option("--scene", q.scene, "or a procedural scene spec");
+  input_path(cmd->add_option("--lf", q.lf, "light field folder with the truth"));
+  input_path(cmd->add_option("--scene", q.scene, "or a procedural scene spec"));
   cmd->add_option("--views", q.views, "angular window R0:R1,C0:C1 (1-based; default central)");
   cmd->add_option(
       "--orient", q.orient,
@@ -112,41 +112,46 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
   cmd->add_option("--noise", q.noise, "Gaussian noise sigma, relative to a white scene's mean")
       ->check(kNoiseSigma);
-  cmd->add_option("--effects", q.effects,
-                  "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
-                  "--noise sets its Gaussian sigma")
+  input_path(cmd->add_option(
+                 "--effects", q.effects,
+                 "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
+                 "--noise sets its Gaussian sigma"))
       ->check(CLI::ExistingFile);
   cmd->add_flag("--estimate-noise", q.estimate_noise,
                 "noise-aware models are told the noise estimated from the sensor image, not the "
                 "simulation's: a camera whose noise is unknown (docs/acquisition.md)");
-  cmd->add_option("--cfa", q.cfa,
-                  "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
-                  "JSON, inline or a file; scores colour and luma (docs/acquisition.md)")
+  input_path(cmd->add_option(
+                 "--cfa", q.cfa,
+                 "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
+                 "JSON, inline or a file; scores colour and luma (docs/acquisition.md)"))
       ->check(kNotEmpty);
   add_demosaic_option(cmd, q.demosaic);
-  auto* camera_error = cmd->add_option(
+  auto* camera_error = input_path(cmd->add_option(
       "--camera-error", q.camera_error,
       "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
       "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
-      "vignetting; docs/acquisition.md)");
+      "vignetting; docs/acquisition.md)"));
   cmd->add_flag("--tell-camera-error", q.tell_camera_error,
                 "lfnet models: the net is told the camera's Phi with that error (its weights over "
                 "one period; no vignetting), as if it had been measured (docs/acquisition.md, "
                 "\"Self-calibration\")")
       ->needs(camera_error);
-  cmd->add_option("--flat-field", q.flat_field,
-                  "the camera's white frame (an acquisition folder, or an image of its N "
-                  "channels): its gain across the sensor, such as vignetting, is divided out "
-                  "(docs/acquisition.md, \"Flat field\")");
+  input_path(
+      cmd->add_option("--flat-field", q.flat_field,
+                      "the camera's white frame (an acquisition folder, or an image of its N "
+                      "channels): its gain across the sensor, such as vignetting, is divided out "
+                      "(docs/acquisition.md, \"Flat field\")"));
   add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
   cmd->add_option("--method", q.method,
                   recon::method_list() + " (default net with --model, pinv without)");
-  cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
-  cmd->add_option("--json", a->json,
-                  "write the evaluation record to this file (a new or empty file, or --force); "
-                  "- prints it on standard output instead of the summary line");
-  cmd->add_option("--out", a->out,
-                  "write the reconstruction as a light-field folder with a viewer (index.html)");
+  input_path(cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict"));
+  output_file(
+      cmd->add_option("--json", a->json,
+                      "write the evaluation record to this file (a new or empty file, or --force); "
+                      "- prints it on standard output instead of the summary line"));
+  output_folder(cmd->add_option(
+      "--out", a->out,
+      "write the reconstruction as a light-field folder with a viewer (index.html)"));
   cmd->add_flag("--force", a->force, "replace an existing --out folder and --json file");
   cmd->add_option("--seed", q.seed, "noise seed")->check(kSeed);
   cmd->add_option("--choice", q.choice,

@@ -11,10 +11,12 @@ void add_export_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd = app.add_subcommand(
       "export", "Write a checkpoint's network as a TorchScript file for LibTorch and Python");
   auto a = std::make_shared<pipeline::ExportRequest>();
-  cmd->add_option("--model", a->model, "trained model (checkpoint, or a zoo model's name)")
+  input_path(
+      cmd->add_option("--model", a->model, "trained model (checkpoint, or a zoo model's name)"))
       ->required()
       ->transform(zoo_model_file);
-  cmd->add_option("--out", a->out, "TorchScript file to write (e.g. model.pt)")->required();
+  output_file(cmd->add_option("--out", a->out, "TorchScript file to write (e.g. model.pt)"))
+      ->required();
   // The comparison holds every patch's measurements and both outputs in memory (about 16 KB a
   // patch): bounded so that a typo cannot exhaust the memory after the file is written.
   cmd->add_option("--check", a->check,

@@ -17,7 +17,8 @@ void add_info_command(CLI::App& app, const GlobalOptions& global) {
   auto dir = std::make_shared<std::string>();
   auto orient = std::make_shared<std::string>();
   auto layout_text = std::make_shared<std::string>();
-  cmd->add_option("--lf", *dir, "light field folder of sub-aperture images")->required();
+  input_path(cmd->add_option("--lf", *dir, "light field folder of sub-aperture images"))
+      ->required();
   cmd->add_option(
       "--orient", *orient,
       "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");

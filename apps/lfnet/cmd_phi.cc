@@ -90,12 +90,13 @@ void add_phi_command(CLI::App& app, const GlobalOptions&) {
   auto* ex = cmd->add_subcommand(
       "export", "Write a Phi as a calibrated-Phi folder (phi.json and one image per measurement)");
   auto a = std::make_shared<PhiExportArgs>();
-  ex->add_option("--phi", a->phi,
-                 "NAME[:N], a Phi spec (.json), a calibrated-Phi folder, a model file or a zoo "
-                 "model's name")
+  input_path(
+      ex->add_option("--phi", a->phi,
+                     "NAME[:N], a Phi spec (.json), a calibrated-Phi folder, a model file or a zoo "
+                     "model's name"))
       ->required()
       ->transform(zoo_model_file);
-  ex->add_option("--out", a->out, "folder to write")->required();
+  output_folder(ex->add_option("--out", a->out, "folder to write"))->required();
   ex->add_option("--grid", a->grid, "views U x V coded by a NAME[:N] Phi")->capture_default_str();
   ex->add_flag("--force", a->force, "replace an existing folder");
   ex->add_flag("--printable", a->printable,

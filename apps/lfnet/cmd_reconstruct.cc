@@ -86,12 +86,14 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       "a camera's own sensor image with --phi");
   auto a = std::make_shared<ReconstructArgs>();
   auto& q = a->request;
-  cmd->add_option("--sensor", q.sensor,
-                  "acquisition folder (sensor.json with sensor.tif or measurements.f32), or a "
-                  "sensor image of N channels (one file per colour channel, comma-separated)")
+  input_path(
+      cmd->add_option("--sensor", q.sensor,
+                      "acquisition folder (sensor.json with sensor.tif or measurements.f32), or a "
+                      "sensor image of N channels (one file per colour channel, comma-separated)"))
       ->required();
-  cmd->add_option("--out", a->out,
-                  "output light-field folder (views, grid.png, EPIs, viewer index.html)")
+  output_folder(
+      cmd->add_option("--out", a->out,
+                      "output light-field folder (views, grid.png, EPIs, viewer index.html)"))
       ->required();
   add_reconstruction_flags(
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.options.stride, nullptr,
@@ -102,23 +104,25 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       recon::method_list(recon::MethodNeeds::kTruth) +
           " (default net; without --model, net with the zoo's default model for the sensor's "
           "camera and colour, pinv where the zoo has none)");
-  cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict");
+  input_path(cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict"));
   cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
       ->check(kCount);
   cmd->add_flag("--window", q.options.window,
                 "weight patch estimates by a smooth window when stitching");
   cmd->add_flag("--post-filter", q.post_filter,
                 "suppress artefacts that repeat with the patch stride (a spectral notch per view)");
-  cmd->add_option("--cfa", q.cfa,
-                  "the colour filter array a plain sensor image was taken behind: RGGB, BGGR, "
-                  "GRBG, GBRG or JSON, inline or a file (an acquisition folder records its own; "
-                  "docs/acquisition.md)")
+  input_path(cmd->add_option(
+                 "--cfa", q.cfa,
+                 "the colour filter array a plain sensor image was taken behind: RGGB, BGGR, "
+                 "GRBG, GBRG or JSON, inline or a file (an acquisition folder records its own; "
+                 "docs/acquisition.md)"))
       ->check(kNotEmpty);
   add_demosaic_option(cmd, q.demosaic);
-  cmd->add_option("--flat-field", q.flat_field,
-                  "the camera's white frame (an acquisition folder, or an image of its N "
-                  "channels): its gain across the sensor, such as vignetting, is divided out "
-                  "(docs/acquisition.md, \"Flat field\")");
+  input_path(
+      cmd->add_option("--flat-field", q.flat_field,
+                      "the camera's white frame (an acquisition folder, or an image of its N "
+                      "channels): its gain across the sensor, such as vignetting, is divided out "
+                      "(docs/acquisition.md, \"Flat field\")"));
   cmd->add_flag("--match-mean", q.match_mean,
                 "scale real measurements to the training data's mean (the paper's step)");
   cmd->add_flag("--force", a->force, "replace an existing output folder");

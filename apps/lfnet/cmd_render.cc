@@ -71,20 +71,22 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand(
       "render", "Render a procedural scene into a light field folder with its true disparity map");
   auto args = std::make_shared<RenderArgs>();
-  cmd->add_option("--scene", args->request.scene, "scene spec (JSON); see docs/scenes.md");
+  input_path(
+      cmd->add_option("--scene", args->request.scene, "scene spec (JSON); see docs/scenes.md"));
   cmd->add_option("--random", args->request.random_seed,
                   "render the random training scene of this seed")
       ->check(kWhole);
-  cmd->add_option("--random-options", args->request.random_options,
-                  "with --random: the random scene's options (docs/scenes.md), a JSON object "
-                  "or file, e.g. '{\"frame_probability\": 1}'");
+  input_path(
+      cmd->add_option("--random-options", args->request.random_options,
+                      "with --random: the random scene's options (docs/scenes.md), a JSON object "
+                      "or file, e.g. '{\"frame_probability\": 1}'"));
   cmd->add_option("--size", args->size, "HxW of a random scene (default 256x256)");
   cmd->add_option("--views", args->views, "RxC angular grid of a random scene (default 5x5)");
   cmd->add_option("--disparity-range", args->disparity_range,
                   "MIN:MAX disparity of a random scene in px per view (default -3:3)");
   cmd->add_flag("--grey", args->request.grey, "render one luma channel");
-  cmd->add_option("--out", args->request.out,
-                  "output folder: lf_R_C.png, disparity.pfm, previews, scene.json")
+  output_folder(cmd->add_option("--out", args->request.out,
+                                "output folder: lf_R_C.png, disparity.pfm, previews, scene.json"))
       ->required();
   cmd->add_flag("--force", args->request.force, "replace an existing --out folder");
   cmd->add_option("--bits", args->request.bits, "bits per PNG sample, 8 or 16")

@@ -20,12 +20,13 @@ void add_report_command(CLI::App& app, const GlobalOptions&) {
   auto* cmd =
       app.add_subcommand("report", "Write docs/RESULTS.md and its figures from result records");
   auto a = std::make_shared<ReportArgs>();
-  cmd->add_option("results", a->results,
-                  "folder of result sections (default results), or the run folder of an "
-                  "lfnet train / experiment");
-  auto* out = cmd->add_option("--out", a->out,
-                              "the Markdown file to write (default docs/RESULTS.md; for a run "
-                              "folder RUN/report.md)");
+  input_path(cmd->add_option("results", a->results,
+                             "folder of result sections (default results), or the run folder of an "
+                             "lfnet train / experiment"));
+  auto* out =
+      output_file(cmd->add_option("--out", a->out,
+                                  "the Markdown file to write (default docs/RESULTS.md; for a run "
+                                  "folder RUN/report.md)"));
   cmd->add_option("--figures", a->figures,
                   "folder for the figures, PNG and SVG (default images/results beside --out)");
   const std::map<std::string, pipeline::ParetoTime> times = {

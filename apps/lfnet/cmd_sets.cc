@@ -34,14 +34,17 @@ void add_sets_command(CLI::App& app, const GlobalOptions&) {
   cmd->require_subcommand(1);
   auto a = std::make_shared<SetsArgs>();
   auto* list = cmd->add_subcommand("list", "List a set's light fields, their classes and sources");
-  list->add_option("SET", a->set, "a set file (configs/sets/validation.json, test.json)")
+  input_path(
+      list->add_option("SET", a->set, "a set file (configs/sets/validation.json, test.json)"))
       ->required();
   list->callback([a] { list_set(*a); });
   auto* make = cmd->add_subcommand(
       "make", "Write every light field of a set as a folder OUT/NAME (16-bit views, set.json)");
-  make->add_option("SET", a->set, "a set file (configs/sets/validation.json, test.json)")
+  input_path(
+      make->add_option("SET", a->set, "a set file (configs/sets/validation.json, test.json)"))
       ->required();
-  make->add_option("--out", a->out, "the folder to write the light fields into")->required();
+  output_folder(make->add_option("--out", a->out, "the folder to write the light fields into"))
+      ->required();
   make->add_option("--only", a->only, "make only these light fields (by name)");
   make->add_flag("--force", a->force, "replace the folders of light fields made before");
   make->callback([a] {

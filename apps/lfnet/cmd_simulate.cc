@@ -130,15 +130,16 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   auto* cmd = app.add_subcommand(
       "simulate", "Simulate coded capture of a light field with a Phi model and sensor effects");
   auto args = std::make_shared<SimulateArgs>();
-  cmd->add_option("--lf", args->source.lf, "light field folder of sub-aperture images");
+  input_path(cmd->add_option("--lf", args->source.lf, "light field folder of sub-aperture images"));
   cmd->add_option("--white", args->source.white,
                   "or a uniform white light field of HxW pixels: the camera's white frame, for "
                   "--flat-field (docs/acquisition.md)");
-  cmd->add_option("--scene", args->source.scene,
-                  "procedural scene spec to render and simulate (configs/scenes)");
-  cmd->add_option("--phi", args->phi,
-                  "Phi model NAME[:N] (asp, mask, aperture, random, lenslet), a PHI.json spec, a "
-                  "calibrated-Phi folder, a model file or a zoo model's name")
+  input_path(cmd->add_option("--scene", args->source.scene,
+                             "procedural scene spec to render and simulate (configs/scenes)"));
+  input_path(cmd->add_option(
+                 "--phi", args->phi,
+                 "Phi model NAME[:N] (asp, mask, aperture, random, lenslet), a PHI.json spec, a "
+                 "calibrated-Phi folder, a model file or a zoo model's name"))
       ->capture_default_str()
       ->transform(zoo_model_file);
   add_enum_option(cmd, "--mode", args->mode,
@@ -148,7 +149,7 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                   "Gaussian noise sigma, relative to a white scene's mean measurement (1)")
       ->check(kNoiseSigma);
   cmd->add_option("--seed", args->seed, "seed of the noise")->capture_default_str()->check(kSeed);
-  cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)");
+  output_folder(cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)"));
   cmd->add_option("--views", args->source.views,
                   "angular window R0:R1,C0:C1, 1-based inclusive (default: the central 5x5)");
   cmd->add_option(
@@ -159,16 +160,18 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
                   "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
   cmd->add_flag("--color", args->source.color,
                 "simulate every colour channel (default: grey luma)");
-  cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)");
-  cmd->add_option("--cfa", args->cfa,
-                  "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG "
-                  "or per-pixel colour responses as JSON, inline or a file (implies --color; "
-                  "docs/acquisition.md)")
+  input_path(
+      cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)"));
+  input_path(
+      cmd->add_option("--cfa", args->cfa,
+                      "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG "
+                      "or per-pixel colour responses as JSON, inline or a file (implies --color; "
+                      "docs/acquisition.md)"))
       ->check(kNotEmpty);
-  cmd->add_option("--camera-error", args->camera_error,
-                  "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "
-                  "'{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
-                  "vignetting; docs/acquisition.md)");
+  input_path(cmd->add_option("--camera-error", args->camera_error,
+                             "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "
+                             "'{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
+                             "vignetting; docs/acquisition.md)"));
   cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")
       ->check(kStride)
       ->capture_default_str();

@@ -63,16 +63,18 @@ void check_config(const TrainArgs& a) {
 
 void add_train_args(CLI::App* cmd, TrainArgs& a) {
   auto& r = a.request;
-  cmd->add_option("config", r.config, "experiment config (JSON), e.g. configs/quickstart.json")
+  input_path(
+      cmd->add_option("config", r.config, "experiment config (JSON), e.g. configs/quickstart.json"))
       ->check(CLI::ExistingFile);
-  cmd->add_option("--out", r.out, "run folder (default out/<config name>)");
+  output_folder(cmd->add_option("--out", r.out, "run folder (default out/<config name>)"));
   cmd->add_option("--scale", r.scale, "config scale: quick or paper (default: the config's)");
   cmd->add_option("--set", r.set,
                   "KEY.PATH=VALUE: override one config value (JSON-typed, repeatable), e.g. "
                   "--set training.epochs=1");
-  cmd->add_option("--resume", r.resume,
-                  "continue an interrupted run: its run folder (every stage), or a stage's "
-                  "last.ckpt with --stage");
+  run_folder(
+      cmd->add_option("--resume", r.resume,
+                      "continue an interrupted run: its run folder (every stage), or a stage's "
+                      "last.ckpt with --stage"));
   cmd->add_flag("--force", r.force, "replace an existing run folder: start the run afresh");
   cmd->add_flag("--check", a.check, "only read and check the config (every stage), then stop");
   cmd->add_flag("--show-config", a.show,
@@ -80,10 +82,11 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
                 "then stop");
   cmd->add_option("--device", r.device,
                   "cpu or cuda[:K]: where to train (default: the config's training.device, cpu)");
-  cmd->add_option("--init", r.init,
-                  "start the first stage from a checkpoint: finetuning, or Phi switching when "
-                  "its Phi differs (overrides the config's $.init); a zoo model's name stands "
-                  "for its file")
+  input_path(
+      cmd->add_option("--init", r.init,
+                      "start the first stage from a checkpoint: finetuning, or Phi switching when "
+                      "its Phi differs (overrides the config's $.init); a zoo model's name stands "
+                      "for its file"))
       ->transform(zoo_model_file);
 }
 

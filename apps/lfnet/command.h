@@ -17,6 +17,7 @@
 #include "lfnet/nn/network.h"
 #include "lfnet/pipeline/zoo.h"
 #include "lfnet/recon/method_registry.h"
+#include "paths.h"
 
 namespace lfnet::app {
 
@@ -221,17 +222,17 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
       "trained model for net, ae and cnn: a checkpoint, a file lfnet export wrote, or the name "
       "of a zoo model (lfnet models)";
   if (f.models) {
-    cmd->add_option("--model", *f.models,
-                    model +
-                        "; repeatable, the network methods run with each (default: an "
-                        "untrained network of --architecture)")
+    input_path(cmd->add_option("--model", *f.models,
+                               model + "; repeatable, the network methods run with each (default: "
+                                       "an untrained network of --architecture)"))
         ->transform(zoo_model_file);
   } else {
-    cmd->add_option("--model", *f.model, model)->transform(zoo_model_file);
+    input_path(cmd->add_option("--model", *f.model, model))->transform(zoo_model_file);
   }
-  cmd->add_option("--phi", *f.phi,
-                  "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "
-                  "what a model or acquisition does not say, and it must match the model");
+  input_path(cmd->add_option(
+      "--phi", *f.phi,
+      "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "
+      "what a model or acquisition does not say, and it must match the model"));
   cmd->add_option("--device", *f.device, "cpu or cuda[:K] for the network (default cpu)");
   // auto is chosen once the command line is read, when the models and the device are known.
   auto precision_auto = std::make_shared<bool>(true);
@@ -278,10 +279,11 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
         ->check(kStride);
   }
   add_self_ensemble_options(cmd, *f.self_ensemble, *f.ensemble_passes, f.ensemble_verb);
-  cmd->add_option("--method-options", *f.method_options,
-                  "options of the methods with options (" + recon::methods_with_options() +
-                      "), keyed by method: a JSON object or file, e.g. '{\"dict\": {\"method\": "
-                      "\"admm\"}}' (docs/methods.md)");
+  input_path(cmd->add_option(
+      "--method-options", *f.method_options,
+      "options of the methods with options (" + recon::methods_with_options() +
+          "), keyed by method: a JSON object or file, e.g. '{\"dict\": {\"method\": "
+          "\"admm\"}}' (docs/methods.md)"));
 }
 
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.

@@ -12,6 +12,7 @@
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/core/text.h"
+#include "paths.h"
 
 namespace {
 
@@ -73,6 +74,12 @@ int main(int argc, char** argv) {
       add_phi_command,        add_blend_command,    add_sets_command,        add_models_command};
   for (const auto& add : commands) add(app, global);
 
+  try {
+    // Every path flag is checked before anything is parsed or opened (paths.h).
+    check_path_flags(path_flags(app, std::vector<std::string>(argv + 1, argv + argc)));
+  } catch (const std::exception& e) {
+    return fail(e.what());
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

@@ -191,6 +191,7 @@ TEST_CASE("careless input, round 2: run names, resumes, starts, model paths, thr
   config.erase("evaluation");
   write_bytes(cfg, config.dump());
   // A model path that is a folder or a FIFO: one line, and no read that blocks.
+  write_light_field(tmp / "lf");
   expect_error("evaluate --model " + tmp.path().string() + " --lf " + (tmp / "lf"),
                "is a folder, not a model file", tmp.path());
   REQUIRE(mkfifo((tmp / "fifo").c_str(), 0600) == 0);
