@@ -1,6 +1,9 @@
 // The lfnet program's contract: --help, one-line errors, non-zero exits.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
+#include <filesystem>
+
 #include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
 
@@ -13,6 +16,38 @@ TEST_CASE("lfnet --help lists the subcommands", "[app]") {
   CHECK(out.find("info") != std::string::npos);
   REQUIRE(run_command(lfnet_binary() + " info --help", out) == 0);
   CHECK(out.find("--lf") != std::string::npos);
+}
+
+TEST_CASE("lfnet answers --version without loading LibTorch and runs lfnet-run for the rest",
+          "[app]") {
+  namespace fs = std::filesystem;
+  const fs::path launcher = lfnet_binary();
+  const fs::path program = launcher.parent_path() / "lfnet-run";
+  REQUIRE(fs::exists(program));
+  std::string quick;
+  std::string full;
+  REQUIRE(run_command(launcher.string() + " --version", quick) == 0);
+  REQUIRE(run_command(program.string() + " --version", full) == 0);
+  CHECK(quick.rfind("lfnet ", 0) == 0);
+  CHECK(quick == full);
+  // The launcher needs no LibTorch; the program holding the commands does.
+  std::string needed;
+  REQUIRE(run_command("readelf -d " + launcher.string(), needed) == 0);
+  CHECK(needed.find("libtorch") == std::string::npos);
+  REQUIRE(run_command("readelf -d " + program.string(), needed) == 0);
+  CHECK(needed.find("libtorch") != std::string::npos);
+  // Arguments and the exit status pass through it.
+  std::string out;
+  CHECK(run_command(launcher.string() + " info --lf /nonexistent/folder", out) == 1);
+  CHECK(out.rfind("lfnet: error: ", 0) == 0);
+  // Without lfnet-run beside it, one line says what is missing.
+  lfnet::test::TempDir tmp;
+  fs::copy_file(launcher, tmp / "lfnet");
+  CHECK(run_command((tmp / "lfnet") + " info", out) == 127);
+  CHECK(out.find("cannot run " + (tmp / "lfnet-run")) != std::string::npos);
+  CHECK(std::count(out.begin(), out.end(), '\n') == 1);
+  REQUIRE(run_command((tmp / "lfnet") + " --version", out) == 0);
+  CHECK(out == quick);
 }
 
 TEST_CASE("lfnet info describes a light field folder", "[app]") {
