@@ -483,6 +483,9 @@ TEST_CASE("a colour filter array: one sensor image, reconstructed and scored in 
   CHECK(out.find("sensor mode") != std::string::npos);
   CHECK(run_command(evaluate + " --method pinv --cfa RGBG", out) != 0);
   CHECK(out.find("RGGB") != std::string::npos);
+  // A whole-image method of grey images is refused before it runs.
+  CHECK(run_command(evaluate + " --method pinv-nlm --noise 0.05 --cfa GRBG", out) != 0);
+  CHECK(out.find("method 'pinv-nlm' reconstructs grey sensor images") != std::string::npos);
   // batch evaluates light-field folders behind the same array.
   fs::create_directories(tmp / "in");
   fs::rename(tmp / "lf", tmp / "in/lf");

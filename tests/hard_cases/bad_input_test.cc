@@ -229,6 +229,13 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
   const std::string eval = "evaluate --phi asp:2 --lf " + lf + " --method pinv ";
   expect_error(eval + "--stride 0", "--stride", tmp.path());
   expect_error(eval + "--cfa ''", "--cfa: may not be empty", tmp.path());
+  // Inline JSON that is not an object is read as JSON, not as a file's name.
+  {
+    expect_error(eval + "--method-options '[1,2]'", "--method-options", tmp.path());
+    std::string out;
+    CHECK(run_command(quiet_program(eval + "--method-options '[1,2]'"), out) != 0);
+    CHECK(out.find("no such file") == std::string::npos);
+  }
   expect_error(eval + "--camera-error '{\"angular_shift_u\": 100}'",
                "moves the views beyond the 5-view grid", tmp.path());
   expect_error(eval + "--stride 12", "1..9", tmp.path());
@@ -395,6 +402,10 @@ TEST_CASE("truncated and foreign checkpoints, and another Phi's measurements, ar
   write_bytes(tmp / "flipped.ckpt", flipped);
 
   expect_error(reconstruct(tmp / "half.ckpt", tmp / "acq"), "truncated", root);
+  // A noise switch (a JSON model file) cut off is called malformed JSON, not a checkpoint.
+  const auto sw = read_bytes(std::string(LFNET_SOURCE_DIR) + "/models/lfnet-asp-n2-auto.json");
+  write_bytes(tmp / "switch.json", sw.substr(0, sw.size() / 2));
+  expect_error(reconstruct(tmp / "switch.json", tmp / "acq"), "is not valid JSON (truncated", root);
   expect_error(reconstruct(tmp / "stub.ckpt", tmp / "acq"), "stub.ckpt", root);
   expect_error(reconstruct(tmp / "png.ckpt", tmp / "acq"), "not an lfnet checkpoint", root);
   expect_error(reconstruct(tmp / "json.ckpt", tmp / "acq"), "not an lfnet checkpoint", root);

@@ -124,7 +124,10 @@ nlohmann::json read_json_file(const std::string& path) {
   return parse_json(buffer.str(), path);
 }
 
-bool is_inline_json(const std::string& text) { return text.find('{') != std::string::npos; }
+bool is_inline_json(const std::string& text) {
+  // An object anywhere, or an array: '[1,2]' is JSON given inline, not a file's name.
+  return text.find('{') != std::string::npos || text.rfind('[', 0) == 0;
+}
 
 std::string json_argument_file(const std::string& text) {
   return is_inline_json(text) ? std::string() : text;

@@ -116,7 +116,10 @@ EvalResult evaluate_cfa(const LightField& truth, const optics::Phi& phi, const s
                  " channel(s)");
   LFNET_CHECK_AS(ConfigError, options.mode == optics::SimulationMode::kSensor,
                  "a colour filter array is simulated in sensor mode only");
-  LFNET_CHECK_AS(ConfigError, image || solver, "method '", method,
+  // A whole-image method other than a (colour) net, such as pinv-nlm, reconstructs grey images:
+  // refused before the work, not after it.
+  LFNET_CHECK_AS(ConfigError, image ? method == "net" : static_cast<bool>(solver), "method '",
+                 method,
                  "' reconstructs grey sensor images; behind a colour filter array use pinv, "
                  "adjoint, no-parallax or a colour model");
   const auto& ro = options.reconstruct;

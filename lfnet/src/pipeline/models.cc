@@ -48,6 +48,10 @@ ModelFileKind model_file_kind(const std::string& path) {
   if (in.gcount() >= 1 && head[0] == '{' && fs::file_size(path, ec) < (1 << 20) && !ec) {
     // A small JSON file: a noise switch if it says so.
     nlohmann::json j = nlohmann::json::parse(std::ifstream(path), nullptr, false);
+    // Cut off or hand-edited: say so, as a JSON file (a noise switch), not as a checkpoint.
+    LFNET_CHECK_AS(ConfigError, !j.is_discarded(), path,
+                   " is not valid JSON (truncated or malformed); a model given as JSON is a noise "
+                   "switch (docs/models.md)");
     if (j.is_object() && j.value("format", "") == kNoiseSwitchFormat) {
       return ModelFileKind::kNoiseSwitch;
     }

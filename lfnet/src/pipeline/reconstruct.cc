@@ -118,8 +118,8 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   if (folder && !a.cfa.empty()) {
     // An acquisition records its colour filter array: --cfa may only repeat it.
     const auto given = optics::resolve_cfa(a.cfa, nlohmann::json());
-    LFNET_CHECK_AS(ConfigError, cfa && given && given->to_json() == cfa->to_json(), "--cfa ",
-                   a.cfa, " contradicts ", a.sensor, "/sensor.json, which records ",
+    LFNET_CHECK_AS(ConfigError, cfa && given && given->to_json() == cfa->to_json(), "--cfa ", a.cfa,
+                   " contradicts ", a.sensor, "/sensor.json, which records ",
                    cfa ? "another colour filter array" : "a grey sensor");
   }
   if (!a.flat_field.empty()) {
