@@ -185,6 +185,15 @@ TEST_CASE("files read through other files and JSON options are inputs too, even 
   CHECK(read_bytes(opts + "/options.json") == options);
   CHECK(fs::exists(opts + "/cfa.json"));
   CHECK(fs::exists(opts + "/error.json"));
+  // A config's base ($.extends) is an input of the run too.
+  fs::create_directories(tmp.path() / "base");
+  lfnet::write_json_file(tmp / "base/base.json", two_stage_config());
+  lfnet::write_json_file(tmp / "child.json", {{"extends", "base/base.json"}});
+  CHECK(run_command(lfnet::test::lfnet_program("train " + (tmp / "child.json") + " --out " +
+                                               (tmp / "base") + " --force"),
+                    out) != 0);
+  expect_one_error(out, "contains the input");
+  CHECK(fs::exists(tmp.path() / "base/base.json"));
   // --json - is standard output, not a file named "-".
   REQUIRE(run_command("cd " + opts + " && " + lfnet::test::lfnet_program(pinv + "--json -"), out) ==
           0);

@@ -99,6 +99,19 @@ TEST_CASE("a config extends its base at the same scale, then its own keys, then 
   write_json_file(tmp / "a.json", {{"extends", "b.json"}});
   write_json_file(tmp / "b.json", {{"extends", "a.json"}});
   CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "a.json"), Catch::Contains("cycle"));
+  // $.extends empty, naming a folder or a file that is no config: each said as $.extends.
+  write_json_file(tmp / "empty.json", {{"extends", ""}});
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "empty.json"),
+                    Catch::Contains("$.extends: expected the path of a config"));
+  std::filesystem::create_directories(tmp.path() / "folder");
+  write_json_file(tmp / "dir.json", {{"extends", "folder"}});
+  CHECK_THROWS_WITH(
+      pipeline::ExperimentConfig::load(tmp / "dir.json"),
+      Catch::Contains("is a folder, not a config file") && Catch::Contains("($.extends of "));
+  std::ofstream(tmp / "view.png") << "not a config";
+  write_json_file(tmp / "png.json", {{"extends", "view.png"}});
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "png.json"),
+                    Catch::Contains("$.extends of ") && Catch::Contains("view.png"));
   write_json_file(tmp / "lost.json", {{"extends", "step.json"}, {"init", tmp / "gone.ckpt"}});
   CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "lost.json"),
                     Catch::Contains("$.init") && Catch::Contains("gone.ckpt"));

@@ -110,16 +110,23 @@ struct ResolvedConfig {
 
 ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
                               std::vector<std::string>& chain) {
-  LFNET_CHECK_AS(
-      ConfigError, fs::is_regular_file(path), "config ", path,
-      chain.empty() ? " does not exist" : " (extended by " + chain.back() + ") does not exist");
+  const std::string by = chain.empty() ? "" : " ($.extends of " + chain.back() + ")";
+  LFNET_CHECK_AS(ConfigError, !fs::is_directory(path), "config ", path, by,
+                 " is a folder, not a config file");
+  LFNET_CHECK_AS(ConfigError, fs::is_regular_file(path), "config ", path, by, " does not exist");
   const std::string canonical = fs::weakly_canonical(path).string();
   for (const auto& seen : chain) {
     LFNET_CHECK_AS(ConfigError, seen != canonical, path, ": $.extends makes a cycle");
   }
   LFNET_CHECK_AS(ConfigError, chain.size() < 16, path, ": $.extends goes 16 files deep");
+  nlohmann::json j;
+  try {
+    j = read_json_file(path);
+  } catch (const Error& e) {
+    if (chain.empty()) throw;
+    throw ConfigError("$.extends of " + chain.back() + ": " + e.what());
+  }
   chain.push_back(canonical);
-  auto j = read_json_file(path);
   LFNET_CHECK_AS(ConfigError, j.is_object(), path, ": a config is a JSON object");
   ResolvedConfig out;
   out.scale = scale;
@@ -141,7 +148,8 @@ ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
     scales = j["scales"];
   }
   if (j.contains("extends")) {
-    LFNET_CHECK_AS(ConfigError, j["extends"].is_string(), path,
+    LFNET_CHECK_AS(ConfigError,
+                   j["extends"].is_string() && !j["extends"].get<std::string>().empty(), path,
                    ": $.extends: expected the path of a config (relative to this one), got ",
                    j["extends"].dump());
     const auto base_path = fs::path(path).parent_path() / j["extends"].get<std::string>();

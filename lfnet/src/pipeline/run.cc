@@ -40,6 +40,24 @@ void recover_run_folder(const std::string& dir) {
   }
 }
 
+// A config and the bases it reads through $.extends (already checked when it was loaded).
+std::vector<std::string> config_files(const std::string& path) {
+  std::vector<std::string> files;
+  std::string at = path;
+  while (!at.empty() && files.size() < 16) {
+    files.push_back(at);
+    nlohmann::json j;
+    try {
+      j = read_json_file(at);
+    } catch (const Error&) {
+      break;
+    }
+    if (!j.is_object() || !j.contains("extends") || !j["extends"].is_string()) break;
+    at = (fs::path(at).parent_path() / j["extends"].get<std::string>()).lexically_normal().string();
+  }
+  return files;
+}
+
 }  // namespace
 
 void check_config_inputs(const ExperimentConfig& config) {
@@ -147,7 +165,15 @@ TrainResult train_experiment(const TrainRequest& request,
   if (lead) {
     OutputFolderPolicy policy;
     policy.force = request.force;
-    policy.inputs = {request.config, request.init, config.init};
+    // Every file the run reads: the config and its bases, what it starts from, its data, its
+    // teacher, and the model whose learned code it trains on or starts from.
+    policy.inputs = config_files(request.config);
+    policy.inputs.insert(policy.inputs.end(), {request.init, config.init});
+    const auto phi_file = config.raw.value("phi", nlohmann::json());
+    std::error_code ec;
+    if (phi_file.is_string() && fs::exists(phi_file.get<std::string>(), ec)) {
+      policy.inputs.push_back(phi_file.get<std::string>());
+    }
     for (const auto& lf : config.train_data.light_fields) policy.inputs.push_back(lf);
     if (config.distill.enabled()) policy.inputs.push_back(config.distill.teacher);
     if (config.code.enabled) policy.inputs.push_back(config.code.from);
