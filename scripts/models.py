@@ -99,10 +99,13 @@ def recipe_config(recipe):
 
 
 def inputs_of(config):
-    """The model files a config starts from, distils or takes its code from."""
+    """The model files a config starts from, distils, takes its code from or measures with."""
     found = []
     if config.get("init"):
         found.append(("starts from", config["init"]))
+    phi = config.get("phi")
+    if isinstance(phi, str) and phi.endswith(".ckpt"):
+        found.append(("measures with the code of", phi))
     teacher = config.get("distill", {}).get("teacher")
     if teacher:
         found.append(("distils", teacher))

@@ -62,7 +62,7 @@ void expect_one_error(const std::string& out, const std::string& needle) {
 // A small grey light field rendered into tmp/lf, its path.
 std::string rendered_light_field(const lfnet::test::TempDir& tmp) {
   std::string out;
-  const std::string lf = tmp / "lf";
+  std::string lf = tmp / "lf";
   REQUIRE(
       run_command(lfnet::test::lfnet_program("render --random 1 --size 24x24 --grey --out " + lf),
                   out) == 0);
