@@ -33,8 +33,10 @@ namespace {
 std::map<std::string, std::string> snapshot(const fs::path& dir) {
   std::map<std::string, std::string> files;
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    const auto rel = fs::relative(e.path(), dir).string();
-    files[rel] = e.is_regular_file() ? read_bytes(e.path().string()) : std::string("<dir>");
+    const auto rel = e.path().lexically_relative(dir).string();
+    std::error_code ec;  // a link that loops is listed, not followed
+    files[rel] = e.is_regular_file(ec) ? read_bytes(e.path().string())
+                                       : std::string(ec ? "<link>" : "<dir>");
   }
   return files;
 }
@@ -326,7 +328,13 @@ TEST_CASE("missing, mismatched, truncated and foreign image files are one-line e
   auto folder_view = fresh("folder_view");
   fs::remove(folder_view + "/lf_2_3.png");
   fs::create_directories(folder_view + "/lf_2_3.png");
-  expect_error(simulate(folder_view), "lf_2_3.png is not a regular file", root);
+  expect_error(simulate(folder_view), "lf_2_3.png is not a regular file but a folder", root);
+  // A view that links to itself is called a link that loops.
+  auto looping_view = fresh("looping_view");
+  fs::remove(looping_view + "/lf_2_3.png");
+  fs::create_symlink("lf_2_3.png", looping_view + "/lf_2_3.png");
+  expect_error(simulate(looping_view), "lf_2_3.png is not a regular file but a link that loops",
+               root);
   expect_error(simulate(mixed), "such as input_Cam000.png", root);
 
   // Float views are radiance in [0, 1]: far outside it (another unit) is refused with the file.

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -44,6 +45,35 @@ std::string to_string(NamingScheme scheme) {
   }
   return "unknown";
 }
+
+namespace {
+
+// What a path that is not a regular file is, in words: "a folder", "a link that loops", ...
+std::string what_is(const fs::path& path) {
+  std::error_code ec;
+  const auto link = fs::symlink_status(path, ec);
+  if (fs::is_symlink(link)) {
+    (void)fs::status(path, ec);  // only its error: ELOOP, or a missing target
+    if (ec.value() == ELOOP) return "a link that loops";
+    if (ec) return "a broken link";
+  }
+  const auto status = fs::status(path, ec);
+  switch (status.type()) {
+    case fs::file_type::directory:
+      return "a folder";
+    case fs::file_type::fifo:
+      return "a named pipe (FIFO)";
+    case fs::file_type::socket:
+      return "a socket";
+    case fs::file_type::block:
+    case fs::file_type::character:
+      return "a device";
+    default:
+      return "a special file";
+  }
+}
+
+}  // namespace
 
 namespace {
 
@@ -295,8 +325,9 @@ FolderLayout scan_folder(const std::string& dir, const std::string& layout) {
     }
   }
   for (const auto& name : not_files) {
-    LFNET_CHECK_AS(IoError, !is_view_name(name), "view ", (fs::path(dir) / name).string(),
-                   " is not a regular file (a folder?): a view is an image file");
+    const auto path = fs::path(dir) / name;
+    LFNET_CHECK_AS(IoError, !is_view_name(name), "view ", path.string(),
+                   " is not a regular file but ", what_is(path), ": a view is an image file");
   }
 
   std::map<NamingScheme, std::vector<Candidate>> found;
