@@ -5,6 +5,7 @@
 #include <system_error>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/file_kind.h"
 
 namespace lfnet::app {
 
@@ -58,20 +59,6 @@ std::vector<std::string> input_parts(const std::string& value) {
     begin = end + 1;
   }
   return parts;
-}
-
-const char* special_kind(const fs::file_status& status) {
-  switch (status.type()) {
-    case fs::file_type::fifo:
-      return "a named pipe (FIFO)";
-    case fs::file_type::socket:
-      return "a socket";
-    case fs::file_type::block:
-    case fs::file_type::character:
-      return "a device";
-    default:
-      return nullptr;
-  }
 }
 
 // `inner` is `outer`, or lies inside the folder `outer` (both existing).
@@ -150,7 +137,7 @@ void check_path_flags(const std::vector<PathFlag>& flags) {
       LFNET_CHECK_AS(ConfigError, !(ec && ec.value() == ELOOP), f.flag, " ", part,
                      " is a link that loops");
       if (fs::exists(status)) {
-        const char* kind = special_kind(status);
+        const char* kind = special_file_kind(status);
         LFNET_CHECK_AS(ConfigError, kind == nullptr, f.flag, " ", part,
                        " is not a regular file or folder: it is ", kind,
                        ", which lfnet does not read");

@@ -19,6 +19,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/file_backed.h"
+#include "lfnet/core/file_kind.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/parallel.h"
 #include "lfnet/io/png.h"
@@ -58,24 +59,10 @@ std::string what_is(const fs::path& path) {
     if (ec) return "a broken link";
   }
   const auto status = fs::status(path, ec);
-  switch (status.type()) {
-    case fs::file_type::directory:
-      return "a folder";
-    case fs::file_type::fifo:
-      return "a named pipe (FIFO)";
-    case fs::file_type::socket:
-      return "a socket";
-    case fs::file_type::block:
-    case fs::file_type::character:
-      return "a device";
-    default:
-      return "a special file";
-  }
+  if (fs::is_directory(status)) return "a folder";
+  const char* kind = special_file_kind(status);
+  return kind != nullptr ? kind : "a special file";
 }
-
-}  // namespace
-
-namespace {
 
 const std::regex kHci(R"(^input_Cam(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
 const std::regex kRowColRe(R"(^lf_(\d+)_(\d+)\.(png|tif|tiff|exr|jpg|jpeg)$)", std::regex::icase);
