@@ -106,6 +106,7 @@ struct ResolvedConfig {
   nlohmann::json j;
   std::string scale;
   bool found = false;
+  std::vector<std::string> files;  // the file, then each base it extends
 };
 
 ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
@@ -130,6 +131,7 @@ ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
   LFNET_CHECK_AS(ConfigError, j.is_object(), path, ": a config is a JSON object");
   ResolvedConfig out;
   out.scale = scale;
+  out.files.push_back(path);
   if (out.scale.empty() && j.contains("default_scale")) {
     LFNET_CHECK_AS(ConfigError, j["default_scale"].is_string(), path,
                    ": $.default_scale: expected the name of a scale, got ",
@@ -157,6 +159,7 @@ ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
     out.scale = base.scale;
     out.found = base.found;
     out.j = std::move(base.j);
+    out.files.insert(out.files.end(), base.files.begin(), base.files.end());
   }
   j.erase("extends");
   j.erase("scales");
@@ -182,6 +185,7 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
   for (const auto& o : overrides) apply_override(j, o);
   auto config = from_json(j, overrides.empty() ? path : path + " (with --set)");
   config.scale = resolved.scale;
+  config.files = std::move(resolved.files);
   // A new run starts from $.init: it must be there (a resumed run may no longer need it).
   LFNET_CHECK_AS(ConfigError, config.init.empty() || fs::is_regular_file(config.init), path,
                  ": $.init: ", config.init, " is not a file: give a checkpoint to start from");

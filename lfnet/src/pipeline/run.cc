@@ -40,24 +40,6 @@ void recover_run_folder(const std::string& dir) {
   }
 }
 
-// A config and the bases it reads through $.extends (already checked when it was loaded).
-std::vector<std::string> config_files(const std::string& path) {
-  std::vector<std::string> files;
-  std::string at = path;
-  while (!at.empty() && files.size() < 16) {
-    files.push_back(at);
-    nlohmann::json j;
-    try {
-      j = read_json_file(at);
-    } catch (const Error&) {
-      break;
-    }
-    if (!j.is_object() || !j.contains("extends") || !j["extends"].is_string()) break;
-    at = (fs::path(at).parent_path() / j["extends"].get<std::string>()).lexically_normal().string();
-  }
-  return files;
-}
-
 }  // namespace
 
 void check_config_inputs(const ExperimentConfig& config) {
@@ -167,7 +149,7 @@ TrainResult train_experiment(const TrainRequest& request,
     policy.force = request.force;
     // Every file the run reads: the config and its bases, what it starts from, its data, its
     // teacher, and the model whose learned code it trains on or starts from.
-    policy.inputs = config_files(request.config);
+    policy.inputs = config.files;
     policy.inputs.insert(policy.inputs.end(), {request.init, config.init});
     const auto phi_file = config.raw.value("phi", nlohmann::json());
     std::error_code ec;

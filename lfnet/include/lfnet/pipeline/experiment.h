@@ -107,6 +107,9 @@ struct ExperimentConfig {
   dict::SparseCodingOptions dictionary_coding;
   EvaluationConfig evaluation;
   nlohmann::json raw;  // the config after merging the scale, as written to config.json
+  // The config file and each base it extends ($.extends), as load() read them; none for a run's
+  // config.json (load_run).
+  std::vector<std::string> files;
 
   // Reads a config file; `scale` picks one of its "scales" (merge patches) or, when empty,
   // its "default_scale". A config may extend another ($.extends: a path relative to it): the
