@@ -146,7 +146,7 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
       {"distill.teacher=" + models + "lfnet-asp-n2-bayer-blend.ckpt",
        "behind a Bayer RGGB filter, the net reconstructs grey sensor images"},
       {"distill.weight=1.5", "$.distill.weight: must lie in [0, 1]"},
-      {"distill.passes=-1", "$.distill.passes: must be >= 0"},
+      {"distill.passes=-1", "$.distill.passes: must lie in [0, 64], got -1"},
       {"distill.precision=half", "half"},
   };
   for (const auto& [set, message] : bad) {

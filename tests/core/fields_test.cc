@@ -57,6 +57,16 @@ Outer read(const nlohmann::json& j) {
   return o;
 }
 
+struct Bounded {
+  double rate = 0.5;
+  std::vector<int64_t> sizes = {1};
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("rate", rate, lfnet::Range::above(0, 1));
+    f("sizes", sizes, lfnet::Range::closed(1, 8));
+  }
+};
+
 }  // namespace sample
 
 TEST_CASE("a field list writes every field and reads back what it wrote", "[core][fields]") {
@@ -120,4 +130,19 @@ TEST_CASE("with_path puts the reader's path in front of a validation error", "[c
   lfnet::JsonReader r(j, "$.training");
   CHECK_THROWS_WITH(lfnet::with_path(r, [] { throw lfnet::ConfigError("epochs: must be >= 1"); }),
                     "$.training.epochs: must be >= 1");
+}
+
+TEST_CASE("a field's range refuses what lies outside it, with the path and the range", "[fields]") {
+  using lfnet::options_from_json;
+  const auto ok = options_from_json<sample::Bounded>({{"rate", 1.0}, {"sizes", {1, 8}}}, "$");
+  CHECK(ok.rate == 1.0);
+  CHECK(ok.sizes == std::vector<int64_t>{1, 8});
+  CHECK_THROWS_WITH(options_from_json<sample::Bounded>({{"rate", 0.0}}, "$"),
+                    "$.rate: must lie in (0, 1], got 0");
+  CHECK_THROWS_WITH(options_from_json<sample::Bounded>({{"rate", 1e300}}, "$"),
+                    "$.rate: must lie in (0, 1], got 1e+300");
+  CHECK_THROWS_WITH(options_from_json<sample::Bounded>({{"sizes", {2, 9}}}, "$"),
+                    "$.sizes[1]: must lie in [1, 8], got 9");
+  // Writing ignores the range.
+  CHECK(lfnet::fields_to_json(ok) == nlohmann::json{{"rate", 1.0}, {"sizes", {1, 8}}});
 }

@@ -171,6 +171,10 @@ TEST_CASE("a custom colour response comes from JSON and is checked", "[optics][c
   CHECK_THROWS_WITH(
       ColourFilterArray::from_json(nlohmann::json::parse(R"({"response": [[[0, 0, 0]]]})")),
       Catch::Contains("$.response[0][0]"));
+  // A weight a float cannot hold (it became NaN in the patch rows) is refused by its domain.
+  CHECK_THROWS_WITH(
+      ColourFilterArray::from_json(nlohmann::json::parse(R"({"response": [[[1e300, 0, 0]]]})")),
+      Catch::Contains("$.response[0][0][0]: a weight must lie in [0, 100]"));
   CHECK_THROWS_WITH(
       ColourFilterArray::from_json(nlohmann::json::parse(R"({"pattern": "RGGB", "x": 1})")),
       Catch::Contains("x"));

@@ -6,10 +6,12 @@
 #include <algorithm>
 
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <set>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/optics/asp.h"
 #include "support/test_support.h"
 
@@ -323,7 +325,7 @@ TEST_CASE("lenslets record one view per pixel of a super-pixel", "[optics][lensl
 TEST_CASE("the Tikhonov pseudo-inverse", "[optics][pinv]") {
   // lambda -> 0 with N = U V on a full-rank model recovers a patch exactly.
   torch::manual_seed(4);
-  auto patch = torch::rand({25 * 9 * 9}, torch::kFloat64);
+  auto patch = torch::rand({int64_t{25} * 9 * 9}, torch::kFloat64);
   for (const auto& name : {"asp", "aperture", "lenslet"}) {
     auto phi = make_phi(spec_of(name, 25));
     auto a = phi->patch_matrix(3, 5, 9, 9, torch::kFloat64);
@@ -424,4 +426,22 @@ TEST_CASE("an ASP quadrature pair is odd in the view angle and still sums to a p
   CHECK(lfnet::optics::make_phi(column)->spec().params["pair_alpha"] == 0.0);
   column.params = {{"pair_alpha", 90.0}};  // asked for explicitly: an error
   CHECK_THROWS_AS(lfnet::optics::make_phi(column), lfnet::ConfigError);
+}
+
+TEST_CASE("every number in a shipped camera spec has a domain", "[phi][domains]") {
+  const std::filesystem::path dir = std::filesystem::path(LFNET_SOURCE_DIR) / "configs" / "cameras";
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.path().extension() != ".json") continue;
+    ++files;
+    const auto found = lfnet::test::absurd_values_unrefused(
+        lfnet::read_json_file(entry.path().string()), [](const nlohmann::json& j) {
+          (void)lfnet::optics::make_phi(lfnet::optics::PhiSpec::from_json(j));
+        });
+    std::string all;
+    for (const auto& line : found) all += line + "\n";
+    INFO(entry.path().string() << "\n" << all);
+    CHECK(found.empty());
+  }
+  CHECK(files >= 1);
 }

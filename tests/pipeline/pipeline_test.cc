@@ -115,6 +115,13 @@ TEST_CASE("a config extends its base at the same scale, then its own keys, then 
   write_json_file(tmp / "lost.json", {{"extends", "step.json"}, {"init", tmp / "gone.ckpt"}});
   CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "lost.json"),
                     Catch::Contains("$.init") && Catch::Contains("gone.ckpt"));
+  // $.init written relative to the config: the error names the file beside it.
+  std::filesystem::create_directories(tmp.path() / "sub");
+  std::ofstream(tmp / "sub/start.ckpt") << "LFNETCKP";
+  write_json_file(tmp / "sub/rel.json", {{"extends", "../step.json"}, {"init", "start.ckpt"}});
+  CHECK_THROWS_WITH(pipeline::ExperimentConfig::load(tmp / "sub/rel.json"),
+                    Catch::Contains("taken from the working folder, not the config's: give ") &&
+                        Catch::Contains("sub/start.ckpt"));
 }
 
 TEST_CASE("every model in models/ has a recipe, and every recipe's config is valid",
@@ -449,10 +456,10 @@ TEST_CASE("method options are keyed by method, read from JSON or a file, and che
       R"({"pinv-nlm": {"denoiser": "nlm", "options": {"search": 3}}})", run));
   CHECK_THROWS_WITH(pipeline::method_options_argument(R"({"pinv-nlm": {"denoiser": "bm3d"}})", run),
                     Catch::Contains("unknown denoiser 'bm3d'") && Catch::Contains("nlm"));
-  CHECK_THROWS_WITH(
-      pipeline::method_options_argument(
-          R"({"pinv-nlm": {"denoiser": "nlm", "options": {"h": -1}}})", run),
-      Catch::Contains("--method-options.pinv-nlm.options") && Catch::Contains("h: must be > 0"));
+  CHECK_THROWS_WITH(pipeline::method_options_argument(
+                        R"({"pinv-nlm": {"denoiser": "nlm", "options": {"h": -1}}})", run),
+                    Catch::Contains("--method-options.pinv-nlm.options") &&
+                        Catch::Contains("h: must lie in (0, 100], got -1"));
   // A run's record says which options it ran with, complete.
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   pipeline::MethodContext context;

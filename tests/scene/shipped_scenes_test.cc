@@ -3,6 +3,7 @@
 
 #include <filesystem>
 
+#include "lfnet/core/json.h"
 #include "lfnet/scene/render.h"
 #include "support/test_support.h"
 
@@ -36,4 +37,22 @@ TEST_CASE("every shipped scene parses and renders with values in [0, 1]", "[scen
     CHECK(result.disparity.abs().max().item<double>() <= spec.max_abs_disparity() + 1e-4);
   }
   CHECK(heldout);
+}
+
+TEST_CASE("every number in a shipped scene has a domain", "[scene][shipped][domains]") {
+  // Each numeric value of each shipped scene in turn at 1e300 and -1e300: refused, naming it.
+  const fs::path dir = fs::path(LFNET_SOURCE_DIR) / "configs" / "scenes";
+  int files = 0;
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    if (entry.path().extension() != ".json") continue;
+    ++files;
+    const auto found = lfnet::test::absurd_values_unrefused(
+        lfnet::read_json_file(entry.path().string()),
+        [](const nlohmann::json& j) { (void)lfnet::scene::SceneSpec::from_json(j); });
+    std::string all;
+    for (const auto& line : found) all += line + "\n";
+    INFO(entry.path().string() << "\n" << all);
+    CHECK(found.empty());
+  }
+  CHECK(files >= 7);
 }

@@ -1,5 +1,7 @@
 #include "support/test_support.h"
 
+#include "lfnet/core/error.h"
+
 #include <catch2/catch.hpp>
 
 #include <sys/wait.h>
@@ -150,6 +152,53 @@ LightField parallax_light_field(int64_t rows, int64_t cols, int64_t h, int64_t w
     }
   }
   return LightField(out);
+}
+
+namespace {
+// The JSON pointers of the numeric leaves of `j` (their last key: `key`).
+void numeric_leaves(const nlohmann::json& j, const std::string& pointer, const std::string& key,
+                    std::vector<std::pair<std::string, std::string>>& out) {
+  if (j.is_object()) {
+    for (const auto& [k, v] : j.items()) {
+      std::string child = pointer;
+      child.append("/").append(k);
+      numeric_leaves(v, child, k, out);
+    }
+  } else if (j.is_array()) {
+    for (size_t i = 0; i < j.size(); ++i) {
+      numeric_leaves(j[i], pointer + "/" + std::to_string(i), key, out);
+    }
+  } else if (j.is_number()) {
+    out.emplace_back(pointer, key);
+  }
+}
+}  // namespace
+
+std::vector<std::string> absurd_values_unrefused(
+    const nlohmann::json& base, const std::function<void(const nlohmann::json&)>& read) {
+  std::vector<std::pair<std::string, std::string>> leaves;
+  numeric_leaves(base, "", "", leaves);
+  std::vector<std::string> found;
+  for (const auto& [pointer, key] : leaves) {
+    if (key == "seed") continue;
+    for (const double value : {1e300, -1e300}) {
+      auto input = base;
+      input[nlohmann::json::json_pointer(pointer)] = value;
+      const std::string what = pointer + " = " + nlohmann::json(value).dump();
+      try {
+        read(input);
+        found.push_back(what + ": accepted");
+      } catch (const ConfigError& e) {
+        if (std::string(e.what()).find(key) == std::string::npos) {
+          found.push_back(what + ": refused without naming '" + key + "': ");
+          found.back() += e.what();
+        }
+      } catch (const std::exception& e) {
+        found.push_back(what + ": not a ConfigError: " + e.what());
+      }
+    }
+  }
+  return found;
 }
 
 }  // namespace lfnet::test

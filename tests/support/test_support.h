@@ -7,6 +7,7 @@
 #include <sys/types.h>
 
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -99,5 +100,11 @@ std::vector<std::filesystem::path> zoo_checkpoints();
 // (integers, so every view is an exact shift: L(u, v)(y, x) = T(y - d du, x - d dv)).
 LightField parallax_light_field(int64_t rows, int64_t cols, int64_t h, int64_t w, int64_t left,
                                 int64_t right, uint64_t seed = 1);
+
+// Sets each numeric leaf of `base` in turn (seeds aside: any value is one) to 1e300 and -1e300
+// and runs `read` on the result: one line for each value it accepts, or refuses otherwise than
+// with a ConfigError naming the leaf's key. Empty when every leaf has a domain.
+std::vector<std::string> absurd_values_unrefused(
+    const nlohmann::json& base, const std::function<void(const nlohmann::json&)>& read);
 
 }  // namespace lfnet::test

@@ -10,6 +10,7 @@
 #include <sstream>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/output.h"
 
 namespace lfnet {
@@ -227,6 +228,24 @@ std::string phi_label(const nlohmann::json& spec) {
     return v.is_string() ? v.get<std::string>() : v.dump();
   };
   return part("name") + ":" + part("n");
+}
+
+namespace {
+std::string number_text(double v) {
+  std::ostringstream out;
+  out << std::setprecision(6) << v;
+  return out.str();
+}
+}  // namespace
+
+std::string Range::text() const {
+  return std::string(lo_open ? "(" : "[") + number_text(lo) + ", " + number_text(hi) + "]";
+}
+
+void detail::check_in_range(double v, const Range& range, const std::string& path) {
+  if (!range.contains(v)) {
+    throw ConfigError(path + ": must lie in " + range.text() + ", got " + number_text(v));
+  }
 }
 
 }  // namespace lfnet

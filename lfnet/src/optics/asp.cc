@@ -159,8 +159,11 @@ AspParams AspParams::read(JsonReader& r) {
                  ": the modulation depth m must be in (0, 1], got ", p.depth);
   LFNET_CHECK_AS(ConfigError, p.aperture == "full" || p.aperture == "disk", r.path_of("aperture"),
                  ": expected \"full\" or \"disk\", got \"", p.aperture, "\"");
-  LFNET_CHECK_AS(ConfigError, p.radius > 0 && p.edge > 0, r.path_of("radius"),
-                 ": radius and edge must be positive");
+  // Both relative to the aperture's radius: 10 is already far outside it.
+  LFNET_CHECK_AS(ConfigError, p.radius > 0 && p.radius <= 10, r.path_of("radius"),
+                 ": must lie in (0, 10], got ", p.radius);
+  LFNET_CHECK_AS(ConfigError, p.edge > 0 && p.edge <= 10, r.path_of("edge"),
+                 ": must lie in (0, 10], got ", p.edge);
   LFNET_CHECK_AS(ConfigError, p.layout == "independent" || p.layout == "pairs", r.path_of("layout"),
                  ": expected \"independent\" or \"pairs\", got \"", p.layout, "\"");
   return p;

@@ -101,9 +101,11 @@ ColourFilterArray ColourFilterArray::from_json(const nlohmann::json& j, const st
       double sum = 0;
       for (int64_t c = 0; c < 3; ++c) {
         const auto& v = rgb[static_cast<size_t>(c)];
-        LFNET_CHECK_AS(ConfigError,
-                       v.is_number() && std::isfinite(v.get<double>()) && v.get<double>() >= 0,
-                       path, ".response[", y, "][", x, "]: weights must be finite and >= 0");
+        // A filter's weight is its transmittance relative to the others: 100 is already absurd,
+        // and a float overflows beyond about 3e38.
+        LFNET_CHECK_AS(ConfigError, v.is_number() && v.get<double>() >= 0 && v.get<double>() <= 100,
+                       path, ".response[", y, "][", x, "][", c,
+                       "]: a weight must lie in [0, 100], got ", v.dump());
         response[c][y][x] = v.get<float>();
         sum += v.get<double>();
       }

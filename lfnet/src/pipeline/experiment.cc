@@ -30,17 +30,10 @@ void EvaluationConfig::read(JsonReader& r) {
   }
   r.get("method_options", method_options);
   check_method_options(method_options, methods, r.path_of("method_options"));
-  r.get("strides", strides);
-  for (size_t i = 0; i < strides.size(); ++i) {
-    LFNET_CHECK_AS(ConfigError, strides[i] >= 1, r.path_of("strides"), "[", i,
-                   "]: a stride must be >= 1, got ", strides[i]);
-  }
-  FieldReader{r}("modes", modes);
-  r.get("noise", noise);
-  for (size_t i = 0; i < noise.size(); ++i) {
-    LFNET_CHECK_AS(ConfigError, noise[i] >= 0 && std::isfinite(noise[i]), r.path_of("noise"), "[",
-                   i, "]: a noise sigma must be finite and >= 0, got ", noise[i]);
-  }
+  FieldReader fields{r};
+  fields("strides", strides, Range::closed(1, 64));
+  fields("modes", modes);
+  fields("noise", noise, Range::closed(0, 10));
   r.get("model_stage", model_stage);
   r.finish();
 }
@@ -186,19 +179,29 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
   auto config = from_json(j, overrides.empty() ? path : path + " (with --set)");
   config.scale = resolved.scale;
   config.files = std::move(resolved.files);
-  // A new run starts from $.init: it must be there (a resumed run may no longer need it).
+  // A new run starts from $.init: it must be there (a resumed run may no longer need it). A
+  // config's paths are taken from the working folder, $.extends alone from the config's: a path
+  // that exists beside the config only is named.
+  const auto where = [&](const std::string& file) {
+    const auto beside = fs::path(path).parent_path() / file;
+    return fs::path(file).is_relative() && fs::is_regular_file(beside)
+               ? " (it is taken from the working folder, not the config's: give " +
+                     beside.string() + ")"
+               : "";
+  };
   LFNET_CHECK_AS(ConfigError, config.init.empty() || fs::is_regular_file(config.init), path,
-                 ": $.init: ", config.init, " is not a file: give a checkpoint to start from");
+                 ": $.init: ", config.init, " is not a file", where(config.init),
+                 ": give a checkpoint to start from");
   LFNET_CHECK_AS(ConfigError, config.code.from.empty() || fs::is_regular_file(config.code.from),
-                 path, ": $.code.from: ", config.code.from,
-                 " is not a file: give a model that learned a code of this family and shape");
+                 path, ": $.code.from: ", config.code.from, " is not a file",
+                 where(config.code.from),
+                 ": give a model that learned a code of this family and shape");
   return config;
 }
 
 void DistillConfig::read(JsonReader& r) {
   read_fields(r, *this);
   r.finish();
-  if (passes < 0) throw ConfigError(r.path_of("passes") + ": must be >= 0 (0: every mirror image)");
   if (!(weight >= 0 && weight <= 1))
     throw ConfigError(r.path_of("weight") + ": must lie in [0, 1]");
 }

@@ -25,7 +25,9 @@ namespace lfnet::pipeline {
 void LightFieldSources::read(JsonReader& r) {
   read_fields(r, *this);
   r.finish();
-  if (random_scenes < 0) throw ConfigError(r.path_of("random_scenes") + ": must be >= 0");
+  // The scene options are checked now, not when the first scene is drawn.
+  JsonReader scene_reader(random_options, r.path_of("random_options"));
+  (void)scene::RandomSceneOptions::from_json(scene_reader);
   AngularOrientation::parse(orient, r.path_of("orient"));
   if (!layout.empty()) io::parse_layout(layout, r.path_of("layout"));
 }

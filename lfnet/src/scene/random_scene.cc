@@ -324,9 +324,11 @@ void RandomSceneOptions::validate(const std::string& p) const {
   if (width < 8 || width > 16384) fail(p + ".width", "must lie in [8, 16384]");
   if (rows < 1 || rows > 64) fail(p + ".rows", "must lie in [1, 64]");
   if (cols < 1 || cols > 64) fail(p + ".cols", "must lie in [1, 64]");
-  if (!(min_disparity <= max_disparity) || !std::isfinite(min_disparity) ||
-      !std::isfinite(max_disparity)) {
-    fail(p + ".max_disparity", "the disparity range must be finite with min <= max");
+  // Beyond +-64 px per view step every layer leaves the views of a 5 x 5 grid.
+  if (!(std::abs(min_disparity) <= 64)) fail(p + ".min_disparity", "must lie in [-64, 64]");
+  if (!(std::abs(max_disparity) <= 64)) fail(p + ".max_disparity", "must lie in [-64, 64]");
+  if (!(min_disparity <= max_disparity)) {
+    fail(p + ".max_disparity", "must be >= min_disparity");
   }
   if (min_layers < 1) fail(p + ".min_layers", "must be >= 1");
   if (max_layers < min_layers || max_layers > 64) {

@@ -5,6 +5,7 @@
 
 #include "json_read.h"
 #include "lfnet/core/error.h"
+#include "lfnet/core/text.h"
 
 namespace lfnet::scene {
 namespace {
@@ -52,16 +53,17 @@ void check_color(const Rgb& c, const std::string& path) {
   }
 }
 
+std::string number(double value) { return format_text("%g", value); }
+
 void check_positive(double value, const std::string& path) {
   if (!(value > 0.0) || !std::isfinite(value)) {
-    fail(path, "must be a positive number, got " + std::to_string(value));
+    fail(path, "must be a positive number, got " + number(value));
   }
 }
 
 void check_range(double value, double lo, double hi, const std::string& path) {
   if (!(value >= lo && value <= hi)) {
-    fail(path, "must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                   std::to_string(value));
+    fail(path, "must lie in [" + number(lo) + ", " + number(hi) + "], got " + number(value));
   }
 }
 
@@ -238,6 +240,7 @@ json TextureSpec::to_json() const {
 }
 
 void TextureSpec::validate(const std::string& json_path) const {
+  check_range(angle, -3600.0, 3600.0, json_path + ".angle");
   if (kind != TextureKind::kImage) {
     if (colors.empty()) fail(json_path + ".colors", "needs at least one colour");
     for (size_t i = 0; i < colors.size(); ++i) {
@@ -269,7 +272,14 @@ void TextureSpec::validate(const std::string& json_path) const {
         fail(json_path + ".profile",
              "gradient profile must be 'linear' or 'radial', got '" + profile + "'");
       }
-      if (length) check_positive(*length, json_path + ".length");
+      if (length) {
+        check_positive(*length, json_path + ".length");
+        check_range(*length, 0.0, 1e5, json_path + ".length");
+      }
+      if (center) {
+        check_range(center->x, -1e5, 1e5, json_path + ".center");
+        check_range(center->y, -1e5, 1e5, json_path + ".center");
+      }
       break;
     case TextureKind::kImage:
       if (path.empty()) fail(json_path + ".path", "image texture needs a file path");
@@ -396,9 +406,27 @@ void ShapeSpec::validate(const std::string& path) const {
       check_positive(width, path + ".width");
       check_positive(period, path + ".period");
       if (width >= period) fail(path + ".width", "bars must be narrower than their period");
-      if (count < 0) fail(path + ".count", "must be >= 0 (0: unlimited)");
+      if (count < 0 || count > 100000) {
+        fail(path + ".count", "must lie in [0, 100000] (0: unlimited)");
+      }
       break;
   }
+  // Positions and sizes in pixels: a scene is at most 16384 px a side, so 1e5 is far outside it.
+  constexpr double kFar = 1e5;
+  if (center) {
+    check_range(center->x, -kFar, kFar, path + ".center");
+    check_range(center->y, -kFar, kFar, path + ".center");
+  }
+  for (const auto& p : points) {
+    check_range(p.x, -kFar, kFar, path + ".points");
+    check_range(p.y, -kFar, kFar, path + ".points");
+  }
+  if (width > kFar || height > kFar) {
+    fail(path + (kind == ShapeKind::kBars ? ".width" : ".size"), "must be at most 1e+05 px");
+  }
+  if (radius > kFar) fail(path + ".radius", "must be at most 1e+05 px");
+  if (period > kFar) fail(path + ".period", "must be at most 1e+05 px");
+  check_range(angle, -3600.0, 3600.0, path + ".angle");
   check_range(softness, 0.05, 1e4, path + ".softness");
 }
 
@@ -443,7 +471,7 @@ json LayerSpec::to_json() const {
 void LayerSpec::validate(const std::string& path) const {
   texture.validate(path + ".texture");
   shape.validate(path + ".shape");
-  if (!std::isfinite(disparity)) fail(path + ".disparity", "must be finite");
+  check_range(disparity, -1024.0, 1024.0, path + ".disparity");
   check_range(opacity, 0.0, 1.0, path + ".opacity");
   check_range(gloss, 0.0, 10.0, path + ".gloss");
 }
@@ -482,7 +510,7 @@ void SpecularSpec::validate(const std::string& path) const {
   check_range(strength, 0.0, 10.0, path + ".strength");
   check_range(sigma, 0.1, 1e4, path + ".sigma");
   check_range(lobe, 0.05, 1e3, path + ".lobe");
-  if (!std::isfinite(disparity_offset)) fail(path + ".disparity_offset", "must be finite");
+  check_range(disparity_offset, -1024.0, 1024.0, path + ".disparity_offset");
   check_color(color, path + ".color");
 }
 
@@ -523,7 +551,7 @@ json DefocusSpec::to_json() const {
 }
 
 void DefocusSpec::validate(const std::string& path) const {
-  if (!std::isfinite(focus_disparity)) fail(path + ".focus_disparity", "must be finite");
+  check_range(focus_disparity, -1024.0, 1024.0, path + ".focus_disparity");
   check_range(blur, 0.0, 100.0, path + ".blur");
   check_range(max_sigma, 0.0, 64.0, path + ".max_sigma");
 }
@@ -619,7 +647,8 @@ void SceneSpec::validate() const {
   }
   const double max_shift = max_abs_disparity() * std::max(umax, vmax);
   if (max_shift > 1024.0) {
-    fail("$.layers", "disparities shift views by up to " + std::to_string(max_shift) +
+    fail("$.layers", "disparities shift views by up to " +
+                         std::to_string(static_cast<int64_t>(max_shift)) +
                          " px; the limit is 1024");
   }
   if (specular) specular->validate("$.effects.specular");

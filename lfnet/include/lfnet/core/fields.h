@@ -7,7 +7,10 @@
 //     f("reduction", reduction);
 //   }
 //
-// and read_fields / fields_to_json drive that list both ways: reading is strict (JsonReader:
+// and read_fields / fields_to_json drive that list both ways. A numeric field names its domain
+// as a third argument, f("lr", lr, Range::above(0, 1)): reading refuses a value outside it (each
+// element of a list) with its JSON path; every numeric field of a JSON input has one
+// (tests/pipeline/numeric_domains_test.cc). Reading and writing: reading is strict (JsonReader:
 // kinds checked, unknown keys refused with their JSON path), nested Options structs (those
 // with a fields() of their own) are read and written as nested objects, and a missing key
 // keeps the field's default. An optional Options struct (std::optional<T>) is set when its key
@@ -30,11 +33,29 @@
 
 namespace lfnet {
 
+// The values a numeric field may take: [lo, hi], or (lo, hi] when made by above().
+struct Range {
+  double lo = 0;
+  double hi = 0;
+  bool lo_open = false;
+
+  static constexpr Range closed(double lo, double hi) { return {lo, hi, false}; }
+  static constexpr Range above(double lo, double hi) { return {lo, hi, true}; }
+  bool contains(double v) const { return (lo_open ? v > lo : v >= lo) && v <= hi; }
+  // "[0, 1]", "(0, 10]"
+  std::string text() const;
+};
+
 namespace detail {
+
+// Throws ConfigError "PATH: must lie in [lo, hi], got V" unless `v` is in `range`.
+void check_in_range(double v, const Range& range, const std::string& path);
 
 struct FieldProbe {
   template <typename T>
   void operator()(const char*, T&) {}
+  template <typename T>
+  void operator()(const char*, T&, const Range&) {}
 };
 
 // True for types with a fields() member template: nested Options structs.
@@ -100,6 +121,19 @@ struct FieldReader {
       reader.get(key, value);
     }
   }
+  // A numeric field (or a list of numbers) and its domain.
+  template <typename T>
+  void operator()(const char* key, T& value, const Range& range) {
+    if (!reader.get(key, value)) return;
+    if constexpr (std::is_arithmetic_v<T>) {
+      detail::check_in_range(static_cast<double>(value), range, reader.path_of(key));
+    } else {
+      for (size_t i = 0; i < value.size(); ++i) {
+        detail::check_in_range(static_cast<double>(value[i]), range,
+                               reader.path_of(key) + "[" + std::to_string(i) + "]");
+      }
+    }
+  }
 };
 
 // Every field of `options` present in the reader's object. Unknown keys are left to the
@@ -131,6 +165,10 @@ struct FieldWriter {
     } else {
       out[key] = value;
     }
+  }
+  template <typename T>
+  void operator()(const char* key, const T& value, const Range&) {
+    out[key] = value;
   }
 };
 

@@ -7,6 +7,8 @@
 
 #include <cstdint>
 
+#include "lfnet/core/fields.h"
+
 namespace lfnet::cv {
 
 // cv::fastNlMeansDenoising, one view at a time, on 16-bit views (the L1 norm).
@@ -17,7 +19,7 @@ struct OpenCvNlmOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("h", h);
+    f("h", h, Range::above(0, 100));
     f("patch", patch);
     f("search", search);
   }

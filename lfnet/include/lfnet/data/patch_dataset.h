@@ -99,13 +99,13 @@ struct DatasetOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("patch_h", patch_h);
-    f("patch_w", patch_w);
+    f("patch_h", patch_h, Range::closed(1, 4096));
+    f("patch_w", patch_w, Range::closed(1, 4096));
     f("train_patches", train_patches);
     f("validation_patches", validation_patches);
     f("validation_fraction", validation_fraction);
     f("augment", augment);
-    f("min_std", min_std);
+    f("min_std", min_std, Range::closed(0, 1));
     f("angular_windows", angular_windows);
     f("angular_steps", angular_steps);
     f("jitter_gamma", jitter_gamma);

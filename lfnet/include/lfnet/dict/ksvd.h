@@ -43,16 +43,16 @@ struct KsvdOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("atoms", atoms);
+    f("atoms", atoms, Range::closed(1, 20000));
     f("sparsity", sparsity);
-    f("target_error", target_error);
-    f("iterations", iterations);
-    f("tolerance", tolerance);
+    f("target_error", target_error, Range::closed(0, 1e3));
+    f("iterations", iterations, Range::closed(1, 1e6));
+    f("tolerance", tolerance, Range::closed(0, 1));
     f("atom_update", atom_update);
     f("seed", seed);
     f("keep_better_codes", keep_better_codes);
     f("replace_atoms", replace_atoms);
-    f("min_uses", min_uses);
+    f("min_uses", min_uses, Range::closed(0, 1e9));
     f("max_coherence", max_coherence);
   }
   void validate() const;

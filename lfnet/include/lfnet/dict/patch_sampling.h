@@ -28,13 +28,13 @@ struct PatchSamplingOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("count", count);
-    f("views", views);
-    f("patch_size", patch_size);
-    f("min_variance", min_variance);
+    f("count", count, Range::closed(1, 1e8));
+    f("views", views, Range::closed(1, 4096));
+    f("patch_size", patch_size, Range::closed(1, 256));
+    f("min_variance", min_variance, Range::closed(0, 1));
     f("color", color);
     f("seed", seed);
-    f("max_draws", max_draws);
+    f("max_draws", max_draws, Range::closed(1, 1e12));
   }
   void validate() const;
   nlohmann::json to_json() const;

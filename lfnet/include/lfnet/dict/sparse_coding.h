@@ -19,12 +19,12 @@ namespace lfnet::dict {
 struct OmpCodingOptions {
   int64_t max_atoms = 10;            // atoms per patch
   double residual_tolerance = -1.0;  // also stop when ||A D alpha - y||^2 / m <= this (a noise
-                                     // variance per measurement); < 0: off
+                                     // variance per measurement); -1 to 0: off
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("max_atoms", max_atoms);
-    f("residual_tolerance", residual_tolerance);
+    f("max_atoms", max_atoms, Range::closed(1, 1e6));
+    f("residual_tolerance", residual_tolerance, Range::closed(-1, 1e3));
   }
   void validate() const;
   nlohmann::json to_json() const;
@@ -59,11 +59,11 @@ struct AdmmOptions {
   void fields(Fields& f) {
     f("lambda", lambda);
     f("relative_lambda", relative_lambda);
-    f("rho", rho);
+    f("rho", rho, Range::above(0, 1e6));
     f("relaxation", relaxation);
-    f("abs_tolerance", abs_tolerance);
-    f("rel_tolerance", rel_tolerance);
-    f("max_iterations", max_iterations);
+    f("abs_tolerance", abs_tolerance, Range::closed(0, 1));
+    f("rel_tolerance", rel_tolerance, Range::closed(0, 1));
+    f("max_iterations", max_iterations, Range::closed(1, 1e8));
     f("double_precision", double_precision);
   }
   void validate() const;
@@ -90,7 +90,7 @@ struct SparseCodingOptions {
   void fields(Fields& f) {
     f("method", method);
     f("normalize_columns", normalize_columns);
-    f("cache_size", cache_size);
+    f("cache_size", cache_size, Range::closed(0, 1e9));
     f("omp", omp);
     f("admm", admm);
   }

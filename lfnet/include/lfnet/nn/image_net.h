@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/nn/architecture.h"
 
@@ -35,9 +36,9 @@ struct ImageNetOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("channels", channels);
+    f("channels", channels, Range::closed(1, 1024));
     f("levels", levels);
-    f("blocks", blocks);
+    f("blocks", blocks, Range::closed(1, 16));
     f("widths", widths);
     f("noise_input", noise_input);
   }

@@ -41,7 +41,7 @@ struct LearnedPhiOptions {
     f("max_depth", max_depth);
     f("init", init);
     f("seed", seed);
-    f("init_spread", init_spread);
+    f("init_spread", init_spread, Range::closed(0, 10));
   }
   // Throws ConfigError naming the bad field.
   void validate() const;

@@ -53,7 +53,7 @@ struct LossOptions {
   void fields(Fields& f) {
     f("name", name);
     f("reduction", reduction);
-    f("noise_scale", noise_scale);
+    f("noise_scale", noise_scale, Range::closed(0, 1e3));
   }
   static LossOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);

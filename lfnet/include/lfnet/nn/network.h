@@ -84,7 +84,7 @@ struct AutoencoderOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("hidden", hidden);
+    f("hidden", hidden, Range::closed(1, 1 << 16));
     f("input", input);
   }
   void read(JsonReader& reader);
@@ -98,8 +98,8 @@ struct CnnOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("channels", channels);
-    f("depth", depth);
+    f("channels", channels, Range::closed(1, 1024));
+    f("depth", depth, Range::closed(1, 64));
   }
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
@@ -142,13 +142,13 @@ struct NetworkOptions {
     f("patch", patch);
     f("measurements", measurements);
     f("branches", branches);
-    f("kernel", kernel);
+    f("kernel", kernel, Range::closed(1, 15));
     f("conv_algorithm", conv_algorithm);
     f("ae", ae);
     f("cnn", cnn);
-    f("head_weights", head_weights);
+    f("head_weights", head_weights, Range::closed(0, 10));
     f("residual", residual);
-    f("pinv_lambda", pinv_lambda);
+    f("pinv_lambda", pinv_lambda, Range::closed(0, 1e3));
     f("architecture", architecture);
     f("image", image);
     f("cfa", cfa);

@@ -40,11 +40,11 @@ struct CalibrationError {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("depth", depth);
-    f("angular_shift_u", angular_shift_u);
-    f("angular_shift_v", angular_shift_v);
-    f("shift_y", shift_y);
-    f("shift_x", shift_x);
+    f("depth", depth, Range::above(-1, 10));
+    f("angular_shift_u", angular_shift_u, Range::closed(-1000, 1000));
+    f("angular_shift_v", angular_shift_v, Range::closed(-1000, 1000));
+    f("shift_y", shift_y, Range::closed(-1e4, 1e4));
+    f("shift_x", shift_x, Range::closed(-1e4, 1e4));
     f("period", period);
     f("vignetting", vignetting);
   }
@@ -71,11 +71,11 @@ struct CalibrationRanges {
   template <typename Fields>
   void fields(Fields& f) {
     f("depth", depth);
-    f("angular_shift", angular_shift);
-    f("shift", shift);
+    f("angular_shift", angular_shift, Range::closed(0, 16));
+    f("shift", shift, Range::closed(0, 1024));
     f("period", period);
     f("vignetting", vignetting);
-    f("vignetting_sensor", vignetting_sensor);
+    f("vignetting_sensor", vignetting_sensor, Range::closed(1, 1e6));
   }
   bool empty() const;
   void validate() const;

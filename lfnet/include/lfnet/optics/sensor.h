@@ -29,7 +29,7 @@ struct GaussianNoise {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("sigma", sigma);
+    f("sigma", sigma, Range::closed(0, 10));
   }
 };
 // Photon shot noise: electrons ~ Poisson(photons_at_white * y).
@@ -47,7 +47,7 @@ struct ReadNoise {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("electrons", electrons);
+    f("electrons", electrons, Range::closed(0, 1e6));
   }
 };
 // Full-well saturation: electrons are clipped at the well's capacity.
@@ -56,7 +56,7 @@ struct WellSaturation {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("full_well", full_well);
+    f("full_well", full_well, Range::above(0, 1e12));
   }
 };
 // Analogue-to-digital conversion: clip to [0, full_scale] and quantise to 2^bits levels.
@@ -67,7 +67,7 @@ struct AdcConversion {
   template <typename Fields>
   void fields(Fields& f) {
     f("bits", bits);
-    f("full_scale", full_scale);
+    f("full_scale", full_scale, Range::above(0, 1e6));
   }
 };
 // Fixed-pattern photo-response non-uniformity: each sensor pixel's gain ~ N(1, spread).
@@ -77,7 +77,7 @@ struct PixelGain {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("spread", spread);
+    f("spread", spread, Range::closed(0, 1));
     f("seed", seed);
   }
 };
@@ -104,7 +104,7 @@ struct SensorOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("photons_at_white", photons_at_white);
+    f("photons_at_white", photons_at_white, Range::above(0, 1e12));
     f("gaussian", gaussian);
     f("shot", shot);
     f("read", read);

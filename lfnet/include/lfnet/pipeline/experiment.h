@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/data/patch_dataset.h"
 #include "lfnet/dict/ksvd.h"
@@ -54,7 +55,7 @@ struct DistillConfig {
   template <typename Fields>
   void fields(Fields& f) {
     f("teacher", teacher);
-    f("passes", passes);
+    f("passes", passes, Range::closed(0, 64));
     f("weight", weight);
     f("precision", precision);
   }

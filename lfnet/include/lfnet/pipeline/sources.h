@@ -35,7 +35,7 @@ struct LightFieldSources {
   void fields(Fields& f) {
     f("light_fields", light_fields);
     f("scenes", scenes);
-    f("random_scenes", random_scenes);
+    f("random_scenes", random_scenes, Range::closed(0, 1e6));
     f("random_seed", random_seed);
     f("random_options", random_options);
     f("views", views);

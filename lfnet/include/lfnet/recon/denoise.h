@@ -27,7 +27,7 @@ struct NlmOptions {
   void fields(Fields& f) {
     f("search", search);
     f("patch", patch);
-    f("h", h);
+    f("h", h, Range::above(0, 100));
   }
   void validate() const;
 };

@@ -47,10 +47,10 @@ struct LrScheduleOptions {
   template <typename Fields>
   void fields(Fields& f) {
     f("name", name);
-    f("step_epochs", step_epochs);
-    f("gamma", gamma);
+    f("step_epochs", step_epochs, Range::closed(1, 1e6));
+    f("gamma", gamma, Range::above(0, 10));
     f("min_factor", min_factor);
-    f("warmup_epochs", warmup_epochs);
+    f("warmup_epochs", warmup_epochs, Range::closed(0, 1e6));
   }
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
@@ -87,18 +87,19 @@ struct TrainerOptions {
   template <typename Fields>
   void fields(Fields& f) {
     f("stage", stage);
-    f("epochs", epochs);
-    f("batch_size", batch_size);
-    f("lr", lr);
+    f("epochs", epochs, Range::closed(1, 1e6));
+    f("batch_size", batch_size, Range::closed(1, 1e6));
+    // Up to 1e12: rates far too large are how divergence handling is exercised.
+    f("lr", lr, Range::above(0, 1e12));
     f("beta1", beta1);
     f("beta2", beta2);
-    f("eps", eps);
-    f("weight_decay", weight_decay);
+    f("eps", eps, Range::above(0, 1));
+    f("weight_decay", weight_decay, Range::closed(0, 1));
     f("schedule", schedule);
     f("loss", loss);
-    f("clip_grad_norm", clip_grad_norm);
+    f("clip_grad_norm", clip_grad_norm, Range::closed(0, 1e6));
     f("on_nonfinite", on_nonfinite);
-    f("max_skipped_batches", max_skipped_batches);
+    f("max_skipped_batches", max_skipped_batches, Range::closed(0, 1e9));
     f("out_dir", out_dir);
     f("progress", progress);
     f("device", device);
@@ -124,10 +125,10 @@ struct CodeTrainingOptions {
 
   template <typename Fields>
   void fields(Fields& f) {
-    f("lr", lr);
-    f("freeze_epochs", freeze_epochs);
+    f("lr", lr, Range::above(0, 10));
+    f("freeze_epochs", freeze_epochs, Range::closed(0, 1e6));
     f("binarise", binarise);
-    f("straight_through_epochs", straight_through_epochs);
+    f("straight_through_epochs", straight_through_epochs, Range::closed(0, 1e6));
   }
   void validate(int64_t epochs) const;  // ConfigError naming the field
 };
