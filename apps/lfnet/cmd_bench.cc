@@ -127,8 +127,11 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                              &a->method_options,
                              "time"};
   add_reconstruction_flags(cmd, shared);
-  cmd->add_option("--height", a->height, "light-field height (default 593)")->check(kCount);
-  cmd->add_option("--width", a->width, "light-field width (default 840)")->check(kCount);
+  // At least one 9 x 9 patch; at most 8192 x 8192 x 5 x 5 floats (6.7 GB) per light field.
+  cmd->add_option("--height", a->height, "light-field height (default 593)")
+      ->check(whole_number_in(9, 8192, "pixels"));
+  cmd->add_option("--width", a->width, "light-field width (default 840)")
+      ->check(whole_number_in(9, 8192, "pixels"));
   cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")->check(kCount);
   input_path(cmd->add_option("--dictionary", a->dictionary,
                              "dictionary file (default: a small K-SVD dictionary)"));
@@ -136,8 +139,9 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                               "write the bench's K-SVD dictionary to this file"));
   input_path(cmd->add_option("--scene", a->scene,
                              "scene spec to render instead of a random scene (its own size)"));
+  // K-SVD keeps an atoms x atoms Gram matrix in double: 20000 atoms take 3.2 GB.
   cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")
-      ->check(kCount);
+      ->check(whole_number_in(1, 20000, "atoms"));
   cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)")->check(kSeed);
   cmd->add_option("--conv-batch", a->conv_batch, "patches per Conv4d timing (default 256)")
       ->check(kCount);

@@ -276,6 +276,29 @@ TEST_CASE("out-of-domain numbers on the command line name the option before any 
   expect_error("phi export --phi asp:2 --grid 0x5 --out " + (tmp / "cam"), "--grid", tmp.path());
   expect_error("phi export --phi random:2 --out " + (tmp / "cam"), "not local", tmp.path());
   CHECK_FALSE(fs::exists(tmp / "cam"));
+  // bench: sizes with domains, and a case that fails in its child process is one error line
+  // with the child's reason (not its exit status).
+  const std::string bench = "bench --phi asp:2 --methods pinv --reps 1 --strides 9 --skip-kernels ";
+  expect_error(bench + "--height 8", "--height", tmp.path());
+  expect_error(bench + "--width 100000", "--width", tmp.path());
+  expect_error("bench --methods dict --strides 9 --skip-kernels --dict-atoms 100000",
+               "--dict-atoms", tmp.path());
+  auto spec = nlohmann::json::parse(
+      std::ifstream(std::string(LFNET_SOURCE_DIR) + "/configs/scenes/heldout_window.json"));
+  spec["height"] = 4;
+  spec["width"] = 4;
+  std::ofstream(tmp / "tiny_scene.json") << spec.dump();
+  std::string out;
+  CHECK(run_command(quiet_program(bench + "--scene " + (tmp / "tiny_scene.json")), out) != 0);
+  INFO(out);
+  size_t errors = 0;
+  for (auto at = out.find("lfnet: error: "); at != std::string::npos;
+       at = out.find("lfnet: error: ", at + 1)) {
+    ++errors;
+  }
+  CHECK(errors == 1);
+  CHECK(out.find("lfnet: error: bench: every case failed (1 of 1); the first: a light field of 4 "
+                 "pixels is smaller than one patch of 9") != std::string::npos);
 }
 
 TEST_CASE("missing, mismatched, truncated and foreign image files are one-line errors",

@@ -510,18 +510,43 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
                   {"--method-options", shell_quote(nlohmann::json{{method, all[method]}}.dump())});
     }
   }
+  // The child's messages go to a temporary file, passed on to stderr when it ends, so that its
+  // error line (which names the flag it refused) also becomes the case's error in the table.
+  char log_path[] = "/tmp/lfnet-bench-XXXXXX";
+  const int log_fd = mkstemp(log_path);
+  LFNET_CHECK_AS(IoError, log_fd >= 0, "bench: cannot make a temporary file in /tmp");
+  close(log_fd);
   // exec: the case is the bench's own child, which it dies with (cmd_bench's --case).
-  FILE* pipe = popen(("exec " + join(args, " ")).c_str(), "r");
+  FILE* pipe = popen(("exec " + join(args, " ") + " 2>" + shell_quote(log_path)).c_str(), "r");
+  if (!pipe) std::remove(log_path);
   LFNET_CHECK_AS(IoError, pipe, "bench: cannot start a child process");
   std::string output;
   char buffer[4096];
   while (size_t got = std::fread(buffer, 1, sizeof(buffer), pipe)) output.append(buffer, got);
   const int status = pclose(pipe);
+  std::string log, error;
+  {
+    std::ifstream in(log_path);
+    for (std::string line; std::getline(in, line);) {
+      // The child's error becomes the case's (and, if every case fails, the bench's one error
+      // line); its other messages pass through.
+      const auto said = line.find("lfnet: error: ");
+      if (said == std::string::npos) {
+        log += line + "\n";
+      } else {
+        error = line.substr(said + 14);
+      }
+    }
+  }
+  std::remove(log_path);
+  std::fputs(log.c_str(), stderr);
   const auto at = output.find(kBenchCaseTag);
   if (status != 0 || at == std::string::npos) {
-    return {{"method", method},
-            {"stride", stride},
-            {"error", "the child process failed (status " + std::to_string(status) + ")"}};
+    return {
+        {"method", method},
+        {"stride", stride},
+        {"error", error.empty() ? "the child process failed (status " + std::to_string(status) + ")"
+                                : error}};
   }
   const auto end = output.find('\n', at);
   return nlohmann::json::parse(
