@@ -103,18 +103,11 @@ std::vector<std::string> unguarded(const json& base, const std::vector<NumericFi
     for (const auto& value : values) {
       json input = base;
       input[json::json_pointer(field.pointer)] = field.list ? json::array({value}) : value;
-      const std::string what = field.pointer + " = " + value.dump();
-      try {
-        read(input);
-        found.push_back(what + ": accepted");
-      } catch (const lfnet::ConfigError& e) {
-        if (std::string(e.what()).find(key) == std::string::npos) {
-          found.push_back(what + ": refused without naming '" + key + "': ");
-          found.back() += e.what();
-        }
-      } catch (const std::exception& e) {
-        found.push_back(what + ": not a ConfigError: " + e.what());
-      }
+      const auto problem = lfnet::test::unrefused(input, key, read);
+      if (problem.empty()) continue;
+      std::string line = field.pointer;
+      line.append(" = ").append(value.dump()).append(problem);
+      found.push_back(line);
     }
   }
   return found;

@@ -184,21 +184,28 @@ std::vector<std::string> absurd_values_unrefused(
     for (const double value : {1e300, -1e300}) {
       auto input = base;
       input[nlohmann::json::json_pointer(pointer)] = value;
-      const std::string what = pointer + " = " + nlohmann::json(value).dump();
-      try {
-        read(input);
-        found.push_back(what + ": accepted");
-      } catch (const ConfigError& e) {
-        if (std::string(e.what()).find(key) == std::string::npos) {
-          found.push_back(what + ": refused without naming '" + key + "': ");
-          found.back() += e.what();
-        }
-      } catch (const std::exception& e) {
-        found.push_back(what + ": not a ConfigError: " + e.what());
-      }
+      const auto problem = unrefused(input, key, read);
+      if (problem.empty()) continue;
+      std::string line = pointer;
+      line.append(" = ").append(nlohmann::json(value).dump()).append(problem);
+      found.push_back(line);
     }
   }
   return found;
+}
+
+std::string unrefused(const nlohmann::json& input, const std::string& key,
+                      const std::function<void(const nlohmann::json&)>& read) {
+  try {
+    read(input);
+    return ": accepted";
+  } catch (const ConfigError& e) {
+    if (std::string(e.what()).find(key) != std::string::npos) return "";
+    std::string problem = ": refused without naming '" + key + "': ";
+    return problem + e.what();
+  } catch (const std::exception& e) {
+    return std::string(": not a ConfigError: ") + e.what();
+  }
 }
 
 }  // namespace lfnet::test

@@ -104,6 +104,11 @@ LightField parallax_light_field(int64_t rows, int64_t cols, int64_t h, int64_t w
 // Sets each numeric leaf of `base` in turn (seeds aside: any value is one) to 1e300 and -1e300
 // and runs `read` on the result: one line for each value it accepts, or refuses otherwise than
 // with a ConfigError naming the leaf's key. Empty when every leaf has a domain.
+// "" when `read(input)` throws a ConfigError naming `key`; else what it did instead (": accepted",
+// ": refused without naming ...", ": not a ConfigError: ...").
+std::string unrefused(const nlohmann::json& input, const std::string& key,
+                      const std::function<void(const nlohmann::json&)>& read);
+
 std::vector<std::string> absurd_values_unrefused(
     const nlohmann::json& base, const std::function<void(const nlohmann::json&)>& read);
 
