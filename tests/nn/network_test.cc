@@ -47,8 +47,8 @@ TEST_CASE("the default net has the documented parameter count and names", "[nn][
   const int64_t ae = (162 * 256 + 256) + (256 * 128 + 128) + (128 * 256 + 256) + (256 * 128 + 128) +
                      (128 * 256 + 256) + (256 * 2025 + 2025) + (81 + 1);
   const int64_t cnn = (16 * 81 + 16) + 3 * (16 * 16 * 81 + 16) + (16 * 81 + 1);
-  CHECK(lfnet::nn::parameter_count(*net->ae) == ae);
-  CHECK(lfnet::nn::parameter_count(*net->cnn) == cnn);
+  CHECK(lfnet::nn::parameter_count(*lfnet::nn::ae_branch(*net)) == ae);
+  CHECK(lfnet::nn::parameter_count(*lfnet::nn::cnn_branch(*net)) == cnn);
   CHECK(lfnet::nn::parameter_count(*net) == ae + cnn);
   std::set<std::string> names;
   for (const auto& p : net->named_parameters()) names.insert(p.key());
@@ -76,8 +76,8 @@ TEST_CASE("the head averages the branch outputs with the configured weights", "[
     auto y = torch::rand({4, o.measurement_size()});
     auto out = net->forward_all(y);
     // The branches evaluated on their own, independently of the head.
-    auto ae = net->ae->forward(y);
-    auto cnn = net->cnn->forward(net->adjoint(y).view({4, 1, 3, 3, 5, 5}));
+    auto ae = lfnet::nn::ae_branch(*net)->forward(y);
+    auto cnn = lfnet::nn::cnn_branch(*net)->forward(net->adjoint(y).view({4, 1, 3, 3, 5, 5}));
     lfnet::test::require_close(out.ae, ae, 0);
     lfnet::test::require_close(out.cnn, cnn, 0);
     lfnet::test::require_close(out.output, weights[0] * ae + weights[1] * cnn, 1e-6);
@@ -277,8 +277,8 @@ TEST_CASE("the CNN branch in bfloat16 stays close to float32 and keeps float32 o
   torch::NoGradGuard no_grad;
   auto want = net->forward_all(y);
   lfnet::nn::set_cnn_precision(net, lfnet::nn::Precision::kBFloat16);
-  CHECK(net->cnn->convs[0]->weight.scalar_type() == torch::kBFloat16);
-  CHECK(net->ae->fc[0]->weight.scalar_type() == torch::kFloat32);
+  CHECK(lfnet::nn::cnn_branch(*net)->convs[0]->weight.scalar_type() == torch::kBFloat16);
+  CHECK(lfnet::nn::ae_branch(*net)->fc[0]->weight.scalar_type() == torch::kFloat32);
   auto got = net->forward_all(y);
   REQUIRE(got.output.scalar_type() == torch::kFloat32);
   // bfloat16 keeps 8 mantissa bits: relative error ~2^-8 per rounding.
@@ -288,7 +288,7 @@ TEST_CASE("the CNN branch in bfloat16 stays close to float32 and keeps float32 o
   CHECK(err < 0.03 * scale);
   lfnet::test::require_close(got.ae, want.ae, 0.0);
   lfnet::nn::set_cnn_precision(net, lfnet::nn::Precision::kFloat32);
-  CHECK(net->cnn->convs[0]->weight.scalar_type() == torch::kFloat32);
+  CHECK(lfnet::nn::cnn_branch(*net)->convs[0]->weight.scalar_type() == torch::kFloat32);
   CHECK(lfnet::nn::parse_precision("bfloat16") == lfnet::nn::Precision::kBFloat16);
   CHECK(lfnet::nn::to_string(lfnet::nn::Precision::kFloat32) == "float32");
   CHECK_THROWS_AS(lfnet::nn::parse_precision("half"), lfnet::ConfigError);

@@ -151,6 +151,21 @@ json base_config() {
 
 void read_config(const json& j) { (void)lfnet::pipeline::ExperimentConfig::from_json(j, "config"); }
 
+// The numeric leaves of a JSON object (an architecture's default options), as fields; an empty
+// list is a list of whole numbers.
+void numeric_leaves(const json& j, const std::string& pointer, std::vector<NumericField>& out) {
+  for (const auto& [key, value] : j.items()) {
+    const auto p = pointer + "/" + key;
+    if (value.is_object()) {
+      numeric_leaves(value, p, out);
+    } else if (value.is_number()) {
+      out.push_back({p, value.is_number_float(), false});
+    } else if (value.is_array() && (value.empty() || value[0].is_number())) {
+      out.push_back({p, !value.empty() && value[0].is_number_float(), true});
+    }
+  }
+}
+
 }  // namespace
 
 TEST_CASE("every numeric field of an experiment config has a domain", "[domains]") {
@@ -169,6 +184,26 @@ TEST_CASE("every numeric field of an experiment config has a domain", "[domains]
   REQUIRE(fields.size() > 60);
   REQUIRE_NOTHROW(read_config(base_config()));
   check_guarded(unguarded(base_config(), fields, read_config));
+}
+
+TEST_CASE("every numeric field of an architecture's own options has a domain", "[domains]") {
+  using namespace lfnet;
+  int sections = 0;
+  for (const auto& name : nn::registered_architectures()) {
+    const auto& arch = nn::find_architecture(name);
+    if (arch.options_section().empty()) continue;
+    INFO(name);
+    ++sections;
+    auto base = base_config();
+    base["network"]["architecture"] = name;
+    base["network"][arch.options_section()] = arch.default_options();
+    std::vector<NumericField> fields;
+    numeric_leaves(arch.default_options(), "/network/" + arch.options_section(), fields);
+    REQUIRE(fields.size() >= 3);
+    REQUIRE_NOTHROW(read_config(base));
+    check_guarded(unguarded(base, fields, read_config));
+  }
+  CHECK(sections >= 1);  // the unrolled architecture's
 }
 
 TEST_CASE("every numeric field of a learned code has a domain", "[domains]") {

@@ -89,11 +89,11 @@ class GainArchitecture : public nn::NetworkArchitecture {
 TEST_CASE("an architecture registered from outside the library runs through the registry",
           "[recon][architecture]") {
   CHECK(nn::registered_architectures() ==
-        std::vector<std::string>{nn::kPaperArchitecture, nn::kLfnetArchitecture});
+        std::vector<std::string>{nn::kPaperArchitecture, nn::kLfnetArchitecture, "unrolled"});
   CHECK_THROWS_WITH(nn::NetworkOptions::from_json({{"architecture", "gain-test"}}),
-                    Catch::Contains("$.architecture") && Catch::Contains("paper, lfnet"));
+                    Catch::Contains("$.architecture") && Catch::Contains("paper, lfnet, unrolled"));
   nn::register_architecture(std::make_unique<GainArchitecture>());
-  CHECK(nn::architecture_list() == "paper, lfnet, gain-test");
+  CHECK(nn::architecture_list() == "paper, lfnet, unrolled, gain-test");
 
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   nn::NetworkOptions o;

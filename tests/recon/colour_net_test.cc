@@ -167,8 +167,10 @@ TEST_CASE("a colour net starts from a grey one: the grey net's correction of the
   const auto x = torch::rand({2, views, 16, 16}, gen);
   const auto sigma = torch::full({2, 1, 16, 16}, 0.05);
   torch::NoGradGuard no_grad;
-  const auto want = grey->image->forward(torch::cat({x, sigma}, 1)).repeat({1, 3, 1, 1});
-  lfnet::test::require_close(colour->image->forward(torch::cat({x, x, x, sigma}, 1)), want, 1e-5);
+  const auto want =
+      lfnet::nn::image_layers(*grey)->forward(torch::cat({x, sigma}, 1)).repeat({1, 3, 1, 1});
+  lfnet::test::require_close(
+      lfnet::nn::image_layers(*colour)->forward(torch::cat({x, x, x, sigma}, 1)), want, 1e-5);
 }
 
 TEST_CASE("colour nets are checked", "[recon][image][colour]") {
@@ -177,7 +179,7 @@ TEST_CASE("colour nets are checked", "[recon][image][colour]") {
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("cfa") && Catch::Contains("unknown Bayer"));
   o.cfa = "RGGB";
   o.architecture = nn::kPaperArchitecture;
-  CHECK_THROWS_WITH(o.validate(), Catch::Contains("needs the lfnet architecture"));
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("reconstructs colour"));
   o = colour_options(*phi, "RGGB");
   CHECK_NOTHROW(o.validate());
   CHECK(nn::NetworkOptions::from_json(o.to_json()).cfa == "RGGB");

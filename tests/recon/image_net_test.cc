@@ -170,7 +170,7 @@ TEST_CASE("image.widths sets the channels of every level and is checked", "[reco
   auto o = image_options(*phi, 3);
   o.image.widths = {6, 12, 8};
   nn::LightFieldNet net(o);
-  auto params = net->image->named_parameters();
+  auto params = lfnet::nn::image_layers(*net)->named_parameters();
   CHECK(params["enc1_0.weight"].sizes() == torch::IntArrayRef{12, 12, 3, 3});
   CHECK(params["down1.weight"].sizes() == torch::IntArrayRef{8, 12, 2, 2});
   CHECK(params["up1.weight"].sizes() == torch::IntArrayRef{8, 12, 2, 2});
@@ -179,7 +179,7 @@ TEST_CASE("image.widths sets the channels of every level and is checked", "[reco
   CHECK(back.image.widths == std::vector<int64_t>{6, 12, 8});
   // Doubled widths spelled out build the default net.
   o.image.widths = {6, 12, 24};
-  CHECK(nn::LightFieldNet(o)->image->named_parameters()["enc2_0.weight"].size(0) == 24);
+  CHECK(nn::image_layers(*nn::LightFieldNet(o))->named_parameters()["enc2_0.weight"].size(0) == 24);
   o.image.widths = {6, 12};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.widths") && Catch::Contains("2 entries"));
   o.image.widths = {8, 12, 8};
@@ -237,7 +237,7 @@ TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 ou
   nn::set_cnn_precision(net, nn::Precision::kBFloat16);
   // All but the transposed convolutions (ImageNetImpl::set_precision).
   int64_t bf16 = 0, fp32 = 0;
-  for (const auto& p : net->image->parameters())
+  for (const auto& p : lfnet::nn::image_layers(*net)->parameters())
     (p.scalar_type() == torch::kBFloat16 ? bf16 : fp32)++;
   CHECK(bf16 > 2 * fp32);
   CHECK(fp32 == 4);  // two levels up, each a weight and a bias
@@ -251,7 +251,8 @@ TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 ou
   const auto correction = want - net->pixel_pinv_image(sensor.unsqueeze(0), {}).view(want.sizes());
   CHECK(err < 0.05 * correction.abs().max().item<double>());
   nn::set_cnn_precision(net, nn::Precision::kFloat32);
-  for (const auto& p : net->image->parameters()) CHECK(p.scalar_type() == torch::kFloat32);
+  for (const auto& p : lfnet::nn::image_layers(*net)->parameters())
+    CHECK(p.scalar_type() == torch::kFloat32);
 }
 
 TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one did",
@@ -274,23 +275,23 @@ TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one d
   CHECK((wide->forward_image(sensor.unsqueeze(0), 0, 0.1) - want).abs().max().item<double>() >
         1e-2);
   int64_t widened = 0;
-  for (const auto& p : narrow->image->named_parameters()) {
-    auto dst = wide->image->named_parameters()[p.key()];
+  for (const auto& p : lfnet::nn::image_layers(*narrow)->named_parameters()) {
+    auto dst = lfnet::nn::image_layers(*wide)->named_parameters()[p.key()];
     INFO(p.key());
     REQUIRE(nn::embed_narrow_parameter(p.key(), p.value(), dst));
     widened += dst.sizes() != p.value().sizes() ? 1 : 0;
   }
   // All but the output's bias, one per view either way.
-  CHECK(widened == static_cast<int64_t>(narrow->image->parameters().size()) - 1);
+  CHECK(widened == static_cast<int64_t>(lfnet::nn::image_layers(*narrow)->parameters().size()) - 1);
   // Whatever the new channels hold and whatever the noise input says.
   for (double sigma : {0.0, 0.3}) {
     lfnet::test::require_close(wide->forward_image(sensor.unsqueeze(0), 0, sigma), want, 1e-5);
   }
   // A wider parameter does not fit in a narrower one, which stays as it was.
-  auto w = narrow->image->named_parameters()["enc0_0.weight"];
+  auto w = lfnet::nn::image_layers(*narrow)->named_parameters()["enc0_0.weight"];
   const auto before = w.clone();
-  CHECK_FALSE(nn::embed_narrow_parameter("enc0_0.weight",
-                                         wide->image->named_parameters()["enc0_0.weight"], w));
+  CHECK_FALSE(nn::embed_narrow_parameter(
+      "enc0_0.weight", lfnet::nn::image_layers(*wide)->named_parameters()["enc0_0.weight"], w));
   CHECK(torch::equal(w, before));
 }
 
@@ -304,19 +305,19 @@ TEST_CASE("a shallow U-Net's weights start a deeper one that computes what the s
   const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 17));
   torch::NoGradGuard no_grad;
   const auto want = shallow->forward_image(sensor.unsqueeze(0));
-  auto deep_params = deep->image->named_parameters();
-  for (const auto& p : shallow->image->named_parameters()) {
+  auto deep_params = lfnet::nn::image_layers(*deep)->named_parameters();
+  for (const auto& p : lfnet::nn::image_layers(*shallow)->named_parameters()) {
     INFO(p.key());
     REQUIRE(deep_params.contains(p.key()));
     deep_params[p.key()].copy_(p.value());
   }
   // The shallow net's parameters alone: its bottom level now has a decoder and a level below.
   CHECK((deep->forward_image(sensor.unsqueeze(0)) - want).abs().max().item<double>() > 1e-2);
-  const auto names = deep->image->start_new_levels(2);
+  const auto names = lfnet::nn::image_layers(*deep)->start_new_levels(2);
   CHECK(names ==
         std::vector<std::string>{"up1.weight", "up1.bias", "dec1_0.weight", "dec1_0.bias"});
   lfnet::test::require_close(deep->forward_image(sensor.unsqueeze(0)), want, 1e-5);
-  CHECK_THROWS(deep->image->start_new_levels(3));
+  CHECK_THROWS(lfnet::nn::image_layers(*deep)->start_new_levels(3));
 }
 
 TEST_CASE("a deeper U-Net with a narrower new level starts as the shallow one", "[recon][image]") {
@@ -331,13 +332,13 @@ TEST_CASE("a deeper U-Net with a narrower new level starts as the shallow one", 
   test::randomise_image_net(deep, 26);
   const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 24, 32, 27));
   torch::NoGradGuard no_grad;
-  auto deep_params = deep->image->named_parameters();
-  for (const auto& p : shallow->image->named_parameters()) {
+  auto deep_params = lfnet::nn::image_layers(*deep)->named_parameters();
+  for (const auto& p : lfnet::nn::image_layers(*shallow)->named_parameters()) {
     INFO(p.key());
     REQUIRE(deep_params[p.key()].sizes() == p.value().sizes());
     deep_params[p.key()].copy_(p.value());
   }
-  deep->image->start_new_levels(2);
+  lfnet::nn::image_layers(*deep)->start_new_levels(2);
   lfnet::test::require_close(deep->forward_image(sensor.unsqueeze(0)),
                              shallow->forward_image(sensor.unsqueeze(0)), 1e-5);
 }

@@ -20,7 +20,7 @@ nn::NetworkOptions small_network_options(const std::string& branches) {
 void randomise_image_net(nn::LightFieldNet& net, uint64_t seed) {
   torch::manual_seed(seed);
   torch::NoGradGuard no_grad;
-  for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.2);
+  for (auto& p : lfnet::nn::image_layers(*net)->parameters()) p.copy_(torch::randn_like(p) * 0.2);
 }
 
 void save_net(const nn::LightFieldNet& net, const optics::Phi& phi, const std::string& stage,

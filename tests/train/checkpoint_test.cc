@@ -236,7 +236,8 @@ TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[tra
     net->set_phi(torch::rand({2, 3, 3, period, period}));
     {
       torch::NoGradGuard no_grad;
-      for (auto& p : net->image->parameters()) p.copy_(torch::randn_like(p) * 0.1);
+      for (auto& p : lfnet::nn::image_layers(*net)->parameters())
+        p.copy_(torch::randn_like(p) * 0.1);
     }
     const auto path = dir / ("lfnet" + std::to_string(period) + ".ckpt");
     lfnet::train::save_checkpoint(checkpoint_of(net, {{"name", "mask"}}), path);

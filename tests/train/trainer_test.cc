@@ -457,7 +457,8 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
   auto narrow = make_net(o, weights, 50);
   {
     torch::NoGradGuard no_grad;
-    for (auto& p : narrow->image->parameters()) p.copy_(torch::randn_like(p) * 0.3);
+    for (auto& p : lfnet::nn::image_layers(*narrow)->parameters())
+      p.copy_(torch::randn_like(p) * 0.3);
   }
   lfnet::train::Checkpoint ck;
   ck.network = o.to_json();
@@ -472,7 +473,7 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
   Trainer t(wide, quick_options("joint", "", 1), run_info(ck.phi));
   auto report = t.init_from(path);
   // All but the output's bias (one per view either way), which is copied.
-  CHECK(report.widened.size() == narrow->image->parameters().size() - 1);
+  CHECK(report.widened.size() == lfnet::nn::image_layers(*narrow)->parameters().size() - 1);
   CHECK(std::find(report.copied.begin(), report.copied.end(), "image.output.bias") !=
         report.copied.end());
   CHECK(report.reinitialised.empty());
@@ -521,7 +522,7 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
       o.residual = lfnet::nn::Residual::kPinv;
       auto net = make_net(o, phi, 43);
       torch::NoGradGuard no_grad;
-      for (auto& p : net->ae->parameters()) p.zero_();
+      for (auto& p : lfnet::nn::ae_branch(*net)->parameters()) p.zero_();
       Trainer t(net, quick_options("ae", "", 1),
                 run_info(lfnet::test::synthetic_phi_spec("random", n, 41)));
       WARN("N = " << n << ": pinv alone " << t.evaluate(*source).psnr_db << " dB");

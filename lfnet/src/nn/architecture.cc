@@ -7,8 +7,9 @@
 namespace lfnet::nn {
 
 // One factory per built-in architecture, each defined beside its class.
-std::unique_ptr<NetworkArchitecture> make_paper_architecture();  // paper_architecture.cc
-std::unique_ptr<NetworkArchitecture> make_lfnet_architecture();  // lfnet_architecture.cc
+std::unique_ptr<NetworkArchitecture> make_paper_architecture();     // paper_architecture.cc
+std::unique_ptr<NetworkArchitecture> make_lfnet_architecture();     // lfnet_architecture.cc
+std::unique_ptr<NetworkArchitecture> make_unrolled_architecture();  // unrolled_architecture.cc
 
 namespace {
 
@@ -17,6 +18,7 @@ NamedRegistry<NetworkArchitecture>& registry() {
   static NamedRegistry<NetworkArchitecture> r([](NamedRegistry<NetworkArchitecture>& builtins) {
     builtins.add(make_paper_architecture());
     builtins.add(make_lfnet_architecture());
+    builtins.add(make_unrolled_architecture());
   });
   return r;
 }

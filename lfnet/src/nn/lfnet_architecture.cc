@@ -20,8 +20,8 @@ namespace {
 
 // The methods of an exported net of the lfnet architecture (docs/export.md). The U-Net is the
 // submodule `image`, traced from the C++ module itself; these methods repeat only the
-// per-pixel pseudo-inverse, the padding and the noise channel of this file and the tiles of
-// nn::image_tiles / recon::reconstruct_sensor_tiled, op for op.
+// per-pixel pseudo-inverse, the padding and the noise channel of this file, op for op
+// (reconstruct and simulate are every whole-image net's: kWholeImageScriptSource).
 constexpr const char* kImageSource = R"TS(
 def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
     t = self.pixel_pinv.size(0)
@@ -57,46 +57,6 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
 
 def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
     return self.forward_image(sensor, phase, noise_sigma)
-
-def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
-    if sensor.dim() != 3 or sensor.size(0) != self.measurements:
-        raise ValueError("reconstruct: expected a sensor image (N, H, W) with N the measurements")
-    if tile < 1:
-        raise ValueError("reconstruct: the tile must be positive")
-    m = self.multiple
-    t = self.period
-    h = sensor.size(1)
-    w = sensor.size(2)
-    hp = (h + m - 1) // m * m
-    wp = (w + m - 1) // m * m
-    halo = (self.receptive_radius + m - 1) // m * m
-    step = (tile + m - 1) // m * m
-    padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
-    out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)
-    for y0 in range(0, hp, step):
-        for x0 in range(0, wp, step):
-            a0 = max(0, y0 - halo)
-            a1 = min(hp, y0 + step + halo)
-            b0 = max(0, x0 - halo)
-            b1 = min(wp, x0 + step + halo)
-            crop = padded.narrow(1, a0, a1 - a0).narrow(2, b0, b1 - b0).unsqueeze(0)
-            est = self.forward_image(crop, (a0 % t) * t + b0 % t, noise_sigma)[0]
-            th = min(y0 + step, h) - y0
-            tw = min(x0 + step, w) - x0
-            if th > 0 and tw > 0:
-                out.narrow(2, y0, th).narrow(3, x0, tw).copy_(est.narrow(2, y0 - a0, th).narrow(3, x0 - b0, tw))
-    if clamp:
-        out.clamp_(0.0, 1.0)
-    return out
-
-def simulate(self, lf: Tensor) -> Tensor:
-    t = self.phi.size(3)
-    h = lf.size(2)
-    w = lf.size(3)
-    rows = torch.remainder(torch.arange(h, device=lf.device), t)
-    cols = torch.remainder(torch.arange(w, device=lf.device), t)
-    weights = self.phi.index_select(3, rows).index_select(4, cols)
-    return (weights * lf.to(self.phi.dtype).unsqueeze(0)).sum([1, 2])
 )TS";
 
 // The prefix of the U-Net's parameter names: the network's submodule "image".
@@ -106,11 +66,12 @@ constexpr std::string_view kImagePrefix = "image.";
 // channel (B sigmas, undefined: 0) when the net is noise-aware.
 torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
                      const torch::Tensor& noise) {
-  if (!net.options().image.noise_input) return base + net.image->forward(base);
+  const auto image = image_layers(net);
+  if (!net.options().image.noise_input) return base + image->forward(base);
   auto sigma =
       noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
   auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
-  return base + net.image->forward(torch::cat({base, channel}, 1));
+  return base + image->forward(torch::cat({base, channel}, 1));
 }
 
 // A colour net's CFA response at every pixel of crops (B, h, w) whose pixel (0, 0) has phase
@@ -199,6 +160,9 @@ class LfnetArchitecture : public NetworkArchitecture {
   }
   bool whole_image() const override { return true; }
   PhiInput phi_input() const override { return PhiInput::kPixelWeights; }
+  bool learns_code() const override { return true; }
+  bool reads_noise(const NetworkOptions& o) const override { return o.image.noise_input; }
+  bool colour() const override { return true; }
 
   void validate(const NetworkOptions& o) const override {
     o.image.validate();
@@ -222,7 +186,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     }
     const int64_t channels = o.colours() * views;
     const int64_t in = channels + (o.image.noise_input ? 1 : 0);
-    net.image = net.register_module("image", ImageNet(o.image, in, channels));
+    net.register_module("image", ImageNet(o.image, in, channels));
   }
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
@@ -301,7 +265,7 @@ class LfnetArchitecture : public NetworkArchitecture {
   ImageTiling image_tiling(const NetworkOptions& o) const override { return o.image.tiling(); }
 
   void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
-    net.image->set_precision(dtype);
+    image_layers(net)->set_precision(dtype);
   }
 
   double patch_flops(const NetworkOptions& o, const BranchSelection&) const override {
@@ -324,7 +288,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
     const int64_t channels = o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0);
     const int64_t m = o.image.multiple();
-    auto module = net.image;  // a handle: the same module, callable
+    auto module = image_layers(net);  // the same module, callable
     // The U-Net has no size-dependent operations, so one trace serves every image size.
     builder.trace(
         "image", [&](const torch::Tensor& x) { return module->forward(x); },
@@ -332,7 +296,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     builder.attribute("multiple", m);
     builder.attribute("receptive_radius", o.image.receptive_radius());
     builder.attribute("noise_input", o.image.noise_input);
-    return kImageSource;
+    return std::string(kImageSource) + kWholeImageScriptSource;
   }
 
   WarmStart warm_start(const LightFieldNetImpl& net, const std::string& name,
@@ -361,7 +325,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     if (!from.network.is_object() || !from.network.contains("image")) return names;
     const int64_t from_levels = from.network["image"].value("levels", int64_t{0});
     if (from_levels < 1 || from_levels >= net.options().image.levels) return names;
-    for (const auto& name : net.image->start_new_levels(from_levels)) {
+    for (const auto& name : image_layers(net)->start_new_levels(from_levels)) {
       names.push_back(std::string(kImagePrefix) + name);
     }
     return names;
@@ -405,6 +369,10 @@ torch::Tensor pixel_pseudo_inverses(const torch::Tensor& weights, double lambda)
   const auto a = weights.reshape({n, views, t, t}).permute({2, 3, 0, 1});  // (T, T, N, U V)
   const auto gram = torch::matmul(a, a.transpose(2, 3)) + lambda * torch::eye(n, a.options());
   return at::linalg_solve(gram, a);
+}
+
+std::shared_ptr<ImageNetImpl> image_layers(const LightFieldNetImpl& net) {
+  return net.layer<ImageNetImpl>("image");
 }
 
 std::unique_ptr<NetworkArchitecture> make_lfnet_architecture() {

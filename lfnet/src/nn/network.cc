@@ -47,10 +47,20 @@ NetworkOptions NetworkOptions::from_json(const nlohmann::json& j, const std::str
 
 void NetworkOptions::read(JsonReader& reader) {
   read_fields(reader, *this);
+  // The sections of the architectures that own theirs, kept as read (validate parses them).
+  sections = nlohmann::json::object();
+  for (const auto& name : registered_architectures()) {
+    const auto key = find_architecture(name).options_section();
+    if (!key.empty() && reader.has(key)) sections[key] = reader.child(key).object();
+  }
   with_path(reader, [&] { validate(); });
 }
 
-nlohmann::json NetworkOptions::to_json() const { return fields_to_json(*this); }
+nlohmann::json NetworkOptions::to_json() const {
+  auto j = fields_to_json(*this);
+  for (const auto& [key, value] : sections.items()) j[key] = value;
+  return j;
+}
 
 void NetworkOptions::validate() const {
   auto fail = [](const std::string& field, const std::string& what) {
@@ -69,9 +79,15 @@ void NetworkOptions::validate() const {
   if (!(pinv_lambda > 0) || !std::isfinite(pinv_lambda)) {
     fail("pinv_lambda", "must be positive and finite");
   }
+  for (const auto& [key, value] : sections.items()) {
+    if (key != a->options_section()) {
+      fail(key, "these options belong to another architecture than '" + architecture + "'");
+    }
+  }
   if (!cfa.empty()) {
-    if (architecture != kLfnetArchitecture) {
-      fail("cfa", "a colour net needs the lfnet architecture, not '" + architecture + "'");
+    if (!a->colour()) {
+      fail("cfa", "a colour net needs an architecture that reconstructs colour (lfnet), not '" +
+                      architecture + "'");
     }
     try {
       optics::ColourFilterArray::bayer(cfa);

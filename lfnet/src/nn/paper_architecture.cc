@@ -296,8 +296,8 @@ class PaperArchitecture : public NetworkArchitecture {
     if (o.residual == Residual::kPinv) {
       net.base = net.register_buffer("base", torch::zeros({1, m, d}));
     }
-    if (o.has_ae()) net.ae = net.register_module("ae", AutoencoderBranch(o));
-    if (o.has_cnn()) net.cnn = net.register_module("cnn", CnnBranch(o));
+    if (o.has_ae()) net.register_module("ae", AutoencoderBranch(o));
+    if (o.has_cnn()) net.register_module("cnn", CnnBranch(o));
   }
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
@@ -340,8 +340,8 @@ class PaperArchitecture : public NetworkArchitecture {
     torch::Tensor x0 = need_adjoint ? scaled_adjoint(net, y, ph) : torch::Tensor();
 
     NetworkOutputs out;
-    if (run_ae) out.ae = net.ae->forward(o.ae.input == AeInput::kAdjoint ? x0 : y);
-    if (run_cnn) out.cnn = net.cnn->forward(x0.view(shape));
+    if (run_ae) out.ae = ae_branch(net)->forward(o.ae.input == AeInput::kAdjoint ? x0 : y);
+    if (run_cnn) out.cnn = cnn_branch(net)->forward(x0.view(shape));
     if (out.ae.defined() && out.cnn.defined()) {
       const double a = o.head_weights[0], b = o.head_weights[1];
       // One fused kernel: lerp(cnn, ae, a) = (1 - a) cnn + a ae when the weights sum to 1.
@@ -360,7 +360,7 @@ class PaperArchitecture : public NetworkArchitecture {
   }
 
   void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
-    if (net.options().has_cnn()) net.cnn->to(dtype);
+    if (net.options().has_cnn()) cnn_branch(net)->to(dtype);
   }
 
   double patch_flops(const NetworkOptions& o, const BranchSelection& run) const override {
@@ -402,13 +402,13 @@ class PaperArchitecture : public NetworkArchitecture {
     const auto& ps = o.patch;
     // Two patches: the traced graph keeps no batch size (ScriptBuilder::trace).
     if (o.has_ae()) {
-      auto module = net.ae;  // a handle: the same module, callable
+      auto module = ae_branch(net);  // the same module, callable
       builder.trace(
           "ae", [&](const torch::Tensor& x) { return module->forward(x); },
           torch::rand({2, o.ae_input_size()}));
     }
     if (o.has_cnn()) {
-      auto module = net.cnn;
+      auto module = cnn_branch(net);
       builder.trace(
           "cnn", [&](const torch::Tensor& x) { return module->forward(x); },
           torch::rand({2, 1, ps.rows, ps.cols, ps.height, ps.width}));
@@ -442,6 +442,14 @@ torch::Tensor LightFieldNetImpl::adjoint(const torch::Tensor& y, const torch::Te
   LFNET_CHECK(!architecture().whole_image(), "the ", architecture().name(),
               " architecture has no scaled adjoint");
   return scaled_adjoint(*this, y, check_phase(y, phase));
+}
+
+std::shared_ptr<AutoencoderBranchImpl> ae_branch(const LightFieldNetImpl& net) {
+  return net.layer<AutoencoderBranchImpl>("ae");
+}
+
+std::shared_ptr<CnnBranchImpl> cnn_branch(const LightFieldNetImpl& net) {
+  return net.layer<CnnBranchImpl>("cnn");
 }
 
 std::unique_ptr<NetworkArchitecture> make_paper_architecture() {

@@ -199,6 +199,48 @@ std::string ScriptBuilder::literal(double value) {
   return s;
 }
 
+const char* const kWholeImageScriptSource = R"TS(
+def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
+    if sensor.dim() != 3 or sensor.size(0) != self.measurements:
+        raise ValueError("reconstruct: expected a sensor image (N, H, W) with N the measurements")
+    if tile < 1:
+        raise ValueError("reconstruct: the tile must be positive")
+    m = self.multiple
+    t = self.period
+    h = sensor.size(1)
+    w = sensor.size(2)
+    hp = (h + m - 1) // m * m
+    wp = (w + m - 1) // m * m
+    halo = (self.receptive_radius + m - 1) // m * m
+    step = (tile + m - 1) // m * m
+    padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
+    out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)
+    for y0 in range(0, hp, step):
+        for x0 in range(0, wp, step):
+            a0 = max(0, y0 - halo)
+            a1 = min(hp, y0 + step + halo)
+            b0 = max(0, x0 - halo)
+            b1 = min(wp, x0 + step + halo)
+            crop = padded.narrow(1, a0, a1 - a0).narrow(2, b0, b1 - b0).unsqueeze(0)
+            est = self.forward_image(crop, (a0 % t) * t + b0 % t, noise_sigma)[0]
+            th = min(y0 + step, h) - y0
+            tw = min(x0 + step, w) - x0
+            if th > 0 and tw > 0:
+                out.narrow(2, y0, th).narrow(3, x0, tw).copy_(est.narrow(2, y0 - a0, th).narrow(3, x0 - b0, tw))
+    if clamp:
+        out.clamp_(0.0, 1.0)
+    return out
+
+def simulate(self, lf: Tensor) -> Tensor:
+    t = self.phi.size(3)
+    h = lf.size(2)
+    w = lf.size(3)
+    rows = torch.remainder(torch.arange(h, device=lf.device), t)
+    cols = torch.remainder(torch.arange(w, device=lf.device), t)
+    weights = self.phi.index_select(3, rows).index_select(4, cols)
+    return (weights * lf.to(self.phi.dtype).unsqueeze(0)).sum([1, 2])
+)TS";
+
 torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata& meta) {
   const auto& o = net->options();
   const int64_t phases = net->phases();

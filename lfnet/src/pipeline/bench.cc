@@ -166,7 +166,8 @@ nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int6
       no.architecture = architecture;
       if (no.arch().whole_image()) {
         model_info = "untrained " + architecture + " network";
-        no.patch.height = no.patch.width = 48;  // a training crop of any U-Net depth up to 5
+        // A training crop the architecture takes (sides multiples of its tiling's multiple).
+        no.patch.height = no.patch.width = 12 * no.arch().image_tiling(no).multiple;
       }
       torch::manual_seed(0);
       net = nn::LightFieldNet(no);

@@ -120,7 +120,7 @@ ModelFile load_noise_switch(const std::string& path, bool network) {
     auto m = load_model(p.string(), network);
     LFNET_CHECK_AS(ConfigError, m.network.arch().whole_image(), path, ": ", name,
                    " is not of a whole-image architecture such as lfnet");
-    LFNET_CHECK_AS(ConfigError, m.network.image.noise_input, path, ": ", name,
+    LFNET_CHECK_AS(ConfigError, m.network.arch().reads_noise(m.network), path, ": ", name,
                    " has no noise input: it cannot be told the sigma the switch reads");
     return m;
   };

@@ -211,9 +211,9 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   // records (simulate's sensor.json), else the noise estimated from each sensor image.
   // (A noise switch's members have a noise input, so it is noise-aware too.)
   // (A colour net is told the noise only: the estimator reads grey sensor images.)
-  const bool noise_aware =
-      ((model && model->network.image.noise_input) || recon::find_method(method).reads_noise()) &&
-      !cfa;
+  const bool noise_aware = ((model && model->network.arch().reads_noise(model->network)) ||
+                            recon::find_method(method).reads_noise()) &&
+                           !cfa;
   const bool noise_told = a.noise_sigma >= 0 || acq.meta.contains("noise_sigma");
   const double told_sigma = a.noise_sigma >= 0 ? a.noise_sigma : acq.meta.value("noise_sigma", 0.0);
   nlohmann::json estimated = nlohmann::json::array();  // per colour channel

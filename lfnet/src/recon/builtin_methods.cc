@@ -130,10 +130,7 @@ class NetworkMethod : public Method {
 
  private:
   // Whether the model (a checkpoint's net or an exported one) reconstructs whole images.
-  static bool is_image(const MethodResources& r) {
-    if (r.script) return r.script->network.arch().whole_image();
-    return !r.net.is_empty() && r.net->architecture().whole_image();
-  }
+  static bool is_image(const MethodResources& r) { return whole_image_model(r.net, r.script); }
   void check_image_branch() const {
     LFNET_CHECK_AS(ConfigError, branch_ == "net", "method '", branch_,
                    "' names a branch of the paper's network; a model of a whole-image "

@@ -89,7 +89,9 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
   auto x0 = reconstruct_sensor(phi, sensor, adjoint, raw);  // (1, U, V, H, W)
   const double cnn_weight =
       method == "net" && o.branches == nn::Branches::kNet ? o.head_weights[1] : 1.0;
-  auto out = cnn_over_light_field(net->cnn, x0[0], tile).mul_(cnn_weight).unsqueeze(0);
+  auto out = cnn_over_light_field(nn::CnnBranch(nn::cnn_branch(*net)), x0[0], tile)
+                 .mul_(cnn_weight)
+                 .unsqueeze(0);
   // The rest per patch: the weighted autoencoder branch and the residual base.
   const bool ae = method == "net" && o.has_ae();
   if (ae || o.residual != nn::Residual::kNone) {
@@ -223,11 +225,14 @@ int64_t mirrored_origin(const nn::LightFieldNet& net, const SensorMirror& m, int
   return ((oy + (m.flip_y ? height - 1 : 0)) % t) * t + (ox + (m.flip_x ? width - 1 : 0)) % t;
 }
 
+bool whole_image_model(const nn::LightFieldNet& net, const nn::ScriptedNetwork* script) {
+  return (!net.is_empty() && net->architecture().whole_image()) ||
+         (script != nullptr && script->network.arch().whole_image());
+}
+
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
                          const nn::ScriptedNetwork* script) {
-  const bool image = (!net.is_empty() && net->architecture().whole_image()) ||
-                     (script != nullptr && script->network.arch().whole_image());
-  LFNET_CHECK_AS(ConfigError, method == "net" && image,
+  LFNET_CHECK_AS(ConfigError, method == "net" && whole_image_model(net, script),
                  "--self-ensemble applies to --method net with a model of a whole-image "
                  "architecture (lfnet)");
 }

@@ -31,9 +31,8 @@ torch::Tensor simulate_patches(const torch::Tensor& weights, const torch::Tensor
 
 torch::Tensor joint_forward(nn::LightFieldNet& net, const torch::Tensor& weights,
                             const Batch& batch, uint64_t noise_seed) {
-  LFNET_CHECK_AS(ConfigError, net->architecture().name() == nn::kLfnetArchitecture,
-                 "a code is trained with a network of the lfnet architecture, not '",
-                 net->architecture().name(), "'");
+  LFNET_CHECK_AS(ConfigError, net->architecture().learns_code(), "the ", net->architecture().name(),
+                 " architecture cannot learn a code with the net (the lfnet architecture can)");
   auto y = simulate_patches(weights, batch.target, batch.phase);
   if (batch.noise.defined()) {
     auto gen = at::detail::createCPUGenerator(noise_seed);

@@ -346,9 +346,9 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
 
 void Trainer::set_code(nn::LearnedPhi code, CodeTrainingOptions options) {
   LFNET_CHECK(code, "set_code: no code");
-  LFNET_CHECK_AS(ConfigError, net_->architecture().name() == nn::kLfnetArchitecture,
-                 "a code is trained with a network of the lfnet architecture, not '",
-                 net_->architecture().name(), "'");
+  LFNET_CHECK_AS(ConfigError, net_->architecture().learns_code(), "the ",
+                 net_->architecture().name(),
+                 " architecture cannot learn a code with the net (the lfnet architecture can)");
   options.validate(options_.epochs);
   const auto w = code->weights();
   const auto& o = net_->options();

@@ -71,6 +71,20 @@ class NetworkArchitecture {
   // on a grid, stitched (recon::reconstruct_sensor).
   virtual bool whole_image() const = 0;
   virtual PhiInput phi_input() const = 0;
+  // True when a code can be learned with the net (train/joint_phi.h): its forward reads the
+  // Phi only through the net's `phi` and `pixel_pinv`, which joint training swaps for the
+  // code's inside the graph.
+  virtual bool learns_code() const { return false; }
+  // True when a net of `options` reads the sensor's noise sigma (a noise-aware net).
+  virtual bool reads_noise(const NetworkOptions& options) const { return false; }
+  // True when the architecture reconstructs colour behind a colour filter array (network.cfa).
+  virtual bool colour() const { return false; }
+
+  // The key of the architecture's own section of the network options (e.g. "unrolled"), ""
+  // for none. NetworkOptions keeps the section as it was read (NetworkOptions::sections) and
+  // writes it back; the architecture parses it (validate, build) and names its defaults here.
+  virtual std::string options_section() const { return ""; }
+  virtual nlohmann::json default_options() const { return nlohmann::json::object(); }
 
   // Checks the options only this architecture reads (the common ones are checked by
   // NetworkOptions::validate); a ConfigError names the field.
@@ -133,10 +147,10 @@ void register_architecture(std::unique_ptr<NetworkArchitecture> architecture);
 // The architecture called `name`; an unknown name is a ConfigError listing the known ones.
 const NetworkArchitecture& find_architecture(const std::string& name);
 
-// Every registered architecture's name, in registration order (paper, lfnet).
+// Every registered architecture's name, in registration order (paper, lfnet, unrolled).
 std::vector<std::string> registered_architectures();
 
-// "paper, lfnet": the registered architectures, for messages and help texts.
+// "paper, lfnet, unrolled": the registered architectures, for messages and help texts.
 std::string architecture_list();
 
 }  // namespace lfnet::nn

@@ -1,7 +1,11 @@
-// The reconstruction network: one module, LightFieldNet, that holds the layers and buffers of
-// its architecture (nn/architecture.h: "paper", the two-branch network of Gupta et al. 2017 on
-// patches, docs/training.md; "lfnet", lfnet's U-Net over whole sensor images,
-// docs/architectures.md), with the options of every architecture.
+// The reconstruction network: one module, LightFieldNet, that holds the Phi and what is derived
+// from it, and the layers its architecture registers on it (nn/architecture.h: "paper", the
+// two-branch network of Gupta et al. 2017 on patches, docs/training.md; "lfnet", lfnet's U-Net
+// over whole sensor images, and "unrolled", an unrolled data-consistency network,
+// docs/architectures.md). An architecture's layers are its own: it registers them in build()
+// and finds them by name (LightFieldNetImpl::layer); its options are NetworkOptions' typed
+// fields for the built-in paper and lfnet architectures, and its own section of the options
+// (NetworkOptions::sections) for any other.
 //
 // The Phi is part of the net (the buffer `phi`), so a saved or exported model is
 // self-contained. Registered names are the checkpoint schema. The paper architecture:
@@ -14,6 +18,7 @@
 //   phi            (N, U, V, T, T)      per-pixel weights of one period (buffer)
 //   pixel_pinv     (T, T, N, U V)       per-pixel pseudo-inverses (buffer, derived from phi)
 //   image.*                             the U-Net (nn/image_net.h)
+// The unrolled architecture: phi and pixel_pinv as lfnet's, `step` (K), denoiser<k>.* (K U-Nets).
 #pragma once
 
 #include <torch/nn/module.h>
@@ -23,10 +28,12 @@
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "lfnet/core/error.h"
 #include "lfnet/core/fields.h"
 #include "lfnet/core/json.h"
 #include "lfnet/nn/architecture.h"
@@ -136,6 +143,10 @@ struct NetworkOptions {
   // How a colour net demosaics its per-pixel pseudo-inverse into its U-Net's input:
   // "bilinear" or "malvar" (gradient-corrected, optics/cfa.h). Grey nets ignore it.
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;
+  // The option sections of the architectures that own theirs (options_section(), e.g.
+  // "unrolled"), by key, as read: each is parsed and checked by its architecture
+  // (section<T>()). A section of an architecture other than `architecture` is refused.
+  nlohmann::json sections = nlohmann::json::object();
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -160,6 +171,13 @@ struct NetworkOptions {
   nlohmann::json to_json() const;
   // Throws ConfigError naming the bad field (the architecture checks its own).
   void validate() const;
+  // The section `key` read strictly into the Options struct T (its defaults where the section
+  // or a key is absent); a ConfigError names the field, e.g. "unrolled.iterations: ...".
+  template <typename T>
+  T section(const std::string& key) const {
+    const auto it = sections.find(key);
+    return options_from_json<T>(it == sections.end() ? nlohmann::json::object() : *it, key);
+  }
 
   // The registered class of `architecture`; a ConfigError when none is.
   const NetworkArchitecture& arch() const { return find_architecture(architecture); }
@@ -257,8 +275,8 @@ class LightFieldNetImpl : public torch::nn::Module {
   // `noise_sigma`: the sensor's noise for a noise-aware net (ignored by others).
   torch::Tensor forward_image(const torch::Tensor& sensor, int64_t phase = 0,
                               double noise_sigma = 0.0);
-  // lfnet architecture: the per-pixel Tikhonov pseudo-inverse of sensor crops (B, N, h, w)
-  // whose pixel (0, 0) has phase `phase` (B) (undefined: 0), as (B, U V, h, w).
+  // Local Phis (lfnet, unrolled): the per-pixel Tikhonov pseudo-inverse of sensor crops
+  // (B, N, h, w) whose pixel (0, 0) has phase `phase` (B) (undefined: 0), as (B, U V, h, w).
   torch::Tensor pixel_pinv_image(const torch::Tensor& sensor,
                                  const torch::Tensor& phase = {}) const;
 
@@ -273,11 +291,18 @@ class LightFieldNetImpl : public torch::nn::Module {
   const NetworkOptions& options() const { return options_; }
   const NetworkArchitecture& architecture() const { return *arch_; }
 
-  AutoencoderBranch ae{nullptr};
-  CnnBranch cnn{nullptr};
-  ImageNet image{nullptr};  // lfnet architecture
+  // The layer the architecture registered as `name` (a direct submodule), as its class M;
+  // a null pointer when it has none of that name and class.
+  template <typename M>
+  std::shared_ptr<M> layer(const std::string& name) const {
+    for (const auto& child : named_children()) {
+      if (child.key() == name) return std::dynamic_pointer_cast<M>(child.value());
+    }
+    return nullptr;
+  }
+
   torch::Tensor phi, adjoint_scale, base;
-  torch::Tensor pixel_pinv;  // lfnet architecture: (T, T, N, U V) per-pixel pseudo-inverses
+  torch::Tensor pixel_pinv;  // local Phis: (T, T, N, U V) per-pixel pseudo-inverses
   // A colour net: the CFA's response (3, T, T) over the period T of `phi` and `pixel_pinv`,
   // the least common multiple of the code's and the CFA's.
   torch::Tensor cfa_response;
@@ -290,6 +315,14 @@ class LightFieldNetImpl : public torch::nn::Module {
   const NetworkArchitecture* arch_ = nullptr;  // owned by the registry
 };
 TORCH_MODULE(LightFieldNet);
+
+// The paper architecture's branches, the layers "ae" and "cnn" of `net` (null when it has
+// none: another architecture, or one branch only).
+std::shared_ptr<AutoencoderBranchImpl> ae_branch(const LightFieldNetImpl& net);
+std::shared_ptr<CnnBranchImpl> cnn_branch(const LightFieldNetImpl& net);
+
+// The lfnet architecture's U-Net, the layer "image" of `net` (null for another architecture).
+std::shared_ptr<ImageNetImpl> image_layers(const LightFieldNetImpl& net);
 
 // y (B, M) times the phase's matrix of `stack` (P, M, D): (B, D). Groups the batch by phase.
 torch::Tensor apply_phase_stack(const torch::Tensor& y, const torch::Tensor& phase,

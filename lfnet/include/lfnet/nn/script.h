@@ -93,6 +93,13 @@ class ScriptBuilder {
   std::map<std::string, torch::jit::Module> children_;
 };
 
+// The TorchScript methods every whole-image net's export shares, written on its
+// forward_image(sensor, phase, noise_sigma) and the root's buffers phi (N, U, V, T, T) and
+// pixel_pinv and attributes multiple, receptive_radius, period and patch_shape:
+// reconstruct(sensor, tile, clamp, noise_sigma), the tiles of nn::image_tiles and
+// recon::reconstruct_sensor_tiled op for op, and simulate(lf).
+extern const char* const kWholeImageScriptSource;
+
 // The TorchScript module of `net` (its parameters copied, detached). Throws ConfigError when
 // the metadata does not fit the net (phases != period^2, a block that does not divide the
 // patch).

@@ -107,8 +107,12 @@ torch::Tensor mirror_weights(const nn::LightFieldNet& net);
 int64_t mirrored_origin(const nn::LightFieldNet& net, const SensorMirror& m, int64_t height,
                         int64_t width, int64_t origin = 0);
 
-// Throws a ConfigError unless the self-ensemble applies: `method` "net" with a model of the
-// lfnet architecture, a checkpoint's network (`net`, empty without one) or an exported one
+// Whether the model, a checkpoint's network (`net`, empty without one) or an exported one
+// (`script`, null without one), is of an architecture that reconstructs whole sensor images.
+bool whole_image_model(const nn::LightFieldNet& net, const nn::ScriptedNetwork* script);
+
+// Throws a ConfigError unless the self-ensemble applies: `method` "net" with a model of a
+// whole-image architecture, a checkpoint's network (`net`, empty without one) or an exported one
 // (`script`, null without one).
 void check_self_ensemble(const std::string& method, const nn::LightFieldNet& net,
                          const nn::ScriptedNetwork* script = nullptr);
