@@ -3,8 +3,9 @@
 
 Every model is one config run by one lfnet command at one scale. A config may extend another
 ($.extends) and start from a model ($.init), distil one ($.distill.teacher) or start its learned
-code from one ($.code.from): those inputs are read from the config, its bases and its scale,
-and a recipe whose model is an input of another is made first. A `blend` recipe's config names
+code from one ($.code.from): those inputs are read from the config as lfnet resolves it (`lfnet
+train CONFIG --show-config`: its bases and its scale merged in), and a recipe whose model is an
+input of another is made first. A `blend` recipe's config names
 a finetuned model, its base and alpha ($.blend; `lfnet blend`) instead of training. A model
 outside the zoo (models/zoo.json) -- a research variant, or a step of a long chain -- is made into
 out/ (out/cache/ or out/chains/, the recipe's model path) rather than models/; it is made again
@@ -66,35 +67,31 @@ def scale_args(recipe):
     return ["--scale", recipe["scale"]] if recipe["scale"] else []
 
 
-def merged(base, over):
-    """`over` merged into `base` as lfnet merges a config into the one it extends."""
-    out = dict(base)
-    for key, value in over.items():
-        if isinstance(value, dict) and isinstance(out.get(key), dict):
-            out[key] = merged(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def written_config(path, scale):
-    """A config as lfnet resolves it at `scale`, read without lfnet (a model it starts from may
-    not be made yet): its base ($.extends, relative to it) at the same scale, then its own keys,
-    then its own patch for the scale."""
-    with open(path) as f:
-        config = json.load(f)
-    base = config.pop("extends", None)
-    patch = config.get("scales", {}).get(scale, {})
-    if base is not None:
-        config = merged(written_config(os.path.join(os.path.dirname(path), base), scale), config)
-    return merged(config, patch)
+_resolved = {}
 
 
 def recipe_config(recipe):
-    """The recipe's config at its scale (the config's default scale where it names none)."""
-    scale = recipe["scale"] or written_config(recipe["config"], "").get("default_scale", "")
-    config = written_config(recipe["config"], scale)
-    config["scale"] = scale
+    """The recipe's config at its scale as lfnet resolves it (`lfnet train CONFIG --show-config`:
+    $.extends, the scale -- the config's default where the recipe names none -- merged in; the
+    models it starts from need not be made yet). A blend recipe's config is read as it is: it
+    names two models and an alpha, and extends nothing."""
+    key = (recipe["config"], recipe["scale"], recipe["command"])
+    if key in _resolved:
+        return _resolved[key]
+    if recipe["command"] == "blend":
+        with open(recipe["config"]) as f:
+            config = json.load(f)
+        if "extends" in config:
+            fail(f"{recipe['name']}: a blend recipe's config extends nothing ($.extends)")
+        config["scale"] = recipe["scale"]
+    else:
+        shown = subprocess.run([lfnet(), "--log-level", "error", "train", recipe["config"]]
+                               + scale_args(recipe) + ["--show-config"],
+                               capture_output=True, text=True)
+        if shown.returncode != 0:
+            fail(f"{recipe['name']}: {shown.stderr.strip()}")
+        config = json.loads(shown.stdout)
+    _resolved[key] = config
     return config
 
 

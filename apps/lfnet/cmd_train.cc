@@ -34,15 +34,20 @@ std::string command_line_of(const TrainArgs& a, const std::string& verb) {
 
 // Prints what the config holds and that it is valid.
 void check_config(const TrainArgs& a) {
-  const auto config = pipeline::resolve_request(a.request);
-  if (!a.show) pipeline::check_config_inputs(config);
   if (a.show) {
-    // The config as the run would record it: bases, scale and --set merged in.
+    // The config as the run would record it: bases, scale and --set merged in. A config's
+    // inputs ($.init, ...) need not be made yet.
+    const auto& r = a.request;
+    const auto config = !r.config.empty() && r.resume.empty() && r.init.empty()
+                            ? pipeline::ExperimentConfig::resolve(r.config, r.scale, r.set)
+                            : pipeline::resolve_request(r);
     auto resolved = config.raw;
     resolved["scale"] = config.scale;
     std::printf("%s\n", resolved.dump(2).c_str());
     return;
   }
+  const auto config = pipeline::resolve_request(a.request);
+  pipeline::check_config_inputs(config);
   std::string names;
   for (const auto& s : config.stages) {
     if (pipeline::is_network_stage(s.name))

@@ -136,6 +136,30 @@ TEST_CASE("every model in models/ has a recipe, and every recipe's config is val
   CHECK(out.find("92 recipes") != std::string::npos);
 }
 
+TEST_CASE("train --show-config resolves a config whose inputs are not made yet", "[pipeline]") {
+  // scripts/models.py reads every recipe's config so, before the models it starts from exist.
+  lfnet::test::TempDir tmp;
+  auto base = small_config();
+  base["scales"] = {{"paper", {{"training", {{"epochs", 7}}}}}};
+  write_json_file(tmp / "base.json", base);
+  write_json_file(tmp / "c.json", {{"extends", "base.json"},
+                                   {"init", tmp / "not-made.ckpt"},
+                                   {"training", {{"batch_size", 3}}}});
+  const std::string train = std::string(LFNET_BINARY) + " --log-level error train " +
+                            tmp / "c.json" + " --scale paper ";
+  std::string out;
+  REQUIRE(lfnet::test::run_command(train + "--show-config 2>&1", out) == 0);
+  const auto shown = nlohmann::json::parse(out);
+  CHECK(shown.at("scale") == "paper");
+  CHECK(shown.at("training").at("epochs") == 7);      // the base's scale
+  CHECK(shown.at("training").at("batch_size") == 3);  // the config's own key
+  CHECK(shown.at("init") == tmp / "not-made.ckpt");
+  CHECK_FALSE(shown.contains("extends"));
+  // A run of it (and --check) needs the model.
+  CHECK(lfnet::test::run_command(train + "--check 2>&1", out) != 0);
+  CHECK(out.find("$.init") != std::string::npos);
+}
+
 TEST_CASE("network.patch and network.measurements are honoured when they agree, else refused",
           "[pipeline]") {
   lfnet::test::TempDir tmp;

@@ -168,8 +168,8 @@ ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
 
 }  // namespace
 
-ExperimentConfig ExperimentConfig::load(const std::string& path, const std::string& scale,
-                                        const std::vector<std::string>& overrides) {
+ExperimentConfig ExperimentConfig::resolve(const std::string& path, const std::string& scale,
+                                           const std::vector<std::string>& overrides) {
   std::vector<std::string> chain;
   auto resolved = resolve_config(path, scale, chain);
   LFNET_CHECK_AS(ConfigError, resolved.scale.empty() || resolved.found, path,
@@ -179,6 +179,12 @@ ExperimentConfig ExperimentConfig::load(const std::string& path, const std::stri
   auto config = from_json(j, overrides.empty() ? path : path + " (with --set)");
   config.scale = resolved.scale;
   config.files = std::move(resolved.files);
+  return config;
+}
+
+ExperimentConfig ExperimentConfig::load(const std::string& path, const std::string& scale,
+                                        const std::vector<std::string>& overrides) {
+  auto config = resolve(path, scale, overrides);
   // A new run starts from $.init: it must be there (a resumed run may no longer need it). A
   // config's paths are taken from the working folder, $.extends alone from the config's: a path
   // that exists beside the config only is named.

@@ -116,9 +116,15 @@ struct ExperimentConfig {
   // its "default_scale". A config may extend another ($.extends: a path relative to it): the
   // base resolved at the same scale, then this file's keys, then this file's patch for the
   // scale (docs/experiments.md "Recipes"). `overrides` (KEY.PATH=VALUE, see apply_override)
-  // apply last.
+  // apply last. A new run starts from the files it names ($.init, $.code.from): they must
+  // exist.
   static ExperimentConfig load(const std::string& path, const std::string& scale = "",
                                const std::vector<std::string>& overrides = {});
+  // The same, without the check that those files exist: the config as a run of it will be
+  // resolved, before the models it starts from are made (train --show-config, the recipes'
+  // scripts/models.py).
+  static ExperimentConfig resolve(const std::string& path, const std::string& scale = "",
+                                  const std::vector<std::string>& overrides = {});
   // Reads the config.json of a run folder (the config as it was trained, scale merged).
   static ExperimentConfig load_run(const std::string& run_dir);
   static ExperimentConfig from_json(const nlohmann::json& j, const std::string& source);
