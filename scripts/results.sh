@@ -623,7 +623,8 @@ cross-scene() {
     models=()
     for name in asp-n2-paper asp-n2 lfnet-asp-n2-c32 lfnet-asp-n2-c48 lfnet-asp-n2-f10 \
       lfnet-asp-n2-first20 lfnet-asp-n2-l3 lfnet-asp-n2-l4 lfnet-asp-n2-noise lfnet-asp-n2 \
-      paper-quick/asp-n2 lfnet-asp-n2-robust lfnet-asp-n2-hard-blend; do
+      paper-quick/asp-n2 lfnet-asp-n2-robust lfnet-asp-n2-hard-blend lfnet-asp-n2-c16 \
+      lfnet-asp-n2-unrolled; do
       models+=("$(model_file "$name")")
       need_model "${models[-1]}"
     done

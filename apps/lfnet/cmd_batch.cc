@@ -7,6 +7,7 @@
 
 #include "command.h"
 #include "dist_flags.h"
+#include "flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/pipeline/batch.h"
 #include "lfnet/recon/method_registry.h"
@@ -60,25 +61,18 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
       cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile, &o.stride, nullptr,
             &o.self_ensemble, &o.self_ensemble_passes, &o.method_options});
   add_self_calibrate_flag(cmd, o.self_calibrate);
-  input_path(cmd->add_option("--dictionary", o.dictionary, "dictionary file for dict"));
-  add_enum_option(cmd, "--mode", o.mode, "simulation mode of evaluations: sensor or per_patch");
-  cmd->add_option("--noise", o.noise, "Gaussian noise sigma of evaluations")->check(kNoiseSigma);
-  cmd->add_option("--seed", o.seed, "noise seed of evaluations")->check(kSeed);
-  input_path(
-      cmd->add_option("--cfa", o.cfa,
-                      "evaluations behind a colour filter array: RGGB, BGGR, GRBG, GBRG or JSON, "
-                      "inline or a file (colour light fields; pinv, adjoint, no-parallax)"))
-      ->check(kNotEmpty);
-  cmd->add_option("--batch", o.batch, "patches per solver call")->check(kCount);
-  cmd->add_flag("--window", o.window, "weight patch estimates by a smooth window when stitching");
-  cmd->add_flag("--post-filter", o.post_filter, "suppress artefacts with the stride's period");
-  cmd->add_flag("--match-mean", o.match_mean, "scale real measurements to the training mean");
+  add_dictionary_option(cmd, o.dictionary);
+  add_mode_option(cmd, o.mode);  // of evaluations
+  add_noise_option(cmd, o.noise);
+  add_seed_option(cmd, o.seed);
+  add_cfa_option(cmd, o.cfa);
+  add_batch_option(cmd, o.batch);
+  add_window_flag(cmd, o.window);
+  add_post_filter_flag(cmd, o.post_filter);
+  add_match_mean_flag(cmd, o.match_mean);
   add_demosaic_option(cmd, o.demosaic);
-  input_path(
-      cmd->add_option("--flat-field", o.flat_field,
-                      "the camera's white frame, divided out of every acquisition's sensor image "
-                      "(docs/acquisition.md, \"Flat field\")"));
-  cmd->add_flag("--force", o.force, "write into an existing non-empty output folder");
+  add_flat_field_option(cmd, o.flat_field);
+  add_force_flag(cmd, o.force);
   cmd->add_flag("--resume", o.resume,
                 "continue the batch in --out: only the item-method pairs without a record of "
                 "success are done (same options as the batch it continues)");

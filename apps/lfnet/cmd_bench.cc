@@ -9,6 +9,7 @@
 #include <string>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
@@ -106,50 +107,35 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
       "bench", "Measure GEMM and Conv4d FLOP/s and whole-light-field reconstruction speed");
   auto args = std::make_shared<BenchArgs>();
   auto* a = &args->options;
-  output_file(cmd->add_option(
-      "--json", args->json,
-      "also write the report as JSON to this file (a new or empty file, or --force; "
-      "'-': stdout)"));
-  cmd->add_flag("--force", args->force, "replace an existing --json file");
+  add_json_option(cmd, args->json);
+  add_force_flag(cmd, args->force);
   cmd->add_option("--methods", a->methods,
                   "methods to time: " + recon::method_list(recon::MethodNeeds::kTruth))
       ->delimiter(',');
-  ReconstructionFlags shared{nullptr,
-                             &a->models,
-                             &a->phi,
-                             &a->device,
-                             &a->precision,
-                             &a->tile,
-                             nullptr,
-                             &a->strides,
-                             &a->self_ensemble,
-                             &a->self_ensemble_passes,
-                             &a->method_options,
-                             "time"};
+  ReconstructionFlags shared{
+      nullptr,           &a->models, &a->phi,     &a->device,        &a->precision,
+      &a->tile,          nullptr,    &a->strides, &a->self_ensemble, &a->self_ensemble_passes,
+      &a->method_options};
   add_reconstruction_flags(cmd, shared);
   // At least one 9 x 9 patch; at most 8192 x 8192 x 5 x 5 floats (6.7 GB) per light field.
   cmd->add_option("--height", a->height, "light-field height (default 593)")
       ->check(whole_number_in(9, 8192, "pixels"));
   cmd->add_option("--width", a->width, "light-field width (default 840)")
       ->check(whole_number_in(9, 8192, "pixels"));
-  cmd->add_option("--batch", a->batch, "patches per solver call (default 1024)")->check(kCount);
-  input_path(cmd->add_option("--dictionary", a->dictionary,
-                             "dictionary file (default: a small K-SVD dictionary)"));
+  add_batch_option(cmd, a->batch);
+  add_dictionary_option(cmd, a->dictionary);
   output_file(cmd->add_option("--save-dictionary", a->save_dictionary,
                               "write the bench's K-SVD dictionary to this file"));
-  input_path(cmd->add_option("--scene", a->scene,
-                             "scene spec to render instead of a random scene (its own size)"));
+  add_scene_option(cmd, a->scene);
   // K-SVD keeps an atoms x atoms Gram matrix in double: 20000 atoms take 3.2 GB.
   cmd->add_option("--dict-atoms", a->dict_atoms, "atoms of the bench dictionary (default 1000)")
       ->check(whole_number_in(1, 20000, "atoms"));
-  cmd->add_option("--seed", a->seed, "seed of the procedural scene (default 7)")->check(kSeed);
+  add_seed_option(cmd, a->seed);
   cmd->add_option("--conv-batch", a->conv_batch, "patches per Conv4d timing (default 256)")
       ->check(kCount);
   cmd->add_option("--reps", a->reps, "repetitions of the kernel timings (best is kept)")
       ->check(kCount);
-  add_enum_option(
-      cmd, "--cnn-mode", a->cnn_mode,
-      "CNN branch per patch ('patches', the default) or once over the light field ('full')");
+  add_cnn_mode_option(cmd, a->cnn_mode);
   cmd->add_option_function<std::vector<std::string>>(
       "--architecture",
       [a](const std::vector<std::string>& names) {

@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/pipeline/blend.h"
 
 namespace lfnet::app {
@@ -24,7 +25,7 @@ void add_blend_command(CLI::App& app, const GlobalOptions&) {
       "--alpha", a->alpha,
       "each shared weight becomes (1 - alpha) base + alpha model: 0 to 1 (default 0.5)");
   output_file(cmd->add_option("--out", a->out, "checkpoint to write"))->required();
-  cmd->add_flag("--force", a->force, "replace an existing file");
+  add_force_flag(cmd, a->force);
   cmd->callback([a] {
     a->command_line = "lfnet blend --model " + a->model + " --base " + a->base + " --alpha " +
                       CLI::detail::to_string(a->alpha) + " --out " + a->out;

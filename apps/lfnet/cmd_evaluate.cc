@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/process_time.h"
@@ -101,65 +102,41 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
       cmd, {&q.model, nullptr, &q.phi, &q.device, &q.precision, &q.tile, &q.stride, nullptr,
             &q.self_ensemble, &q.self_ensemble_passes, &q.method_options});
   add_self_calibrate_flag(cmd, q.self_calibrate);
-  input_path(cmd->add_option("--lf", q.lf, "light field folder with the truth"));
-  input_path(cmd->add_option("--scene", q.scene, "or a procedural scene spec"));
-  cmd->add_option("--views", q.views, "angular window R0:R1,C0:C1 (1-based; default central)");
-  cmd->add_option(
-      "--orient", q.orient,
-      "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
-  cmd->add_option("--layout", q.layout,
-                  "file-naming pattern of --lf: view_{row}_{col}.png, or "
-                  "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
-  cmd->add_option("--noise", q.noise, "Gaussian noise sigma, relative to a white scene's mean")
-      ->check(kNoiseSigma);
-  input_path(cmd->add_option(
-                 "--effects", q.effects,
-                 "sensor effects JSON file: shot, read noise and the rest (docs/acquisition.md); "
-                 "--noise sets its Gaussian sigma"))
-      ->check(CLI::ExistingFile);
+  add_lf_option(cmd, q.lf);
+  add_scene_option(cmd, q.scene);
+  add_views_option(cmd, q.views);
+  add_orient_option(cmd, q.orient);
+  add_layout_option(cmd, q.layout);
+  add_noise_option(cmd, q.noise);
+  add_effects_option(cmd, q.effects);
   cmd->add_flag("--estimate-noise", q.estimate_noise,
                 "noise-aware models are told the noise estimated from the sensor image, not the "
                 "simulation's: a camera whose noise is unknown (docs/acquisition.md)");
-  input_path(cmd->add_option(
-                 "--cfa", q.cfa,
-                 "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG or "
-                 "JSON, inline or a file; scores colour and luma (docs/acquisition.md)"))
-      ->check(kNotEmpty);
+  add_cfa_option(cmd, q.cfa);
   add_demosaic_option(cmd, q.demosaic);
-  auto* camera_error = input_path(cmd->add_option(
-      "--camera-error", q.camera_error,
-      "simulate a camera whose Phi differs from the model's: JSON, inline or a file, "
-      "e.g. '{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
-      "vignetting; docs/acquisition.md)"));
+  auto* camera_error = add_camera_error_option(cmd, q.camera_error);
   cmd->add_flag("--tell-camera-error", q.tell_camera_error,
                 "lfnet models: the net is told the camera's Phi with that error (its weights over "
                 "one period; no vignetting), as if it had been measured (docs/acquisition.md, "
                 "\"Self-calibration\")")
       ->needs(camera_error);
-  input_path(
-      cmd->add_option("--flat-field", q.flat_field,
-                      "the camera's white frame (an acquisition folder, or an image of its N "
-                      "channels): its gain across the sensor, such as vignetting, is divided out "
-                      "(docs/acquisition.md, \"Flat field\")"));
-  add_enum_option(cmd, "--mode", q.mode, "simulation mode: sensor or per_patch");
+  add_flat_field_option(cmd, q.flat_field);
+  add_mode_option(cmd, q.mode);
   cmd->add_option("--method", q.method,
                   recon::method_list() + " (default net with --model, pinv without)");
-  input_path(cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict"));
-  output_file(
-      cmd->add_option("--json", a->json,
-                      "write the evaluation record to this file (a new or empty file, or --force); "
-                      "- prints it on standard output instead of the summary line"));
+  add_dictionary_option(cmd, q.dictionary);
+  add_json_option(cmd, a->json);
   output_folder(cmd->add_option(
       "--out", a->out,
       "write the reconstruction as a light-field folder with a viewer (index.html)"));
-  cmd->add_flag("--force", a->force, "replace an existing --out folder and --json file");
-  cmd->add_option("--seed", q.seed, "noise seed")->check(kSeed);
+  add_force_flag(cmd, a->force);
+  add_seed_option(cmd, q.seed);
   cmd->add_option("--choice", q.choice,
                   "what this evaluation decides (an alpha, an epoch, which model ships), kept in "
                   "the record; made on a test-set light field, lfnet report marks it "
                   "(docs/protocol.md)");
-  cmd->add_option("--batch", q.batch, "patches per forward pass")->check(kCount);
-  cmd->add_flag("--window", q.window, "weight patch estimates by a smooth window when stitching");
+  add_batch_option(cmd, q.batch);
+  add_window_flag(cmd, q.window);
   cmd->callback([a] { run_evaluate(*a); });
 }
 

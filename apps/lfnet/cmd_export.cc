@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/pipeline/export.h"
 
 namespace lfnet::app {
@@ -23,7 +24,7 @@ void add_export_command(CLI::App& app, const GlobalOptions&) {
                   "patches on which to compare the exported net with the checkpoint, 0 to 65536 "
                   "(0: none; the lfnet architecture is compared on one sensor image)")
       ->check(whole_number_in(0, 65536, "patches"));
-  cmd->add_flag("--force", a->force, "replace an existing file");
+  add_force_flag(cmd, a->force);
   cmd->callback([a] {
     const auto r = pipeline::export_model(*a);
     std::printf("exported %s (%s, %s, %lld phases) to %s: %.2f MB", a->model.c_str(), r.phi.c_str(),

@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/io/light_field_io.h"
 
@@ -17,14 +18,9 @@ void add_info_command(CLI::App& app, const GlobalOptions& global) {
   auto dir = std::make_shared<std::string>();
   auto orient = std::make_shared<std::string>();
   auto layout_text = std::make_shared<std::string>();
-  input_path(cmd->add_option("--lf", *dir, "light field folder of sub-aperture images"))
-      ->required();
-  cmd->add_option(
-      "--orient", *orient,
-      "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
-  cmd->add_option("--layout", *layout_text,
-                  "file-naming pattern for other folders: view_{row}_{col}.png, or "
-                  "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
+  add_lf_option(cmd, *dir)->required();
+  add_orient_option(cmd, *orient);
+  add_layout_option(cmd, *layout_text);
   cmd->callback([dir, orient, layout_text] {
     const auto orientation = AngularOrientation::parse(*orient, "--orient");
     const auto layout = io::scan_folder(*dir, *layout_text);

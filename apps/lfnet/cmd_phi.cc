@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
@@ -90,15 +91,10 @@ void add_phi_command(CLI::App& app, const GlobalOptions&) {
   auto* ex = cmd->add_subcommand(
       "export", "Write a Phi as a calibrated-Phi folder (phi.json and one image per measurement)");
   auto a = std::make_shared<PhiExportArgs>();
-  input_path(
-      ex->add_option("--phi", a->phi,
-                     "NAME[:N], a Phi spec (.json), a calibrated-Phi folder, a model file or a zoo "
-                     "model's name"))
-      ->required()
-      ->transform(zoo_model_file);
+  add_phi_option(ex, a->phi)->required();
   output_folder(ex->add_option("--out", a->out, "folder to write"))->required();
   ex->add_option("--grid", a->grid, "views U x V coded by a NAME[:N] Phi")->capture_default_str();
-  ex->add_flag("--force", a->force, "replace an existing folder");
+  add_force_flag(ex, a->force);
   ex->add_flag("--printable", a->printable,
                "also write each measurement's code as an 8-bit image to print (mask_<n>.png; "
                "always for a learned mask or aperture)");

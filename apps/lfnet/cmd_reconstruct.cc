@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
@@ -104,31 +105,16 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
       recon::method_list(recon::MethodNeeds::kTruth) +
           " (default net; without --model, net with the zoo's default model for the sensor's "
           "camera and colour, pinv where the zoo has none)");
-  input_path(cmd->add_option("--dictionary", q.dictionary, "dictionary file for --method dict"));
-  cmd->add_option("--batch", q.options.batch, "patches per solver call (bounds memory)")
-      ->check(kCount);
-  cmd->add_flag("--window", q.options.window,
-                "weight patch estimates by a smooth window when stitching");
-  cmd->add_flag("--post-filter", q.post_filter,
-                "suppress artefacts that repeat with the patch stride (a spectral notch per view)");
-  input_path(cmd->add_option(
-                 "--cfa", q.cfa,
-                 "the colour filter array a plain sensor image was taken behind: RGGB, BGGR, "
-                 "GRBG, GBRG or JSON, inline or a file (an acquisition folder records its own; "
-                 "docs/acquisition.md)"))
-      ->check(kNotEmpty);
+  add_dictionary_option(cmd, q.dictionary);
+  add_batch_option(cmd, q.options.batch);
+  add_window_flag(cmd, q.options.window);
+  add_post_filter_flag(cmd, q.post_filter);
+  add_cfa_option(cmd, q.cfa);
   add_demosaic_option(cmd, q.demosaic);
-  input_path(
-      cmd->add_option("--flat-field", q.flat_field,
-                      "the camera's white frame (an acquisition folder, or an image of its N "
-                      "channels): its gain across the sensor, such as vignetting, is divided out "
-                      "(docs/acquisition.md, \"Flat field\")"));
-  cmd->add_flag("--match-mean", q.match_mean,
-                "scale real measurements to the training data's mean (the paper's step)");
-  cmd->add_flag("--force", a->force, "replace an existing output folder");
-  add_enum_option(cmd, "--cnn-mode", q.cnn_mode,
-                  "CNN branch per patch ('patches', default) or once over the light field in "
-                  "tiles ('full'; docs/performance.md)");
+  add_flat_field_option(cmd, q.flat_field);
+  add_match_mean_flag(cmd, q.match_mean);
+  add_force_flag(cmd, a->force);
+  add_cnn_mode_option(cmd, q.cnn_mode);
   cmd->add_option("--noise-sigma", q.noise_sigma,
                   "the sensor's noise sigma (relative to white) for noise-aware models (default: "
                   "what the acquisition's sensor.json records, else estimated from the sensor "

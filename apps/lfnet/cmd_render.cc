@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/pipeline/render.h"
 
@@ -71,8 +72,7 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   auto* cmd = app.add_subcommand(
       "render", "Render a procedural scene into a light field folder with its true disparity map");
   auto args = std::make_shared<RenderArgs>();
-  input_path(
-      cmd->add_option("--scene", args->request.scene, "scene spec (JSON); see docs/scenes.md"));
+  add_scene_option(cmd, args->request.scene);
   cmd->add_option("--random", args->request.random_seed,
                   "render the random training scene of this seed")
       ->check(kWhole);
@@ -88,7 +88,7 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   output_folder(cmd->add_option("--out", args->request.out,
                                 "output folder: lf_R_C.png, disparity.pfm, previews, scene.json"))
       ->required();
-  cmd->add_flag("--force", args->request.force, "replace an existing --out folder");
+  add_force_flag(cmd, args->request.force);
   cmd->add_option("--bits", args->request.bits, "bits per PNG sample, 8 or 16")
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--epi-row", args->request.epi_row,

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/pipeline/sets.h"
 
 namespace lfnet::app {
@@ -46,7 +47,7 @@ void add_sets_command(CLI::App& app, const GlobalOptions&) {
   output_folder(make->add_option("--out", a->out, "the folder to write the light fields into"))
       ->required();
   make->add_option("--only", a->only, "make only these light fields (by name)");
-  make->add_flag("--force", a->force, "replace the folders of light fields made before");
+  add_force_flag(make, a->force);
   make->callback([a] {
     const auto set = pipeline::read_set(a->set);
     pipeline::write_set(set, a->set, a->out, a->only, a->force);

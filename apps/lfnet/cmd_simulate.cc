@@ -8,6 +8,7 @@
 #include <optional>
 
 #include "command.h"
+#include "flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
@@ -130,56 +131,31 @@ void add_simulate_command(CLI::App& app, const GlobalOptions& /*global*/) {
   auto* cmd = app.add_subcommand(
       "simulate", "Simulate coded capture of a light field with a Phi model and sensor effects");
   auto args = std::make_shared<SimulateArgs>();
-  input_path(cmd->add_option("--lf", args->source.lf, "light field folder of sub-aperture images"));
+  add_lf_option(cmd, args->source.lf);
   cmd->add_option("--white", args->source.white,
                   "or a uniform white light field of HxW pixels: the camera's white frame, for "
                   "--flat-field (docs/acquisition.md)");
-  input_path(cmd->add_option("--scene", args->source.scene,
-                             "procedural scene spec to render and simulate (configs/scenes)"));
-  input_path(cmd->add_option(
-                 "--phi", args->phi,
-                 "Phi model NAME[:N] (asp, mask, aperture, random, lenslet), a PHI.json spec, a "
-                 "calibrated-Phi folder, a model file or a zoo model's name"))
-      ->capture_default_str()
-      ->transform(zoo_model_file);
-  add_enum_option(cmd, "--mode", args->mode,
-                  "sensor (the default): one sensor image; per_patch: every patch measured alone "
-                  "(the paper's protocol)");
-  cmd->add_option("--noise", args->noise,
-                  "Gaussian noise sigma, relative to a white scene's mean measurement (1)")
-      ->check(kNoiseSigma);
-  cmd->add_option("--seed", args->seed, "seed of the noise")->capture_default_str()->check(kSeed);
+  add_scene_option(cmd, args->source.scene);
+  add_phi_option(cmd, args->phi)->capture_default_str();
+  add_mode_option(cmd, args->mode);
+  add_noise_option(cmd, args->noise);
+  add_seed_option(cmd, args->seed)->capture_default_str();
   output_folder(cmd->add_option("--out", args->out, "output folder (see docs/acquisition.md)"));
-  cmd->add_option("--views", args->source.views,
-                  "angular window R0:R1,C0:C1, 1-based inclusive (default: the central 5x5)");
-  cmd->add_option(
-      "--orient", args->source.orient,
-      "reorient the folder's angular axes: flip-u, flip-v, transpose (comma-separated)");
-  cmd->add_option("--layout", args->source.layout,
-                  "file-naming pattern of --lf: view_{row}_{col}.png, or "
-                  "img{index}.png:cols=9[:col-major] (docs/conventions.md)");
+  add_views_option(cmd, args->source.views);
+  add_orient_option(cmd, args->source.orient);
+  add_layout_option(cmd, args->source.layout);
   cmd->add_flag("--color", args->source.color,
                 "simulate every colour channel (default: grey luma)");
-  input_path(
-      cmd->add_option("--effects", args->effects, "sensor effects JSON (docs/acquisition.md)"));
-  input_path(
-      cmd->add_option("--cfa", args->cfa,
-                      "a single colour sensor behind a colour filter array: RGGB, BGGR, GRBG, GBRG "
-                      "or per-pixel colour responses as JSON, inline or a file (implies --color; "
-                      "docs/acquisition.md)"))
-      ->check(kNotEmpty);
-  input_path(cmd->add_option("--camera-error", args->camera_error,
-                             "a camera whose Phi differs from --phi: JSON, inline or a file, e.g. "
-                             "'{\"depth\": 0.1}' (depth, angular_shift_u/v, shift_y/x, period, "
-                             "vignetting; docs/acquisition.md)"));
+  add_effects_option(cmd, args->effects);
+  add_cfa_option(cmd, args->cfa);  // implies --color
+  add_camera_error_option(cmd, args->camera_error);
   cmd->add_option("--stride", args->stride, "patch stride, per_patch mode")
       ->check(kStride)
       ->capture_default_str();
   cmd->add_option("--patch", args->patch, "patch size, per_patch mode")
       ->check(whole_number_in(1, 64, "pixels"))
       ->capture_default_str();
-  cmd->add_flag("--force", args->force,
-                "replace an existing non-empty --out folder (and --plot-weights files)");
+  add_force_flag(cmd, args->force);  // --out, and --plot-weights files
   cmd->add_flag("--describe", args->describe,
                 "print the singular values and condition numbers of the Phi's per-pixel (or "
                 "per-block) matrices");

@@ -3,6 +3,7 @@
 
 #include "command.h"
 #include "dist_flags.h"
+#include "flags.h"
 #include "lfnet/pipeline/run.h"
 #include "lfnet/pipeline/stages.h"
 
@@ -80,13 +81,12 @@ void add_train_args(CLI::App* cmd, TrainArgs& a) {
       cmd->add_option("--resume", r.resume,
                       "continue an interrupted run: its run folder (every stage), or a stage's "
                       "last.ckpt with --stage"));
-  cmd->add_flag("--force", r.force, "replace an existing run folder: start the run afresh");
+  add_force_flag(cmd, r.force);  // a run folder: the run starts afresh
   cmd->add_flag("--check", a.check, "only read and check the config (every stage), then stop");
   cmd->add_flag("--show-config", a.show,
                 "print the resolved config (its bases, the scale and --set merged in) as JSON, "
                 "then stop");
-  cmd->add_option("--device", r.device,
-                  "cpu or cuda[:K]: where to train (default: the config's training.device, cpu)");
+  add_device_option(cmd, r.device);
   input_path(
       cmd->add_option("--init", r.init,
                       "start the first stage from a checkpoint: finetuning, or Phi switching when "

@@ -13,8 +13,6 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/version.h"
-#include "lfnet/nn/auto_precision.h"
-#include "lfnet/nn/network.h"
 #include "lfnet/pipeline/zoo.h"
 #include "lfnet/recon/method_registry.h"
 #include "paths.h"
@@ -162,15 +160,12 @@ CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, std::vector
 }
 
 // --self-ensemble and --ensemble-passes: lfnet models averaged over the Phi's mirror images
-// (recon::reconstruct_sensor_mirrored), all of them or the first `passes`. `what` opens the
-// flag's help ("reconstruct" or "time").
-inline void add_self_ensemble_options(CLI::App* cmd, bool& self_ensemble, int64_t& passes,
-                                      const std::string& what = "reconstruct") {
+// (recon::reconstruct_sensor_mirrored), all of them or the first `passes`.
+inline void add_self_ensemble_options(CLI::App* cmd, bool& self_ensemble, int64_t& passes) {
   auto* flag = cmd->add_flag(
       "--self-ensemble", self_ensemble,
-      "lfnet models: " + what +
-          " the sensor image's mirror images that the Phi allows too (asp:2 all four) and "
-          "average, at that many times the cost (docs/architectures.md)");
+      "whole-image models: reconstruct the sensor image's mirror images that the Phi allows too "
+      "(asp:2 all four) and average, at that many times the cost (docs/architectures.md)");
   cmd->add_option("--ensemble-passes", passes,
                   "with --self-ensemble: the first N of those passes only, the identity first, "
                   "then left to right, top to bottom, both (default: all)")
@@ -190,101 +185,6 @@ inline void add_self_calibrate_flag(CLI::App* cmd, bool& self_calibrate) {
 // The transform of every flag that takes a model file: a zoo model's name stands for its file
 // (pipeline/zoo.h, `lfnet models`).
 inline std::string zoo_model_file(std::string text) { return pipeline::resolve_model_name(text); }
-
-// The flags every command that reconstructs (evaluate, reconstruct, batch, bench) shares, bound
-// once here so that their names, checks and help are the same in all four (docs/reconstruction.md,
-// "Flags every command shares"). Each member points at the command's field, and every one must
-// be given. bench times several models and strides (`models`, `strides`; its --stride N is
-// --strides N), the others take one (`model`, `stride`). --threads is the program's option and
-// may also follow the command's name (main.cc).
-struct ReconstructionFlags {
-  std::string* model = nullptr;
-  std::vector<std::string>* models = nullptr;  // instead of `model`
-  std::string* phi = nullptr;
-  std::string* device = nullptr;
-  nn::Precision* precision = nullptr;
-  int64_t* tile = nullptr;
-  int64_t* stride = nullptr;
-  std::vector<int64_t>* strides = nullptr;  // instead of `stride`
-  bool* self_ensemble = nullptr;
-  int64_t* ensemble_passes = nullptr;
-  std::string* method_options = nullptr;
-  std::string ensemble_verb = "reconstruct";  // opens --self-ensemble's help
-};
-
-inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f) {
-  if ((f.model == nullptr) == (f.models == nullptr) ||
-      (f.stride == nullptr) == (f.strides == nullptr) || !f.phi || !f.device || !f.precision ||
-      !f.tile || !f.self_ensemble || !f.ensemble_passes || !f.method_options) {
-    throw std::logic_error("add_reconstruction_flags: every shared flag needs one target");
-  }
-  const std::string model =
-      "trained model for net, ae and cnn: a checkpoint, a file lfnet export wrote, or the name "
-      "of a zoo model (lfnet models)";
-  if (f.models) {
-    input_path(cmd->add_option("--model", *f.models,
-                               model + "; repeatable, the network methods run with each (default: "
-                                       "an untrained network of --architecture)"))
-        ->transform(zoo_model_file);
-  } else {
-    input_path(cmd->add_option("--model", *f.model, model))->transform(zoo_model_file);
-  }
-  input_path(cmd->add_option(
-      "--phi", *f.phi,
-      "the camera: NAME[:N], a spec (.json), a calibrated-Phi folder or a model; for "
-      "what a model or acquisition does not say, and it must match the model"));
-  cmd->add_option("--device", *f.device, "cpu or cuda[:K] for the network (default cpu)");
-  // auto is chosen once the command line is read, when the models and the device are known.
-  auto precision_auto = std::make_shared<bool>(true);
-  cmd->add_option_function<std::string>(
-      "--precision",
-      [precision = f.precision, precision_auto](const std::string& text) {
-        *precision_auto = text == "auto";
-        if (*precision_auto) return;
-        try {
-          *precision = nn::parse_precision(text);
-        } catch (const ConfigError&) {
-          throw CLI::ValidationError("--precision",
-                                     "'" + text + "' is unknown (known: auto, float32, bfloat16)");
-        }
-      },
-      "auto (default), float32 or bfloat16 for the paper net's CNN branch or lfnet's U-Net; "
-      "auto: bfloat16 on a CPU with native bfloat16 for models verified in it (bfloat16.json "
-      "beside the model), float32 elsewhere (docs/performance.md)");
-  cmd->parse_complete_callback([f, precision_auto] {
-    if (!*precision_auto) return;
-    std::vector<std::string> models;
-    if (f.models) models = *f.models;
-    if (f.model && !f.model->empty()) models.push_back(*f.model);
-    *f.precision = nn::choose_precision(models, *f.device).precision;
-  });
-  cmd->add_option("--tile", *f.tile,
-                  "spatial tile of whole-image models (default 256) and of --cnn-mode full "
-                  "(default 128)")
-      ->check(kCount);
-  if (f.strides) {
-    cmd->add_option("--strides", *f.strides,
-                    "patch strides, comma-separated (default 9,5,2; 9: non-overlapping 9x9 "
-                    "patches)")
-        ->delimiter(',')
-        ->check(kStride);
-    auto* strides = f.strides;
-    cmd->add_option_function<int64_t>(
-           "--stride", [strides](const int64_t& v) { *strides = {v}; },
-           "patch stride of patch methods: one stride, as --strides N")
-        ->check(kStride);
-  } else {
-    cmd->add_option("--stride", *f.stride,
-                    "patch stride of patch methods (default 5; whole-image models have none)")
-        ->check(kStride);
-  }
-  add_self_ensemble_options(cmd, *f.self_ensemble, *f.ensemble_passes, f.ensemble_verb);
-  input_path(cmd->add_option(
-      "--method-options", *f.method_options,
-      "options of the methods with options (" + recon::methods_with_options() +
-          "), keyed by method: a JSON object or file, e.g. '{\"dict\": {\"method\": "
-          "\"admm\"}}' (docs/methods.md)"));
-}
 
 // Adds one subcommand to `app`. The subcommand's callback does the work and throws on error.
 using CommandFactory = std::function<void(CLI::App& app, const GlobalOptions& global)>;

@@ -73,7 +73,8 @@ TEST_CASE("lfnet bench refuses a device it does not have", "[app]") {
   // Enum options name themselves and the known values (one name table per enum).
   CHECK(out.find("--cnn-mode: 'tiles' is unknown (known: patches, full)") != std::string::npos);
   CHECK(run_command(lfnet_binary() + " bench --methods net --architecture unet", out) != 0);
-  CHECK(out.find("--architecture: 'unet' is unknown (known: paper, lfnet)") != std::string::npos);
+  CHECK(out.find("--architecture: 'unet' is unknown (known: paper, lfnet, unrolled)") !=
+        std::string::npos);
 }
 
 TEST_CASE("lfnet bench --json - writes the JSON alone, and a bench with no case run fails",

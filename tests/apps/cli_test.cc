@@ -3,6 +3,11 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <map>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include "lfnet/io/light_field_io.h"
 #include "support/test_support.h"
@@ -88,7 +93,7 @@ TEST_CASE("every reconstructing command takes the shared flags with one meaning"
       const auto line = out.substr(at, out.find('\n', at) - at);
       // The help texts come from one binding: the device's is word for word the same.
       if (flag == "--device")
-        CHECK(line.find("cpu or cuda[:K] for the network") != std::string::npos);
+        CHECK(line.find("cpu or cuda[:K]: where the network runs") != std::string::npos);
       if (flag == "--precision") CHECK(line.find("bfloat16") != std::string::npos);
       // The methods with options come from the registry.
       if (flag == "--method-options") CHECK(line.find("(dict, pinv-nlm)") != std::string::npos);
@@ -151,4 +156,68 @@ TEST_CASE("reconstruct without --model runs the zoo's default for the camera and
                           (tmp / "rec-adjoint"),
                       out) == 0);
   CHECK(out.find("zoo") == std::string::npos);
+}
+
+namespace {
+
+// The options of `lfnet ARGS --help`: flag -> help text (CLI11 writes one line per option, or
+// two when a "Needs:" clause pushes the text to the next).
+std::map<std::string, std::string> help_texts(const std::string& args) {
+  std::string out;
+  REQUIRE(run_command(lfnet_binary() + " " + args + " --help", out) == 0);
+  std::map<std::string, std::string> texts;
+  std::istringstream lines(out);
+  std::string line, pending;
+  while (std::getline(lines, line)) {
+    if (!pending.empty()) {
+      texts[pending] = line.substr(line.find_first_not_of(' '));
+      pending.clear();
+      continue;
+    }
+    if (line.rfind("  --", 0) != 0) continue;
+    const auto end = line.find_first_of(" ", 2);
+    const auto flag = line.substr(2, end - 2);
+    const auto gap = line.find("  ", end);
+    if (line.find("Needs:") != std::string::npos || gap == std::string::npos) {
+      pending = flag;
+    } else {
+      texts[flag] = line.substr(line.find_first_not_of(' ', gap));
+    }
+  }
+  return texts;
+}
+
+}  // namespace
+
+TEST_CASE("a flag several commands take has one help text", "[app]") {
+  // The flags whose meaning is the command's own: where its output goes, which model it
+  // blends or exports, which methods it can run or time (reconstruct has no truth for
+  // no-parallax), what it resumes or checks, render's view grid (RxC, not a window) and
+  // simulate's per_patch stride.
+  const std::set<std::string> own = {"--out",    "--model", "--method", "--methods",
+                                     "--resume", "--check", "--views",  "--stride"};
+  const std::vector<std::string> commands = {
+      "info",        "render", "simulate",  "train",     "experiment", "evaluate",
+      "reconstruct", "batch",  "report",    "export",    "launch",     "bench",
+      "phi export",  "blend",  "sets make", "sets list", "models"};
+  std::map<std::string, std::map<std::string, std::string>> by_flag;  // flag -> text -> command
+  for (const auto& command : commands) {
+    for (const auto& [flag, text] : help_texts(command)) by_flag[flag][text] = command;
+  }
+  int shared = 0;
+  for (const auto& [flag, texts] : by_flag) {
+    if (own.count(flag)) continue;
+    std::string said;
+    for (const auto& [text, command] : texts) said += "\n  " + command + ": " + text;
+    INFO(flag << said);
+    CHECK(texts.size() == 1);
+    ++shared;
+  }
+  CHECK(shared > 40);
+  // The shared groups are there: --force in every command that writes.
+  for (const auto& command : {"render", "simulate", "train", "evaluate", "reconstruct", "batch",
+                              "export", "bench", "phi export", "blend", "sets make"}) {
+    INFO(command);
+    CHECK(help_texts(command).count("--force") == 1);
+  }
 }

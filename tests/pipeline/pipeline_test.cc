@@ -145,8 +145,8 @@ TEST_CASE("train --show-config resolves a config whose inputs are not made yet",
   write_json_file(tmp / "c.json", {{"extends", "base.json"},
                                    {"init", tmp / "not-made.ckpt"},
                                    {"training", {{"batch_size", 3}}}});
-  const std::string train = std::string(LFNET_BINARY) + " --log-level error train " +
-                            tmp / "c.json" + " --scale paper ";
+  const std::string train =
+      std::string(LFNET_BINARY) + " --log-level error train " + tmp / "c.json" + " --scale paper ";
   std::string out;
   REQUIRE(lfnet::test::run_command(train + "--show-config 2>&1", out) == 0);
   const auto shown = nlohmann::json::parse(out);

@@ -1,6 +1,6 @@
-// The unrolled data-consistency architecture (docs/architectures.md, "Unrolled"): K iterations
-// of a learned denoiser and a half-quadratic-splitting step with the camera's per-pixel Phi A
-// and its pseudo-inverse A^+ = A^T (A A^T + lambda I)^-1 in the loop,
+// The unrolled data-consistency architecture (docs/architectures.md, "The unrolled network"):
+// K iterations of a learned denoiser and a half-quadratic-splitting step with the camera's
+// per-pixel Phi A and its pseudo-inverse A^+ = A^T (A A^T + lambda I)^-1 in the loop,
 //   x_0 = A^+ y,   z_k = x_(k-1) + D_k(x_(k-1)),   x_k = z_k + s_k A^+ (y - A z_k),
 // the family of LFCA and DeepULFCam. The step s_k is learned and starts at 1, where x_k is the
 // exact minimiser of ||A x - y||^2 + lambda ||x - z_k||^2. The denoisers D_k are small U-Nets

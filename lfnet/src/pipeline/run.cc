@@ -270,12 +270,8 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
       for (int64_t stride : ev.strides) {
         for (const auto& mode : ev.modes) {
           for (double noise : ev.noise) {
-            std::optional<nn::PatchShape> patch;  // lfnet reconstructs whole images
-            if (!config.network.arch().whole_image()) {
-              patch = nn::PatchShape{};
-              patch->height = config.dataset.patch_h;
-              patch->width = config.dataset.patch_w;
-            }
+            // The net's patch grid: none for a whole-image architecture.
+            const auto patch = config.network.patch_grid();
             const eval::EvalOptions defaults;
             auto o =
                 make_eval_options(mode, noise, defaults.seed, stride, defaults.reconstruct.batch,
