@@ -9,6 +9,7 @@
 // Grey only; noise-aware when its denoiser reads the noise.
 #include <torch/torch.h>
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -82,12 +83,22 @@ torch::Tensor iterate(const LightFieldNetImpl& net, const torch::Tensor& y,
   const auto u = unrolled_options(net.options());
   const int64_t b = y.size(0), h = y.size(2), w = y.size(3);
   const auto x_in = y.to(net.pixel_pinv.scalar_type());
-  // A and A^+ at every pixel: (B, h, w, N, U V).
   const auto n = net.phi.size(0), views = net.phi.size(1) * net.phi.size(2), t = net.phi.size(3);
-  const auto a =
-      pixel_maps(net.phi.reshape({n, views, t, t}).permute({2, 3, 0, 1}), phase, b, h, w);
-  const auto p = pixel_maps(net.pixel_pinv, phase, b, h, w);
-  auto x = torch::einsum("bijnk,bnij->bkij", {p, x_in});
+  const auto period_a = net.phi.reshape({n, views, t, t}).permute({2, 3, 0, 1});  // (T, T, N, U V)
+  // A z and A^+ r at every pixel: one matrix for a code of period 1, else each pixel's own
+  // (B, h, w, N, U V).
+  std::function<torch::Tensor(const torch::Tensor&)> measure, invert;
+  if (t == 1) {
+    const auto a = period_a[0][0], p = net.pixel_pinv[0][0];  // (N, U V)
+    measure = [a](const torch::Tensor& z) { return torch::einsum("nk,bkij->bnij", {a, z}); };
+    invert = [p](const torch::Tensor& r) { return torch::einsum("nk,bnij->bkij", {p, r}); };
+  } else {
+    const auto a = pixel_maps(period_a, phase, b, h, w);
+    const auto p = pixel_maps(net.pixel_pinv, phase, b, h, w);
+    measure = [a](const torch::Tensor& z) { return torch::einsum("bijnk,bkij->bnij", {a, z}); };
+    invert = [p](const torch::Tensor& r) { return torch::einsum("bijnk,bnij->bkij", {p, r}); };
+  }
+  auto x = invert(x_in);
   if (start != nullptr) *start = x;
   torch::Tensor channel;
   if (u.denoiser.noise_input) {
@@ -99,8 +110,7 @@ torch::Tensor iterate(const LightFieldNetImpl& net, const torch::Tensor& y,
     const auto denoiser = net.layer<ImageNetImpl>(denoiser_name(u, k));
     const auto in = channel.defined() ? torch::cat({x, channel}, 1) : x;
     const auto z = x + denoiser->forward(in);
-    const auto residual = x_in - torch::einsum("bijnk,bkij->bnij", {a, z});
-    x = z + step[k] * torch::einsum("bijnk,bnij->bkij", {p, residual});
+    x = z + step[k] * invert(x_in - measure(z));
   }
   return x;
 }
