@@ -11,6 +11,7 @@
 #include "lfnet/nn/architecture.h"
 #include "lfnet/nn/image_net.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/pixel_phi.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/cfa.h"
 
@@ -166,21 +167,14 @@ class LfnetArchitecture : public NetworkArchitecture {
 
   void validate(const NetworkOptions& o) const override {
     o.image.validate();
-    const int64_t m = o.image.multiple();
-    if (o.patch.height % m != 0 || o.patch.width % m != 0) {
-      throw ConfigError(
-          "patch: the lfnet architecture's training crops need sides that are "
-          "multiples of " +
-          std::to_string(m) + ", got " + o.patch.to_json().dump());
-    }
+    check_crop_multiple(o, o.image.multiple(), name());
   }
 
   void build(LightFieldNetImpl& net) const override {
     const auto& o = net.options();
     const auto& p = o.patch;
     const int64_t views = p.rows * p.cols;
-    net.phi = net.register_buffer("phi", torch::zeros({o.measurements, p.rows, p.cols, 1, 1}));
-    net.pixel_pinv = net.register_buffer("pixel_pinv", torch::zeros({1, 1, o.measurements, views}));
+    register_pixel_phi(net);
     if (o.colours() > 1) {
       net.cfa_response = net.register_buffer("cfa_response", torch::zeros({3, 1, 1}));
     }
@@ -191,13 +185,7 @@ class LfnetArchitecture : public NetworkArchitecture {
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
     const auto& o = net.options();
-    const auto& p = o.patch;
-    LFNET_CHECK(stack.dim() == 5 && stack.size(0) == o.measurements && stack.size(1) == p.rows &&
-                    stack.size(2) == p.cols && stack.size(3) >= 1 && stack.size(3) == stack.size(4),
-                "set_phi: the lfnet architecture expects the pixel weights of one period (",
-                o.measurements, ", ", p.rows, ", ", p.cols, ", T, T), got ", stack.sizes());
-    LFNET_CHECK_AS(NumericalError, torch::isfinite(stack).all().item<bool>(),
-                   "set_phi: the pixel weights contain NaN or inf");
+    check_pixel_weights(net, stack, name());
     torch::NoGradGuard no_grad;
     auto weights = stack;
     if (o.colours() > 1) {
@@ -210,20 +198,14 @@ class LfnetArchitecture : public NetworkArchitecture {
                                 .to(net.phi.options())
                                 .contiguous());
     }
-    const auto inverse = pixel_pseudo_inverses(weights.to(torch::kFloat64), o.pinv_lambda);
-    net.phi.set_(weights.to(net.phi.options()).contiguous().clone());
-    net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
+    store_pixel_phi(net, weights);
   }
 
-  int64_t phases(const LightFieldNetImpl& net) const override {
-    return net.phi.size(3) * net.phi.size(4);
-  }
-  // The period axes of the pixel weights (N, U, V, T, T) and pseudo-inverses (T, T, N, U V).
+  int64_t phases(const LightFieldNetImpl& net) const override { return pixel_phases(net); }
+  // The period axes of the pixel weights, pseudo-inverses and CFA response (3, T, T).
   std::vector<size_t> phase_axes(const std::string& name, size_t rank) const override {
-    if (name == "phi" && rank == 5) return {3, 4};
-    if (name == "pixel_pinv") return {0, 1};
     if (name == "cfa_response" && rank == 3) return {1, 2};
-    return {};
+    return pixel_phase_axes(name, rank);
   }
 
   NetworkOutputs forward_all(LightFieldNetImpl& net, const torch::Tensor& y,
@@ -274,11 +256,7 @@ class LfnetArchitecture : public NetworkArchitecture {
 
   double image_flops(const NetworkOptions& o, int64_t height, int64_t width,
                      int64_t tile) const override {
-    double pixels = 0;
-    for (const auto& t : image_tiles(o.image.tiling(), height, width, tile)) {
-      pixels += static_cast<double>((t.a1 - t.a0) * (t.b1 - t.b0));
-    }
-    return image_pixel_flops(o) * pixels;
+    return tiled_image_flops(o.image.tiling(), image_pixel_flops(o), height, width, tile);
   }
 
   std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {

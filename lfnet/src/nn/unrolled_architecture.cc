@@ -18,6 +18,7 @@
 #include "lfnet/nn/architecture.h"
 #include "lfnet/nn/image_net.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/pixel_phi.h"
 #include "lfnet/nn/script.h"
 
 namespace lfnet::nn {
@@ -171,23 +172,14 @@ class UnrolledArchitecture : public NetworkArchitecture {
   nlohmann::json default_options() const override { return fields_to_json(UnrolledOptions{}); }
 
   void validate(const NetworkOptions& o) const override {
-    const auto u = unrolled_options(o);
-    const int64_t m = u.denoiser.multiple();
-    if (o.patch.height % m != 0 || o.patch.width % m != 0) {
-      throw ConfigError(
-          "patch: the unrolled architecture's training crops need sides that are "
-          "multiples of " +
-          std::to_string(m) + ", got " + o.patch.to_json().dump());
-    }
+    check_crop_multiple(o, unrolled_options(o).denoiser.multiple(), name());
   }
 
   void build(LightFieldNetImpl& net) const override {
     const auto& o = net.options();
     const auto u = unrolled_options(o);
     const int64_t views = o.patch.rows * o.patch.cols;
-    net.phi = net.register_buffer("phi",
-                                  torch::zeros({o.measurements, o.patch.rows, o.patch.cols, 1, 1}));
-    net.pixel_pinv = net.register_buffer("pixel_pinv", torch::zeros({1, 1, o.measurements, views}));
+    register_pixel_phi(net);
     net.register_parameter("step", torch::ones({u.iterations}));
     const int64_t in = views + (u.denoiser.noise_input ? 1 : 0);
     for (int64_t k = 0; k < u.denoisers(); ++k) {
@@ -196,28 +188,13 @@ class UnrolledArchitecture : public NetworkArchitecture {
   }
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& weights) const override {
-    const auto& o = net.options();
-    LFNET_CHECK(weights.dim() == 5 && weights.size(0) == o.measurements &&
-                    weights.size(1) == o.patch.rows && weights.size(2) == o.patch.cols &&
-                    weights.size(3) >= 1 && weights.size(3) == weights.size(4),
-                "set_phi: the unrolled architecture expects the pixel weights of one period (",
-                o.measurements, ", ", o.patch.rows, ", ", o.patch.cols, ", T, T), got ",
-                weights.sizes());
-    LFNET_CHECK_AS(NumericalError, torch::isfinite(weights).all().item<bool>(),
-                   "set_phi: the pixel weights contain NaN or inf");
-    torch::NoGradGuard no_grad;
-    const auto inverse = pixel_pseudo_inverses(weights.to(torch::kFloat64), o.pinv_lambda);
-    net.phi.set_(weights.to(net.phi.options()).contiguous().clone());
-    net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
+    check_pixel_weights(net, weights, name());
+    store_pixel_phi(net, weights);
   }
 
-  int64_t phases(const LightFieldNetImpl& net) const override {
-    return net.phi.size(3) * net.phi.size(4);
-  }
+  int64_t phases(const LightFieldNetImpl& net) const override { return pixel_phases(net); }
   std::vector<size_t> phase_axes(const std::string& name, size_t rank) const override {
-    if (name == "phi" && rank == 5) return {3, 4};
-    if (name == "pixel_pinv") return {0, 1};
-    return {};
+    return pixel_phase_axes(name, rank);
   }
 
   NetworkOutputs forward_all(LightFieldNetImpl& net, const torch::Tensor& y,
@@ -267,11 +244,7 @@ class UnrolledArchitecture : public NetworkArchitecture {
   }
   double image_flops(const NetworkOptions& o, int64_t height, int64_t width,
                      int64_t tile) const override {
-    double pixels = 0;
-    for (const auto& t : image_tiles(image_tiling(o), height, width, tile)) {
-      pixels += static_cast<double>((t.a1 - t.a0) * (t.b1 - t.b0));
-    }
-    return pixel_flops(o) * pixels;
+    return tiled_image_flops(image_tiling(o), pixel_flops(o), height, width, tile);
   }
 
   std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {

@@ -1,0 +1,65 @@
+#include "lfnet/nn/pixel_phi.h"
+
+#include <torch/torch.h>
+
+#include "lfnet/core/error.h"
+#include "lfnet/nn/image_net.h"
+
+namespace lfnet::nn {
+
+void check_crop_multiple(const NetworkOptions& o, int64_t multiple,
+                         const std::string& architecture) {
+  if (o.patch.height % multiple != 0 || o.patch.width % multiple != 0) {
+    throw ConfigError("patch: the " + architecture +
+                      " architecture's training crops need sides that are multiples of " +
+                      std::to_string(multiple) + ", got " + o.patch.to_json().dump());
+  }
+}
+
+void register_pixel_phi(LightFieldNetImpl& net) {
+  const auto& o = net.options();
+  const auto& p = o.patch;
+  net.phi = net.register_buffer("phi", torch::zeros({o.measurements, p.rows, p.cols, 1, 1}));
+  net.pixel_pinv =
+      net.register_buffer("pixel_pinv", torch::zeros({1, 1, o.measurements, p.rows * p.cols}));
+}
+
+void check_pixel_weights(const LightFieldNetImpl& net, const torch::Tensor& weights,
+                         const std::string& architecture) {
+  const auto& o = net.options();
+  const auto& p = o.patch;
+  LFNET_CHECK(
+      weights.dim() == 5 && weights.size(0) == o.measurements && weights.size(1) == p.rows &&
+          weights.size(2) == p.cols && weights.size(3) >= 1 && weights.size(3) == weights.size(4),
+      "set_phi: the ", architecture, " architecture expects the pixel weights of one period (",
+      o.measurements, ", ", p.rows, ", ", p.cols, ", T, T), got ", weights.sizes());
+  LFNET_CHECK_AS(NumericalError, torch::isfinite(weights).all().item<bool>(),
+                 "set_phi: the pixel weights contain NaN or inf");
+}
+
+void store_pixel_phi(LightFieldNetImpl& net, const torch::Tensor& weights) {
+  torch::NoGradGuard no_grad;
+  const auto inverse =
+      pixel_pseudo_inverses(weights.to(torch::kFloat64), net.options().pinv_lambda);
+  net.phi.set_(weights.to(net.phi.options()).contiguous().clone());
+  net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
+}
+
+int64_t pixel_phases(const LightFieldNetImpl& net) { return net.phi.size(3) * net.phi.size(4); }
+
+std::vector<size_t> pixel_phase_axes(const std::string& name, size_t rank) {
+  if (name == "phi" && rank == 5) return {3, 4};
+  if (name == "pixel_pinv") return {0, 1};
+  return {};
+}
+
+double tiled_image_flops(const ImageTiling& tiling, double pixel_flops, int64_t height,
+                         int64_t width, int64_t tile) {
+  double pixels = 0;
+  for (const auto& t : image_tiles(tiling, height, width, tile)) {
+    pixels += static_cast<double>((t.a1 - t.a0) * (t.b1 - t.b0));
+  }
+  return pixel_flops * pixels;
+}
+
+}  // namespace lfnet::nn
