@@ -1,8 +1,8 @@
 #!/bin/bash
-# What a command costs end to end against its reconstruction alone, on the paper's scene at
-# aperture 5 (593 x 840 x 5 x 5) with models/lfnet-asp-n2.ckpt, two threads: for each lfnet
-# binary given (default build/apps/lfnet), alternating, RUNS times (default 3), one line per
-# command
+# What a command costs end to end against its reconstruction alone, on a random procedural scene
+# of 593 x 840 x 5 x 5 (colour, 8-bit views; render --random 7, made once by the first binary)
+# with models/lfnet-asp-n2.ckpt, two threads: for each lfnet binary given (default
+# build/apps/lfnet), alternating, RUNS times (default 3), one line per command
 #   BINARY  COMMAND  reconstruction-seconds  end-to-end-seconds  ratio
 # for `reconstruct --out` (from its reconstruction.json) and `evaluate --json` (docs/performance.md,
 # "End to end").
@@ -10,16 +10,15 @@
 # `reconstruct --method pinv --out` and `info --lf` (the commands a new user runs first), one line
 #   BINARY  COMMAND  seconds-lfnet-reports  wall-seconds
 # each ("info" reports the seconds it took to load the light field).
-# The paper's scene is the one timed; this script reads only seconds, never a PSNR, so nothing
-# is chosen by the scene's score.
 # Usage: scripts/end-to-end.sh [BINARY...]   (RUNS=5 scripts/end-to-end.sh ...; ALL=1 ...)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-data=../shared/data/mit_dragons_bunnies_5x5_ap5
 model=models/lfnet-asp-n2.ckpt
 [[ $# -gt 0 ]] || set -- build/apps/lfnet
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
+data=$work/scene
+"$1" --threads 2 --log-level off render --random 7 --size 593x840 --bits 8 --out "$data"
 "$1" --threads 2 --log-level off simulate --lf "$data" --phi "$model" --out "$work/acq"
 line() {
   /usr/bin/python3 - "$1" "$2" "$3" <<'PY'
