@@ -79,14 +79,7 @@ torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
 // `phase` (B, undefined: 0), from the response tile (3, L, L) of the net's period: (B, 3, h, w).
 torch::Tensor response_maps(const torch::Tensor& tile, const torch::Tensor& phase, int64_t batch,
                             int64_t h, int64_t w) {
-  const int64_t l = tile.size(1);
-  const auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({batch}, torch::kInt64);
-  const auto rows =
-      (torch::arange(h, torch::kInt64).unsqueeze(0) + ph.div(l, "floor").unsqueeze(1)) % l;
-  const auto cols = (torch::arange(w, torch::kInt64).unsqueeze(0) + (ph % l).unsqueeze(1)) % l;
-  const auto device = tile.device();
-  return tile.permute({1, 2, 0})
-      .index({rows.unsqueeze(2).to(device), cols.unsqueeze(1).to(device)})  // (B, h, w, 3)
+  return pixel_period_maps(tile.permute({1, 2, 0}), phase, batch, h, w)  // (B, h, w, 3)
       .permute({0, 3, 1, 2});
 }
 

@@ -45,6 +45,17 @@ void store_pixel_phi(LightFieldNetImpl& net, const torch::Tensor& weights) {
   net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
 }
 
+torch::Tensor pixel_period_maps(const torch::Tensor& period, const torch::Tensor& phase,
+                                int64_t batch, int64_t h, int64_t w) {
+  const int64_t t = period.size(0);
+  const auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({batch}, torch::kInt64);
+  const auto rows =
+      (torch::arange(h, torch::kInt64).unsqueeze(0) + ph.div(t, "floor").unsqueeze(1)) % t;
+  const auto cols = (torch::arange(w, torch::kInt64).unsqueeze(0) + (ph % t).unsqueeze(1)) % t;
+  const auto device = period.device();
+  return period.index({rows.unsqueeze(2).to(device), cols.unsqueeze(1).to(device)});
+}
+
 int64_t pixel_phases(const LightFieldNetImpl& net) { return net.phi.size(3) * net.phi.size(4); }
 
 std::vector<size_t> pixel_phase_axes(const std::string& name, size_t rank) {

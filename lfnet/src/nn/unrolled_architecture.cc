@@ -62,19 +62,6 @@ std::string denoiser_name(const UnrolledOptions& u, int64_t k) {
   return u.shared ? "denoiser" : "denoiser" + std::to_string(k);
 }
 
-// The per-pixel matrices (B, h, w, N, U V) of crops (B, *, h, w) whose pixel (0, 0) has phase
-// `phase` (B, undefined: 0), from those of one period (T, T, N, U V).
-torch::Tensor pixel_maps(const torch::Tensor& period, const torch::Tensor& phase, int64_t batch,
-                         int64_t h, int64_t w) {
-  const int64_t t = period.size(0);
-  const auto ph = phase.defined() ? phase.to(torch::kCPU) : torch::zeros({batch}, torch::kInt64);
-  const auto rows =
-      (torch::arange(h, torch::kInt64).unsqueeze(0) + ph.div(t, "floor").unsqueeze(1)) % t;
-  const auto cols = (torch::arange(w, torch::kInt64).unsqueeze(0) + (ph % t).unsqueeze(1)) % t;
-  const auto device = period.device();
-  return period.index({rows.unsqueeze(2).to(device), cols.unsqueeze(1).to(device)});
-}
-
 // The iterations on sensor crops `y` (B, N, h, w) whose pixel (0, 0) has phase `phase` (B,
 // undefined: 0), with noise sigmas `noise` (B, undefined: 0): (B, U V, h, w), and the
 // pseudo-inverse it starts from in `start`.
@@ -94,8 +81,8 @@ torch::Tensor iterate(const LightFieldNetImpl& net, const torch::Tensor& y,
     measure = [a](const torch::Tensor& z) { return torch::einsum("nk,bkij->bnij", {a, z}); };
     invert = [p](const torch::Tensor& r) { return torch::einsum("nk,bnij->bkij", {p, r}); };
   } else {
-    const auto a = pixel_maps(period_a, phase, b, h, w);
-    const auto p = pixel_maps(net.pixel_pinv, phase, b, h, w);
+    const auto a = pixel_period_maps(period_a, phase, b, h, w);
+    const auto p = pixel_period_maps(net.pixel_pinv, phase, b, h, w);
     measure = [a](const torch::Tensor& z) { return torch::einsum("bijnk,bkij->bnij", {a, z}); };
     invert = [p](const torch::Tensor& r) { return torch::einsum("bijnk,bnij->bkij", {p, r}); };
   }

@@ -31,6 +31,12 @@ void check_pixel_weights(const LightFieldNetImpl& net, const torch::Tensor& weig
 // (pixel_pseudo_inverses in float64, lambda = pinv_lambda) as `pixel_pinv`.
 void store_pixel_phi(LightFieldNetImpl& net, const torch::Tensor& weights);
 
+// The entries (B, h, w, ...) of crops (B, *, h, w) whose pixel (0, 0) has phase `phase` (B,
+// undefined: 0), from a tile of one period (T, T, ...): pixel (i, j) of a crop of phase
+// (py, px) takes the tile's entry ((py + i) mod T, (px + j) mod T).
+torch::Tensor pixel_period_maps(const torch::Tensor& period, const torch::Tensor& phase,
+                                int64_t batch, int64_t h, int64_t w);
+
 // T^2: the phases of a net that holds the pixel weights of one period T.
 int64_t pixel_phases(const LightFieldNetImpl& net);
 
