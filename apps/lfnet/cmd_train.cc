@@ -39,11 +39,16 @@ void check_config(const TrainArgs& a) {
     // The config as the run would record it: bases, scale and --set merged in. A config's
     // inputs ($.init, ...) need not be made yet.
     const auto& r = a.request;
-    const auto config = !r.config.empty() && r.resume.empty() && r.init.empty()
-                            ? pipeline::ExperimentConfig::resolve(r.config, r.scale, r.set)
-                            : pipeline::resolve_request(r);
-    auto resolved = config.raw;
-    resolved["scale"] = config.scale;
+    nlohmann::json resolved;
+    if (!r.config.empty() && r.resume.empty() && r.init.empty()) {
+      const auto merged = pipeline::ExperimentConfig::merge(r.config, r.scale, r.set);
+      resolved = merged.j;
+      resolved["scale"] = merged.scale;
+    } else {
+      const auto config = pipeline::resolve_request(r);
+      resolved = config.raw;
+      resolved["scale"] = config.scale;
+    }
     std::printf("%s\n", resolved.dump(2).c_str());
     return;
   }

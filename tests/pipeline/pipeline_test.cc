@@ -144,6 +144,7 @@ TEST_CASE("train --show-config resolves a config whose inputs are not made yet",
   write_json_file(tmp / "base.json", base);
   write_json_file(tmp / "c.json", {{"extends", "base.json"},
                                    {"init", tmp / "not-made.ckpt"},
+                                   {"phi", tmp / "code-not-made.ckpt"},
                                    {"training", {{"batch_size", 3}}}});
   const std::string train =
       std::string(LFNET_BINARY) + " --log-level error train " + tmp / "c.json" + " --scale paper ";
@@ -154,8 +155,12 @@ TEST_CASE("train --show-config resolves a config whose inputs are not made yet",
   CHECK(shown.at("training").at("epochs") == 7);      // the base's scale
   CHECK(shown.at("training").at("batch_size") == 3);  // the config's own key
   CHECK(shown.at("init") == tmp / "not-made.ckpt");
+  CHECK(shown.at("phi") == tmp / "code-not-made.ckpt");  // a model's code, read once made
   CHECK_FALSE(shown.contains("extends"));
-  // A run of it (and --check) needs the model.
+  // A run of it (and --check) needs the models, and says which is missing.
+  CHECK(lfnet::test::run_command(train + "--check 2>&1", out) != 0);
+  CHECK(out.find("$.phi " + tmp / "code-not-made.ckpt" + ": no such file") != std::string::npos);
+  write_json_file(tmp / "c.json", {{"extends", "base.json"}, {"init", tmp / "not-made.ckpt"}});
   CHECK(lfnet::test::run_command(train + "--check 2>&1", out) != 0);
   CHECK(out.find("$.init") != std::string::npos);
 }

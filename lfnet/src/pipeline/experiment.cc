@@ -168,23 +168,22 @@ ResolvedConfig resolve_config(const std::string& path, const std::string& scale,
 
 }  // namespace
 
-ExperimentConfig ExperimentConfig::resolve(const std::string& path, const std::string& scale,
-                                           const std::vector<std::string>& overrides) {
+ExperimentConfig::Merged ExperimentConfig::merge(const std::string& path, const std::string& scale,
+                                                 const std::vector<std::string>& overrides) {
   std::vector<std::string> chain;
   auto resolved = resolve_config(path, scale, chain);
   LFNET_CHECK_AS(ConfigError, resolved.scale.empty() || resolved.found, path,
                  ": $.scales has no scale '", resolved.scale, "'");
-  auto j = std::move(resolved.j);
-  for (const auto& o : overrides) apply_override(j, o);
-  auto config = from_json(j, overrides.empty() ? path : path + " (with --set)");
-  config.scale = resolved.scale;
-  config.files = std::move(resolved.files);
-  return config;
+  for (const auto& o : overrides) apply_override(resolved.j, o);
+  return {std::move(resolved.j), resolved.scale, std::move(resolved.files)};
 }
 
 ExperimentConfig ExperimentConfig::load(const std::string& path, const std::string& scale,
                                         const std::vector<std::string>& overrides) {
-  auto config = resolve(path, scale, overrides);
+  auto merged = merge(path, scale, overrides);
+  auto config = from_json(merged.j, overrides.empty() ? path : path + " (with --set)");
+  config.scale = merged.scale;
+  config.files = std::move(merged.files);
   // A new run starts from $.init: it must be there (a resumed run may no longer need it). A
   // config's paths are taken from the working folder, $.extends alone from the config's: a path
   // that exists beside the config only is named.

@@ -308,7 +308,14 @@ optics::PhiSpec phi_from_argument(const std::string& text, const std::string& op
       return optics::PhiSpec::from_json(j, text + ":$");
     }
   }
-  if (!fs::is_regular_file(text, ec)) return optics::PhiSpec::parse(text);
+  if (!fs::is_regular_file(text, ec)) {
+    // A path (a folder or an extension in it) names a file that is not there, not a bad NAME.
+    const fs::path p(text);
+    LFNET_CHECK_AS(ConfigError, !p.has_parent_path() && !p.has_extension(), option, " ", text,
+                   ": no such file (a Phi is NAME[:N], a Phi spec .json, a calibrated-Phi folder "
+                   "or a model)");
+    return optics::PhiSpec::parse(text);
+  }
   ModelFile model;
   try {
     model = load_model(text, /*network=*/false);

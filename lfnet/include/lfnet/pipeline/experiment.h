@@ -120,11 +120,16 @@ struct ExperimentConfig {
   // exist.
   static ExperimentConfig load(const std::string& path, const std::string& scale = "",
                                const std::vector<std::string>& overrides = {});
-  // The same, without the check that those files exist: the config as a run of it will be
-  // resolved, before the models it starts from are made (train --show-config, the recipes'
-  // scripts/models.py).
-  static ExperimentConfig resolve(const std::string& path, const std::string& scale = "",
-                                  const std::vector<std::string>& overrides = {});
+  // The config file as load() reads it, merged ($.extends, the scale, `overrides`) but not
+  // parsed: a config before the models it starts from, measures with or distils are made
+  // (train --show-config, the recipes' scripts/models.py). `scale` is the one chosen.
+  struct Merged {
+    nlohmann::json j;
+    std::string scale;
+    std::vector<std::string> files;
+  };
+  static Merged merge(const std::string& path, const std::string& scale = "",
+                      const std::vector<std::string>& overrides = {});
   // Reads the config.json of a run folder (the config as it was trained, scale merged).
   static ExperimentConfig load_run(const std::string& run_dir);
   static ExperimentConfig from_json(const nlohmann::json& j, const std::string& source);
