@@ -142,138 +142,182 @@ std::vector<BatchItem> discover_items(const std::string& root) {
   return items;
 }
 
-std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptions& a,
-                                         const std::vector<std::string>& methods,
-                                         const std::string& out_dir, ModelCache& cache) {
-  std::vector<nlohmann::json> records;
-  auto failed = [&](const std::string& method, const std::string& error) {
-    return nlohmann::json{{"item", item.name}, {"path", item.path},
-                          {"kind", item.kind}, {"method", method},
-                          {"status", "error"}, {"error", without_source_locations(error)}};
-  };
-  if (item.kind == "unreadable") {
-    for (const auto& method : methods) records.push_back(failed(method, item.error));
-    return records;
+namespace {
+
+// One item of a batch, each of its methods a record: reconstructed (an acquisition folder),
+// evaluated (a light-field folder) or failed with its reason.
+class ItemProcessor {
+ public:
+  ItemProcessor(const BatchItem& item, const BatchOptions& options,
+                const std::vector<std::string>& methods, const std::string& out_dir,
+                ModelCache& cache)
+      : item_(item), a_(options), methods_(methods), out_dir_(out_dir), cache_(cache) {}
+
+  std::vector<nlohmann::json> run() {
+    if (item_.kind == "unreadable") {
+      fail_all(item_.error);
+    } else if (item_.kind == "reconstruct") {
+      reconstruct();
+    } else {
+      evaluate();
+    }
+    return std::move(records_);
   }
-  if (item.kind == "reconstruct") {
+
+ private:
+  nlohmann::json failed(const std::string& method, const std::string& error) const {
+    return {{"item", item_.name}, {"path", item_.path}, {"kind", item_.kind},
+            {"method", method},   {"status", "error"},  {"error", without_source_locations(error)}};
+  }
+  void fail_all(const std::string& error) {
+    for (const auto& method : methods_) records_.push_back(failed(method, error));
+  }
+  nlohmann::json ok(nlohmann::json record) const {
+    record["item"] = item_.name;
+    record["path"] = item_.path;
+    record["kind"] = item_.kind;
+    record["status"] = "ok";
+    return record;
+  }
+
+  void reconstruct() {
     // What holds for every method, checked once per item: --phi against the model, and the
     // methods' options (checked for all methods at the start, read again here).
     nlohmann::json all_options;
     try {
-      if (!a.model.empty()) check_phi_argument(cache.model(a.model), a.phi);
-      all_options = method_options_argument(a.method_options, methods);
+      if (!a_.model.empty()) check_phi_argument(cache_.model(a_.model), a_.phi);
+      all_options = method_options_argument(a_.method_options, methods_);
     } catch (const std::exception& e) {
-      for (const auto& method : methods) records.push_back(failed(method, e.what()));
-      return records;
+      return fail_all(e.what());
     }
-    for (const auto& method : methods) {
+    for (const auto& method : methods_) {
       try {
-        ReconstructRequest q;
-        q.sensor = item.path;
-        q.method = method;
-        q.model = a.model;
-        q.dictionary = a.dictionary;
-        if (all_options.contains(method)) {
-          q.method_options = nlohmann::json{{method, all_options[method]}}.dump();
-        }
-        q.options.stride = a.stride;
-        q.options.batch = a.batch;
-        q.options.window = a.window;
-        q.post_filter = a.post_filter;
-        q.match_mean = a.match_mean;
-        q.flat_field = a.flat_field;
-        q.demosaic = a.demosaic;
-        q.self_ensemble = a.self_ensemble;
-        q.self_ensemble_passes = a.self_ensemble_passes;
-        q.self_calibrate = a.self_calibrate;
-        q.device = a.device;
-        q.precision = a.precision;
-        q.tile = a.tile;
-        q.coded = true;  // as reconstruct: a grey light field in 16-bit codes
-        auto r = reconstruct_acquisition(q, {}, &cache);
-        const std::string target = (fs::path(out_dir) / item.name / method).string();
-        OutputFolderPolicy policy;
-        policy.inputs = batch_inputs(a);
-        policy.inputs.push_back(item.path);
-        policy.force = a.resume;  // an output without its record is an unfinished attempt
-        write_reconstruction(r, target, policy,
-                             /*end_to_end=*/false);  // the batch's, not the item's
-        auto record = r.record;
-        record["item"] = item.name;
-        record["path"] = item.path;
-        record["kind"] = item.kind;
-        record["status"] = "ok";
-        record["output"] = target;
-        records.push_back(record);
+        records_.push_back(reconstruct_with(method, all_options));
       } catch (const std::exception& e) {
-        records.push_back(failed(method, e.what()));
+        records_.push_back(failed(method, e.what()));
       }
     }
-    return records;
   }
+
+  nlohmann::json reconstruct_with(const std::string& method, const nlohmann::json& all_options) {
+    ReconstructRequest q;
+    q.sensor = item_.path;
+    q.method = method;
+    q.model = a_.model;
+    q.dictionary = a_.dictionary;
+    if (all_options.contains(method)) {
+      q.method_options = nlohmann::json{{method, all_options[method]}}.dump();
+    }
+    q.options.stride = a_.stride;
+    q.options.batch = a_.batch;
+    q.options.window = a_.window;
+    q.post_filter = a_.post_filter;
+    q.match_mean = a_.match_mean;
+    q.flat_field = a_.flat_field;
+    q.demosaic = a_.demosaic;
+    q.self_ensemble = a_.self_ensemble;
+    q.self_ensemble_passes = a_.self_ensemble_passes;
+    q.self_calibrate = a_.self_calibrate;
+    q.device = a_.device;
+    q.precision = a_.precision;
+    q.tile = a_.tile;
+    q.coded = true;  // as reconstruct: a grey light field in 16-bit codes
+    auto r = reconstruct_acquisition(q, {}, &cache_);
+    const std::string target = (fs::path(out_dir_) / item_.name / method).string();
+    OutputFolderPolicy policy;
+    policy.inputs = batch_inputs(a_);
+    policy.inputs.push_back(item_.path);
+    policy.force = a_.resume;  // an output without its record is an unfinished attempt
+    write_reconstruction(r, target, policy, /*end_to_end=*/false);  // the batch's, not the item's
+    auto record = ok(r.record);
+    record["output"] = target;
+    return record;
+  }
+
   // evaluate: simulate with the model's Phi (or --phi), reconstruct, score.
-  std::vector<NamedLightField> truths;
-  MethodContext context;
-  std::unique_ptr<optics::Phi> phi;
-  std::optional<nn::PatchShape> patch;           // the model's, when there is one
-  std::optional<optics::ColourFilterArray> cfa;  // --cfa, inline once the batch has read it
-  try {
-    optics::PhiSpec spec;
-    if (!a.model.empty()) {
-      const auto& model = cache.model(a.model);
-      spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
-      check_phi_argument(model, a.phi);
-      place_network(model, a.device, a.precision);
-      use_model(context, model);
-      patch = model.network.patch_grid();
-    } else {
-      LFNET_CHECK_AS(ConfigError, !a.phi.empty(),
-                     "evaluating light-field folders needs --model or --phi");
-      spec = phi_from_argument(a.phi);
-    }
-    phi = optics::make_phi(spec);
-    context.phi = phi.get();
-    context.dictionary = a.dictionary;
-    context.cache = &cache;
-    context.method_options = method_options_argument(a.method_options, methods);
-    context.self_ensemble = a.self_ensemble;
-    context.self_ensemble_passes = a.self_ensemble_passes;
-    context.self_calibrate = a.self_calibrate;
-    context.tile = a.tile;
-    LightFieldSources sources;
-    sources.light_fields = {item.path};
-    // As evaluate: a grey truth of 16-bit views in 16-bit codes.
-    truths = load_sources(sources, phi->rows(), phi->cols(), false, !a.cfa.empty(), a.cfa.empty());
-    if (!a.cfa.empty()) cfa = optics::ColourFilterArray::parse(a.cfa);
-  } catch (const std::exception& e) {
-    for (const auto& method : methods) records.push_back(failed(method, e.what()));
-    return records;
-  }
-  for (const auto& method : methods) {
+  void evaluate() {
     try {
-      if (!a.model.empty() && recon::needs_network(method)) {
-        cache.model(a.model).check_cfa(cfa ? cfa->pattern() : "");
-      }
-      auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, patch);
-      o.cfa = cfa;
-      // A colour net demosaics inside itself: --demosaic is for the other methods.
-      check_demosaic_argument(a.demosaic, cfa.has_value(), false, method);
-      o.demosaic = a.demosaic;
-      context.coded = o.reconstruct.coded = !cfa;  // as evaluate: a grey estimate in 16-bit codes
-      auto record = evaluate_method(truths[0], method, context, o, nullptr, false);
-      record["item"] = item.name;
-      record["path"] = item.path;
-      record["kind"] = item.kind;
-      record["status"] = "ok";
-      const auto needs = recon::find_method(method).needs();
-      if (needs == recon::MethodNeeds::kNetwork) record["model"] = a.model;
-      if (needs == recon::MethodNeeds::kDictionary) record["model"] = a.dictionary;
-      records.push_back(record);
+      read_truth();
     } catch (const std::exception& e) {
-      records.push_back(failed(method, e.what()));
+      return fail_all(e.what());
+    }
+    for (const auto& method : methods_) {
+      try {
+        records_.push_back(evaluate_with(method));
+      } catch (const std::exception& e) {
+        records_.push_back(failed(method, e.what()));
+      }
     }
   }
-  return records;
+
+  void read_truth() {
+    optics::PhiSpec spec;
+    if (!a_.model.empty()) {
+      const auto& model = cache_.model(a_.model);
+      spec = optics::PhiSpec::from_json(model.phi, a_.model + ":$.phi");
+      check_phi_argument(model, a_.phi);
+      place_network(model, a_.device, a_.precision);
+      use_model(context_, model);
+      patch_ = model.network.patch_grid();
+    } else {
+      LFNET_CHECK_AS(ConfigError, !a_.phi.empty(),
+                     "evaluating light-field folders needs --model or --phi");
+      spec = phi_from_argument(a_.phi);
+    }
+    phi_ = optics::make_phi(spec);
+    context_.phi = phi_.get();
+    context_.dictionary = a_.dictionary;
+    context_.cache = &cache_;
+    context_.method_options = method_options_argument(a_.method_options, methods_);
+    context_.self_ensemble = a_.self_ensemble;
+    context_.self_ensemble_passes = a_.self_ensemble_passes;
+    context_.self_calibrate = a_.self_calibrate;
+    context_.tile = a_.tile;
+    LightFieldSources sources;
+    sources.light_fields = {item_.path};
+    // As evaluate: a grey truth of 16-bit views in 16-bit codes.
+    truths_ =
+        load_sources(sources, phi_->rows(), phi_->cols(), false, !a_.cfa.empty(), a_.cfa.empty());
+    if (!a_.cfa.empty()) cfa_ = optics::ColourFilterArray::parse(a_.cfa);
+  }
+
+  nlohmann::json evaluate_with(const std::string& method) {
+    if (!a_.model.empty() && recon::needs_network(method)) {
+      cache_.model(a_.model).check_cfa(cfa_ ? cfa_->pattern() : "");
+    }
+    auto o = make_eval_options(a_.mode, a_.noise, a_.seed, a_.stride, a_.batch, a_.window, patch_);
+    o.cfa = cfa_;
+    // A colour net demosaics inside itself: --demosaic is for the other methods.
+    check_demosaic_argument(a_.demosaic, cfa_.has_value(), false, method);
+    o.demosaic = a_.demosaic;
+    context_.coded = o.reconstruct.coded = !cfa_;  // as evaluate: a grey estimate in 16-bit codes
+    auto record = ok(evaluate_method(truths_[0], method, context_, o, nullptr, false));
+    const auto needs = recon::find_method(method).needs();
+    if (needs == recon::MethodNeeds::kNetwork) record["model"] = a_.model;
+    if (needs == recon::MethodNeeds::kDictionary) record["model"] = a_.dictionary;
+    return record;
+  }
+
+  const BatchItem& item_;
+  const BatchOptions& a_;
+  const std::vector<std::string>& methods_;
+  const std::string& out_dir_;
+  ModelCache& cache_;
+  std::vector<nlohmann::json> records_;
+  // An evaluated item's truth, camera and method context.
+  std::vector<NamedLightField> truths_;
+  MethodContext context_;
+  std::unique_ptr<optics::Phi> phi_;
+  std::optional<nn::PatchShape> patch_;           // the model's, when there is one
+  std::optional<optics::ColourFilterArray> cfa_;  // --cfa, inline once the batch has read it
+};
+
+}  // namespace
+
+std::vector<nlohmann::json> process_item(const BatchItem& item, const BatchOptions& a,
+                                         const std::vector<std::string>& methods,
+                                         const std::string& out_dir, ModelCache& cache) {
+  return ItemProcessor(item, a, methods, out_dir, cache).run();
 }
 
 void write_batch_summary(const std::string& out_dir, const std::vector<nlohmann::json>& records) {
@@ -386,176 +430,234 @@ std::optional<nlohmann::json> finished_record(const fs::path& file) {
 
 }  // namespace
 
-BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator> comm) {
-  if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
-  const int64_t rank = comm->rank(), world = comm->world_size();
-  std::vector<std::string> methods = a.methods;
-  if (methods.empty()) methods = {a.model.empty() ? "pinv" : "net"};
-  for (const auto& m : methods) {
-    try {
-      (void)recon::find_method(m);
-    } catch (const ConfigError& e) {
-      throw ConfigError(std::string("--methods: ") + e.what());
-    }
-  }
-  // Checked before any work, and read once: the items take them inline, not from a file again.
-  BatchOptions resolved = a;
-  const auto method_options = method_options_argument(a.method_options, methods);
-  resolved.method_options = method_options.empty() ? "" : method_options.dump();
-  // --cfa, or the one a calibrated Phi's folder names.
-  if (const auto cfa = cfa_of_arguments(a.cfa, a.phi)) {
-    cfa->check_demosaicable();
-    resolved.cfa = cfa->to_json().dump();
-  }
-  const auto manifest = batch_manifest(a, methods);
-  OutputFolderPolicy policy;
-  policy.force = a.force;
-  policy.inputs = batch_inputs(a);
-  policy.inputs.push_back(a.in);
-  if (a.resume) {
-    check_resumable(a, manifest);
-  } else {
-    try {
-      check_output_folder(a.out, policy);
-    } catch (const ConfigError& e) {
-      std::error_code ec;
-      if (!fs::is_regular_file(fs::path(a.out) / "batch.json", ec)) throw;
-      throw ConfigError(std::string(e.what()) + "; it holds a batch: --resume continues it");
-    }
-  }
-  const auto items = discover_items(a.in);
-  LFNET_CHECK_AS(ConfigError, !items.empty(), "no acquisition folder (with ", io::kSidecarName,
-                 ") and no light-field folder under ", a.in);
-  LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
-  ModelCache cache;  // every item shares one read of the model and the dictionary
-  recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
-  if (a.self_ensemble) {
-    LFNET_CHECK_AS(ConfigError, !a.model.empty(),
-                   "--self-ensemble applies to --method net with a model of the lfnet "
-                   "architecture: pass --model");
-    const auto& model = cache.model(a.model);
-    for (const auto& m : methods) recon::check_self_ensemble(m, model.net, model.script.get());
-  }
-  std::unique_ptr<RunFolder> folder;  // rank 0 makes it; the others write into it
-  if (rank == 0) folder = std::make_unique<RunFolder>(a.out, policy, a.resume);
-  // The other ranks write only once rank 0 has checked and made the folder (when it is shared),
-  // and rank 0 writes into it only once they have checked it.
-  comm->barrier();
-  if (rank == 0 && !a.resume) {
-    write_json_file((fs::path(a.out) / "batch.json").string(), manifest);
-  }
-  const fs::path records_dir = fs::path(a.out) / "records";
-  fs::create_directories(records_dir);
-  int64_t reconstruct = 0;
-  for (const auto& it : items) reconstruct += it.kind == "reconstruct";
-  std::string method_list;
-  for (const auto& m : methods) method_list += (method_list.empty() ? "" : ",") + m;
-  spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
-               items.size(), a.in, reconstruct, items.size() - reconstruct, method_list);
+namespace {
 
-  // The pairs still to do (all of them unless resumed), and the records of those done.
+// lfnet batch as a controller: check() reads the methods, their options, the colour filter
+// array, the output folder and the items before any work; run() makes the folder, takes this
+// rank's share of the pairs still to do and, on rank 0, writes the summary of every rank's.
+class Batch {
+ public:
+  Batch(const BatchOptions& options, std::shared_ptr<dist::Communicator> comm)
+      : a_(options),
+        comm_(comm ? std::move(comm) : std::make_shared<dist::LocalCommunicator>()),
+        rank_(comm_->rank()),
+        world_(comm_->world_size()),
+        resolved_(options) {}
+
+  void check() {
+    methods_ = a_.methods;
+    if (methods_.empty()) methods_ = {a_.model.empty() ? "pinv" : "net"};
+    for (const auto& m : methods_) {
+      try {
+        (void)recon::find_method(m);
+      } catch (const ConfigError& e) {
+        throw ConfigError(std::string("--methods: ") + e.what());
+      }
+    }
+    // Read once: the items take them inline, not from a file again.
+    const auto method_options = method_options_argument(a_.method_options, methods_);
+    resolved_.method_options = method_options.empty() ? "" : method_options.dump();
+    // --cfa, or the one a calibrated Phi's folder names.
+    if (const auto cfa = cfa_of_arguments(a_.cfa, a_.phi)) {
+      cfa->check_demosaicable();
+      resolved_.cfa = cfa->to_json().dump();
+    }
+    manifest_ = batch_manifest(a_, methods_);
+    check_output();
+    items_ = discover_items(a_.in);
+    LFNET_CHECK_AS(ConfigError, !items_.empty(), "no acquisition folder (with ", io::kSidecarName,
+                   ") and no light-field folder under ", a_.in);
+    LFNET_CHECK_AS(ConfigError, a_.noise >= 0, "--noise must be >= 0");
+    recon::check_ensemble_passes(a_.self_ensemble, a_.self_ensemble_passes);
+    if (a_.self_ensemble) {
+      LFNET_CHECK_AS(ConfigError, !a_.model.empty(),
+                     "--self-ensemble applies to --method net with a whole-image model: pass "
+                     "--model");
+      const auto& model = cache_.model(a_.model);
+      for (const auto& m : methods_) recon::check_self_ensemble(m, model.net, model.script.get());
+    }
+  }
+
+  BatchSummary run() {
+    make_folder();
+    plan();
+    BatchSummary summary = process_mine();
+    summary.loads = cache_.loads();
+    if (!gather(summary)) return summary;  // rank 0 writes the summary
+    write_batch_summary(a_.out, summary.records);
+    if (folder_) folder_->commit();
+    return summary;
+  }
+
+ private:
+  // ((item, method), record): where a record sits in the summary of one process.
+  using Keyed = std::pair<std::pair<size_t, size_t>, nlohmann::json>;
   struct Pending {
     size_t item;
     std::vector<std::string> methods;
   };
-  std::vector<Pending> pending;
-  std::vector<std::pair<std::pair<size_t, size_t>, nlohmann::json>>
-      kept;  // ((item, method), record)
-  for (size_t i = 0; i < items.size(); ++i) {
-    Pending p{i, {}};
-    for (size_t m = 0; m < methods.size(); ++m) {
-      auto done = a.resume ? finished_record(records_dir / record_file(items[i].name, methods[m]))
-                           : std::nullopt;
-      if (done) {
-        kept.emplace_back(std::make_pair(i, m), std::move(*done));
-      } else {
-        p.methods.push_back(methods[m]);
-      }
+
+  void check_output() {
+    policy_.force = a_.force;
+    policy_.inputs = batch_inputs(a_);
+    policy_.inputs.push_back(a_.in);
+    if (a_.resume) return check_resumable(a_, manifest_);
+    try {
+      check_output_folder(a_.out, policy_);
+    } catch (const ConfigError& e) {
+      std::error_code ec;
+      if (!fs::is_regular_file(fs::path(a_.out) / "batch.json", ec)) throw;
+      throw ConfigError(std::string(e.what()) + "; it holds a batch: --resume continues it");
     }
-    if (!p.methods.empty()) pending.push_back(std::move(p));
-  }
-  if (a.resume) {
-    spdlog::info("batch: resumed; {} of {} item-method pair(s) done before, {} item(s) to do",
-                 kept.size(), items.size() * methods.size(), pending.size());
   }
 
-  // Rank r takes pending items r, r + W, r + 2W, ...: neighbours in the list (often alike in
-  // size) go to different ranks.
-  std::vector<size_t> mine;
-  for (size_t i = static_cast<size_t>(rank); i < pending.size(); i += static_cast<size_t>(world)) {
-    mine.push_back(i);
+  void make_folder() {
+    if (rank_ == 0) folder_ = std::make_unique<RunFolder>(a_.out, policy_, a_.resume);
+    // The other ranks write only once rank 0 has checked and made the folder (when it is
+    // shared), and rank 0 writes into it only once they have checked it.
+    comm_->barrier();
+    if (rank_ == 0 && !a_.resume) {
+      write_json_file((fs::path(a_.out) / "batch.json").string(), manifest_);
+    }
+    records_dir_ = fs::path(a_.out) / "records";
+    fs::create_directories(records_dir_);
   }
-  if (world > 1) {
-    spdlog::info("batch: {} rank(s), rank 0 takes {} item(s)", world, mine.size());
+
+  // The pairs still to do (all of them unless resumed), the records of those done, and this
+  // rank's share: pending items r, r + W, r + 2W, ... (neighbours in the list, often alike in
+  // size, go to different ranks).
+  void plan() {
+    int64_t reconstruct = 0;
+    for (const auto& it : items_) reconstruct += it.kind == "reconstruct";
+    spdlog::info("batch: {} item(s) under {} ({} to reconstruct, {} to evaluate), methods {}",
+                 items_.size(), a_.in, reconstruct, items_.size() - reconstruct,
+                 join(methods_, ","));
+    for (size_t i = 0; i < items_.size(); ++i) {
+      Pending p{i, {}};
+      for (size_t m = 0; m < methods_.size(); ++m) {
+        auto done = a_.resume
+                        ? finished_record(records_dir_ / record_file(items_[i].name, methods_[m]))
+                        : std::nullopt;
+        if (done) {
+          kept_.emplace_back(std::make_pair(i, m), std::move(*done));
+        } else {
+          p.methods.push_back(methods_[m]);
+        }
+      }
+      if (!p.methods.empty()) pending_.push_back(std::move(p));
+    }
+    if (a_.resume) {
+      spdlog::info("batch: resumed; {} of {} item-method pair(s) done before, {} item(s) to do",
+                   kept_.size(), items_.size() * methods_.size(), pending_.size());
+    }
+    for (size_t i = static_cast<size_t>(rank_); i < pending_.size();
+         i += static_cast<size_t>(world_)) {
+      mine_.push_back(i);
+    }
+    if (world_ > 1) {
+      spdlog::info("batch: {} rank(s), rank 0 takes {} item(s)", world_, mine_.size());
+    }
   }
-  auto method_index = [&](const nlohmann::json& r) {
+
+  BatchSummary process_mine() {
+    BatchSummary summary;
+    ProgressBar bar("batch", static_cast<int64_t>(mine_.size()), "items");
+    for (size_t p : mine_) {
+      const size_t index = pending_[p].item;
+      const auto& item = items_[index];
+      bar.set_note(item.name);
+      for (auto& r : process_item(item, resolved_, pending_[p].methods, a_.out, cache_)) {
+        summary.failures += r["status"] != "ok";
+        write_json_file(
+            (records_dir_ / record_file(item.name, r["method"].get<std::string>())).string(), r);
+        if (folder_) folder_->commit();  // a record lasts: the batch keeps its folder from now on
+        log_record(item, r);
+        record_key_.emplace_back(index, method_index(r));
+        summary.records.push_back(std::move(r));
+      }
+      bar.advance(1);
+    }
+    bar.finish();
+    return summary;
+  }
+
+  static void log_record(const BatchItem& item, const nlohmann::json& r) {
+    const auto method = r["method"].get<std::string>();
+    if (r["status"] != "ok") {
+      spdlog::warn("{} {}: {}", item.name, method, r["error"].get<std::string>());
+    } else if (r.contains("psnr_db")) {
+      spdlog::info("{} {}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s", item.name, method,
+                   r["psnr_db"].is_null() ? INFINITY : r["psnr_db"].get<double>(),
+                   r["ssim"].get<double>(), r["seconds"].get<double>());
+    } else {
+      spdlog::info("{} {}: {:.2f} s -> {}", item.name, method, r["seconds"].get<double>(),
+                   r["output"].get<std::string>());
+    }
+  }
+
+  size_t method_index(const nlohmann::json& r) const {
     const auto name = r["method"].get<std::string>();
-    return static_cast<size_t>(std::find(methods.begin(), methods.end(), name) - methods.begin());
-  };
-  BatchSummary summary;
-  std::vector<std::pair<size_t, size_t>> record_key;  // (item, method) of every record
-  ProgressBar bar("batch", static_cast<int64_t>(mine.size()), "items");
-  for (size_t p : mine) {
-    const size_t index = pending[p].item;
-    const auto& item = items[index];
-    bar.set_note(item.name);
-    for (auto& r : process_item(item, resolved, pending[p].methods, a.out, cache)) {
-      const bool ok = r["status"] == "ok";
-      summary.failures += !ok;
-      write_json_file(
-          (records_dir / record_file(item.name, r["method"].get<std::string>())).string(), r);
-      if (folder) folder->commit();  // a record lasts: the batch keeps its folder from now on
-      if (ok && r.contains("psnr_db")) {
-        spdlog::info("{} {}: PSNR {:.2f} dB, SSIM {:.4f}, {:.2f} s", item.name,
-                     r["method"].get<std::string>(),
-                     r["psnr_db"].is_null() ? INFINITY : r["psnr_db"].get<double>(),
-                     r["ssim"].get<double>(), r["seconds"].get<double>());
-      } else if (ok) {
-        spdlog::info("{} {}: {:.2f} s -> {}", item.name, r["method"].get<std::string>(),
-                     r["seconds"].get<double>(), r["output"].get<std::string>());
-      } else {
-        spdlog::warn("{} {}: {}", item.name, r["method"].get<std::string>(),
-                     r["error"].get<std::string>());
-      }
-      record_key.emplace_back(index, method_index(r));
-      summary.records.push_back(std::move(r));
-    }
-    bar.advance(1);
+    return static_cast<size_t>(std::find(methods_.begin(), methods_.end(), name) -
+                               methods_.begin());
   }
-  bar.finish();
-  summary.loads = cache.loads();
+
   // One summary on rank 0: every rank's records and those kept, in the order of one process.
-  std::vector<std::pair<std::pair<size_t, size_t>, nlohmann::json>> all;
-  if (world > 1) {
-    nlohmann::json shipped = nlohmann::json::array();
-    for (size_t i = 0; i < summary.records.size(); ++i) {
-      shipped.push_back({record_key[i].first, record_key[i].second, summary.records[i]});
-    }
-    const auto gathered = comm->all_gather(shipped.dump());
-    if (rank != 0) return summary;  // rank 0 writes the summary
-    for (const auto& part : gathered) {
-      for (auto& entry : nlohmann::json::parse(part)) {
-        all.emplace_back(std::make_pair(entry[0].get<size_t>(), entry[1].get<size_t>()),
-                         std::move(entry[2]));
+  // False on the other ranks, which have no summary to write.
+  bool gather(BatchSummary& summary) {
+    std::vector<Keyed> all;
+    if (world_ > 1) {
+      nlohmann::json shipped = nlohmann::json::array();
+      for (size_t i = 0; i < summary.records.size(); ++i) {
+        shipped.push_back({record_key_[i].first, record_key_[i].second, summary.records[i]});
+      }
+      const auto gathered = comm_->all_gather(shipped.dump());
+      if (rank_ != 0) return false;
+      for (const auto& part : gathered) {
+        for (auto& entry : nlohmann::json::parse(part)) {
+          all.emplace_back(std::make_pair(entry[0].get<size_t>(), entry[1].get<size_t>()),
+                           std::move(entry[2]));
+        }
+      }
+    } else {
+      for (size_t i = 0; i < summary.records.size(); ++i) {
+        all.emplace_back(record_key_[i], std::move(summary.records[i]));
       }
     }
-  } else {
-    for (size_t i = 0; i < summary.records.size(); ++i) {
-      all.emplace_back(record_key[i], std::move(summary.records[i]));
+    for (auto& k : kept_) all.push_back(std::move(k));
+    std::stable_sort(all.begin(), all.end(),
+                     [](const auto& x, const auto& y) { return x.first < y.first; });
+    summary.records.clear();
+    summary.failures = 0;
+    for (auto& entry : all) {
+      summary.failures += entry.second["status"] != "ok";
+      summary.records.push_back(std::move(entry.second));
     }
+    return true;
   }
-  for (auto& k : kept) all.push_back(std::move(k));
-  std::stable_sort(all.begin(), all.end(),
-                   [](const auto& x, const auto& y) { return x.first < y.first; });
-  summary.records.clear();
-  summary.failures = 0;
-  for (auto& entry : all) {
-    summary.failures += entry.second["status"] != "ok";
-    summary.records.push_back(std::move(entry.second));
-  }
-  write_batch_summary(a.out, summary.records);
-  if (folder) folder->commit();
-  return summary;
+
+  const BatchOptions& a_;
+  std::shared_ptr<dist::Communicator> comm_;
+  const int64_t rank_, world_;
+  BatchOptions resolved_;  // the options the items take: method options and CFA inline
+  std::vector<std::string> methods_;
+  nlohmann::json manifest_;
+  OutputFolderPolicy policy_;
+  std::vector<BatchItem> items_;
+  ModelCache cache_;                   // every item shares one read of the model and the dictionary
+  std::unique_ptr<RunFolder> folder_;  // rank 0 makes it; the others write into it
+  fs::path records_dir_;
+  std::vector<Pending> pending_;
+  std::vector<Keyed> kept_;
+  std::vector<size_t> mine_;                           // this rank's indices into pending_
+  std::vector<std::pair<size_t, size_t>> record_key_;  // (item, method) of every record
+};
+
+}  // namespace
+
+BatchSummary run_batch(const BatchOptions& a, std::shared_ptr<dist::Communicator> comm) {
+  Batch batch(a, std::move(comm));
+  batch.check();
+  return batch.run();
 }
 
 }  // namespace lfnet::pipeline

@@ -136,164 +136,219 @@ dict::Dictionary bench_dictionary(const BenchOptions& a, int64_t patch) {
   return d;
 }
 
-nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int64_t stride,
-                          double gemm) {
-  const torch::Device device = parse_device(a.device);
-  Stopwatch setup_clock;
-  nn::LightFieldNet net{nullptr};               // a checkpoint's or an untrained network,
-  std::shared_ptr<nn::ScriptedNetwork> script;  // or an exported one
-  nn::NetworkOptions network;                   // its options
-  optics::PhiSpec spec = phi_from_argument(a.phi);
-  nlohmann::json model_info = "untrained default network";
-  if (recon::needs_network(method)) {
-    const std::string model = a.models.empty() ? "" : a.models.front();
-    std::string architecture = nn::kPaperArchitecture;
-    if (!a.architectures.empty()) architecture = a.architectures.front();
+namespace {
+
+// One case of lfnet bench, as steps: the network (a model's, or an untrained one of an
+// architecture), the method prepared on the bench light field's sensor image, then one timed
+// reconstruction measured in seconds, CPU, memory and operations.
+class BenchCase {
+ public:
+  BenchCase(const BenchOptions& options, const std::string& method, int64_t stride, double gemm)
+      : a_(options),
+        method_(method),
+        stride_(stride),
+        gemm_(gemm),
+        spec_(phi_from_argument(options.phi)),
+        full_(options.cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn")),
+        cnn_tile_(options.tile > 0 ? options.tile : recon::kDefaultCnnTile),
+        image_tile_(options.tile > 0 ? options.tile : recon::kDefaultImageTile) {}
+
+  nlohmann::json run() {
+    const torch::Device device = parse_device(a_.device);
+    Stopwatch setup_clock;
+    if (recon::needs_network(method_)) read_network();
+    has_net_ = net_ || script_;
+    phi_ = optics::make_phi(spec_);
+    if (net_ && a_.models.empty()) net_->set_phi(phi_tensor(*phi_, net_->options()));
+    // The patch grid of patch methods (a whole-image net's crop is no patch).
+    const auto net_grid = has_net_ ? network_.patch_grid() : std::nullopt;
+    patch_ = net_grid ? net_grid->height : 9;
+    o_.patch_h = o_.patch_w = patch_;
+    o_.stride = stride_;
+    o_.batch = a_.batch;
+    o_.validate();
+    truth_ = bench_light_field(a_);
+    sensor_ = optics::simulate_sensor(*phi_, truth_.data()[0]);
+    prepare(device);
+    setup_seconds_ = setup_clock.seconds();
+    return measure();
+  }
+
+ private:
+  // A checkpoint's or an exported network, or an untrained one of --architecture.
+  void read_network() {
+    const std::string model = a_.models.empty() ? "" : a_.models.front();
     if (!model.empty()) {
-      const auto file = load_model(model, true);  // a checkpoint or an exported file
-      spec = optics::PhiSpec::from_json(file.phi, model + ":$.phi");
-      place_network(file, a.device, a.precision);
-      LFNET_CHECK_AS(ConfigError, file.net || a.cnn_mode != recon::CnnMode::kFull,
+      const auto file = load_model(model, true);
+      spec_ = optics::PhiSpec::from_json(file.phi, model + ":$.phi");
+      place_network(file, a_.device, a_.precision);
+      LFNET_CHECK_AS(ConfigError, file.net || a_.cnn_mode != recon::CnnMode::kFull,
                      "--cnn-mode full applies to checkpoints; ", model,
                      " is an exported TorchScript file");
-      net = file.net;
-      script = file.script;
-      network = file.network;
-      model_info = model;
-    } else {
-      nn::NetworkOptions no;
-      no.measurements = spec.n;
-      no.architecture = architecture;
-      if (no.arch().whole_image()) {
-        model_info = "untrained " + architecture + " network";
-        // A training crop the architecture takes (sides multiples of its tiling's multiple).
-        no.patch.height = no.patch.width = 12 * no.arch().image_tiling(no).multiple;
-      }
-      torch::manual_seed(0);
-      net = nn::LightFieldNet(no);
-      network = no;
+      net_ = file.net;
+      script_ = file.script;
+      network_ = file.network;
+      model_info_ = model;
+      return;
     }
+    network_.measurements = spec_.n;
+    network_.architecture =
+        a_.architectures.empty() ? nn::kPaperArchitecture : a_.architectures.front();
+    if (!network_.patch_grid()) {  // a whole-image architecture
+      model_info_ = "untrained " + network_.architecture + " network";
+      // A training crop the architecture takes (sides multiples of its tiling's multiple).
+      network_.patch.height = network_.patch.width =
+          12 * network_.arch().image_tiling(network_).multiple;
+    }
+    torch::manual_seed(0);
+    net_ = nn::LightFieldNet(network_);
   }
-  const bool has_net = net || script;
-  const auto phi = optics::make_phi(spec);
-  if (net && a.models.empty()) net->set_phi(phi_tensor(*phi, net->options()));
-  // The patch grid of patch methods (lfnet reconstructs whole images: its crop is no patch).
-  const auto net_grid = has_net ? network.patch_grid() : std::nullopt;
-  const int64_t patch = net_grid ? net_grid->height : 9;
-  recon::ReconstructOptions o;
-  o.patch_h = o.patch_w = patch;
-  o.stride = stride;
-  o.batch = a.batch;
-  o.validate();
-  const LightField truth = bench_light_field(a);
-  const auto sensor = optics::simulate_sensor(*phi, truth.data()[0]);
 
-  const bool full = a.cnn_mode == recon::CnnMode::kFull && (method == "net" || method == "cnn");
-  const int64_t cnn_tile = a.tile > 0 ? a.tile : recon::kDefaultCnnTile;
-  const int64_t image_tile = a.tile > 0 ? a.tile : recon::kDefaultImageTile;
-  nlohmann::json extra = nlohmann::json::object();
-  MethodContext context;
-  context.phi = phi.get();
-  // This method's options (the whole run's were checked by bench_report).
-  const auto all_options = a.method_options.empty()
-                               ? nlohmann::json::object()
-                               : read_json_argument(a.method_options, "--method-options");
-  if (all_options.is_object() && all_options.contains(method)) {
-    context.method_options = {{method, all_options[method]}};
-  }
-  dict::Dictionary dictionary;
-  if (has_net) {
-    if (net) {
-      net->to(device);
-      nn::set_cnn_precision(net, a.precision);
+  // The method's context: the net on its device, or the dictionary; its options.
+  void prepare(const torch::Device& device) {
+    MethodContext context;
+    context.phi = phi_.get();
+    // This method's options (the whole run's were checked by bench_report).
+    const auto all_options = a_.method_options.empty()
+                                 ? nlohmann::json::object()
+                                 : read_json_argument(a_.method_options, "--method-options");
+    if (all_options.is_object() && all_options.contains(method_)) {
+      context.method_options = {{method_, all_options[method_]}};
     }
-    context.net = net;
-    context.script = script;
-    extra["model"] = model_info;
-    extra["architecture"] = network.architecture;
-    extra["cnn_mode"] = full ? "full" : "patches";
-    extra["precision"] = nn::to_string(a.precision);
-    if (full) extra["tile"] = cnn_tile;
-  } else if (recon::find_method(method).needs() == recon::MethodNeeds::kDictionary) {
-    dictionary = bench_dictionary(a, patch);
-    context.dictionary_data = &dictionary;
-    extra["dictionary_atoms"] = dictionary.size();
-    extra["dictionary"] = a.dictionary.empty() ? "bench K-SVD (3 iterations)" : a.dictionary;
+    if (has_net_) {
+      if (net_) {
+        net_->to(device);
+        nn::set_cnn_precision(net_, a_.precision);
+      }
+      context.net = net_;
+      context.script = script_;
+      extra_["model"] = model_info_;
+      extra_["architecture"] = network_.architecture;
+      extra_["cnn_mode"] = full_ ? "full" : "patches";
+      extra_["precision"] = nn::to_string(a_.precision);
+      if (full_) extra_["tile"] = cnn_tile_;
+    } else if (recon::find_method(method_).needs() == recon::MethodNeeds::kDictionary) {
+      dictionary_ = bench_dictionary(a_, patch_);
+      context.dictionary_data = &dictionary_;
+      extra_["dictionary_atoms"] = dictionary_.size();
+      extra_["dictionary"] = a_.dictionary.empty() ? "bench K-SVD (3 iterations)" : a_.dictionary;
+    }
+    context.tile = image_tile_;
+    if (a_.self_ensemble && has_net_ && recon::whole_image_model(net_, script_.get())) {
+      context.self_ensemble = true;
+      context.self_ensemble_passes = a_.self_ensemble_passes;
+      passes_ = static_cast<int64_t>(
+          recon::ensemble_mirrors(net_, script_.get(), a_.self_ensemble_passes).size());
+      extra_["self_ensemble_passes"] = passes_;
+    }
+    prepared_ = prepare_method(method_, context, patch_, patch_);
+    if (!prepared_.options.empty()) extra_["method_options"] = prepared_.options;
+    if (prepared_.options.contains("omp"))
+      extra_["omp_atoms"] = prepared_.options["omp"]["max_atoms"];
+    if (prepared_.image) extra_["tile"] = image_tile_;
   }
-  context.tile = image_tile;
-  int64_t passes = 1;  // of the lfnet architecture's whole-image pass
-  if (a.self_ensemble && has_net && network.arch().whole_image()) {
-    context.self_ensemble = true;
-    context.self_ensemble_passes = a.self_ensemble_passes;
-    passes = static_cast<int64_t>(
-        recon::ensemble_mirrors(net, script.get(), a.self_ensemble_passes).size());
-    extra["self_ensemble_passes"] = passes;
+
+  torch::Tensor reconstruct() const {
+    if (prepared_.image) return prepared_.image(sensor_, 0.0);
+    if (full_) {
+      return recon::reconstruct_sensor_fully_convolutional(net_, method_, *phi_, sensor_, o_,
+                                                           cnn_tile_);
+    }
+    return recon::reconstruct_sensor(*phi_, sensor_, prepared_.solver, o_);
   }
-  const auto prepared = prepare_method(method, context, patch, patch);
-  if (!prepared.options.empty()) extra["method_options"] = prepared.options;
-  if (prepared.options.contains("omp")) extra["omp_atoms"] = prepared.options["omp"]["max_atoms"];
-  const recon::PatchSolver solver = prepared.solver;
-  const recon::ImageSolver image = prepared.image;
-  if (image) extra["tile"] = image_tile;
-  const double flops_per_patch = recon::find_method(method).patch_flops(prepared.resources);
-  const double setup_seconds = setup_clock.seconds();
-  const double setup_peak = status_mb("VmHWM");
-  const bool isolated_peak = reset_peak_rss();
-  const double rss_before = status_mb("VmRSS");
-  const auto cpu0 = cpu_seconds();
-  Stopwatch clock;
-  auto est =
-      image  ? image(sensor, 0.0)
-      : full ? recon::reconstruct_sensor_fully_convolutional(net, method, *phi, sensor, o, cnn_tile)
-             : recon::reconstruct_sensor(*phi, sensor, solver, o);
-  const double seconds = clock.seconds();
-  const auto cpu1 = cpu_seconds();
-  const double user = cpu1.first - cpu0.first, system = cpu1.second - cpu0.second;
-  const double cpu = user + system;
-  const double peak = status_mb("VmHWM");
-  const PatchGrid grid(truth.height(), truth.width(), patch, patch, stride);
+
   // Patch stitching computes flops_per_patch for every patch; the fully convolutional pass
   // computes the CNN once per tile position instead.
-  double flops = image
-                     ? static_cast<double>(passes) *
-                           nn::image_full_flops(network, truth.height(), truth.width(), image_tile)
-                     : flops_per_patch * static_cast<double>(grid.size());
-  if (full && !image) {
-    flops += nn::cnn_full_flops(network, truth.height(), truth.width(), cnn_tile) -
-             nn::cnn_patch_flops(network) * static_cast<double>(grid.size());
+  double flops(double flops_per_patch, const PatchGrid& grid) const {
+    const int64_t h = truth_.height(), w = truth_.width();
+    if (prepared_.image) {
+      return static_cast<double>(passes_) * nn::image_full_flops(network_, h, w, image_tile_);
+    }
+    double f = flops_per_patch * static_cast<double>(grid.size());
+    if (full_) {
+      f += nn::cnn_full_flops(network_, h, w, cnn_tile_) -
+           nn::cnn_patch_flops(network_) * static_cast<double>(grid.size());
+    }
+    return f;
   }
-  // Whole-image models have no stride and no patches: their rate is in sensor megapixels per
-  // second, which every case reports so that all compare.
-  nlohmann::json r = {{"method", method},
-                      {"seconds", seconds},
-                      {"megapixels_per_second",
-                       static_cast<double>(truth.height() * truth.width()) / seconds / 1e6},
-                      {"cpu_utilisation", cpu / seconds / thread_count()},
-                      {"cpu_user_seconds", user},
-                      {"cpu_system_seconds", system},
-                      {"batch", a.batch},
-                      {"peak_rss_mb", peak},
-                      {"rss_before_mb", rss_before},
-                      {"peak_is_reconstruction_only", isolated_peak},
-                      {"setup_peak_rss_mb", setup_peak},
-                      {"setup_seconds", setup_seconds},
-                      {"flops_per_patch", flops_per_patch},
-                      {"gflops", flops / seconds / 1e9},
-                      {"gemm_fraction", gemm > 0 ? flops / seconds / gemm : 0.0},
-                      {"psnr_db", psnr(LightField(est), truth)},
-                      {"phi", spec.label()},
-                      {"device", a.device}};
-  if (image) {
-    r["whole_image"] = true;
-  } else {
-    r["stride"] = stride;
-    r["patches"] = grid.size();
-    r["patches_per_second"] = static_cast<double>(grid.size()) / seconds;
+
+  nlohmann::json measure() const {
+    const double flops_per_patch = recon::find_method(method_).patch_flops(prepared_.resources);
+    const double setup_peak = status_mb("VmHWM");
+    const bool isolated_peak = reset_peak_rss();
+    const double rss_before = status_mb("VmRSS");
+    const auto cpu0 = cpu_seconds();
+    Stopwatch clock;
+    const auto est = reconstruct();
+    const double seconds = clock.seconds();
+    const auto cpu1 = cpu_seconds();
+    const double user = cpu1.first - cpu0.first, system = cpu1.second - cpu0.second;
+    const double peak = status_mb("VmHWM");
+    const PatchGrid grid(truth_.height(), truth_.width(), patch_, patch_, stride_);
+    const double total_flops = flops(flops_per_patch, grid);
+    // Whole-image models have no stride and no patches: their rate is in sensor megapixels per
+    // second, which every case reports so that all compare.
+    nlohmann::json r = {{"method", method_},
+                        {"seconds", seconds},
+                        {"megapixels_per_second",
+                         static_cast<double>(truth_.height() * truth_.width()) / seconds / 1e6},
+                        {"cpu_utilisation", (user + system) / seconds / thread_count()},
+                        {"cpu_user_seconds", user},
+                        {"cpu_system_seconds", system},
+                        {"batch", a_.batch},
+                        {"peak_rss_mb", peak},
+                        {"rss_before_mb", rss_before},
+                        {"peak_is_reconstruction_only", isolated_peak},
+                        {"setup_peak_rss_mb", setup_peak},
+                        {"setup_seconds", setup_seconds_},
+                        {"flops_per_patch", flops_per_patch},
+                        {"gflops", total_flops / seconds / 1e9},
+                        {"gemm_fraction", gemm_ > 0 ? total_flops / seconds / gemm_ : 0.0},
+                        {"psnr_db", psnr(LightField(est), truth_)},
+                        {"phi", spec_.label()},
+                        {"device", a_.device}};
+    if (prepared_.image) {
+      r["whole_image"] = true;
+    } else {
+      r["stride"] = stride_;
+      r["patches"] = grid.size();
+      r["patches_per_second"] = static_cast<double>(grid.size()) / seconds;
+    }
+    if (method_ == "net") r["paper_ratio"] = kPaperNetSeconds / seconds;
+    if (method_ == "dict") r["paper_ratio"] = kPaperDictSeconds / seconds;
+    r.update(extra_);
+    return r;
   }
-  if (method == "net") r["paper_ratio"] = kPaperNetSeconds / seconds;
-  if (method == "dict") r["paper_ratio"] = kPaperDictSeconds / seconds;
-  r.update(extra);
-  return r;
+
+  const BenchOptions& a_;
+  const std::string method_;
+  const int64_t stride_;
+  const double gemm_;  // the machine's GEMM rate, for gemm_fraction (0: not measured)
+  optics::PhiSpec spec_;
+  const bool full_;  // --cnn-mode full on a method with a CNN
+  const int64_t cnn_tile_, image_tile_;
+  nn::LightFieldNet net_{nullptr};               // a checkpoint's or an untrained network,
+  std::shared_ptr<nn::ScriptedNetwork> script_;  // or an exported one
+  nn::NetworkOptions network_;                   // its options
+  nlohmann::json model_info_ = "untrained default network";
+  bool has_net_ = false;
+  std::shared_ptr<optics::Phi> phi_;
+  int64_t patch_ = 9;
+  recon::ReconstructOptions o_;
+  LightField truth_;
+  torch::Tensor sensor_;
+  dict::Dictionary dictionary_;
+  PreparedMethod prepared_;
+  int64_t passes_ = 1;  // of a whole-image pass (the self-ensemble's mirrors)
+  double setup_seconds_ = 0;
+  nlohmann::json extra_ = nlohmann::json::object();
+};
+
+}  // namespace
+
+nlohmann::json bench_case(const BenchOptions& a, const std::string& method, int64_t stride,
+                          double gemm) {
+  return BenchCase(a, method, stride, gemm).run();
 }
 
 nlohmann::json bench_conv_kernels(const BenchOptions& a, double gemm) {
@@ -354,6 +409,44 @@ double load_average() {
   return load[0];
 }
 
+// The nets the network methods run with: one narrowed option set per model or architecture,
+// with whether it reconstructs whole images.
+std::vector<std::pair<BenchOptions, bool>> bench_nets(const BenchOptions& a) {
+  std::vector<std::pair<BenchOptions, bool>> nets;
+  const std::vector<std::string> models =
+      a.models.empty() ? std::vector<std::string>{""} : a.models;
+  for (const auto& model : models) {
+    for (const auto& architecture : a.architectures) {
+      BenchOptions n = a;
+      n.models = model.empty() ? std::vector<std::string>{} : std::vector<std::string>{model};
+      n.architectures = {architecture};
+      nn::NetworkOptions options;
+      if (model.empty()) {
+        options.architecture = architecture;
+      } else {
+        options = load_model(model, false).network;
+      }
+      nets.emplace_back(n, !options.patch_grid());
+      if (!model.empty()) break;  // a checkpoint has its own architecture
+    }
+  }
+  return nets;
+}
+
+// The line a case prints: its error, or its time, rate, memory and PSNR.
+std::string case_line(const std::string& label, const std::string& where, const nlohmann::json& r) {
+  if (r.contains("error")) {
+    return format_text("%-4s %s: %s\n", label.c_str(), where.c_str(),
+                       r["error"].get<std::string>().c_str());
+  }
+  const bool image = r.value("whole_image", false);
+  return format_text(
+      "%-4s %s: %.2f s, %.*f %s, peak %.0f MB, PSNR %.2f dB\n", label.c_str(), where.c_str(),
+      r["seconds"].get<double>(), image ? 2 : 0,
+      image ? r["megapixels_per_second"].get<double>() : r["patches_per_second"].get<double>(),
+      image ? "Mpx/s" : "patches/s", r["peak_rss_mb"].get<double>(), r["psnr_db"].get<double>());
+}
+
 }  // namespace
 
 nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_case,
@@ -386,22 +479,7 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
     }
   }
   report["cases"] = nlohmann::json::array();
-  // The nets the network methods run with: one narrowed option set per model or architecture,
-  // with whether it reconstructs whole images.
-  std::vector<std::pair<BenchOptions, bool>> nets;
-  const std::vector<std::string> models =
-      a.models.empty() ? std::vector<std::string>{""} : a.models;
-  for (const auto& model : models) {
-    for (const auto& architecture : a.architectures) {
-      BenchOptions n = a;
-      n.models = model.empty() ? std::vector<std::string>{} : std::vector<std::string>{model};
-      n.architectures = {architecture};
-      const bool image = model.empty() ? nn::find_architecture(architecture).whole_image()
-                                       : load_model(model, false).network.arch().whole_image();
-      nets.emplace_back(n, image);
-      if (!model.empty()) break;  // a checkpoint has its own architecture
-    }
-  }
+  const auto nets = bench_nets(a);
   for (size_t s = 0; s < a.strides.size(); ++s) {
     const int64_t stride = a.strides[s];
     for (const auto& method : a.methods) {
@@ -416,19 +494,7 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
                            (narrowed.models.empty() ? narrowed.architectures.front()
                                                     : narrowed.models.front()) +
                            "]";
-        const std::string where =
-            image ? std::string("whole image") : "stride " + std::to_string(stride);
-        if (r.contains("error")) {
-          say("%-4s %s: %s\n", label.c_str(), where.c_str(), r["error"].get<std::string>().c_str());
-        } else if (image) {
-          say("%-4s %s: %.2f s, %.2f Mpx/s, peak %.0f MB, PSNR %.2f dB\n", label.c_str(),
-              where.c_str(), r["seconds"].get<double>(), r["megapixels_per_second"].get<double>(),
-              r["peak_rss_mb"].get<double>(), r["psnr_db"].get<double>());
-        } else {
-          say("%-4s %s: %.2f s, %.0f patches/s, peak %.0f MB, PSNR %.2f dB\n", label.c_str(),
-              where.c_str(), r["seconds"].get<double>(), r["patches_per_second"].get<double>(),
-              r["peak_rss_mb"].get<double>(), r["psnr_db"].get<double>());
-        }
+        print(case_line(label, image ? "whole image" : "stride " + std::to_string(stride), r));
         report["cases"].push_back(r);
         if (!network) break;  // one case for methods without a net
       }
@@ -454,10 +520,9 @@ std::string shell_quote(const std::string& s) {
   return out + "'";
 }
 
-}  // namespace
-
-nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& method, int64_t stride,
-                                   double gemm) {
+// The command line of a case's child: this program, `bench --case`, and the options.
+std::vector<std::string> child_command(const BenchOptions& a, const std::string& method,
+                                       int64_t stride, double gemm) {
   char exe[4096];
   const ssize_t n = readlink("/proc/self/exe", exe, sizeof(exe) - 1);
   LFNET_CHECK_AS(IoError, n > 0, "bench: cannot find this program's path (/proc/self/exe)");
@@ -511,6 +576,14 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
                   {"--method-options", shell_quote(nlohmann::json{{method, all[method]}}.dump())});
     }
   }
+  return args;
+}
+
+}  // namespace
+
+nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& method, int64_t stride,
+                                   double gemm) {
+  const auto args = child_command(a, method, stride, gemm);
   // The child's messages go to a temporary file, passed on to stderr when it ends, so that its
   // error line (which names the flag it refused) also becomes the case's error in the table.
   char log_path[] = "/tmp/lfnet-bench-XXXXXX";

@@ -225,149 +225,206 @@ void check_phi_argument(const ModelFile& model, const std::string& phi) {
                  spec.label());
 }
 
-EvaluateResult evaluate_request(const EvaluateRequest& a) {
-  const std::string method = a.method.empty() ? (a.model.empty() ? "pinv" : "net") : a.method;
-  const auto method_options = method_options_argument(a.method_options, {method});
-  LFNET_CHECK_AS(ConfigError, a.lf.empty() != a.scene.empty(),
-                 "give exactly one of --lf DIR and --scene SCENE.json");
-  LFNET_CHECK_AS(ConfigError, a.noise >= 0, "--noise must be >= 0");
-  // Where the light field sits in the protocol (docs/protocol.md), read before any work.
-  const nlohmann::json set = folder_set_record(a.lf);
-  if (!a.choice.empty() && !set.is_null() && set.value("role", "") == "test") {
-    spdlog::warn(
-        "--choice '{}' on {}, a light field of the test set: choices are made on the validation "
-        "set (docs/protocol.md); lfnet report marks this record",
-        a.choice, set.value("name", a.lf));
-  }
-  std::optional<optics::SensorOptions> effects;  // read before any work
-  if (!a.effects.empty()) {
-    // As lfnet simulate reads them: the file, then --noise as its Gaussian sigma.
-    effects = simulation_effects(a.effects, a.noise > 0 ? a.noise : -1, SimulateInput{}, "");
-  }
-  optics::CalibrationError camera_error;  // read before any work
-  if (!a.camera_error.empty()) {
-    camera_error =
-        optics::CalibrationError::from_json(read_json_argument(a.camera_error, "--camera-error"),
-                                            json_argument_source(a.camera_error, "--camera-error"));
-    LFNET_CHECK_AS(ConfigError, camera_error.empty() || a.mode == optics::SimulationMode::kSensor,
-                   "--camera-error is simulated in sensor mode only");
-  }
-  // --cfa, or the one a calibrated Phi's folder names.
-  auto cfa = cfa_of_arguments(a.cfa, a.phi);
-  if (cfa) {
-    LFNET_CHECK_AS(ConfigError, a.mode == optics::SimulationMode::kSensor,
-                   "--cfa is simulated in sensor mode only");
-    cfa->check_demosaicable();
-  }
-  check_demosaic_argument(a.demosaic, cfa.has_value(), recon::needs_network(method), method);
-  parse_device(a.device);  // a clear error before any work
-  MethodContext context;
-  optics::PhiSpec spec;
-  std::optional<nn::PatchShape> network_patch;  // the patch size of net, ae and cnn
-  nlohmann::json noise_switch;                  // a noise switch's members, for the record
-  if (!a.model.empty()) {
-    const auto model = load_model(a.model, recon::needs_network(method));
-    if (recon::needs_network(method)) {
-      model.check_cfa(cfa ? cfa->pattern() : "");
-      noise_switch = model.noise_switch_record();
-    }
-    spec = optics::PhiSpec::from_json(model.phi, a.model + ":$.phi");
-    check_phi_argument(model, a.phi);
-    if (recon::needs_network(method)) {
-      use_model(context, model);
-      network_patch = model.network.patch_grid();
-      place_network(model, a.device, a.precision);
-    }
-  } else {
-    LFNET_CHECK_AS(ConfigError, !recon::needs_network(method), "method '", method,
-                   "' needs --model");
-    LFNET_CHECK_AS(ConfigError, !cfa || !recon::needs_network(method), "method '", method,
-                   "' needs a colour model behind a colour filter array");
-    LFNET_CHECK_AS(ConfigError, !a.phi.empty(), "--phi NAME[:N] is needed without --model");
-    spec = phi_from_argument(a.phi);
-  }
-  LightFieldSources sources;
-  if (!a.lf.empty()) sources.light_fields = {a.lf};
-  if (!a.scene.empty()) sources.scenes = {a.scene};
-  sources.views = a.views;
-  sources.orient = a.orient;
-  sources.layout = a.layout;
-  if (!a.layout.empty()) io::parse_layout(a.layout);  // before any work
-  AngularOrientation::parse(a.orient, "--orient");    // before any work
-  if (!a.views.empty()) {
-    auto [ru, rv] = parse_views(a.views);
-    if (a.model.empty()) {
-      spec.rows = ru.size();
-      spec.cols = rv.size();
-    }
-  }
-  if (a.self_ensemble) recon::check_self_ensemble(method, context.net, context.script.get());
-  recon::check_ensemble_passes(a.self_ensemble, a.self_ensemble_passes);
-  context.method_options = method_options;
-  context.self_ensemble = a.self_ensemble;
-  context.self_ensemble_passes = a.self_ensemble_passes;
-  context.self_calibrate = a.self_calibrate;
-  LFNET_CHECK_AS(ConfigError, a.tile >= 0, "--tile must be positive, got ", a.tile);
-  context.tile = a.tile;
-  const auto phi = optics::make_phi(spec);
-  context.phi = phi.get();
-  context.dictionary = a.dictionary;
-  torch::Tensor flat_field;  // read before the light field
-  if (!a.flat_field.empty()) {
-    LFNET_CHECK_AS(ConfigError, a.mode == optics::SimulationMode::kSensor,
-                   "--flat-field corrects a sensor image: sensor mode only");
-    flat_field = read_flat_field(a.flat_field, *phi, cfa);
-  }
-  // A grey truth of 16-bit views is held in 16-bit codes, as the estimate is.
-  const auto truths =
-      load_sources(sources, phi->rows(), phi->cols(), false, cfa.has_value(), !cfa.has_value());
+namespace {
 
-  auto o = make_eval_options(a.mode, a.noise, a.seed, a.stride, a.batch, a.window, network_patch);
-  if (effects) o.effects = *effects;
-  o.estimate_noise = a.estimate_noise;
-  o.camera_error = camera_error;
-  if (a.tell_camera_error) {
-    // The camera as if measured: its nets hold the Phi with the error (recon/self_calibration.h).
-    LFNET_CHECK_AS(ConfigError, context.net && context.net->architecture().whole_image(),
-                   "--tell-camera-error: the model must be a checkpoint of the lfnet architecture");
-    LFNET_CHECK_AS(ConfigError, !a.self_calibrate,
-                   "--tell-camera-error and --self-calibrate: give one, not both");
-    for (const auto& net : {context.net, context.noisy_net}) {
-      if (!net.is_empty()) recon::tell_camera(net, *phi, camera_error);
+// lfnet evaluate as a controller: check() reads and checks every argument (the model, the Phi,
+// the sensor's effects, the light field's place in the protocol) before any work, then run()
+// loads the light field, simulates the camera and scores the method.
+class Evaluation {
+ public:
+  explicit Evaluation(const EvaluateRequest& request)
+      : a_(request),
+        method_(request.method.empty() ? (request.model.empty() ? "pinv" : "net") : request.method),
+        network_(recon::needs_network(method_)) {}
+
+  void check() {
+    LFNET_CHECK_AS(ConfigError, a_.lf.empty() != a_.scene.empty(),
+                   "give exactly one of --lf DIR and --scene SCENE.json");
+    LFNET_CHECK_AS(ConfigError, a_.noise >= 0, "--noise must be >= 0");
+    LFNET_CHECK_AS(ConfigError, a_.tile >= 0, "--tile must be positive, got ", a_.tile);
+    context_.method_options = method_options_argument(a_.method_options, {method_});
+    check_protocol();
+    read_sensor_effects();
+    read_camera();
+    check_sources();
+    if (a_.self_ensemble) recon::check_self_ensemble(method_, context_.net, context_.script.get());
+    recon::check_ensemble_passes(a_.self_ensemble, a_.self_ensemble_passes);
+    context_.self_ensemble = a_.self_ensemble;
+    context_.self_ensemble_passes = a_.self_ensemble_passes;
+    context_.self_calibrate = a_.self_calibrate;
+    context_.tile = a_.tile;
+    context_.dictionary = a_.dictionary;
+  }
+
+  EvaluateResult run() {
+    phi_ = optics::make_phi(spec_);
+    context_.phi = phi_.get();
+    torch::Tensor flat_field;  // read before the light field
+    if (!a_.flat_field.empty()) flat_field = read_flat_field(a_.flat_field, *phi_, cfa_);
+    // A grey truth of 16-bit views is held in 16-bit codes, as the estimate is.
+    const auto truths = load_sources(sources_, phi_->rows(), phi_->cols(), false, cfa_.has_value(),
+                                     !cfa_.has_value());
+    auto o = options(truths[0], flat_field);
+    if (a_.tell_camera_error) tell_camera_error();
+    EvaluateResult result;
+    result.record = evaluate_method(truths[0], method_, context_, o,
+                                    a_.keep_estimate ? &result.estimate : nullptr);
+    add_to_record(result.record);
+    result.light_field = truths[0].name;
+    if (a_.keep_estimate) result.truth = truths[0].views().raw();
+    result.phi = spec_.label();
+    return result;
+  }
+
+ private:
+  // Where the light field sits in the protocol (docs/protocol.md).
+  void check_protocol() {
+    set_ = folder_set_record(a_.lf);
+    if (!a_.choice.empty() && !set_.is_null() && set_.value("role", "") == "test") {
+      spdlog::warn(
+          "--choice '{}' on {}, a light field of the test set: choices are made on the validation "
+          "set (docs/protocol.md); lfnet report marks this record",
+          a_.choice, set_.value("name", a_.lf));
     }
   }
-  o.cfa = cfa;
-  o.demosaic = a.demosaic;
-  if (flat_field.defined()) {
-    const auto views = truths[0].views();
+
+  // --effects, --camera-error, --cfa (or a calibrated Phi's), --demosaic, --flat-field, --device.
+  void read_sensor_effects() {
+    if (!a_.effects.empty()) {
+      // As lfnet simulate reads them: the file, then --noise as its Gaussian sigma.
+      effects_ = simulation_effects(a_.effects, a_.noise > 0 ? a_.noise : -1, SimulateInput{}, "");
+    }
+    const bool sensor = a_.mode == optics::SimulationMode::kSensor;
+    if (!a_.camera_error.empty()) {
+      camera_error_ = optics::CalibrationError::from_json(
+          read_json_argument(a_.camera_error, "--camera-error"),
+          json_argument_source(a_.camera_error, "--camera-error"));
+      LFNET_CHECK_AS(ConfigError, camera_error_.empty() || sensor,
+                     "--camera-error is simulated in sensor mode only");
+    }
+    cfa_ = cfa_of_arguments(a_.cfa, a_.phi);
+    if (cfa_) {
+      LFNET_CHECK_AS(ConfigError, sensor, "--cfa is simulated in sensor mode only");
+      cfa_->check_demosaicable();
+    }
+    check_demosaic_argument(a_.demosaic, cfa_.has_value(), network_, method_);
+    LFNET_CHECK_AS(ConfigError, a_.flat_field.empty() || sensor,
+                   "--flat-field corrects a sensor image: sensor mode only");
+    parse_device(a_.device);
+  }
+
+  // The model (its Phi, its nets placed on the device), or --phi alone.
+  void read_camera() {
+    if (a_.model.empty()) {
+      LFNET_CHECK_AS(ConfigError, !network_, "method '", method_, "' needs --model");
+      LFNET_CHECK_AS(ConfigError, !a_.phi.empty(), "--phi NAME[:N] is needed without --model");
+      spec_ = phi_from_argument(a_.phi);
+      return;
+    }
+    const auto model = load_model(a_.model, network_);
+    if (network_) {
+      model.check_cfa(cfa_ ? cfa_->pattern() : "");
+      noise_switch_ = model.noise_switch_record();
+    }
+    spec_ = optics::PhiSpec::from_json(model.phi, a_.model + ":$.phi");
+    check_phi_argument(model, a_.phi);
+    if (network_) {
+      use_model(context_, model);
+      network_patch_ = model.network.patch_grid();
+      place_network(model, a_.device, a_.precision);
+    }
+  }
+
+  // --lf or --scene, with --views, --orient and --layout; --views sets a named Phi's views.
+  void check_sources() {
+    if (!a_.lf.empty()) sources_.light_fields = {a_.lf};
+    if (!a_.scene.empty()) sources_.scenes = {a_.scene};
+    sources_.views = a_.views;
+    sources_.orient = a_.orient;
+    sources_.layout = a_.layout;
+    if (!a_.layout.empty()) io::parse_layout(a_.layout);
+    AngularOrientation::parse(a_.orient, "--orient");
+    if (!a_.views.empty()) {
+      auto [ru, rv] = parse_views(a_.views);
+      if (a_.model.empty()) {
+        spec_.rows = ru.size();
+        spec_.cols = rv.size();
+      }
+    }
+  }
+
+  eval::EvalOptions options(const NamedLightField& truth, const torch::Tensor& flat_field) {
+    auto o = make_eval_options(a_.mode, a_.noise, a_.seed, a_.stride, a_.batch, a_.window,
+                               network_patch_);
+    if (effects_) o.effects = *effects_;
+    o.estimate_noise = a_.estimate_noise;
+    o.camera_error = camera_error_;
+    o.cfa = cfa_;
+    o.demosaic = a_.demosaic;
+    if (flat_field.defined()) {
+      const auto views = truth.views();
+      LFNET_CHECK_AS(ConfigError,
+                     flat_field.size(0) == views.height() && flat_field.size(1) == views.width(),
+                     "--flat-field ", a_.flat_field, " is a white frame of ", flat_field.size(0),
+                     "x", flat_field.size(1), " pixels; the light field's views are ",
+                     views.height(), "x", views.width());
+      o.flat_field = flat_field;
+    }
+    // A grey estimate is held in 16-bit codes, what its files hold: half the memory (the scores
+    // differ from float32's by far less than their printed digits).
+    context_.coded = o.reconstruct.coded = !cfa_;
+    return o;
+  }
+
+  // The camera as if measured: its nets hold the Phi with the error (recon/self_calibration.h).
+  void tell_camera_error() {
     LFNET_CHECK_AS(ConfigError,
-                   flat_field.size(0) == views.height() && flat_field.size(1) == views.width(),
-                   "--flat-field ", a.flat_field, " is a white frame of ", flat_field.size(0), "x",
-                   flat_field.size(1), " pixels; the light field's views are ", views.height(), "x",
-                   views.width());
-    o.flat_field = flat_field;
+                   !context_.net.is_empty() &&
+                       context_.net->architecture().phi_input() == nn::PhiInput::kPixelWeights,
+                   "--tell-camera-error: the model must be a checkpoint whose net holds its "
+                   "camera's per-pixel weights (the lfnet or unrolled architecture)");
+    LFNET_CHECK_AS(ConfigError, !a_.self_calibrate,
+                   "--tell-camera-error and --self-calibrate: give one, not both");
+    for (const auto& net : {context_.net, context_.noisy_net}) {
+      if (!net.is_empty()) recon::tell_camera(net, *phi_, camera_error_);
+    }
   }
-  // A grey estimate is held in 16-bit codes, what its files hold: half the memory (the scores
-  // differ from float32's by far less than their printed digits).
-  context.coded = o.reconstruct.coded = !cfa;
-  EvaluateResult result;
-  result.record =
-      evaluate_method(truths[0], method, context, o, a.keep_estimate ? &result.estimate : nullptr);
-  if (!a.model.empty()) result.record["model"] = a.model;
-  if (!noise_switch.is_null()) result.record["noise_switch"] = noise_switch;
-  result.record["device"] = a.device;
-  if (!set.is_null()) {
-    result.record["set"] = {{"name", set.value("set", "")},
-                            {"role", set.value("role", "")},
-                            {"classes", set.value("classes", nlohmann::json::array())}};
+
+  void add_to_record(nlohmann::json& record) const {
+    if (!a_.model.empty()) record["model"] = a_.model;
+    if (!noise_switch_.is_null()) record["noise_switch"] = noise_switch_;
+    record["device"] = a_.device;
+    if (!set_.is_null()) {
+      record["set"] = {{"name", set_.value("set", "")},
+                       {"role", set_.value("role", "")},
+                       {"classes", set_.value("classes", nlohmann::json::array())}};
+    }
+    if (!a_.choice.empty()) record["choice"] = a_.choice;
+    if (a_.tell_camera_error) record["camera_error_told"] = true;
+    if (network_) record["precision"] = nn::to_string(a_.precision);
   }
-  if (!a.choice.empty()) result.record["choice"] = a.choice;
-  if (a.tell_camera_error) result.record["camera_error_told"] = true;
-  if (recon::needs_network(method)) result.record["precision"] = nn::to_string(a.precision);
-  result.light_field = truths[0].name;
-  if (a.keep_estimate) result.truth = truths[0].views().raw();
-  result.phi = spec.label();
-  return result;
+
+  const EvaluateRequest& a_;
+  const std::string method_;
+  const bool network_;  // the method needs --model
+  MethodContext context_;
+  nlohmann::json set_;  // the light field's set record (docs/protocol.md), or null
+  std::optional<optics::SensorOptions> effects_;
+  optics::CalibrationError camera_error_;
+  std::optional<optics::ColourFilterArray> cfa_;
+  optics::PhiSpec spec_;
+  std::shared_ptr<optics::Phi> phi_;
+  std::optional<nn::PatchShape> network_patch_;  // the patch size of net, ae and cnn
+  nlohmann::json noise_switch_;                  // a noise switch's members, for the record
+  LightFieldSources sources_;
+};
+
+}  // namespace
+
+EvaluateResult evaluate_request(const EvaluateRequest& a) {
+  Evaluation evaluation(a);
+  evaluation.check();
+  return evaluation.run();
 }
 
 }  // namespace lfnet::pipeline
