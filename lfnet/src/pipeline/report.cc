@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <set>
 #include <sstream>
@@ -242,8 +243,8 @@ struct Claim {
   std::string source;
 };
 
-std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
-  auto rows = s.records;
+// Records in table order: by their settings, then by method.
+std::vector<nlohmann::json> table_order(std::vector<nlohmann::json> rows) {
   std::sort(rows.begin(), rows.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
     for (const auto& k : kSettings) {
       if (k == "method") continue;
@@ -255,35 +256,86 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
     }
     return method_rank(a.value("method", "")) < method_rank(b.value("method", ""));
   });
-  // Columns: settings that vary, and always the method and the mode.
-  std::vector<std::string> columns = {"method"};
-  for (const auto& k : kSettings) {
-    std::set<std::string> values;
-    for (const auto& r : rows) values.insert(setting(r, k));
-    if (k != "method" && k != "mode" && values.size() > 1) columns.push_back(k);
+  return rows;
+}
+
+// The table of a section's records: a column for each setting that varies (and always the
+// method and the mode), the scores, then the columns that some record fills.
+class RecordTable {
+ public:
+  RecordTable(const Section& s, std::vector<Claim>& claims)
+      : s_(s), claims_(claims), rows_(table_order(s.records)), settings_{"method"} {
+    for (const auto& k : kSettings) {
+      std::set<std::string> values;
+      for (const auto& r : rows_) values.insert(setting(r, k));
+      if (k != "method" && k != "mode" && values.size() > 1) settings_.push_back(k);
+    }
+    settings_.push_back("mode");
+    add_result_columns();
   }
-  columns.push_back("mode");
-  bool has_paper = false, has_training = false;
-  for (const auto& r : rows) has_paper |= paper_entry(s, r) != nullptr;
-  bool has_estimate = false;  // noise-blind records: the sigma the method was told
-  for (const auto& r : rows) has_training |= r.contains("training_seconds");
-  for (const auto& r : rows) has_estimate |= r.contains("noise_sigma_estimated");
-  bool has_shift = false;  // self-calibrated records: the angular shift they estimated
-  for (const auto& r : rows) has_shift |= r.contains("camera_error_estimated");
-  bool has_luma = false;  // colour records: the luma's PSNR beside the colour one
-  for (const auto& r : rows) has_luma |= r.contains("luma_psnr_db");
-  // Records that decided something (evaluate --choice); one made on the test set is marked.
-  bool has_choice = false;
-  int64_t test_choices = 0;
-  for (const auto& r : rows) {
-    has_choice |= r.contains("choice");
-    test_choices += r.contains("choice") && record_role(r) == "test";
+
+  std::string markdown() const {
+    std::ostringstream md;
+    md << "|";
+    for (const auto& c : settings_) md << " " << setting_header(c) << " |";
+    for (const auto& c : results_) md << " " << c.header << " |";
+    md << "\n|";
+    for (size_t i = 0; i < settings_.size(); ++i) md << "---|";
+    // Numbers right-aligned; text (the choice) left-aligned after them.
+    for (const auto& c : results_) {
+      for (int i = 0; i < c.width; ++i) md << (c.text ? "---|" : "---:|");
+    }
+    md << "\n";
+    int64_t test_choices = 0;
+    for (const auto& r : rows_) {
+      md << "|";
+      for (const auto& c : settings_) {
+        const auto value = setting(r, c);
+        md << " " << (c == "camera_error" && value.empty() ? "none" : value) << " |";
+      }
+      for (const auto& c : results_) md << " " << c.cell(r) << " |";
+      md << "\n";
+      test_choices += r.contains("choice") && record_role(r) == "test";
+      add_claim(r);
+    }
+    if (test_choices > 0) {
+      md << "\n**" << test_choices
+         << " record(s) here decided a choice on a light field of the test set**: choices are "
+            "made on the validation set, and the test set is only reported (docs/protocol.md).\n";
+    }
+    bool baseline = false;
+    for (const auto& r : rows_) baseline |= r.value("method", "") == "no-parallax";
+    if (!baseline) md << "\n*These records have no `no-parallax` baseline.*\n";
+    return md.str();
   }
-  // Records of a camera whose Phi is off: what the error costs against the same record (every
-  // other setting equal) of the nominal camera.
-  const bool has_cost = std::find(columns.begin(), columns.end(), "camera_error") != columns.end();
-  auto nominal_psnr = [&](const nlohmann::json& r) {
-    for (const auto& other : rows) {
+
+ private:
+  struct Column {
+    std::string header;
+    std::function<std::string(const nlohmann::json&)> cell;
+    int width = 1;      // markdown columns it spans (the paper's PSNR and seconds: 2)
+    bool text = false;  // left-aligned
+  };
+
+  static std::string setting_header(const std::string& c) {
+    return c == "n"              ? "N"
+           : c == "light_field"  ? "light field"
+           : c == "camera_error" ? "camera error"
+                                 : c;
+  }
+
+  bool any(const std::string& key) const {
+    return std::any_of(rows_.begin(), rows_.end(),
+                       [&](const nlohmann::json& r) { return r.contains(key); });
+  }
+
+  static double psnr_of(const nlohmann::json& r) { return number(r, "psnr_db", INFINITY); }
+
+  // A record of a camera whose Phi is off: the PSNR of the same record (every other setting
+  // equal) of the nominal camera.
+  double nominal_psnr(const nlohmann::json& r) const {
+    if (setting(r, "camera_error").empty()) return NAN;
+    for (const auto& other : rows_) {
       if (!setting(other, "camera_error").empty()) continue;
       bool same = true;
       for (const auto& k : kSettings) {
@@ -291,109 +343,118 @@ std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
       }
       if (same) return number(other, "psnr_db");
     }
-    return static_cast<double>(NAN);
-  };
-  std::ostringstream md;
-  md << "|";
-  for (const auto& c : columns) {
-    md << " "
-       << (c == "n"              ? "N"
-           : c == "light_field"  ? "light field"
-           : c == "camera_error" ? "camera error"
-                                 : c)
-       << " |";
+    return NAN;
   }
-  md << " PSNR dB | SSIM | seconds |";
-  if (has_luma) md << " luma PSNR dB |";
-  if (has_cost) md << " cost dB |";
-  if (has_estimate) md << " estimated sigma |";
-  if (has_shift) md << " estimated shift |";
-  if (has_training) md << " training s |";
-  if (has_paper) md << " paper PSNR dB | paper seconds |";
-  if (has_choice) md << " choice |";
-  md << "\n|";
-  const size_t n_columns = columns.size() + 3 + (has_luma ? 1 : 0) + (has_cost ? 1 : 0) +
-                           (has_estimate ? 1 : 0) + (has_shift ? 1 : 0) + (has_training ? 1 : 0) +
-                           (has_paper ? 2 : 0);
-  // The choice column is text: left-aligned after the numbers.
-  for (size_t i = 0; i < n_columns; ++i) md << (i >= columns.size() ? "---:|" : "---|");
-  if (has_choice) md << "---|";
-  md << "\n";
-  for (const auto& r : rows) {
-    md << "|";
-    for (const auto& c : columns) {
-      const auto value = setting(r, c);
-      md << " " << (c == "camera_error" && value.empty() ? "none" : value) << " |";
+
+  void add_result_columns() {
+    const auto optional = [](double v, const char* format) {
+      return std::isfinite(v) ? fmt(format, v) : std::string();
+    };
+    results_.push_back({"PSNR dB", [](const nlohmann::json& r) {
+                          const double psnr = psnr_of(r);
+                          return std::isfinite(psnr) ? fmt("%.2f", psnr) : std::string("inf");
+                        }});
+    results_.push_back(
+        {"SSIM", [](const nlohmann::json& r) { return fmt("%.3f", number(r, "ssim")); }});
+    results_.push_back(
+        {"seconds", [](const nlohmann::json& r) { return fmt("%.2f", number(r, "seconds")); }});
+    if (any("luma_psnr_db")) {  // colour records: the luma's PSNR beside the colour one
+      results_.push_back({"luma PSNR dB", [=](const nlohmann::json& r) {
+                            return optional(number(r, "luma_psnr_db", NAN), "%.2f");
+                          }});
     }
-    const double psnr = number(r, "psnr_db", INFINITY), ssim = number(r, "ssim"),
-                 sec = number(r, "seconds");
-    md << " " << (std::isfinite(psnr) ? fmt("%.2f", psnr) : "inf") << " | " << fmt("%.3f", ssim)
-       << " | " << fmt("%.2f", sec) << " |";
-    if (has_luma) {
-      const double luma = number(r, "luma_psnr_db", NAN);
-      md << " " << (std::isfinite(luma) ? fmt("%.2f", luma) : "") << " |";
+    // What the camera's error costs against the nominal camera.
+    if (std::find(settings_.begin(), settings_.end(), "camera_error") != settings_.end()) {
+      results_.push_back({"cost dB", [this](const nlohmann::json& r) {
+                            const double nominal = nominal_psnr(r);
+                            return std::isfinite(nominal) ? fmt("%.2f", nominal - psnr_of(r))
+                                                          : std::string();
+                          }});
     }
-    if (has_cost) {
-      const double nominal = setting(r, "camera_error").empty() ? NAN : nominal_psnr(r);
-      md << " " << (std::isfinite(nominal) ? fmt("%.2f", nominal - psnr) : "") << " |";
+    if (any("noise_sigma_estimated")) {  // noise-blind records: the sigma they estimated
+      results_.push_back({"estimated sigma", [=](const nlohmann::json& r) {
+                            return r.contains("noise_sigma_estimated")
+                                       ? fmt("%.4f", number(r, "noise_sigma_estimated"))
+                                       : std::string();
+                          }});
     }
-    if (has_estimate) {
-      md << " "
-         << (r.contains("noise_sigma_estimated") ? fmt("%.4f", number(r, "noise_sigma_estimated"))
-                                                 : "")
-         << " |";
+    if (any("camera_error_estimated")) {  // self-calibrated records: the shift they estimated
+      results_.push_back({"estimated shift", [](const nlohmann::json& r) { return shift(r); }});
     }
-    if (has_shift) {
-      // The views along U (and along V when that was found too).
-      std::string shift;
-      if (r.contains("camera_error_estimated")) {
-        const auto& e = r["camera_error_estimated"];
-        shift = fmt("U %.3f", e.value("angular_shift_u", 0.0));
-        const double v = e.value("angular_shift_v", 0.0);
-        if (v != 0) shift += fmt(", V %.3f", v);
-      }
-      md << " " << shift << " |";
+    if (any("training_seconds")) {
+      results_.push_back({"training s", [](const nlohmann::json& r) {
+                            return r.contains("training_seconds")
+                                       ? fmt("%.0f", number(r, "training_seconds"))
+                                       : std::string();
+                          }});
     }
-    if (has_training)
-      md << " "
-         << (r.contains("training_seconds") ? fmt("%.0f", number(r, "training_seconds")) : "")
-         << " |";
-    if (has_paper) {
-      const auto* p = paper_entry(s, r);
-      if (p) {
-        const double pp = p->contains("psnr_db") ? (*p)["psnr_db"].get<double>() : NAN;
-        const double ps = p->contains("seconds") ? (*p)["seconds"].get<double>() : NAN;
-        md << " " << (std::isnan(pp) ? "" : fmt("%.2f", pp)) << " | "
-           << (std::isnan(ps) ? "" : fmt("%g", ps)) << " |";
-        std::string what;
-        for (const auto& c : columns) {
-          if (c != "light_field") what += (what.empty() ? "" : ", ") + c + " " + setting(r, c);
-        }
-        claims.push_back({s.meta.value("title", s.name), scene_label(r.value("light_field", "")),
-                          what, pp, psnr, ps, sec, p->value("source", "")});
-      } else {
-        md << " | |";
-      }
+    add_paper_column();
+    if (any("choice")) {  // records that decided something; one made on the test set is marked
+      results_.push_back({"choice",
+                          [](const nlohmann::json& r) {
+                            const std::string choice = r.value("choice", "");
+                            return choice.empty() ? std::string()
+                                   : record_role(r) == "test"
+                                       ? "**made on the test set:** " + choice
+                                       : choice;
+                          },
+                          1, true});
     }
-    if (has_choice) {
-      const std::string choice = r.value("choice", "");
-      md << " "
-         << (choice.empty()             ? ""
-             : record_role(r) == "test" ? "**made on the test set:** " + choice
-                                        : choice)
-         << " |";
-    }
-    md << "\n";
   }
-  if (test_choices > 0) {
-    md << "\n**" << test_choices
-       << " record(s) here decided a choice on a light field of the test set**: choices are made "
-          "on the validation set, and the test set is only reported (docs/protocol.md).\n";
+
+  // The views along U (and along V when that was found too).
+  static std::string shift(const nlohmann::json& r) {
+    if (!r.contains("camera_error_estimated")) return "";
+    const auto& e = r["camera_error_estimated"];
+    std::string out = fmt("U %.3f", e.value("angular_shift_u", 0.0));
+    const double v = e.value("angular_shift_v", 0.0);
+    if (v != 0) out += fmt(", V %.3f", v);
+    return out;
   }
-  bool baseline = false;
-  for (const auto& r : rows) baseline |= r.value("method", "") == "no-parallax";
-  if (!baseline) md << "\n*These records have no `no-parallax` baseline.*\n";
-  return md.str();
+
+  static std::pair<double, double> paper_figures(const nlohmann::json& p) {
+    return {p.contains("psnr_db") ? p["psnr_db"].get<double>() : NAN,
+            p.contains("seconds") ? p["seconds"].get<double>() : NAN};
+  }
+
+  void add_paper_column() {
+    const bool has_paper = std::any_of(rows_.begin(), rows_.end(), [&](const nlohmann::json& r) {
+      return paper_entry(s_, r) != nullptr;
+    });
+    if (!has_paper) return;
+    results_.push_back({"paper PSNR dB | paper seconds",
+                        [this](const nlohmann::json& r) {
+                          const auto* p = paper_entry(s_, r);
+                          if (!p) return std::string("|");
+                          const auto [pp, ps] = paper_figures(*p);
+                          return (std::isnan(pp) ? "" : fmt("%.2f", pp)) + " | " +
+                                 (std::isnan(ps) ? "" : fmt("%g", ps));
+                        },
+                        2});
+  }
+
+  // A record that the paper has a figure for is a claim of the summary at the end.
+  void add_claim(const nlohmann::json& r) const {
+    const auto* p = paper_entry(s_, r);
+    if (!p) return;
+    const auto [pp, ps] = paper_figures(*p);
+    std::string what;
+    for (const auto& c : settings_) {
+      if (c != "light_field") what += (what.empty() ? "" : ", ") + c + " " + setting(r, c);
+    }
+    claims_.push_back({s_.meta.value("title", s_.name), scene_label(r.value("light_field", "")),
+                       what, pp, psnr_of(r), ps, number(r, "seconds"), p->value("source", "")});
+  }
+
+  const Section& s_;
+  std::vector<Claim>& claims_;
+  std::vector<nlohmann::json> rows_;
+  std::vector<std::string> settings_;  // the setting columns
+  std::vector<Column> results_;        // the columns after them
+};
+
+std::string markdown_table(const Section& s, std::vector<Claim>& claims) {
+  return RecordTable(s, claims).markdown();
 }
 
 // net minus no-parallax, dict and pinv for every group of records that differ only in method.
@@ -642,6 +703,264 @@ bool is_run_folder(const std::string& dir) {
   return fs::is_regular_file(fs::path(dir) / "config.json");
 }
 
+namespace {
+
+std::string margin_charts(const Section& s, FigureSet& figure_set,
+                          const std::string& figures_link) {
+  std::ostringstream md;
+  // A bar chart of each model's margin over a baseline per light field ("margins":
+  // {"over": "pinv", "target": 1.5, "stem": ...}, or an array of such charts): the
+  // cross-scene benchmark. It draws the records at the chart's noise sigma ("noise", 0 by
+  // default), and of each only what the chart reads (a record can hold a whole calibrated
+  // Phi).
+  if (s.meta.contains("margins")) {
+    const auto& all = s.meta["margins"];
+    const auto charts = all.is_array() ? all : nlohmann::json::array({all});
+    for (std::size_t k = 0; k < charts.size(); ++k) {
+      const auto& m = charts[k];
+      const double sigma = m.value("noise", 0.0);
+      nlohmann::json drawn = nlohmann::json::array();
+      for (const auto& r : s.records) {
+        if (std::abs(noise_level(r) - sigma) > 1e-9) continue;
+        nlohmann::json slim;
+        for (const char* key : {"light_field", "method", "variant", "psnr_db"})
+          if (r.contains(key)) slim[key] = r[key];
+        drawn.push_back(slim);
+      }
+      const std::string stem =
+          m.value("stem", s.name + "_margins" + (k == 0 ? "" : "_" + std::to_string(k)));
+      figure_set.add({{"kind", "margins"},
+                      {"stem", stem},
+                      {"title", m.value("title", s.meta.value("title", s.name))},
+                      {"over", m.value("over", "pinv")},
+                      {"over_variant", m.value("over_variant", "")},
+                      {"series", m.value("series", nlohmann::json::array())},
+                      {"target", m.contains("target") ? m["target"] : nlohmann::json()},
+                      {"records", drawn}});
+      const std::string over_variant = m.value("over_variant", "");
+      md << figure_markdown("margins over " + m.value("over", "pinv") +
+                                (over_variant.empty() ? "" : " (" + over_variant + ")") +
+                                (sigma == 0 ? "" : fmt(" at noise sigma %g", sigma)),
+                            figures_link, stem)
+         << "\n\n";
+    }
+  }
+  return md.str();
+}
+
+std::string training_curves(const Section& s, FigureSet& figure_set,
+                            const std::string& figures_link) {
+  std::ostringstream md;
+  // Training curves of the models a section names ("training": [{"log": ..., "label": ...}]).
+  if (s.meta.contains("training")) {
+    std::string row;
+    int k = 0;
+    for (const auto& t : s.meta["training"]) {
+      const std::string stem = s.name + "_training_" + std::to_string(k++);
+      const std::string note = figure_set.training(t.at("log").get<std::string>(), stem);
+      if (!note.empty()) {
+        spdlog::warn("no training curves for {}: {}", t.at("log").get<std::string>(), note);
+        continue;
+      }
+      row += "\n\n" + t.value("label", t.at("log").get<std::string>()) + ":\n\n" +
+             figure_markdown("training curves", figures_link, stem);
+    }
+    if (!row.empty())
+      md << "Training curves (loss and validation PSNR per epoch):" << row << "\n\n";
+  }
+  return md.str();
+}
+
+std::string sweep_figure(const Section& s, FigureSet& figure_set, const std::string& figures_link) {
+  std::ostringstream md;
+  if (s.meta.contains("sweep")) {
+    auto spec = sweep_spec(s, s.meta["sweep"]);
+    if (!spec["series"].empty()) {
+      const std::string stem = spec["stem"];
+      figure_set.add(std::move(spec));
+      md << figure_markdown("PSNR sweep", figures_link, stem) << "\n\n";
+    }
+  }
+  return md.str();
+}
+
+std::string view_heatmaps(const Section& s, FigureSet& figure_set,
+                          const std::string& figures_link) {
+  std::ostringstream md;
+  // Per-view PSNR of the records named in "heatmaps" (first sensor-mode record of each): a
+  // method name, or a selector of settings with an optional "label".
+  if (s.meta.contains("heatmaps")) {
+    auto panels = nlohmann::json::array();
+    for (const auto& entry : s.meta["heatmaps"]) {
+      const nlohmann::json selector = entry.is_string() ? nlohmann::json{{"method", entry}} : entry;
+      std::string label = selector.value("label", selector.value("method", "?"));
+      if (!selector.contains("label") && selector.contains("variant"))
+        label += " (" + selector["variant"].get<std::string>() + ")";
+      for (const auto& r : s.records) {
+        if (!matches(r, selector) || r.value("mode", "") != "sensor" ||
+            !r.contains("per_view_psnr_db"))
+          continue;
+        panels.push_back({{"label", label}, {"psnr", r["per_view_psnr_db"]}});
+        break;
+      }
+    }
+    if (!panels.empty()) {
+      const std::string stem = s.name + "_views";
+      figure_set.add({{"kind", "heatmaps"},
+                      {"stem", stem},
+                      {"title", s.meta.value("title", s.name) +
+                                    ": PSNR per view (sensor mode; one colour range)"},
+                      {"panels", panels}});
+      md << "Per-view PSNR (the paper's angular-error figure):\n\n"
+         << figure_markdown("per-view PSNR", figures_link, stem) << "\n\n";
+    }
+  }
+  return md.str();
+}
+
+std::string reconstruction_pictures(const Section& s, FigureSet& figure_set,
+                                    const std::string& figures_link, const std::string& drawing) {
+  std::ostringstream md;
+  // Pictures of reconstructions when the section names a folder that holds them.
+  if (s.meta.contains("pictures")) {
+    const auto& p = s.meta["pictures"];
+    const fs::path dir = p.value("reconstructions", "");
+    const std::string truth_dir = p.value("truth", "");
+    if (fs::is_directory(dir) && fs::is_directory(truth_dir)) {
+      std::vector<LightField> lfs = {io::read_light_field(truth_dir).central(5).grey()};
+      std::vector<std::string> titles = {"truth"};
+      for (const auto& method : p["methods"]) {
+        const fs::path m = dir / method.get<std::string>();
+        if (!fs::is_directory(m)) continue;
+        lfs.push_back(io::read_light_field(m.string()).grey());
+        titles.push_back(method.get<std::string>());
+      }
+      const std::string stem = s.name + "_pictures", gif = s.name + "_parallax.gif";
+      figure_set.add(pictures_spec(lfs, titles, stem, figure_set));
+      io::write_parallax_gif(lfs.size() > 1 ? lfs[1] : lfs[0], (fs::path(drawing) / gif).string());
+      const std::string viewer = s.name + "_viewer.html";
+      write_section_viewer(lfs, titles, (fs::path(drawing) / viewer).string());
+      md << "Centre views, EPIs and error maps (crops):\n\n"
+         << figure_markdown("reconstructions", figures_link, stem) << "\n\nParallax of the `"
+         << titles[lfs.size() > 1 ? 1 : 0]
+         << "` reconstruction, walking the border views: ![parallax](" << figures_link << "/" << gif
+         << ")\n\n[Open it in the light-field viewer](" << figures_link << "/" << viewer
+         << ") (parallax, refocus, EPIs, error map and per-view PSNR against the truth, on the "
+            "central 256 x 256 pixels; docs/viewer.md). The whole light field: `"
+         << (dir / titles[lfs.size() > 1 ? 1 : 0] / "index.html").generic_string() << "`.\n\n";
+    } else {
+      md << "*(pictures: run the section's command to make " << dir.string() << ")*\n\n";
+    }
+  }
+  return md.str();
+}
+
+// The paper's figures beside ours, per aperture of its scene.
+std::string paper_numbers(const std::vector<Claim>& claims) {
+  std::ostringstream md;
+  if (!claims.empty()) {
+    md << "## The paper's numbers beside ours\n\n"
+       << "The paper's figures against ours on its own scene, Dragons and Bunnies; the paper "
+          "does not say which of the four apertures it used, so each is compared at all four. "
+          "A PSNR figure counts as reproduced when ours is at most "
+       << fmt("%.1f", kPsnrTolerance)
+       << " dB below the paper's; a time when ours is no slower. Other scenes are compared "
+          "by their margins over a baseline on the same scene, in their sections.\n\n"
+       << "| section | aperture | setting | paper PSNR dB | ours | paper s | ours s | reproduced "
+          "| source |\n"
+       << "|---|---|---|---:|---:|---:|---:|---|---|\n";
+    std::map<std::string, std::array<int, 4>> tally;  // PSNR claims, yes, time claims, yes
+    for (const auto& c : claims) {
+      auto& t = tally[c.scene];
+      std::string verdict;
+      if (!std::isnan(c.paper_psnr)) {
+        const bool yes = c.ours_psnr >= c.paper_psnr - kPsnrTolerance;
+        ++t[0], t[1] += yes;
+        verdict +=
+            yes ? "PSNR yes" : "PSNR no (" + fmt("%+.2f dB", c.ours_psnr - c.paper_psnr) + ")";
+      }
+      if (!std::isnan(c.paper_s)) {
+        const bool yes = c.ours_s <= c.paper_s;
+        ++t[2], t[3] += yes;
+        verdict +=
+            std::string(verdict.empty() ? "" : "; ") +
+            (yes ? "time yes (" + fmt("%.0fx faster", c.paper_s / c.ours_s) + ")" : "time no");
+      }
+      md << "| " << c.section << " | " << c.scene << " | " << c.setting << " | "
+         << (std::isnan(c.paper_psnr) ? "" : fmt("%.2f", c.paper_psnr)) << " | "
+         << fmt("%.2f", c.ours_psnr) << " | " << (std::isnan(c.paper_s) ? "" : fmt("%g", c.paper_s))
+         << " | " << fmt("%.2f", c.ours_s) << " | " << verdict << " | " << c.source << " |\n";
+    }
+    md << "\nReproduced, per aperture:\n\n";
+    for (const auto& [scene, t] : tally) {
+      md << "- " << scene << ": " << t[1] << " of " << t[0] << " PSNR figures, " << t[3] << " of "
+         << t[2] << " times\n";
+    }
+    md << "\n";
+  }
+  return md.str();
+}
+
+// The paper's claims about differences, judged on every scene measured.
+std::string paper_differences(const std::vector<GapClaim>& gaps) {
+  std::ostringstream md;
+  if (!gaps.empty()) {
+    md << "## The paper's claims about differences\n\n"
+       << "Each claim compares two of our records of the same section on the same scene (ours "
+       << "= the first minus the second), so it is judged on every scene measured. Reproduced "
+       << "when our difference is at least the paper's (lower) figure, less "
+       << fmt("%.1f", kGapTolerance) << " dB; \"direction only\" when the paper claims "
+       << "a gain and ours is a smaller gain; \"no\" otherwise (a loss, or a larger drop than "
+       << "the paper's).\n\n"
+       << "| section | scene | claim | paper dB | ours dB | reproduced | source "
+          "|\n|---|---|---|---:|---:|---|---|\n";
+    std::map<std::string, std::array<int, 3>> tally;  // claims, yes, direction only
+    for (const auto& g : gaps) {
+      const std::string verdict = gap_verdict(g);
+      auto& t = tally[g.scene];
+      ++t[0];
+      t[1] += verdict == "yes";
+      t[2] += verdict.rfind("direction only", 0) == 0;
+      const std::string paper = g.low == g.high
+                                    ? fmt("%+.1f", g.low)
+                                    : fmt("%+.1f", g.low) + " to " + fmt("%+.1f", g.high);
+      md << "| " << g.section << " | " << g.scene << " | " << g.claim << " | " << paper << " | "
+         << (std::isnan(g.ours) ? "" : fmt("%+.2f", g.ours)) << " | " << verdict << " | "
+         << g.source << " |\n";
+    }
+    md << "\nReproduced, per scene:\n\n";
+    for (const auto& [scene, t] : tally) {
+      md << "- " << scene << ": " << t[1] << " of " << t[0] << " claims; " << t[2]
+         << " more in direction only\n";
+    }
+    md << "\n";
+  }
+  return md.str();
+}
+
+// A section: its text, the command that made its records, its table, margins and figures.
+std::string section_markdown(const Section& s, std::vector<Claim>& claims, FigureSet& figure_set,
+                             const std::string& figures_link, const std::string& drawing) {
+  std::ostringstream md;
+  md << "## " << s.meta.value("title", s.name) << "\n\n";
+  if (s.meta.contains("text")) md << s.meta["text"].get<std::string>() << "\n\n";
+  if (s.meta.contains("command"))
+    md << "Records made by:\n\n    " << s.meta["command"].get<std::string>() << "\n\n";
+  if (s.records.empty()) {
+    md << "*No records yet.*\n\n";
+    return md.str();
+  }
+  md << markdown_table(s, claims) << "\n";
+  const auto m = margins(s);
+  if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
+  md << margin_charts(s, figure_set, figures_link) << training_curves(s, figure_set, figures_link)
+     << sweep_figure(s, figure_set, figures_link) << view_heatmaps(s, figure_set, figures_link)
+     << reconstruction_pictures(s, figure_set, figures_link, drawing);
+  return md.str();
+}
+
+}  // namespace
+
 void write_results_report(const std::string& results_dir, const std::string& out,
                           const std::string& figures_dir, ParetoTime time) {
   const auto sections = read_sections(results_dir);
@@ -675,213 +994,10 @@ void write_results_report(const std::string& results_dir, const std::string& out
     std::vector<GapClaim> gaps;
     for (const auto& s : sections) {
       for (auto& g : gap_claims(s)) gaps.push_back(std::move(g));
-      md << "## " << s.meta.value("title", s.name) << "\n\n";
-      if (s.meta.contains("text")) md << s.meta["text"].get<std::string>() << "\n\n";
-      if (s.meta.contains("command"))
-        md << "Records made by:\n\n    " << s.meta["command"].get<std::string>() << "\n\n";
-      if (s.records.empty()) {
-        md << "*No records yet.*\n\n";
-        continue;
-      }
-      md << markdown_table(s, claims) << "\n";
-      const auto m = margins(s);
-      if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
-      // A bar chart of each model's margin over a baseline per light field ("margins":
-      // {"over": "pinv", "target": 1.5, "stem": ...}, or an array of such charts): the
-      // cross-scene benchmark. It draws the records at the chart's noise sigma ("noise", 0 by
-      // default), and of each only what the chart reads (a record can hold a whole calibrated
-      // Phi).
-      if (s.meta.contains("margins")) {
-        const auto& all = s.meta["margins"];
-        const auto charts = all.is_array() ? all : nlohmann::json::array({all});
-        for (std::size_t k = 0; k < charts.size(); ++k) {
-          const auto& m = charts[k];
-          const double sigma = m.value("noise", 0.0);
-          nlohmann::json drawn = nlohmann::json::array();
-          for (const auto& r : s.records) {
-            if (std::abs(noise_level(r) - sigma) > 1e-9) continue;
-            nlohmann::json slim;
-            for (const char* key : {"light_field", "method", "variant", "psnr_db"})
-              if (r.contains(key)) slim[key] = r[key];
-            drawn.push_back(slim);
-          }
-          const std::string stem =
-              m.value("stem", s.name + "_margins" + (k == 0 ? "" : "_" + std::to_string(k)));
-          figure_set.add({{"kind", "margins"},
-                          {"stem", stem},
-                          {"title", m.value("title", s.meta.value("title", s.name))},
-                          {"over", m.value("over", "pinv")},
-                          {"over_variant", m.value("over_variant", "")},
-                          {"series", m.value("series", nlohmann::json::array())},
-                          {"target", m.contains("target") ? m["target"] : nlohmann::json()},
-                          {"records", drawn}});
-          const std::string over_variant = m.value("over_variant", "");
-          md << figure_markdown("margins over " + m.value("over", "pinv") +
-                                    (over_variant.empty() ? "" : " (" + over_variant + ")") +
-                                    (sigma == 0 ? "" : fmt(" at noise sigma %g", sigma)),
-                                figures_link, stem)
-             << "\n\n";
-        }
-      }
-      // Training curves of the models a section names ("training": [{"log": ..., "label": ...}]).
-      if (s.meta.contains("training")) {
-        std::string row;
-        int k = 0;
-        for (const auto& t : s.meta["training"]) {
-          const std::string stem = s.name + "_training_" + std::to_string(k++);
-          const std::string note = figure_set.training(t.at("log").get<std::string>(), stem);
-          if (!note.empty()) {
-            spdlog::warn("no training curves for {}: {}", t.at("log").get<std::string>(), note);
-            continue;
-          }
-          row += "\n\n" + t.value("label", t.at("log").get<std::string>()) + ":\n\n" +
-                 figure_markdown("training curves", figures_link, stem);
-        }
-        if (!row.empty())
-          md << "Training curves (loss and validation PSNR per epoch):" << row << "\n\n";
-      }
-      if (s.meta.contains("sweep")) {
-        auto spec = sweep_spec(s, s.meta["sweep"]);
-        if (!spec["series"].empty()) {
-          const std::string stem = spec["stem"];
-          figure_set.add(std::move(spec));
-          md << figure_markdown("PSNR sweep", figures_link, stem) << "\n\n";
-        }
-      }
-      // Per-view PSNR of the records named in "heatmaps" (first sensor-mode record of each): a
-      // method name, or a selector of settings with an optional "label".
-      if (s.meta.contains("heatmaps")) {
-        auto panels = nlohmann::json::array();
-        for (const auto& entry : s.meta["heatmaps"]) {
-          const nlohmann::json selector =
-              entry.is_string() ? nlohmann::json{{"method", entry}} : entry;
-          std::string label = selector.value("label", selector.value("method", "?"));
-          if (!selector.contains("label") && selector.contains("variant"))
-            label += " (" + selector["variant"].get<std::string>() + ")";
-          for (const auto& r : s.records) {
-            if (!matches(r, selector) || r.value("mode", "") != "sensor" ||
-                !r.contains("per_view_psnr_db"))
-              continue;
-            panels.push_back({{"label", label}, {"psnr", r["per_view_psnr_db"]}});
-            break;
-          }
-        }
-        if (!panels.empty()) {
-          const std::string stem = s.name + "_views";
-          figure_set.add({{"kind", "heatmaps"},
-                          {"stem", stem},
-                          {"title", s.meta.value("title", s.name) +
-                                        ": PSNR per view (sensor mode; one colour range)"},
-                          {"panels", panels}});
-          md << "Per-view PSNR (the paper's angular-error figure):\n\n"
-             << figure_markdown("per-view PSNR", figures_link, stem) << "\n\n";
-        }
-      }
-      // Pictures of reconstructions when the section names a folder that holds them.
-      if (s.meta.contains("pictures")) {
-        const auto& p = s.meta["pictures"];
-        const fs::path dir = p.value("reconstructions", "");
-        const std::string truth_dir = p.value("truth", "");
-        if (fs::is_directory(dir) && fs::is_directory(truth_dir)) {
-          std::vector<LightField> lfs = {io::read_light_field(truth_dir).central(5).grey()};
-          std::vector<std::string> titles = {"truth"};
-          for (const auto& method : p["methods"]) {
-            const fs::path m = dir / method.get<std::string>();
-            if (!fs::is_directory(m)) continue;
-            lfs.push_back(io::read_light_field(m.string()).grey());
-            titles.push_back(method.get<std::string>());
-          }
-          const std::string stem = s.name + "_pictures", gif = s.name + "_parallax.gif";
-          figure_set.add(pictures_spec(lfs, titles, stem, figure_set));
-          io::write_parallax_gif(lfs.size() > 1 ? lfs[1] : lfs[0],
-                                 (fs::path(drawing) / gif).string());
-          const std::string viewer = s.name + "_viewer.html";
-          write_section_viewer(lfs, titles, (fs::path(drawing) / viewer).string());
-          md << "Centre views, EPIs and error maps (crops):\n\n"
-             << figure_markdown("reconstructions", figures_link, stem) << "\n\nParallax of the `"
-             << titles[lfs.size() > 1 ? 1 : 0]
-             << "` reconstruction, walking the border views: ![parallax](" << figures_link << "/"
-             << gif << ")\n\n[Open it in the light-field viewer](" << figures_link << "/" << viewer
-             << ") (parallax, refocus, EPIs, error map and per-view PSNR against the truth, on the "
-                "central 256 x 256 pixels; docs/viewer.md). The whole light field: `"
-             << (dir / titles[lfs.size() > 1 ? 1 : 0] / "index.html").generic_string() << "`.\n\n";
-        } else {
-          md << "*(pictures: run the section's command to make " << dir.string() << ")*\n\n";
-        }
-      }
+      md << section_markdown(s, claims, figure_set, figures_link, drawing);
     }
-    if (!claims.empty()) {
-      md << "## The paper's numbers beside ours\n\n"
-         << "The paper's figures against ours on its own scene, Dragons and Bunnies; the paper "
-            "does not say which of the four apertures it used, so each is compared at all four. "
-            "A PSNR figure counts as reproduced when ours is at most "
-         << fmt("%.1f", kPsnrTolerance)
-         << " dB below the paper's; a time when ours is no slower. Other scenes are compared "
-            "by their margins over a baseline on the same scene, in their sections.\n\n"
-         << "| section | aperture | setting | paper PSNR dB | ours | paper s | ours s | reproduced "
-            "| source |\n"
-         << "|---|---|---|---:|---:|---:|---:|---|---|\n";
-      std::map<std::string, std::array<int, 4>> tally;  // PSNR claims, yes, time claims, yes
-      for (const auto& c : claims) {
-        auto& t = tally[c.scene];
-        std::string verdict;
-        if (!std::isnan(c.paper_psnr)) {
-          const bool yes = c.ours_psnr >= c.paper_psnr - kPsnrTolerance;
-          ++t[0], t[1] += yes;
-          verdict +=
-              yes ? "PSNR yes" : "PSNR no (" + fmt("%+.2f dB", c.ours_psnr - c.paper_psnr) + ")";
-        }
-        if (!std::isnan(c.paper_s)) {
-          const bool yes = c.ours_s <= c.paper_s;
-          ++t[2], t[3] += yes;
-          verdict +=
-              std::string(verdict.empty() ? "" : "; ") +
-              (yes ? "time yes (" + fmt("%.0fx faster", c.paper_s / c.ours_s) + ")" : "time no");
-        }
-        md << "| " << c.section << " | " << c.scene << " | " << c.setting << " | "
-           << (std::isnan(c.paper_psnr) ? "" : fmt("%.2f", c.paper_psnr)) << " | "
-           << fmt("%.2f", c.ours_psnr) << " | "
-           << (std::isnan(c.paper_s) ? "" : fmt("%g", c.paper_s)) << " | " << fmt("%.2f", c.ours_s)
-           << " | " << verdict << " | " << c.source << " |\n";
-      }
-      md << "\nReproduced, per aperture:\n\n";
-      for (const auto& [scene, t] : tally) {
-        md << "- " << scene << ": " << t[1] << " of " << t[0] << " PSNR figures, " << t[3] << " of "
-           << t[2] << " times\n";
-      }
-      md << "\n";
-    }
-    if (!gaps.empty()) {
-      md << "## The paper's claims about differences\n\n"
-         << "Each claim compares two of our records of the same section on the same scene (ours "
-         << "= the first minus the second), so it is judged on every scene measured. Reproduced "
-         << "when our difference is at least the paper's (lower) figure, less "
-         << fmt("%.1f", kGapTolerance) << " dB; \"direction only\" when the paper claims "
-         << "a gain and ours is a smaller gain; \"no\" otherwise (a loss, or a larger drop than "
-         << "the paper's).\n\n"
-         << "| section | scene | claim | paper dB | ours dB | reproduced | source "
-            "|\n|---|---|---|---:|---:|---|---|\n";
-      std::map<std::string, std::array<int, 3>> tally;  // claims, yes, direction only
-      for (const auto& g : gaps) {
-        const std::string verdict = gap_verdict(g);
-        auto& t = tally[g.scene];
-        ++t[0];
-        t[1] += verdict == "yes";
-        t[2] += verdict.rfind("direction only", 0) == 0;
-        const std::string paper = g.low == g.high
-                                      ? fmt("%+.1f", g.low)
-                                      : fmt("%+.1f", g.low) + " to " + fmt("%+.1f", g.high);
-        md << "| " << g.section << " | " << g.scene << " | " << g.claim << " | " << paper << " | "
-           << (std::isnan(g.ours) ? "" : fmt("%+.2f", g.ours)) << " | " << verdict << " | "
-           << g.source << " |\n";
-      }
-      md << "\nReproduced, per scene:\n\n";
-      for (const auto& [scene, t] : tally) {
-        md << "- " << scene << ": " << t[1] << " of " << t[0] << " claims; " << t[2]
-           << " more in direction only\n";
-      }
-      md << "\n";
-    }
+    if (!claims.empty()) md << paper_numbers(claims);
+    if (!gaps.empty()) md << paper_differences(gaps);
     const std::string note = figure_set.draw();
     if (!note.empty()) {
       md << "*(Figures not drawn: " << note << ")*\n";
