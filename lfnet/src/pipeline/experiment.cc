@@ -235,6 +235,95 @@ nlohmann::json CodeConfig::to_json() const {
   return out;
 }
 
+namespace {
+
+// $.stages: names, or objects with a name and training options, each checked before any work.
+void read_stages(JsonReader& r, ExperimentConfig& c) {
+  nlohmann::json stages = nlohmann::json::array({"joint"});
+  r.get("stages", stages);
+  LFNET_CHECK_AS(ConfigError, stages.is_array() && !stages.empty(),
+                 "$.stages: a non-empty list of stages (ae, cnn, joint, joint_scratch)");
+  for (size_t i = 0; i < stages.size(); ++i) {
+    const std::string path = "$.stages[" + std::to_string(i) + "]";
+    StageConfig s;
+    if (stages[i].is_string()) {
+      s.name = stages[i].get<std::string>();
+    } else {
+      JsonReader sr(stages[i], path);
+      sr.require("name", s.name);
+      sr.get("training", s.training);
+      sr.finish();
+      LFNET_CHECK_AS(ConfigError, s.training.is_object(), path,
+                     ".training: expected an object of training options");
+    }
+    LFNET_CHECK_AS(ConfigError,
+                   s.name == "ae" || s.name == "cnn" || s.name == "joint" ||
+                       s.name == "joint_scratch" || s.name == "dict",
+                   path, ": unknown stage '", s.name,
+                   "' (known: ae, cnn, joint, joint_scratch, dict)");
+    LFNET_CHECK_AS(ConfigError, s.name != "dict" || s.training.empty(), path,
+                   ": the dict stage takes its options from $.dictionary, not 'training'");
+    c.stages.push_back(s);
+    // Values (not only keys and types) are checked before any work starts.
+    try {
+      if (is_network_stage(s.name)) c.stage_options(s).validate();
+    } catch (const ConfigError& e) {
+      throw ConfigError("$.training (stage " + s.name + "): " + e.what());
+    }
+  }
+}
+
+// $.dictionary: the sampling, K-SVD and sparse-coding options of the dict stage.
+void read_dictionary(JsonReader& r, ExperimentConfig& c) {
+  if (r.has("dictionary")) {
+    auto d = r.child("dictionary");
+    nlohmann::json sampling = nlohmann::json::object(), ksvd = nlohmann::json::object(),
+                   coding = nlohmann::json::object();
+    d.get("sampling", sampling);
+    d.get("ksvd", ksvd);
+    d.get("coding", coding);
+    d.finish();
+    c.dictionary_coding = dict::SparseCodingOptions::from_json(coding, "$.dictionary.coding");
+    c.dictionary_sampling =
+        dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
+    c.dictionary_ksvd = dict::KsvdOptions::from_json(ksvd, "$.dictionary.ksvd");
+  }
+}
+
+// The net's measurements and patch follow from the Phi and the dataset's patches: a value given
+// in $.network is honoured when it agrees, and refused when it does not.
+void derive_network_shape(ExperimentConfig& c, const nlohmann::json& j, const std::string& source) {
+  const auto given = c.network;
+  c.network.measurements = c.phi.n;
+  c.network.patch.rows = c.phi.rows;
+  c.network.patch.cols = c.phi.cols;
+  c.network.patch.height = c.dataset.patch_h;
+  c.network.patch.width = c.dataset.patch_w;
+  const nlohmann::json network_json = j.contains("network") ? j["network"] : nlohmann::json();
+  auto refuse_if_differs = [&](const std::string& key, int64_t given_value, int64_t value,
+                               const std::string& from) {
+    const bool set = key.rfind("patch.", 0) == 0 ? network_json.contains("patch") &&
+                                                       network_json["patch"].contains(key.substr(6))
+                                                 : network_json.contains(key);
+    if (set && given_value != value) {
+      throw ConfigError(source + ": $.network." + key + " is " + std::to_string(given_value) +
+                        " but " + from + " makes it " + std::to_string(value) + ": set " + from +
+                        " instead, or leave $.network." + key + " out");
+    }
+  };
+  refuse_if_differs("measurements", given.measurements, c.network.measurements,
+                    "the Phi's N ($.phi)");
+  refuse_if_differs("patch.rows", given.patch.rows, c.network.patch.rows,
+                    "the Phi's views ($.phi)");
+  refuse_if_differs("patch.cols", given.patch.cols, c.network.patch.cols,
+                    "the Phi's views ($.phi)");
+  refuse_if_differs("patch.height", given.patch.height, c.network.patch.height,
+                    "$.dataset.patch_h");
+  refuse_if_differs("patch.width", given.patch.width, c.network.patch.width, "$.dataset.patch_w");
+}
+
+}  // namespace
+
 ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std::string& source) {
   ExperimentConfig c;
   c.raw = j;
@@ -277,51 +366,8 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
     }
     // Parse once so errors in the common options surface before any work.
     (void)train::TrainerOptions::from_json(c.training, "$.training");
-    nlohmann::json stages = nlohmann::json::array({"joint"});
-    r.get("stages", stages);
-    LFNET_CHECK_AS(ConfigError, stages.is_array() && !stages.empty(),
-                   "$.stages: a non-empty list of stages (ae, cnn, joint, joint_scratch)");
-    for (size_t i = 0; i < stages.size(); ++i) {
-      const std::string path = "$.stages[" + std::to_string(i) + "]";
-      StageConfig s;
-      if (stages[i].is_string()) {
-        s.name = stages[i].get<std::string>();
-      } else {
-        JsonReader sr(stages[i], path);
-        sr.require("name", s.name);
-        sr.get("training", s.training);
-        sr.finish();
-        LFNET_CHECK_AS(ConfigError, s.training.is_object(), path,
-                       ".training: expected an object of training options");
-      }
-      LFNET_CHECK_AS(ConfigError,
-                     s.name == "ae" || s.name == "cnn" || s.name == "joint" ||
-                         s.name == "joint_scratch" || s.name == "dict",
-                     path, ": unknown stage '", s.name,
-                     "' (known: ae, cnn, joint, joint_scratch, dict)");
-      LFNET_CHECK_AS(ConfigError, s.name != "dict" || s.training.empty(), path,
-                     ": the dict stage takes its options from $.dictionary, not 'training'");
-      c.stages.push_back(s);
-      // Values (not only keys and types) are checked before any work starts.
-      try {
-        if (is_network_stage(s.name)) c.stage_options(s).validate();
-      } catch (const ConfigError& e) {
-        throw ConfigError("$.training (stage " + s.name + "): " + e.what());
-      }
-    }
-    if (r.has("dictionary")) {
-      auto d = r.child("dictionary");
-      nlohmann::json sampling = nlohmann::json::object(), ksvd = nlohmann::json::object(),
-                     coding = nlohmann::json::object();
-      d.get("sampling", sampling);
-      d.get("ksvd", ksvd);
-      d.get("coding", coding);
-      d.finish();
-      c.dictionary_coding = dict::SparseCodingOptions::from_json(coding, "$.dictionary.coding");
-      c.dictionary_sampling =
-          dict::PatchSamplingOptions::from_json(sampling, "$.dictionary.sampling");
-      c.dictionary_ksvd = dict::KsvdOptions::from_json(ksvd, "$.dictionary.ksvd");
-    }
+    read_stages(r, c);
+    read_dictionary(r, c);
     if (r.has("evaluation")) {
       auto e = r.child("evaluation");
       c.evaluation.read(e);
@@ -341,35 +387,7 @@ ExperimentConfig ExperimentConfig::from_json(const nlohmann::json& j, const std:
       throw ConfigError(source + ": $.code: " + e.what());
     }
   }
-  // The net's measurements and patch follow from the Phi and the dataset's patches: a value
-  // given in $.network is honoured when it agrees, and refused when it does not.
-  const auto given = c.network;
-  c.network.measurements = c.phi.n;
-  c.network.patch.rows = c.phi.rows;
-  c.network.patch.cols = c.phi.cols;
-  c.network.patch.height = c.dataset.patch_h;
-  c.network.patch.width = c.dataset.patch_w;
-  const nlohmann::json network_json = j.contains("network") ? j["network"] : nlohmann::json();
-  auto refuse_if_differs = [&](const std::string& key, int64_t given_value, int64_t value,
-                               const std::string& from) {
-    const bool set = key.rfind("patch.", 0) == 0 ? network_json.contains("patch") &&
-                                                       network_json["patch"].contains(key.substr(6))
-                                                 : network_json.contains(key);
-    if (set && given_value != value) {
-      throw ConfigError(source + ": $.network." + key + " is " + std::to_string(given_value) +
-                        " but " + from + " makes it " + std::to_string(value) + ": set " + from +
-                        " instead, or leave $.network." + key + " out");
-    }
-  };
-  refuse_if_differs("measurements", given.measurements, c.network.measurements,
-                    "the Phi's N ($.phi)");
-  refuse_if_differs("patch.rows", given.patch.rows, c.network.patch.rows,
-                    "the Phi's views ($.phi)");
-  refuse_if_differs("patch.cols", given.patch.cols, c.network.patch.cols,
-                    "the Phi's views ($.phi)");
-  refuse_if_differs("patch.height", given.patch.height, c.network.patch.height,
-                    "$.dataset.patch_h");
-  refuse_if_differs("patch.width", given.patch.width, c.network.patch.width, "$.dataset.patch_w");
+  derive_network_shape(c, j, source);
   if (!c.network.cfa.empty()) {
     // A colour net trains on its own colour crops, measured by the code of $.phi.
     LFNET_CHECK_AS(ConfigError, !c.code.enabled, source,

@@ -32,6 +32,57 @@ std::pair<torch::Tensor, torch::Tensor> check_inputs(const nn::LightFieldNet& ne
   return {y, phase};
 }
 
+// What the exported file records of the checkpoint and its camera.
+nn::ScriptMetadata script_metadata(const train::Checkpoint& ckpt, const optics::Phi& phi,
+                                   const std::string& model) {
+  nn::ScriptMetadata meta;
+  meta.phi = ckpt.phi;
+  meta.config = ckpt.config;
+  meta.period = phi.period();
+  meta.block = phi.block();
+  meta.local = phi.local();
+  meta.source = {{"checkpoint", fs::path(model).filename().string()},
+                 {"stage", ckpt.training.stage},
+                 {"epoch", ckpt.training.epoch},
+                 {"step", ckpt.training.step},
+                 {"lfnet_version", kVersion}};
+  if (std::isfinite(ckpt.training.best_metric))
+    meta.source["best_psnr_db"] = ckpt.training.best_metric;
+  return meta;
+}
+
+// The exported net against the checkpoint's: a whole-image net on a sensor image wider than two
+// halos, with sides that are no multiples of its tiling's, in many tiles; a patch net on
+// `count` patches. Returns the largest difference and sets `compared`.
+double compare_exported(nn::LightFieldNet net, const nn::ScriptedNetwork& loaded, int64_t count,
+                        std::string& compared) {
+  const auto& o = net->options();
+  double diff = 0;
+  if (!o.patch_grid()) {
+    auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
+    const auto tiling = o.arch().image_tiling(o);
+    const int64_t m = tiling.multiple, halo = tiling.receptive_radius;
+    auto sensor = torch::rand({o.measurements, 2 * halo + m + 3, 3 * halo + 1}, gen);
+    const double sigma = 0.05;  // read by noise-aware nets only
+    const int64_t tile = 2 * m;
+    auto want = recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
+    auto got = loaded.reconstruct_image(sensor, tile, false, sigma);
+    diff = (got - want.squeeze(0)).abs().max().item<double>();
+    compared = "a " + std::to_string(sensor.size(1)) + " x " + std::to_string(sensor.size(2)) +
+               " sensor image in tiles of " + std::to_string(tile);
+  } else {
+    auto [y, phase] = check_inputs(net, count);
+    torch::NoGradGuard no_grad;
+    auto want = net->forward(y, phase).reshape({count, -1});
+    auto got = loaded.forward(y, phase).reshape({count, -1});
+    diff = (got - want).abs().max().item<double>();
+    compared = std::to_string(count) + " patches";
+  }
+  LFNET_CHECK_AS(NumericalError, diff <= 1e-5, "the exported net differs from the checkpoint by ",
+                 diff, " on ", compared, " (more than 1e-5): please report this");
+  return diff;
+}
+
 }  // namespace
 
 ExportResult export_model(const ExportRequest& a) {
@@ -60,19 +111,7 @@ ExportResult export_model(const ExportRequest& a) {
                  a.model, ": its Phi ", spec.label(), " (", phi->rows(), "x", phi->cols(),
                  " views) does not fit its network (N = ", o.measurements, ", ", o.patch.rows, "x",
                  o.patch.cols, " views)");
-  nn::ScriptMetadata meta;
-  meta.phi = ckpt.phi;
-  meta.config = ckpt.config;
-  meta.period = phi->period();
-  meta.block = phi->block();
-  meta.local = phi->local();
-  meta.source = {{"checkpoint", fs::path(a.model).filename().string()},
-                 {"stage", ckpt.training.stage},
-                 {"epoch", ckpt.training.epoch},
-                 {"step", ckpt.training.step},
-                 {"lfnet_version", kVersion}};
-  if (std::isfinite(ckpt.training.best_metric))
-    meta.source["best_psnr_db"] = ckpt.training.best_metric;
+  const auto meta = script_metadata(ckpt, *phi, a.model);
   // Written to a temporary, read back and compared with the checkpoint's net on realistic
   // inputs, and only then moved into place: a failed comparison leaves no exported file.
   double diff = 0;
@@ -80,37 +119,10 @@ ExportResult export_model(const ExportRequest& a) {
   write_file_atomically(a.out, [&](const std::string& tmp) {
     nn::export_network(net, meta, tmp);
     const auto loaded = nn::load_script(tmp);
-    if (a.check > 0 && o.arch().whole_image()) {
-      // A sensor image wider than two halos, with sides that are no multiples of the U-Net's, in
-      // many tiles.
-      auto gen = torch::make_generator<at::CPUGeneratorImpl>(7);
-      const auto tiling = o.arch().image_tiling(o);
-      const int64_t m = tiling.multiple, halo = tiling.receptive_radius;
-      auto sensor = torch::rand({o.measurements, 2 * halo + m + 3, 3 * halo + 1}, gen);
-      const double sigma = 0.05;  // read by noise-aware nets only
-      const int64_t tile = 2 * m;
-      auto want = recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
-      auto got = loaded.reconstruct_image(sensor, tile, false, sigma);
-      diff = (got - want.squeeze(0)).abs().max().item<double>();
-      r.compared = "a " + std::to_string(sensor.size(1)) + " x " + std::to_string(sensor.size(2)) +
-                   " sensor image in tiles of " + std::to_string(tile);
-      LFNET_CHECK_AS(NumericalError, diff <= 1e-5,
-                     "the exported net differs from the checkpoint by ", diff,
-                     " on a sensor image (more than 1e-5): please report this");
-    } else if (a.check > 0) {
-      auto [y, phase] = check_inputs(net, a.check);
-      torch::NoGradGuard no_grad;
-      auto want = net->forward(y, phase).reshape({a.check, -1});
-      auto got = loaded.forward(y, phase).reshape({a.check, -1});
-      diff = (got - want).abs().max().item<double>();
-      r.compared = std::to_string(a.check) + " patches";
-      LFNET_CHECK_AS(NumericalError, diff <= 1e-5,
-                     "the exported net differs from the checkpoint by ", diff, " on ", a.check,
-                     " patches (more than 1e-5): please report this");
-    }
+    if (a.check > 0) diff = compare_exported(net, loaded, a.check, r.compared);
   });
   r.phi = spec.label();
-  r.branches = o.arch().whole_image() ? o.architecture : nn::to_string(o.branches);
+  r.branches = o.patch_grid() ? nn::to_string(o.branches) : o.architecture;
   r.phases = net->phases();
   r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
   r.max_difference = diff;

@@ -203,28 +203,13 @@ std::string FigureSet::training(const std::string& log, const std::string& stem)
   return run_script({"training", log, (fs::path(folder_) / stem).string()}, folder_);
 }
 
-std::string plot_weights(const optics::Phi& phi, const std::string& dir,
-                         const OutputFolderPolicy& policy) {
+namespace {
+
+// The figure spec of a Phi's weights: a tile per measurement and view (4 decimals: a spec of
+// readable size), titled by the camera.
+nlohmann::json weights_spec(const optics::Phi& phi, const std::string& stem) {
   const auto& s = phi.spec();
-  const std::string stem = s.name + "-n" + std::to_string(s.n);
-  // Three files beside whatever DIR holds: each checked by the policy, drawn in a temporary
-  // folder and moved in only when all three are complete.
-  const std::vector<std::string> names = {stem + ".png", stem + ".svg", stem + ".json"};
-  check_output_apart(dir, policy.inputs, policy.option);
-  for (const auto& name : names) check_output_file((fs::path(dir) / name).string(), policy);
-  const fs::path target = fs::path(dir) / stem;
-  std::error_code ec;
-  const bool made_dir = !fs::exists(dir, ec);
-  // A folder made for a drawing that failed goes again (the lock file inside it goes first).
-  auto lock = std::make_unique<OutputLock>(target.string(), policy.option);
-  auto fail = [&] {
-    lock.reset();
-    if (made_dir && fs::is_empty(dir, ec)) fs::remove(dir, ec);
-  };
-  remove_stale_temporaries(target);
-  const fs::path tmp = temporary_path(target);
   const auto t = optics::weight_tiles(phi);
-  // 4 decimals: a spec of readable size.
   const auto rounded = ((t.tiles * 1e4).round() / 1e4).contiguous();
   const auto a = rounded.accessor<double, 4>();
   nlohmann::json tiles = nlohmann::json::array();
@@ -249,22 +234,47 @@ std::string plot_weights(const optics::Phi& phi, const std::string& dir,
                                 ? camera + ": the angular response of each measurement, M_n(u, v)"
                                 : camera + ": the matrix row of each measurement over the " +
                                       block + " x " + block + " block of every view";
+  return {{"kind", "weights"},
+          {"stem", stem},
+          {"title", title},
+          {"tiles", tiles},
+          {"signed", t.signed_weights},
+          {"wrapped", t.wrapped},
+          {"wrap", t.wrap},
+          {"pixels", t.pixels},
+          {"measurements", phi.measurements()},
+          {"views", std::to_string(phi.rows()) + " x " + std::to_string(phi.cols())},
+          {"block", phi.local() ? 0 : phi.block()}};
+}
+
+}  // namespace
+
+std::string plot_weights(const optics::Phi& phi, const std::string& dir,
+                         const OutputFolderPolicy& policy) {
+  const auto& s = phi.spec();
+  const std::string stem = s.name + "-n" + std::to_string(s.n);
+  // Three files beside whatever DIR holds: each checked by the policy, drawn in a temporary
+  // folder and moved in only when all three are complete.
+  const std::vector<std::string> names = {stem + ".png", stem + ".svg", stem + ".json"};
+  check_output_apart(dir, policy.inputs, policy.option);
+  for (const auto& name : names) check_output_file((fs::path(dir) / name).string(), policy);
+  const fs::path target = fs::path(dir) / stem;
+  std::error_code ec;
+  const bool made_dir = !fs::exists(dir, ec);
+  // A folder made for a drawing that failed goes again (the lock file inside it goes first).
+  auto lock = std::make_unique<OutputLock>(target.string(), policy.option);
+  auto fail = [&] {
+    lock.reset();
+    if (made_dir && fs::is_empty(dir, ec)) fs::remove(dir, ec);
+  };
+  remove_stale_temporaries(target);
+  const fs::path tmp = temporary_path(target);
   fs::remove_all(tmp, ec);
   fs::create_directories(tmp, ec);
   if (ec) fail();
   LFNET_CHECK_AS(IoError, !ec, "cannot create ", tmp.string(), ": ", ec.message());
   FigureSet figures(tmp.string());
-  figures.add({{"kind", "weights"},
-               {"stem", stem},
-               {"title", title},
-               {"tiles", tiles},
-               {"signed", t.signed_weights},
-               {"wrapped", t.wrapped},
-               {"wrap", t.wrap},
-               {"pixels", t.pixels},
-               {"measurements", phi.measurements()},
-               {"views", std::to_string(phi.rows()) + " x " + std::to_string(phi.cols())},
-               {"block", phi.local() ? 0 : phi.block()}});
+  figures.add(weights_spec(phi, stem));
   try {
     const std::string note = figures.draw(stem + ".json");
     LFNET_CHECK_AS(IoError, note.empty(), "cannot draw the weights of ", stem, ": ", note);

@@ -114,117 +114,161 @@ std::string run_folder(const TrainRequest& r, const ExperimentConfig& config) {
   return r.out.empty() ? "out/" + config.name : r.out;
 }
 
-TrainResult train_experiment(const TrainRequest& request,
-                             std::shared_ptr<dist::Communicator> comm) {
-  if (!comm) comm = std::make_shared<dist::LocalCommunicator>();
-  const bool lead = comm->rank() == 0;
-  // Rank 0 owns the folder (another host's process ids mean nothing here).
-  if (lead && resumes_folder(request)) recover_run_folder(request.resume);
-  ExperimentConfig config = resolve_request(request);
-  check_config_inputs(config);
-  const std::string out = run_folder(request, config);
-  if (lead) recover_run_folder(out);
-  const bool continue_folder = resumes_folder(request);
-  // Resuming one stage from its checkpoint writes into the folder that holds it.
-  const bool continue_in_place = continue_folder || !request.resume.empty();
-  // An interrupted run in the way: say how to continue it, not only how to discard it (rank 0
-  // owns the folder; the launcher stops the others).
-  LFNET_CHECK_AS(ConfigError,
-                 !lead || continue_in_place || request.force ||
-                     !fs::is_regular_file(fs::path(out) / "config.json"),
-                 "--out ", out,
-                 " exists and is not empty: it holds a run (its config.json); continue it with "
-                 "--resume ",
-                 out, " (no config file), or pass --force to start it afresh");
-  std::vector<StageConfig> stages;
-  for (const auto& s : config.stages) {
-    if (request.stage.empty() || s.name == request.stage) stages.push_back(s);
+namespace {
+
+// lfnet train as a controller: check() resolves the config and its inputs and the run folder
+// before any work; run() makes the folder, the training data (when a network stage is left)
+// and trains each stage in turn, skipping those a resumed folder has done.
+class Training {
+ public:
+  Training(const TrainRequest& request, std::shared_ptr<dist::Communicator> comm)
+      : request_(request),
+        comm_(comm ? std::move(comm) : std::make_shared<dist::LocalCommunicator>()),
+        lead_(comm_->rank() == 0),
+        continue_folder_(resumes_folder(request)),
+        // Resuming one stage from its checkpoint writes into the folder that holds it.
+        continue_in_place_(continue_folder_ || !request.resume.empty()) {}
+
+  void check() {
+    // Rank 0 owns the folder (another host's process ids mean nothing here).
+    if (lead_ && continue_folder_) recover_run_folder(request_.resume);
+    config_ = resolve_request(request_);
+    check_config_inputs(config_);
+    out_ = run_folder(request_, config_);
+    if (lead_) recover_run_folder(out_);
+    // An interrupted run in the way: say how to continue it, not only how to discard it (rank
+    // 0 owns the folder; the launcher stops the others).
+    LFNET_CHECK_AS(ConfigError,
+                   !lead_ || continue_in_place_ || request_.force ||
+                       !fs::is_regular_file(fs::path(out_) / "config.json"),
+                   "--out ", out_,
+                   " exists and is not empty: it holds a run (its config.json); continue it with "
+                   "--resume ",
+                   out_, " (no config file), or pass --force to start it afresh");
+    for (const auto& s : config_.stages) {
+      if (request_.stage.empty() || s.name == request_.stage) stages_.push_back(s);
+    }
+    resolved_ = config_.raw;
+    resolved_["scale"] = config_.scale;
+    resolved_["phi"] = config_.phi.to_json();  // the camera itself, not a path to it
   }
-  nlohmann::json resolved = config.raw;
-  resolved["scale"] = config.scale;
-  resolved["phi"] = config.phi.to_json();  // the camera itself, not a path to it
-  std::unique_ptr<RunFolder> folder;       // the other ranks write nothing
-  if (lead) {
+
+  TrainResult run() {
+    if (lead_) make_folder();
+    const auto phi = optics::make_phi(config_.phi);
+    spdlog::info("{}: Phi {}, {} stage(s), output in {}{}", config_.name, config_.phi.label(),
+                 stages_.size(), out_,
+                 comm_->world_size() > 1
+                     ? " (" + std::to_string(comm_->world_size()) + " data-parallel ranks)"
+                     : "");
+    if (lead_ && !continue_folder_) {
+      write_json_file((fs::path(out_) / "config.json").string(), resolved_);
+    }
+    make_dataset_if_needed(*phi);
+    std::string last;
+    for (size_t i = 0; i < stages_.size(); ++i) last = train(i);
+    saved();
+    comm_->barrier();  // leave together: rank 0 hosts the rendezvous
+    config_.raw = resolved_;
+    return {config_, out_, last};
+  }
+
+ private:
+  // Every file the run reads: the config and its bases, what it starts from, its data, its
+  // teacher, and the model whose learned code it trains on or starts from.
+  void make_folder() {
     OutputFolderPolicy policy;
-    policy.force = request.force;
-    // Every file the run reads: the config and its bases, what it starts from, its data, its
-    // teacher, and the model whose learned code it trains on or starts from.
-    policy.inputs = config.files;
-    policy.inputs.insert(policy.inputs.end(), {request.init, config.init});
-    const auto phi_file = config.raw.value("phi", nlohmann::json());
+    policy.force = request_.force;
+    policy.inputs = config_.files;
+    policy.inputs.insert(policy.inputs.end(), {request_.init, config_.init});
+    const auto phi_file = config_.raw.value("phi", nlohmann::json());
     std::error_code ec;
     if (phi_file.is_string() && fs::exists(phi_file.get<std::string>(), ec)) {
       policy.inputs.push_back(phi_file.get<std::string>());
     }
-    for (const auto& lf : config.train_data.light_fields) policy.inputs.push_back(lf);
-    if (config.distill.enabled()) policy.inputs.push_back(config.distill.teacher);
-    if (config.code.enabled) policy.inputs.push_back(config.code.from);
-    folder = std::make_unique<RunFolder>(out, policy, continue_in_place);
-    fs::create_directories(fs::path(out) / "models");
+    for (const auto& lf : config_.train_data.light_fields) policy.inputs.push_back(lf);
+    if (config_.distill.enabled()) policy.inputs.push_back(config_.distill.teacher);
+    if (config_.code.enabled) policy.inputs.push_back(config_.code.from);
+    folder_ = std::make_unique<RunFolder>(out_, policy, continue_in_place_);
+    fs::create_directories(fs::path(out_) / "models");
   }
-  const auto phi = optics::make_phi(config.phi);
-  spdlog::info("{}: Phi {}, {} stage(s), output in {}{}", config.name, config.phi.label(),
-               stages.size(), out,
-               comm->world_size() > 1
-                   ? " (" + std::to_string(comm->world_size()) + " data-parallel ranks)"
-                   : "");
-  auto model_of = [&](const StageConfig& s) {
-    return (fs::path(out) / "models" / (s.name + ".ckpt")).string();
-  };
-  auto last_of = [&](const StageConfig& s) {
-    return (fs::path(out) / "models" / s.name / "last.ckpt").string();
-  };
-  // The patch dataset (simulated measurements) is built only when a network is trained.
-  std::unique_ptr<data::PatchDataset> dataset;
-  const bool networks = std::any_of(stages.begin(), stages.end(), [&](const StageConfig& s) {
-    return is_network_stage(s.name) && !(continue_folder && fs::exists(model_of(s)));
-  });
-  if (lead && !continue_folder) write_json_file((fs::path(out) / "config.json").string(), resolved);
-  // A teacher that cannot teach fails before the training data are made.
-  if (networks && config.distill.enabled()) (void)load_teacher(config);
-  if (networks) dataset = make_dataset(config, *phi);
-  if (dataset) {
-    spdlog::info("{} training light fields; measurement mean {:.4f}", dataset->light_fields(),
-                 dataset->measurement_mean());
+
+  std::string model_of(const StageConfig& s) const {
+    return (fs::path(out_) / "models" / (s.name + ".ckpt")).string();
   }
-  auto saved = [&] {
-    if (folder) folder->commit();
-  };
-  std::string last;
-  for (size_t i = 0; i < stages.size(); ++i) {
-    const auto& stage = stages[i];
-    if (continue_folder && fs::exists(model_of(stage))) {
+  std::string last_of(const StageConfig& s) const {
+    return (fs::path(out_) / "models" / s.name / "last.ckpt").string();
+  }
+  bool done(const StageConfig& s) const { return continue_folder_ && fs::exists(model_of(s)); }
+
+  // The patch dataset (simulated measurements) is built only when a network is trained; a
+  // teacher that cannot teach fails before it is made.
+  void make_dataset_if_needed(const optics::Phi& phi) {
+    const bool networks = std::any_of(stages_.begin(), stages_.end(), [&](const StageConfig& s) {
+      return is_network_stage(s.name) && !done(s);
+    });
+    if (!networks) return;
+    if (config_.distill.enabled()) (void)load_teacher(config_);
+    dataset_ = make_dataset(config_, phi);
+    spdlog::info("{} training light fields; measurement mean {:.4f}", dataset_->light_fields(),
+                 dataset_->measurement_mean());
+  }
+
+  void saved() {
+    if (folder_) folder_->commit();
+  }
+
+  // Stage i: done before, the dictionary, or a network; returns its model file.
+  std::string train(size_t i) {
+    const auto& stage = stages_[i];
+    if (done(stage)) {
       spdlog::info("stage {}: done ({})", stage.name, model_of(stage));
-      last = model_of(stage);
-      continue;
+      return model_of(stage);
     }
     if (!is_network_stage(stage.name)) {
       LFNET_CHECK_AS(ConfigError,
-                     (request.resume.empty() || continue_folder) && request.init.empty(),
+                     (request_.resume.empty() || continue_folder_) && request_.init.empty(),
                      "--resume and --init apply to network stages, not to '", stage.name, "'");
-      LFNET_CHECK_AS(ConfigError, comm->world_size() == 1, "the '", stage.name,
+      LFNET_CHECK_AS(ConfigError, comm_->world_size() == 1, "the '", stage.name,
                      "' stage does not train data-parallel: train it in one process (--stage ",
                      stage.name, ")");
-      last = train_dictionary_stage(config, out, request.command_line);
+      auto model = train_dictionary_stage(config_, out_, request_.command_line);
       saved();
-      continue;
+      return model;
     }
-    std::string resume = continue_folder ? "" : request.resume;
-    if (continue_folder && fs::exists(last_of(stage))) {
+    std::string resume = continue_folder_ ? "" : request_.resume;
+    if (continue_folder_ && fs::exists(last_of(stage))) {
       resume = last_of(stage);
       spdlog::info("stage {}: resuming from {}", stage.name, resume);
     }
     // --init (else the config's $.init) applies to the first stage; later stages follow the
     // usual chain.
-    const std::string init = request.init.empty() ? config.init : request.init;
-    last = train_stage(config, stage, *dataset, out, i == 0 ? init : "", resume,
-                       request.command_line, comm, saved);
-    spdlog::info("stage {} done: {}", stage.name, last);
+    const std::string init = request_.init.empty() ? config_.init : request_.init;
+    auto model = train_stage(config_, stage, *dataset_, out_, i == 0 ? init : "", resume,
+                             request_.command_line, comm_, [this] { saved(); });
+    spdlog::info("stage {} done: {}", stage.name, model);
+    return model;
   }
-  saved();
-  comm->barrier();  // leave together: rank 0 hosts the rendezvous
-  config.raw = resolved;
-  return {config, out, last};
+
+  const TrainRequest& request_;
+  std::shared_ptr<dist::Communicator> comm_;
+  const bool lead_;
+  const bool continue_folder_, continue_in_place_;
+  ExperimentConfig config_;
+  std::string out_;
+  std::vector<StageConfig> stages_;
+  nlohmann::json resolved_;            // the config as the run records it
+  std::unique_ptr<RunFolder> folder_;  // the other ranks write nothing
+  std::unique_ptr<data::PatchDataset> dataset_;
+};
+
+}  // namespace
+
+TrainResult train_experiment(const TrainRequest& request,
+                             std::shared_ptr<dist::Communicator> comm) {
+  Training training(request, std::move(comm));
+  training.check();
+  return training.run();
 }
 
 void evaluate_experiment(const ExperimentConfig& config, const std::string& out) {

@@ -27,6 +27,66 @@ namespace fs = std::filesystem;
 
 namespace lfnet::pipeline {
 
+namespace {
+
+// Sensor mode: the sensor image(s), (C, N, H, W) by the camera's own Phi, into `dir`.
+void write_sensor_acquisition(const SimulateRequest& r, const std::string& dir,
+                              nlohmann::json& meta) {
+  const auto& lf = r.lf;
+  const auto& phi = *r.phi;
+  const int64_t n = phi.measurements();
+  Stopwatch clock;
+  // The nominal Phi without a camera error.
+  auto sensor = optics::perturbed_forward(phi, r.camera_error, lf.data());
+  if (r.cfa) sensor = optics::mosaic(sensor, *r.cfa);  // (1, N, H, W): one colour sensor
+  sensor = optics::apply_sensor_effects(sensor, r.effects, r.seed);
+  meta["seconds"] = clock.seconds();
+  // Shot and read noise included: what a noise-aware net reads (optics/sensor.h).
+  meta["noise_sigma"] = r.effects.equivalent_sigma(sensor.mean().item<double>());
+  io::write_sensor_images(dir, sensor);
+  meta["sensor"] = {{"files", io::sensor_file_names(sensor.size(0))},
+                    {"channels_per_file", n},
+                    {"dtype", "float32"},
+                    {"shape", {sensor.size(0), n, lf.height(), lf.width()}}};
+  spdlog::info("simulated a {}x{}x{} sensor image with {} in {:.3f} s", n, lf.height(), lf.width(),
+               phi.spec().label(), clock.seconds());
+}
+
+// Patch modes: the measurements of every patch of the grid, written in bands of rows.
+void write_patch_acquisition(const SimulateRequest& r, const std::string& dir,
+                             nlohmann::json& meta) {
+  const auto& lf = r.lf;
+  const auto& phi = *r.phi;
+  const int64_t n = phi.measurements();
+  Stopwatch clock;
+  const PatchGrid grid(lf.height(), lf.width(), r.patch, r.patch, r.stride);
+  const int64_t m = n * r.patch * r.patch, c = lf.channels();
+  io::MeasurementWriter writer((fs::path(dir) / io::kMeasurementsName).string(), c, grid.size(), m);
+  const int64_t band = std::max<int64_t>(1, 4096 / std::max<int64_t>(1, grid.cols()));
+  ProgressBar bar("simulate", grid.rows(), "rows");
+  for (int64_t row = 0; row < grid.rows(); row += band) {
+    const int64_t row_end = std::min(grid.rows(), row + band);
+    auto values =
+        optics::measure_patches(phi, lf.data(), grid, r.mode, r.effects, r.seed, row, row_end)
+            .values;
+    writer.write(values.view({c, -1, m}), row * grid.cols());
+    bar.advance(row_end - row);
+  }
+  bar.finish();
+  writer.close();
+  meta["seconds"] = clock.seconds();
+  meta["measurements"] = {{"file", io::kMeasurementsName},
+                          {"dtype", "float32"},
+                          {"byte_order", "little"},
+                          {"shape", {c, grid.size(), m}}};
+  meta["grid"] = {{"patch", r.patch},      {"stride", r.stride},  {"height", grid.height()},
+                  {"width", grid.width()}, {"rows", grid.rows()}, {"cols", grid.cols()}};
+  spdlog::info("simulated {} patches of {} measurements with {} ({}) in {:.3f} s", c * grid.size(),
+               m, phi.spec().label(), optics::to_string(r.mode), clock.seconds());
+}
+
+}  // namespace
+
 nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& dir) {
   LFNET_CHECK(r.phi != nullptr, "write_acquisition needs a Phi");
   LFNET_CHECK_AS(ConfigError, r.patch >= 1 && r.stride >= 1, "the patch and stride must be >= 1");
@@ -51,7 +111,6 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
       {"color", lf.channels() == 3},
       {"source", r.source},
   };
-  const int64_t n = phi.measurements();
   LFNET_CHECK_AS(ConfigError, r.camera_error.empty() || r.mode == optics::SimulationMode::kSensor,
                  "a camera error is simulated in sensor mode only");
   if (!r.camera_error.empty()) meta["camera_error"] = r.camera_error.to_json();
@@ -61,49 +120,10 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
                  "a colour filter array needs a colour light field (--color), got ", lf.channels(),
                  " channel(s)");
   if (r.cfa) meta["cfa"] = r.cfa->to_json();
-  Stopwatch clock;
   if (r.mode == optics::SimulationMode::kSensor) {
-    // (C, N, H, W) by the camera's own Phi: the nominal one without a camera error.
-    auto sensor = optics::perturbed_forward(phi, r.camera_error, lf.data());
-    if (r.cfa) sensor = optics::mosaic(sensor, *r.cfa);  // (1, N, H, W): one colour sensor
-    sensor = optics::apply_sensor_effects(sensor, r.effects, r.seed);
-    meta["seconds"] = clock.seconds();
-    // Shot and read noise included: what a noise-aware net reads (optics/sensor.h).
-    meta["noise_sigma"] = r.effects.equivalent_sigma(sensor.mean().item<double>());
-    io::write_sensor_images(dir, sensor);
-    meta["sensor"] = {{"files", io::sensor_file_names(sensor.size(0))},
-                      {"channels_per_file", n},
-                      {"dtype", "float32"},
-                      {"shape", {sensor.size(0), n, lf.height(), lf.width()}}};
-    spdlog::info("simulated a {}x{}x{} sensor image with {} in {:.3f} s", n, lf.height(),
-                 lf.width(), phi.spec().label(), clock.seconds());
+    write_sensor_acquisition(r, dir, meta);
   } else {
-    const PatchGrid grid(lf.height(), lf.width(), r.patch, r.patch, r.stride);
-    const int64_t m = n * r.patch * r.patch, c = lf.channels();
-    io::MeasurementWriter writer((fs::path(dir) / io::kMeasurementsName).string(), c, grid.size(),
-                                 m);
-    const int64_t band = std::max<int64_t>(1, 4096 / std::max<int64_t>(1, grid.cols()));
-    ProgressBar bar("simulate", grid.rows(), "rows");
-    for (int64_t row = 0; row < grid.rows(); row += band) {
-      const int64_t row_end = std::min(grid.rows(), row + band);
-      auto values =
-          optics::measure_patches(phi, lf.data(), grid, r.mode, r.effects, r.seed, row, row_end)
-              .values;
-      writer.write(values.view({c, -1, m}), row * grid.cols());
-      bar.advance(row_end - row);
-    }
-    bar.finish();
-    writer.close();
-    meta["seconds"] = clock.seconds();
-    meta["measurements"] = {{"file", io::kMeasurementsName},
-                            {"dtype", "float32"},
-                            {"byte_order", "little"},
-                            {"shape", {c, grid.size(), m}}};
-    meta["grid"] = {{"patch", r.patch},      {"stride", r.stride},  {"height", grid.height()},
-                    {"width", grid.width()}, {"rows", grid.rows()}, {"cols", grid.cols()}};
-    spdlog::info("simulated {} patches of {} measurements with {} ({}) in {:.3f} s",
-                 c * grid.size(), m, phi.spec().label(), optics::to_string(r.mode),
-                 clock.seconds());
+    write_patch_acquisition(r, dir, meta);
   }
   write_json_file((fs::path(dir) / io::kSidecarName).string(), meta);
   return meta;
