@@ -10,7 +10,6 @@
 #include "flags.h"
 #include "lfnet/core/error.h"
 #include "lfnet/pipeline/batch.h"
-#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -18,12 +17,12 @@ namespace {
 
 struct BatchArgs {
   pipeline::BatchOptions options;
-  std::string methods;     // comma-separated
-  dist::DistOptions dist;  // ranks sharing the items (docs/distributed.md)
+  std::string methods;         // comma-separated
+  pipeline::DistOptions dist;  // ranks sharing the items (docs/distributed.md)
 };
 
 void run(BatchArgs& a) {
-  auto comm = join_job(a.dist);
+  auto comm = pipeline::join_job(a.dist);
   std::stringstream list(a.methods);
   for (std::string m; std::getline(list, m, ',');) {
     if (!m.empty()) a.options.methods.push_back(m);
@@ -55,7 +54,7 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
                       "output folder: reconstructions, records/, summary.csv, summary.json"))
       ->required();
   cmd->add_option("--methods", a->methods,
-                  "comma-separated methods: " + recon::method_list() +
+                  "comma-separated methods: " + pipeline::method_list() +
                       " (default net with --model, pinv without)");
   add_reconstruction_flags(
       cmd, {&o.model, nullptr, &o.phi, &o.device, &o.precision, &o.tile, &o.stride, nullptr,

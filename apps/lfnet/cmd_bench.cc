@@ -14,11 +14,9 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
-#include "lfnet/nn/architecture.h"
 #include "lfnet/pipeline/bench.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
-#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -110,7 +108,7 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
   add_json_option(cmd, args->json);
   add_force_flag(cmd, args->force);
   cmd->add_option("--methods", a->methods,
-                  "methods to time: " + recon::method_list(recon::MethodNeeds::kTruth))
+                  "methods to time: " + pipeline::method_list(/*reconstruction=*/true))
       ->delimiter(',');
   ReconstructionFlags shared{
       nullptr,           &a->models, &a->phi,     &a->device,        &a->precision,
@@ -141,14 +139,14 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
       [a](const std::vector<std::string>& names) {
         for (const auto& name : names) {
           try {
-            (void)nn::find_architecture(name);
+            pipeline::check_architecture(name);
           } catch (const ConfigError& e) {
             throw CLI::ValidationError("--architecture", e.what());
           }
         }
         a->architectures = names;
       },
-      "untrained networks timed without --model, repeatable: " + nn::architecture_list() +
+      "untrained networks timed without --model, repeatable: " + pipeline::architecture_list() +
           " (default paper)");
   cmd->add_flag("--in-process", args->in_process,
                 "run every case in this process (peak memory is then a running maximum)");

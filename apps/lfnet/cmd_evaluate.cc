@@ -11,11 +11,8 @@
 #include "lfnet/core/output.h"
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/runtime.h"
-#include "lfnet/io/light_field_io.h"
-#include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
-#include "lfnet/recon/method_registry.h"
 
 namespace lfnet::app {
 
@@ -54,22 +51,8 @@ void run_evaluate(EvaluateArgs& a) {
   // The outputs first, the records last: a record's end_to_end_seconds is the command's time
   // from its start up to that record, every other output written.
   if (!a.out.empty()) {
-    const LightFieldViews est(r.estimate);  // 16-bit codes or float32
-    write_folder(a.out, policy, [&](const std::string& dir) {
-      // What each step freed is returned before the next (the peak is one step's, not all).
-      release_free_memory();
-      io::write_light_field(est, dir);
-      release_free_memory();
-      io::write_previews(est, dir);
-      release_free_memory();
-      io::ViewerPage page;
-      page.title = record["method"].get<std::string>() + " on " + r.light_field;
-      page.truth = LightFieldViews(r.truth);
-      page.record = record;
-      io::write_viewer(est, (std::filesystem::path(dir) / "index.html").string(), page);
-      record["end_to_end_seconds"] = process_seconds();
-      write_json_file((std::filesystem::path(dir) / "evaluation.json").string(), record);
-    });
+    write_folder(a.out, policy,
+                 [&](const std::string& dir) { pipeline::write_evaluation(r, record, dir); });
   }
   record["end_to_end_seconds"] = process_seconds();
   if (json_stdout) {
@@ -88,7 +71,7 @@ void run_evaluate(EvaluateArgs& a) {
       "%s on %s (%s, %s, %s, noise %.3g): PSNR %.2f dB, SSIM %.4f, %.2f s (%.2f s end to "
       "end)\n",
       record["method"].get<std::string>().c_str(), r.light_field.c_str(), r.phi.c_str(),
-      optics::to_string(q.mode).c_str(), stride.c_str(), noise, psnr, record["ssim"].get<double>(),
+      to_string(q.mode).c_str(), stride.c_str(), noise, psnr, record["ssim"].get<double>(),
       record["seconds"].get<double>(), record["end_to_end_seconds"].get<double>());
 }
 }  // namespace
@@ -123,7 +106,7 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   add_flat_field_option(cmd, q.flat_field);
   add_mode_option(cmd, q.mode);
   cmd->add_option("--method", q.method,
-                  recon::method_list() + " (default net with --model, pinv without)");
+                  pipeline::method_list() + " (default net with --model, pinv without)");
   add_dictionary_option(cmd, q.dictionary);
   add_json_option(cmd, a->json);
   output_folder(cmd->add_option(

@@ -7,15 +7,12 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
-#include "lfnet/nn/architecture.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/pipeline/stages.h"
-#include "lfnet/recon/method_registry.h"
-#include "lfnet/recon/methods.h"
 
 namespace lfnet::app {
 
@@ -57,8 +54,8 @@ void run_reconstruct(ReconstructArgs a) {
   // A whole-image model reconstructs whole sensor images, counted in pixels, not patches (the
   // model, read here to know, is read once: the cache passes it on).
   pipeline::ModelCache cache;
-  const bool whole_image = !a.request.model.empty() && recon::needs_network(a.request.method) &&
-                           cache.model(a.request.model).network.arch().whole_image();
+  const bool whole_image = !a.request.model.empty() && pipeline::needs_network(a.request.method) &&
+                           !cache.model(a.request.model).network.patch_grid();
   // Its total is known once the work starts.
   ProgressBar bar("reconstruct", 0, whole_image ? "pixels" : "patches");
   int64_t shown = 0;
@@ -102,7 +99,7 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
   add_self_calibrate_flag(cmd, q.self_calibrate);
   auto* method = cmd->add_option(
       "--method", q.method,
-      recon::method_list(recon::MethodNeeds::kTruth) +
+      pipeline::method_list(/*reconstruction=*/true) +
           " (default net; without --model, net with the zoo's default model for the sensor's "
           "camera and colour, pinv where the zoo has none)");
   add_dictionary_option(cmd, q.dictionary);

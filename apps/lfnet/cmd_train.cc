@@ -13,9 +13,9 @@ namespace {
 
 struct TrainArgs {
   pipeline::TrainRequest request;
-  dist::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
-  bool check = false;      // read and check the config, then stop
-  bool show = false;       // print the resolved config as JSON, then stop
+  pipeline::DistOptions dist;  // train: data-parallel ranks (docs/distributed.md)
+  bool check = false;          // read and check the config, then stop
+  bool show = false;           // print the resolved config as JSON, then stop
 };
 
 std::string command_line_of(const TrainArgs& a, const std::string& verb) {
@@ -110,7 +110,7 @@ void add_train_command(CLI::App& app, const GlobalOptions&) {
   add_dist_flags(cmd, args->dist);
   cmd->callback([args] {
     if (args->check || args->show) return check_config(*args);
-    auto comm = join_job(args->dist);  // a rank that cannot reach the others fails first
+    auto comm = pipeline::join_job(args->dist);  // a rank that cannot reach the others fails first
     args->request.command_line = command_line_of(*args, "train");
     pipeline::train_experiment(args->request, comm);
   });

@@ -13,8 +13,8 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/version.h"
+#include "lfnet/pipeline/catalog.h"
 #include "lfnet/pipeline/zoo.h"
-#include "lfnet/recon/method_registry.h"
 #include "paths.h"
 
 namespace lfnet::app {
@@ -141,7 +141,7 @@ CLI::Option* add_enum_option(CLI::App* cmd, const std::string& flag, E& value,
       help);
 }
 // --demosaic of evaluate, reconstruct and batch.
-inline CLI::Option* add_demosaic_option(CLI::App* cmd, optics::Demosaic& value) {
+inline CLI::Option* add_demosaic_option(CLI::App* cmd, pipeline::Demosaic& value) {
   return add_enum_option(cmd, "--demosaic", value,
                          "behind a colour filter array, how the views of pinv and adjoint are "
                          "demosaiced: bilinear (default) or malvar, gradient-corrected "

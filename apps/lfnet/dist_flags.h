@@ -4,16 +4,11 @@
 
 #include <CLI/CLI.hpp>
 
-#include <memory>
-
-#include "lfnet/dist/communicator.h"
+#include "lfnet/pipeline/distributed.h"
 
 namespace lfnet::app {
 
 // --world-size, --rank, --master, --dist-timeout, --dist-interface.
-void add_dist_flags(CLI::App* cmd, dist::DistOptions& options);
-
-// Joins the job (a no-op for one process); ranks other than 0 log warnings and errors only.
-std::shared_ptr<dist::Communicator> join_job(const dist::DistOptions& options);
+void add_dist_flags(CLI::App* cmd, pipeline::DistOptions& options);
 
 }  // namespace lfnet::app

@@ -19,11 +19,7 @@
 
 #include "command.h"
 #include "flags.h"
-#include "lfnet/nn/auto_precision.h"
-#include "lfnet/nn/network.h"
-#include "lfnet/optics/measure.h"
-#include "lfnet/recon/fully_convolutional.h"
-#include "lfnet/recon/method_registry.h"
+#include "lfnet/pipeline/catalog.h"
 #include "paths.h"
 
 namespace lfnet::app {
@@ -46,7 +42,7 @@ inline CLI::Option* add_device_option(CLI::App* cmd, std::string& device) {
                          "config's training.device)");
 }
 
-inline CLI::Option* add_cnn_mode_option(CLI::App* cmd, recon::CnnMode& mode) {
+inline CLI::Option* add_cnn_mode_option(CLI::App* cmd, pipeline::CnnMode& mode) {
   return add_enum_option(cmd, "--cnn-mode", mode,
                          "the paper net's CNN branch per patch ('patches', the default) or once "
                          "over the light field in tiles ('full'; docs/performance.md)");
@@ -54,7 +50,7 @@ inline CLI::Option* add_cnn_mode_option(CLI::App* cmd, recon::CnnMode& mode) {
 
 // ---- sensor ---------------------------------------------------------------------------------
 
-inline CLI::Option* add_mode_option(CLI::App* cmd, optics::SimulationMode& mode) {
+inline CLI::Option* add_mode_option(CLI::App* cmd, pipeline::SimulationMode& mode) {
   return add_enum_option(cmd, "--mode", mode,
                          "simulation mode: sensor (the default), one sensor image; or per_patch, "
                          "every patch measured alone (the paper's protocol)");
@@ -193,7 +189,7 @@ struct ReconstructionFlags {
   std::vector<std::string>* models = nullptr;  // instead of `model`
   std::string* phi = nullptr;
   std::string* device = nullptr;
-  nn::Precision* precision = nullptr;
+  pipeline::Precision* precision = nullptr;
   int64_t* tile = nullptr;
   int64_t* stride = nullptr;
   std::vector<int64_t>* strides = nullptr;  // instead of `stride`
@@ -229,7 +225,7 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
         *precision_auto = text == "auto";
         if (*precision_auto) return;
         try {
-          *precision = nn::parse_precision(text);
+          *precision = pipeline::parse_precision(text);
         } catch (const ConfigError&) {
           throw CLI::ValidationError("--precision",
                                      "'" + text + "' is unknown (known: auto, float32, bfloat16)");
@@ -243,7 +239,7 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
     std::vector<std::string> models;
     if (f.models) models = *f.models;
     if (f.model && !f.model->empty()) models.push_back(*f.model);
-    *f.precision = nn::choose_precision(models, *f.device).precision;
+    *f.precision = pipeline::choose_precision(models, *f.device);
   });
   cmd->add_option("--tile", *f.tile,
                   "spatial tile of whole-image models (default 256) and of --cnn-mode full "
@@ -268,7 +264,7 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
   add_self_ensemble_options(cmd, *f.self_ensemble, *f.ensemble_passes);
   input_path(cmd->add_option(
       "--method-options", *f.method_options,
-      "options of the methods with options (" + recon::methods_with_options() +
+      "options of the methods with options (" + pipeline::methods_with_options() +
           "), keyed by method: a JSON object or file, e.g. '{\"dict\": {\"method\": "
           "\"admm\"}}' (docs/methods.md)"));
 }

@@ -29,17 +29,8 @@ int fail(const std::string& what) {
   return 1;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  using namespace lfnet::app;
-  lfnet::configure_allocator();
-  CLI::App app{"lfnet: compressive light field reconstruction from coded sensor images"};
-  app.require_subcommand(1);
-  // lfnet's own options (--threads, --log-level) may also follow the command's name.
-  app.fallthrough();
-  app.set_version_flag("--version", std::string("lfnet ") + lfnet::kVersion);
-  GlobalOptions global;
+// --threads and --log-level, the program's own options, applied once the line is parsed.
+void add_global_options(CLI::App& app, lfnet::app::GlobalOptions& global) {
   // At most 4 threads per core: more only wait for each other (300 threads made a 1 s job
   // take 39 s), and a typo such as 10000 would make a job appear to hang.
   const int cores = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
@@ -58,7 +49,7 @@ int main(int argc, char** argv) {
           "0.." + std::to_string(max_threads)));
   app.add_option("--log-level", global.log_level, "trace, debug, info, warn, error or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}));
-  app.parse_complete_callback([&] {
+  app.parse_complete_callback([&global] {
     spdlog::set_level(spdlog::level::from_str(global.log_level));
     // Quiet means quiet: on failure the error line is then the only output.
     lfnet::set_progress_enabled(global.log_level != "off" && global.log_level != "error");
@@ -66,7 +57,46 @@ int main(int argc, char** argv) {
     int n = lfnet::configure_threads(global.threads);
     spdlog::debug("using {} threads", n);
   });
+}
 
+// A command that does not exist reads better named than as "a subcommand is required": the
+// first word that is no option, when it names no command; "" otherwise.
+std::string unknown_command(CLI::App& app, int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    const std::string before = i > 1 ? argv[i - 1] : "";
+    if (arg.empty() || arg[0] == '-' || before == "--threads" || before == "--log-level") {
+      continue;
+    }
+    std::string known;
+    bool found = false;
+    for (auto* sub : app.get_subcommands([](CLI::App*) { return true; })) {
+      known += (known.empty() ? "" : ", ") + sub->get_name();
+      found = found || sub->check_name(arg);
+    }
+    if (!found) {
+      std::string message = "unknown command '" + arg + "' (known: ";
+      message += known;
+      message += "; run lfnet --help)";
+      return message;
+    }
+    break;
+  }
+  return "";
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace lfnet::app;
+  lfnet::configure_allocator();
+  CLI::App app{"lfnet: compressive light field reconstruction from coded sensor images"};
+  app.require_subcommand(1);
+  // lfnet's own options (--threads, --log-level) may also follow the command's name.
+  app.fallthrough();
+  app.set_version_flag("--version", std::string("lfnet ") + lfnet::kVersion);
+  GlobalOptions global;
+  add_global_options(app, global);
   const std::vector<CommandFactory> commands = {
       add_info_command,       add_render_command,   add_simulate_command,    add_train_command,
       add_experiment_command, add_evaluate_command, add_reconstruct_command, add_batch_command,
@@ -89,27 +119,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    // A command that does not exist reads better named than as "a subcommand is required".
-    for (int i = 1; i < argc; ++i) {
-      const std::string arg = argv[i];
-      const std::string before = i > 1 ? argv[i - 1] : "";
-      if (arg.empty() || arg[0] == '-' || before == "--threads" || before == "--log-level") {
-        continue;
-      }
-      std::string known;
-      bool found = false;
-      for (auto* sub : app.get_subcommands([](CLI::App*) { return true; })) {
-        known += (known.empty() ? "" : ", ") + sub->get_name();
-        found = found || sub->check_name(arg);
-      }
-      if (!found) {
-        std::string message = "unknown command '" + arg + "' (known: ";
-        message += known;
-        message += "; run lfnet --help)";
-        return fail(message);
-      }
-      break;
-    }
+    const std::string unknown = unknown_command(app, argc, argv);
+    if (!unknown.empty()) return fail(unknown);
     return fail(e.what() + std::string(" (run lfnet --help)"));
   } catch (const std::exception& e) {
     return fail(e.what());

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
@@ -220,4 +221,27 @@ TEST_CASE("a flag several commands take has one help text", "[app]") {
     INFO(command);
     CHECK(help_texts(command).count("--force") == 1);
   }
+}
+
+TEST_CASE("the commands reach the library through pipeline/ and core/ alone", "[app]") {
+  // docs/architecture.md: a subcommand turns its flags into a pipeline request and makes one
+  // call; the types its flags bind come through lfnet/pipeline/catalog.h.
+  namespace fs = std::filesystem;
+  int files = 0, includes = 0;
+  for (const auto& entry : fs::directory_iterator(fs::path(LFNET_SOURCE_DIR) / "apps" / "lfnet")) {
+    const auto ext = entry.path().extension();
+    if (ext != ".cc" && ext != ".h") continue;
+    ++files;
+    std::ifstream in(entry.path());
+    for (std::string line; std::getline(in, line);) {
+      const auto at = line.find("#include \"lfnet/");
+      if (at == std::string::npos) continue;
+      ++includes;
+      const std::string area = line.substr(at + 16, line.find('/', at + 16) - at - 16);
+      INFO(entry.path().filename().string() << ": " << line);
+      CHECK((area == "pipeline" || area == "core"));
+    }
+  }
+  CHECK(files > 20);
+  CHECK(includes > 20);
 }

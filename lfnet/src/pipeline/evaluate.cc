@@ -9,11 +9,13 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/patches.h"
+#include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/core/text.h"
 #include "lfnet/cv/opencv.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/io/viewer.h"
 #include "lfnet/pipeline/sets.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -238,11 +240,11 @@ class Evaluation {
         network_(recon::needs_network(method_)) {}
 
   void check() {
+    context_.method_options = method_options_argument(a_.method_options, {method_});
     LFNET_CHECK_AS(ConfigError, a_.lf.empty() != a_.scene.empty(),
                    "give exactly one of --lf DIR and --scene SCENE.json");
     LFNET_CHECK_AS(ConfigError, a_.noise >= 0, "--noise must be >= 0");
     LFNET_CHECK_AS(ConfigError, a_.tile >= 0, "--tile must be positive, got ", a_.tile);
-    context_.method_options = method_options_argument(a_.method_options, {method_});
     check_protocol();
     read_sensor_effects();
     read_camera();
@@ -425,6 +427,22 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
   Evaluation evaluation(a);
   evaluation.check();
   return evaluation.run();
+}
+
+void write_evaluation(const EvaluateResult& r, nlohmann::json& record, const std::string& dir) {
+  const LightFieldViews est(r.estimate);  // 16-bit codes or float32
+  release_free_memory();
+  io::write_light_field(est, dir);
+  release_free_memory();
+  io::write_previews(est, dir);
+  release_free_memory();
+  io::ViewerPage page;
+  page.title = record["method"].get<std::string>() + " on " + r.light_field;
+  page.truth = LightFieldViews(r.truth);
+  page.record = record;
+  io::write_viewer(est, (fs::path(dir) / "index.html").string(), page);
+  record["end_to_end_seconds"] = process_seconds();
+  write_json_file((fs::path(dir) / "evaluation.json").string(), record);
 }
 
 }  // namespace lfnet::pipeline

@@ -4,10 +4,14 @@
 
 #include <cmath>
 #include <filesystem>
+#include <regex>
+#include <utility>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/version.h"
+#include "lfnet/io/phi_io.h"
 #include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/models.h"
@@ -126,6 +130,67 @@ ExportResult export_model(const ExportRequest& a) {
   r.phases = net->phases();
   r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
   r.max_difference = diff;
+  return r;
+}
+
+namespace {
+
+// "UxV" -> (U, V).
+std::pair<int64_t, int64_t> parse_grid(const std::string& text) {
+  static const std::regex kGrid(R"(^(\d{1,3})x(\d{1,3})$)");
+  std::smatch m;
+  const bool matched = std::regex_match(text, m, kGrid);
+  const int64_t u = matched ? std::stoll(m[1]) : 0, v = matched ? std::stoll(m[2]) : 0;
+  LFNET_CHECK_AS(ConfigError, u >= 1 && v >= 1 && u <= optics::kMaxViews && v <= optics::kMaxViews,
+                 "--grid must be UxV with U and V in 1..", optics::kMaxViews, ", got ", text);
+  return {u, v};
+}
+
+}  // namespace
+
+PhiExportResult export_phi(const PhiExportRequest& a) {
+  OutputFolderPolicy policy;
+  policy.force = a.force;
+  policy.inputs = model_input_files(a.phi);  // a switch's members too
+  check_output_folder(a.out, policy);
+  const bool file = phi_argument_is_file(a.phi);
+  optics::PhiSpec spec;
+  if (file) {
+    spec = phi_from_argument(a.phi);
+  } else {
+    spec = optics::PhiSpec::parse(a.phi);
+    std::tie(spec.rows, spec.cols) = parse_grid(a.grid);
+  }
+  const auto phi = optics::make_phi(spec);
+  PhiExportResult r;
+  r.printable = a.printable || io::is_learned_mask(*phi);
+  // A model that learned its code: the code's physical parameters too.
+  const auto code = file ? learned_code_of(a.phi) : nlohmann::json();
+  write_folder(a.out, policy, [&](const std::string& dir) {
+    io::write_calibrated_phi(*phi, dir);
+    if (r.printable) io::write_printable_mask(*phi, dir);
+    if (!code.is_null()) write_json_file((fs::path(dir) / "code.json").string(), code);
+    // Read it back: the folder must give the same camera, weight for weight.
+    const auto back = optics::make_phi(io::read_calibrated_phi(dir));
+    const int64_t t = phi->period();
+    const double diff = (back->pixel_weights(0, 0, t, t, torch::kFloat64) -
+                         phi->pixel_weights(0, 0, t, t, torch::kFloat64))
+                            .abs()
+                            .max()
+                            .item<double>();
+    LFNET_CHECK_AS(NumericalError, diff == 0, "the written Phi differs from ", spec.label(), " by ",
+                   diff, " when read back: please report this");
+  });
+  r.label = spec.label();
+  r.measurements = phi->measurements();
+  r.rows = phi->rows();
+  r.cols = phi->cols();
+  r.period = phi->period();
+  r.code_file = !code.is_null();
+  const std::string source = spec.params.is_object() ? spec.params.value("source", "") : "";
+  if (!r.code_file && spec.name == "calibrated" && source.rfind("learned", 0) == 0) {
+    r.missing_code = source;  // a learned code whose parameters this file does not hold
+  }
   return r;
 }
 

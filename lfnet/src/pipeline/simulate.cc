@@ -11,6 +11,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/light_field.h"
+#include "lfnet/core/output.h"
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
@@ -18,6 +19,7 @@
 #include "lfnet/core/version.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/asp.h"
+#include "lfnet/pipeline/figures.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/scene/render.h"
@@ -322,6 +324,112 @@ std::string describe_phi(const optics::Phi& phi) {
     print("%s\n", line.c_str());
   }
   return text;
+}
+
+namespace {
+
+// lfnet simulate as a controller: check() reads the arguments and checks the outputs before any
+// work; run() loads the light field, makes the camera and writes what was asked.
+class Simulation {
+ public:
+  explicit Simulation(const SimulateOptions& options) : a_(options) {}
+
+  void check() {
+    // --cfa, or the one a calibrated Phi's folder names.
+    cfa_ = cfa_of_arguments(a_.cfa, a_.phi);
+    if (cfa_) a_.source.color = true;
+    const auto& source = a_.source;
+    LFNET_CHECK_AS(ConfigError, a_.patch >= 1 && a_.stride >= 1,
+                   "--patch and --stride must be >= 1");
+    const int sources = (source.lf.empty() ? 0 : 1) + (source.scene.empty() ? 0 : 1) +
+                        (source.white.empty() ? 0 : 1);
+    simulate_ = sources > 0 || !a_.out.empty();
+    LFNET_CHECK_AS(ConfigError, sources <= 1,
+                   "give one of --lf DIR, --scene SCENE.json and --white HxW");
+    LFNET_CHECK_AS(ConfigError, simulate_ || a_.describe || !a_.plot_weights.empty(),
+                   "nothing to do: give --lf and --out to simulate, or --describe / "
+                   "--plot-weights DIR");
+    LFNET_CHECK_AS(ConfigError, !simulate_ || sources == 1,
+                   "--lf DIR, --scene SCENE.json or --white HxW is required to simulate");
+    LFNET_CHECK_AS(ConfigError, !simulate_ || !a_.out.empty(), "--out DIR is required to simulate");
+    if (!a_.camera_error.empty()) {
+      camera_error_ = optics::CalibrationError::from_json(
+          read_json_argument(a_.camera_error, "--camera-error"),
+          json_argument_source(a_.camera_error, "--camera-error"));
+      LFNET_CHECK_AS(ConfigError, a_.mode == optics::SimulationMode::kSensor,
+                     "--camera-error is simulated in sensor mode only");
+    }
+    check_outputs();
+  }
+
+  SimulateResult run() {
+    SimulateInput input;
+    int64_t rows = 0, cols = 0;
+    if (simulate_) {
+      Stopwatch load;
+      input = load_simulate_input(a_.source);
+      rows = input.lf.rows();
+      cols = input.lf.cols();
+      spdlog::info("light field {} ({} s)", input.lf.shape_string(), load.seconds());
+    } else {
+      std::tie(rows, cols) = window_size(a_.source.views);
+    }
+    const auto phi = optics::make_phi(phi_for_window(a_.phi, rows, cols));
+    SimulateResult r;
+    if (a_.describe) r.description = describe_phi(*phi);
+    if (!a_.plot_weights.empty()) r.weights_file = plot_weights(*phi, a_.plot_weights, weights_);
+    if (!simulate_) return r;
+    SimulateRequest request;
+    request.lf = input.lf;
+    request.phi = phi.get();
+    request.effects = simulation_effects(a_.effects, a_.noise, input, a_.source.scene);
+    request.camera_error = camera_error_;
+    request.cfa = cfa_;
+    request.mode = a_.mode;
+    request.seed = a_.seed;
+    request.patch = a_.patch;
+    request.stride = a_.stride;
+    request.views = input.views;
+    request.source = input.source;
+    write_folder(a_.out, policy_, [&](const std::string& dir) { write_acquisition(request, dir); });
+    r.simulated = true;
+    return r;
+  }
+
+ private:
+  // Every file it reads (a noise switch's members and the files of its JSON options too) is
+  // kept from --out and --plot-weights, which are kept apart.
+  void check_outputs() {
+    policy_.force = a_.force;
+    policy_.inputs = {a_.source.lf, a_.source.scene, a_.effects,
+                      json_argument_file(a_.camera_error), json_argument_file(a_.cfa)};
+    if (fs::exists(a_.phi)) {  // a spec, a calibrated Phi or a model
+      for (const auto& path : model_input_files(a_.phi)) policy_.inputs.push_back(path);
+    }
+    weights_ = policy_;
+    weights_.option = "--plot-weights";
+    weights_.inputs.push_back(a_.out);
+    policy_.inputs.push_back(a_.plot_weights);
+    if (simulate_) check_output_folder(a_.out, policy_);
+    if (!a_.plot_weights.empty()) {
+      check_output_apart(a_.plot_weights, weights_.inputs, weights_.option);
+    }
+  }
+
+  SimulateOptions a_;  // a copy: a colour filter array implies a colour light field
+  std::optional<optics::ColourFilterArray> cfa_;
+  bool simulate_ = false;  // an acquisition folder to write, not only the Phi to show
+  optics::CalibrationError camera_error_;
+  OutputFolderPolicy policy_;   // --out
+  OutputFolderPolicy weights_;  // --plot-weights
+};
+
+}  // namespace
+
+SimulateResult simulate(const SimulateOptions& options) {
+  Simulation simulation(options);
+  simulation.check();
+  return simulation.run();
 }
 
 }  // namespace lfnet::pipeline

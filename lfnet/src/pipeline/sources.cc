@@ -11,6 +11,7 @@
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/text.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/calibration.h"
@@ -213,6 +214,33 @@ void check_sources(const LightFieldSources& sources, const std::string& where) {
     LFNET_CHECK_AS(ConfigError, fs::is_regular_file(sources.scenes[i], ec), where, ".scenes[", i,
                    "]: ", sources.scenes[i], " is not a file");
   }
+}
+
+LightFieldFolderInfo describe_light_field_folder(const std::string& dir, const std::string& orient,
+                                                 const std::string& layout_text) {
+  const auto orientation = AngularOrientation::parse(orient, "--orient");
+  const auto layout = io::scan_folder(dir, layout_text);
+  Stopwatch clock;
+  const LightField lf = reorient(io::read_light_field(dir, 0, layout_text), orientation);
+  const double seconds = clock.seconds();
+  const auto& d = lf.data();
+  const auto count = [](int64_t v) { return static_cast<long long>(v); };
+  std::string text =
+      format_text("folder:    %s\n", dir.c_str()) +
+      format_text("scheme:    %s\n", io::to_string(layout.scheme).c_str()) +
+      format_text("grid:      %lld x %lld views (U x V)\n", count(lf.rows()), count(lf.cols())) +
+      format_text("view size: %lld x %lld (W x H), %lld channel(s)\n", count(lf.width()),
+                  count(lf.height()), count(lf.channels())) +
+      format_text("shape:     %s (C x U x V x H x W)\n", lf.shape_string().c_str()) +
+      format_text("values:    min %.4f, max %.4f, mean %.4f\n", d.min().item<double>(),
+                  d.max().item<double>(), d.mean().item<double>()) +
+      format_text("loaded in: %.3f s\n", seconds);
+  if (!orientation.identity()) {
+    text += format_text("oriented:  %s\n", orientation.to_string().c_str());
+  }
+  const auto parallax = check_parallax(lf);
+  text += format_text("parallax:  %s\n", parallax.summary().c_str());
+  return {text, parallax.verdict == ParallaxVerdict::kDisagree};
 }
 
 }  // namespace lfnet::pipeline

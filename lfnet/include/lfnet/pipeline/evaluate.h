@@ -157,5 +157,9 @@ struct EvaluateResult {
 
 // Checks the request (before any work), loads the model, the Phi and the truth, and evaluates.
 EvaluateResult evaluate_request(const EvaluateRequest& request);
+// Writes an evaluation's estimate into `dir`: its views, their previews, the viewer page beside
+// the truth (r.keep_estimate), then evaluation.json of `record`, whose end_to_end_seconds is set
+// once the rest is written. Each step's memory is returned before the next.
+void write_evaluation(const EvaluateResult& r, nlohmann::json& record, const std::string& dir);
 
 }  // namespace lfnet::pipeline

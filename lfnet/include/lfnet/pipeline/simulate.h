@@ -81,4 +81,33 @@ optics::SensorOptions simulation_effects(const std::string& effects_file, double
 // values and condition numbers (by pixel phase for periodic models).
 std::string describe_phi(const optics::Phi& phi);
 
+// lfnet simulate: what to code, with which camera and sensor, into which folder; or only the
+// Phi described or its weights drawn.
+struct SimulateOptions {
+  SimulateSource source;      // the light field (or scene, or white frame), window, orientation
+  std::string phi = "asp:2";  // NAME[:N], a Phi spec, a calibrated-Phi folder or a model
+  optics::SimulationMode mode = optics::SimulationMode::kSensor;
+  double noise = -1;  // < 0: not given
+  uint64_t seed = 0;
+  std::string out;
+  std::string effects;       // EFFECTS.json
+  std::string camera_error;  // JSON or a file (optics/calibration.h)
+  std::string cfa;  // a Bayer pattern or JSON, inline or a file (optics/cfa.h); implies colour
+  int64_t stride = 5;
+  int64_t patch = 9;
+  bool force = false;
+  bool describe = false;     // describe the Phi (SimulateResult::description)
+  std::string plot_weights;  // folder for the Phi's angular-response figure
+};
+
+struct SimulateResult {
+  std::string description;   // with `describe`: describe_phi of the camera
+  std::string weights_file;  // with `plot_weights`: the PNG drawn
+  bool simulated = false;    // an acquisition folder was written to `out`
+};
+
+// Checks every argument and output before any work, then draws and describes the Phi and writes
+// the acquisition folder, as asked.
+SimulateResult simulate(const SimulateOptions& options);
+
 }  // namespace lfnet::pipeline

@@ -91,4 +91,14 @@ scene::RenderOptions scene_render_options(const std::string& scene_file);
 // the folder or file and `where` (a JSON path such as "$.evaluation.data").
 void check_sources(const LightFieldSources& sources, const std::string& where);
 
+// lfnet info: what a light-field folder holds (its naming scheme, grid, view size, shape, value
+// range, load time, orientation and parallax), as printable lines; `axis_reversed` when one
+// angular axis looks reversed against the other.
+struct LightFieldFolderInfo {
+  std::string text;
+  bool axis_reversed = false;
+};
+LightFieldFolderInfo describe_light_field_folder(const std::string& dir, const std::string& orient,
+                                                 const std::string& layout);
+
 }  // namespace lfnet::pipeline
