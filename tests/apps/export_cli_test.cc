@@ -62,10 +62,14 @@ lfnet::nn::LightFieldNet noise_aware_image_net(const lfnet::optics::Phi& phi) {
   o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
-  o.image.channels = 4;
-  o.image.levels = 2;
-  o.image.blocks = 1;
-  o.image.noise_input = true;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = 4;
+    image.levels = 2;
+    image.blocks = 1;
+    image.noise_input = true;
+    lfnet::nn::set_image_options(o, image);
+  }
   lfnet::nn::LightFieldNet net(o);
   const int64_t t = phi.period();
   net->set_phi(phi.pixel_weights(0, 0, t, t));
@@ -287,7 +291,7 @@ void export_shipped_models(size_t shard, size_t shards) {
     INFO(model.string());
     const std::string pt = tmp / (model.stem().string() + ".pt");
     std::string out;
-    const auto network = lfnet::nn::NetworkOptions::from_json(
+    const auto network = lfnet::nn::NetworkOptions::from_file_json(
         lfnet::train::load_checkpoint(model.string()).network, "$.network");
     if (!network.cfa.empty()) {
       // A colour net is not exported yet, and says so.

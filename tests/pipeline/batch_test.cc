@@ -40,8 +40,12 @@ void save_small_lfnet(const std::string& path) {
   no.architecture = nn::kLfnetArchitecture;
   no.measurements = phi->measurements();
   no.patch = {phi->rows(), phi->cols(), 16, 16};
-  no.image.channels = 6;
-  no.image.blocks = 1;
+  {
+    auto no_image = lfnet::nn::image_options(no);
+    no_image.channels = 6;
+    no_image.blocks = 1;
+    lfnet::nn::set_image_options(no, no_image);
+  }
   nn::LightFieldNet net(no);
   net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
   test::randomise_image_net(net, 5);

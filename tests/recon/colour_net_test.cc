@@ -20,9 +20,13 @@ nn::NetworkOptions colour_options(const optics::Phi& phi, const std::string& cfa
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
-  o.image.channels = 6;
-  o.image.levels = 3;
-  o.image.blocks = 1;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = 6;
+    image.levels = 3;
+    image.blocks = 1;
+    lfnet::nn::set_image_options(o, image);
+  }
   o.cfa = cfa;
   return o;
 }
@@ -138,7 +142,11 @@ TEST_CASE("a colour net starts from a grey one: the grey net's correction of the
           "[recon][image][colour]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto grey_options = colour_options(*phi, "");
-  grey_options.image.noise_input = true;
+  {
+    auto grey_options_image = lfnet::nn::image_options(grey_options);
+    grey_options_image.noise_input = true;
+    lfnet::nn::set_image_options(grey_options, grey_options_image);
+  }
   auto grey = net_of(grey_options, *phi);
   test::randomise_image_net(grey, 5);
   auto options = grey_options;
@@ -179,6 +187,9 @@ TEST_CASE("colour nets are checked", "[recon][image][colour]") {
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("cfa") && Catch::Contains("unknown Bayer"));
   o.cfa = "RGGB";
   o.architecture = nn::kPaperArchitecture;
+  // lfnet's U-Net options belong to lfnet alone.
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("image: these options belong to another"));
+  o.sections = nlohmann::json::object();
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("reconstructs colour"));
   o = colour_options(*phi, "RGGB");
   CHECK_NOTHROW(o.validate());

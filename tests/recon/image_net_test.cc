@@ -19,9 +19,13 @@ nn::NetworkOptions image_options(const optics::Phi& phi, int64_t levels = 3) {
   o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
-  o.image.channels = 6;
-  o.image.levels = levels;
-  o.image.blocks = 1;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = 6;
+    image.levels = levels;
+    image.blocks = 1;
+    lfnet::nn::set_image_options(o, image);
+  }
   return o;
 }
 
@@ -35,7 +39,11 @@ nn::LightFieldNet image_net(const optics::Phi& phi, int64_t levels = 3) {
 // A randomised net that reads the noise sigma, with phi's weights over one period.
 nn::LightFieldNet noise_aware_net(const optics::Phi& phi, uint64_t seed) {
   auto o = image_options(phi);
-  o.image.noise_input = true;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.noise_input = true;
+    lfnet::nn::set_image_options(o, image);
+  }
   nn::LightFieldNet net(o);
   net->set_phi(phi.pixel_weights(0, 0, phi.period(), phi.period()));
   test::randomise_image_net(net, seed);
@@ -145,21 +153,33 @@ TEST_CASE("the U-Net's FLOP count matches its layers", "[recon][image]") {
   nn::NetworkOptions o;
   o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = 2;
-  o.image.channels = 8;
-  o.image.levels = 1;
-  o.image.blocks = 1;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = 8;
+    image.levels = 1;
+    image.blocks = 1;
+    lfnet::nn::set_image_options(o, image);
+  }
   // pinv (2 N V), input conv (V -> c), one block (c -> c), output conv (c -> V), 3 x 3 each.
   const double v = 25, c = 8;
   CHECK(nn::image_pixel_flops(o) ==
         Approx(2 * 2 * v + 2 * 9 * (v * c + c * c + c * v)).epsilon(1e-12));
-  o.image.levels = 2;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.levels = 2;
+    lfnet::nn::set_image_options(o, image);
+  }
   // The second level adds a block at a quarter of the pixels, and the 2 x 2 down and up
   // convolutions between c and 2 c channels at a quarter of the pixels.
   const double two = 2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c +
                      (2 * 9 * 2 * c * 2 * c + 2 * 2 * 4 * c * 2 * c) / 4;
   CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + two).epsilon(1e-12));
   // Widths {c, 12}: the second level's block and the 2 x 2 convolutions use 12 channels.
-  o.image.widths = {8, 12};
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.widths = {8, 12};
+    lfnet::nn::set_image_options(o, image);
+  }
   const double narrow =
       2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c + (2 * 9 * 12 * 12 + 2 * 2 * 4 * c * 12) / 4;
   CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + narrow).epsilon(1e-12));
@@ -168,7 +188,9 @@ TEST_CASE("the U-Net's FLOP count matches its layers", "[recon][image]") {
 TEST_CASE("image.widths sets the channels of every level and is checked", "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto o = image_options(*phi, 3);
-  o.image.widths = {6, 12, 8};
+  auto image = nn::image_options(o);
+  image.widths = {6, 12, 8};
+  nn::set_image_options(o, image);
   nn::LightFieldNet net(o);
   auto params = lfnet::nn::image_layers(*net)->named_parameters();
   CHECK(params["enc1_0.weight"].sizes() == torch::IntArrayRef{12, 12, 3, 3});
@@ -176,15 +198,19 @@ TEST_CASE("image.widths sets the channels of every level and is checked", "[reco
   CHECK(params["up1.weight"].sizes() == torch::IntArrayRef{8, 12, 2, 2});
   CHECK(params["enc2_0.weight"].sizes() == torch::IntArrayRef{8, 8, 3, 3});
   const auto back = nn::NetworkOptions::from_json(o.to_json());
-  CHECK(back.image.widths == std::vector<int64_t>{6, 12, 8});
+  CHECK(nn::image_options(back).widths == std::vector<int64_t>{6, 12, 8});
   // Doubled widths spelled out build the default net.
-  o.image.widths = {6, 12, 24};
+  image.widths = {6, 12, 24};
+  nn::set_image_options(o, image);
   CHECK(nn::image_layers(*nn::LightFieldNet(o))->named_parameters()["enc2_0.weight"].size(0) == 24);
-  o.image.widths = {6, 12};
+  image.widths = {6, 12};
+  nn::set_image_options(o, image);
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.widths") && Catch::Contains("2 entries"));
-  o.image.widths = {8, 12, 8};
+  image.widths = {8, 12, 8};
+  nn::set_image_options(o, image);
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.widths") && Catch::Contains("channels 6"));
-  o.image.widths = {6, 0, 8};
+  image.widths = {6, 0, 8};
+  nn::set_image_options(o, image);
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("positive"));
 }
 
@@ -196,9 +222,17 @@ TEST_CASE("the lfnet architecture's options and Phi are checked", "[recon][image
   o.patch = {5, 5, 18, 16};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("multiples of 4"));
   o.patch = {5, 5, 16, 16};
-  o.image.levels = 0;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.levels = 0;
+    lfnet::nn::set_image_options(o, image);
+  }
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.levels"));
-  o.image.levels = 3;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.levels = 3;
+    lfnet::nn::set_image_options(o, image);
+  }
   nn::LightFieldNet net(o);
   CHECK_THROWS_WITH(net->set_phi(torch::rand({1, 512, 6400})),
                     Catch::Contains("pixel weights of one period"));
@@ -259,13 +293,21 @@ TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one d
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto narrow_options = image_options(*phi);
-  narrow_options.image.blocks = 2;
+  {
+    auto narrow_options_image = lfnet::nn::image_options(narrow_options);
+    narrow_options_image.blocks = 2;
+    lfnet::nn::set_image_options(narrow_options, narrow_options_image);
+  }
   nn::LightFieldNet narrow(narrow_options);
   narrow->set_phi(phi->pixel_weights(0, 0, 1, 1));
   test::randomise_image_net(narrow, 12);
   auto wide_options = narrow_options;
-  wide_options.image.channels = 10;
-  wide_options.image.noise_input = true;  // the input convolution gains an input channel too
+  {
+    auto wide_options_image = lfnet::nn::image_options(wide_options);
+    wide_options_image.channels = 10;
+    wide_options_image.noise_input = true;  // the input convolution gains an input channel too
+    lfnet::nn::set_image_options(wide_options, wide_options_image);
+  }
   nn::LightFieldNet wide(wide_options);
   wide->set_phi(phi->pixel_weights(0, 0, 1, 1));
   test::randomise_image_net(wide, 13);
@@ -325,7 +367,11 @@ TEST_CASE("a deeper U-Net with a narrower new level starts as the shallow one", 
   auto shallow = image_net(*phi, 2);
   test::randomise_image_net(shallow, 25);
   auto o = image_options(*phi, 3);
-  o.image.widths = {6, 12, 4};
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.widths = {6, 12, 4};
+    lfnet::nn::set_image_options(o, image);
+  }
   nn::LightFieldNet deep(o);
   const int64_t t = phi->period();
   deep->set_phi(phi->pixel_weights(0, 0, t, t));

@@ -41,9 +41,13 @@ void save_small_image_net(const std::string& cfa, uint64_t seed, const std::stri
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {5, 5, 16, 16};
-  o.image.channels = channels;
-  o.image.levels = 2;
-  o.image.blocks = 1;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = channels;
+    image.levels = 2;
+    image.blocks = 1;
+    lfnet::nn::set_image_options(o, image);
+  }
   o.cfa = cfa;
   nn::LightFieldNet net(o);
   net->set_phi(phi->pixel_weights(0, 0, 1, 1));

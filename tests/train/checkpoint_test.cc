@@ -230,7 +230,11 @@ TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[tra
   for (int64_t period : {1, 3}) {
     INFO("period " << period);
     auto o = lfnet::test::small_image_options(8, 4);
-    o.image.noise_input = period > 1;
+    {
+      auto image = lfnet::nn::image_options(o);
+      image.noise_input = period > 1;
+      lfnet::nn::set_image_options(o, image);
+    }
     torch::manual_seed(period);
     LightFieldNet net(o);
     net->set_phi(torch::rand({2, 3, 3, period, period}));

@@ -17,10 +17,14 @@ nn::LightFieldNet small_lfnet(bool noise_input) {
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {5, 5, 12, 12};
-  o.image.channels = 6;
-  o.image.levels = 2;
-  o.image.blocks = 1;
-  o.image.noise_input = noise_input;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = 6;
+    image.levels = 2;
+    image.blocks = 1;
+    image.noise_input = noise_input;
+    lfnet::nn::set_image_options(o, image);
+  }
   return nn::LightFieldNet(o);
 }
 

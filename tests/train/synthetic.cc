@@ -81,9 +81,13 @@ nn::NetworkOptions small_image_options(int64_t side, int64_t channels) {
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {3, 3, side, side};
-  o.image.channels = channels;
-  o.image.levels = 2;
-  o.image.blocks = 1;
+  {
+    auto image = lfnet::nn::image_options(o);
+    image.channels = channels;
+    image.levels = 2;
+    image.blocks = 1;
+    lfnet::nn::set_image_options(o, image);
+  }
   return o;
 }
 

@@ -468,7 +468,11 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
   lfnet::train::save_checkpoint(ck, path);
 
   auto wide_options = o;
-  wide_options.image.channels = 6;
+  {
+    auto wide_options_image = lfnet::nn::image_options(wide_options);
+    wide_options_image.channels = 6;
+    lfnet::nn::set_image_options(wide_options, wide_options_image);
+  }
   auto wide = make_net(wide_options, weights, 51);
   Trainer t(wide, quick_options("joint", "", 1), run_info(ck.phi));
   auto report = t.init_from(path);
@@ -484,7 +488,11 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
 
   // A deeper U-Net starts from the shallow one's weights and computes what it did.
   auto deep_options = o;
-  deep_options.image.levels = 3;
+  {
+    auto deep_options_image = lfnet::nn::image_options(deep_options);
+    deep_options_image.levels = 3;
+    lfnet::nn::set_image_options(deep_options, deep_options_image);
+  }
   auto deep = make_net(deep_options, weights, 53);
   Trainer d(deep, quick_options("joint", "", 1), run_info(ck.phi));
   auto deep_report = d.init_from(path);

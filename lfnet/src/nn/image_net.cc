@@ -13,21 +13,22 @@ namespace lfnet::nn {
 void ImageNetOptions::read(JsonReader& reader) { read_fields(reader, *this); }
 nlohmann::json ImageNetOptions::to_json() const { return fields_to_json(*this); }
 
-void ImageNetOptions::validate() const {
-  if (channels < 1) throw ConfigError("image.channels: must be positive");
-  if (levels < 1 || levels > 6) throw ConfigError("image.levels: must be 1 to 6");
-  if (blocks < 1) throw ConfigError("image.blocks: must be >= 1");
+void ImageNetOptions::validate(const std::string& key) const {
+  const std::string at = key.empty() ? key : key + ".";
+  if (channels < 1) throw ConfigError(at + "channels: must be positive");
+  if (levels < 1 || levels > 6) throw ConfigError(at + "levels: must be 1 to 6");
+  if (blocks < 1) throw ConfigError(at + "blocks: must be >= 1");
   if (widths.empty()) return;
   if (static_cast<int64_t>(widths.size()) != levels) {
-    throw ConfigError("image.widths: has " + std::to_string(widths.size()) +
-                      " entries for image.levels " + std::to_string(levels));
+    throw ConfigError(at + "widths: has " + std::to_string(widths.size()) + " entries for " + at +
+                      "levels " + std::to_string(levels));
   }
   if (widths.front() != channels) {
-    throw ConfigError("image.widths: starts with " + std::to_string(widths.front()) +
-                      ", not image.channels " + std::to_string(channels));
+    throw ConfigError(at + "widths: starts with " + std::to_string(widths.front()) + ", not " + at +
+                      "channels " + std::to_string(channels));
   }
   for (const int64_t w : widths) {
-    if (w < 1) throw ConfigError("image.widths: every entry must be positive");
+    if (w < 1) throw ConfigError(at + "widths: every entry must be positive");
   }
 }
 

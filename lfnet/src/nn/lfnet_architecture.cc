@@ -22,7 +22,8 @@ namespace {
 // The methods of an exported net of the lfnet architecture (docs/export.md). The U-Net is the
 // submodule `image`, traced from the C++ module itself; these methods repeat only the
 // per-pixel pseudo-inverse, the padding and the noise channel of this file, op for op
-// (reconstruct and simulate are every whole-image net's: kWholeImageScriptSource).
+// (reconstruct, simulate, forward and the input checks are every whole-image net's:
+// kWholeImageScriptSource).
 constexpr const char* kImageSource = R"TS(
 def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
     t = self.pixel_pinv.size(0)
@@ -37,10 +38,7 @@ def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
     return torch.einsum("ijnk,bnij->bkij", [m, x])
 
 def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
-    if sensor.dim() != 4 or sensor.size(1) != self.measurements:
-        raise ValueError("forward_image: expected sensor images (B, N, H, W) with N the measurements")
-    if phase < 0 or phase >= self.period * self.period:
-        raise ValueError("forward_image: phase outside [0, period^2)")
+    self.check_sensor_images(sensor, phase)
     b = sensor.size(0)
     h = sensor.size(2)
     w = sensor.size(3)
@@ -55,20 +53,19 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
         x = torch.cat([base, base.new_full([b, 1, base.size(2), base.size(3)], noise_sigma)], 1)
     out = base + self.image.forward(x)
     return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
-
-def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
-    return self.forward_image(sensor, phase, noise_sigma)
 )TS";
 
-// The prefix of the U-Net's parameter names: the network's submodule "image".
+// The prefix of the U-Net's parameter names: the network's submodule "image"; its options are
+// the section of the same name.
 constexpr std::string_view kImagePrefix = "image.";
+constexpr const char* kImageSection = "image";
 
 // The pseudo-inverse plus the U-Net's correction on a base (B, C U V, h, w), with a noise
 // channel (B sigmas, undefined: 0) when the net is noise-aware.
 torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
                      const torch::Tensor& noise) {
   const auto image = image_layers(net);
-  if (!net.options().image.noise_input) return base + image->forward(base);
+  if (!image->options().noise_input) return base + image->forward(base);
   auto sigma =
       noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
   auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
@@ -155,12 +152,17 @@ class LfnetArchitecture : public NetworkArchitecture {
   bool whole_image() const override { return true; }
   PhiInput phi_input() const override { return PhiInput::kPixelWeights; }
   bool learns_code() const override { return true; }
-  bool reads_noise(const NetworkOptions& o) const override { return o.image.noise_input; }
+  bool reads_noise(const NetworkOptions& o) const override { return image_options(o).noise_input; }
   bool colour() const override { return true; }
 
+  // Its options: the U-Net's, the section "image".
+  std::string options_section() const override { return kImageSection; }
+  nlohmann::json default_options() const override { return fields_to_json(ImageNetOptions{}); }
+
   void validate(const NetworkOptions& o) const override {
-    o.image.validate();
-    check_crop_multiple(o, o.image.multiple(), name());
+    const auto image = image_options(o);
+    image.validate(kImageSection);
+    check_crop_multiple(o, image.multiple(), name());
   }
 
   void build(LightFieldNetImpl& net) const override {
@@ -172,8 +174,9 @@ class LfnetArchitecture : public NetworkArchitecture {
       net.cfa_response = net.register_buffer("cfa_response", torch::zeros({3, 1, 1}));
     }
     const int64_t channels = o.colours() * views;
-    const int64_t in = channels + (o.image.noise_input ? 1 : 0);
-    net.register_module("image", ImageNet(o.image, in, channels));
+    const auto image = image_options(o);
+    const int64_t in = channels + (image.noise_input ? 1 : 0);
+    net.register_module("image", ImageNet(image, in, channels));
   }
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
@@ -222,7 +225,8 @@ class LfnetArchitecture : public NetworkArchitecture {
     const auto& o = net.options();
     LFNET_CHECK(sensor.dim() == 4, "forward_image: expected (B, N, H, W), got ", sensor.sizes());
     const auto& p = o.patch;
-    const int64_t m = o.image.multiple(), h = sensor.size(2), w = sensor.size(3);
+    const int64_t m = image_layers(net)->options().multiple(), h = sensor.size(2),
+                  w = sensor.size(3);
     const int64_t ph = (m - h % m) % m, pw = (m - w % m) % m;
     LFNET_CHECK(phase >= 0 && phase < net.phases(), "forward_image: phase ", phase, " outside [0, ",
                 net.phases(), ")");
@@ -237,7 +241,9 @@ class LfnetArchitecture : public NetworkArchitecture {
     return out.reshape({sensor.size(0), o.colours(), p.rows, p.cols, h, w});
   }
 
-  ImageTiling image_tiling(const NetworkOptions& o) const override { return o.image.tiling(); }
+  ImageTiling image_tiling(const NetworkOptions& o) const override {
+    return image_options(o).tiling();
+  }
 
   void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
     image_layers(net)->set_precision(dtype);
@@ -249,7 +255,7 @@ class LfnetArchitecture : public NetworkArchitecture {
 
   double image_flops(const NetworkOptions& o, int64_t height, int64_t width,
                      int64_t tile) const override {
-    return tiled_image_flops(o.image.tiling(), image_pixel_flops(o), height, width, tile);
+    return tiled_image_flops(image_tiling(o), image_pixel_flops(o), height, width, tile);
   }
 
   std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {
@@ -257,16 +263,17 @@ class LfnetArchitecture : public NetworkArchitecture {
     LFNET_CHECK_AS(ConfigError, o.colours() == 1, "a colour net (cfa ", o.cfa,
                    ") cannot be exported to TorchScript yet; ", "use its checkpoint");
     for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
-    const int64_t channels = o.patch.rows * o.patch.cols + (o.image.noise_input ? 1 : 0);
-    const int64_t m = o.image.multiple();
     auto module = image_layers(net);  // the same module, callable
+    const auto& image = module->options();
+    const int64_t channels = o.patch.rows * o.patch.cols + (image.noise_input ? 1 : 0);
+    const int64_t m = image.multiple();
     // The U-Net has no size-dependent operations, so one trace serves every image size.
     builder.trace(
         "image", [&](const torch::Tensor& x) { return module->forward(x); },
         torch::rand({1, channels, 2 * m, 2 * m}));
     builder.attribute("multiple", m);
-    builder.attribute("receptive_radius", o.image.receptive_radius());
-    builder.attribute("noise_input", o.image.noise_input);
+    builder.attribute("receptive_radius", image.receptive_radius());
+    builder.attribute("noise_input", image.noise_input);
     return std::string(kImageSource) + kWholeImageScriptSource;
   }
 
@@ -293,9 +300,9 @@ class LfnetArchitecture : public NetworkArchitecture {
                                              const WarmStartSource& from) const override {
     // A deeper U-Net starts as the shallower one (ImageNetImpl::start_new_levels).
     std::vector<std::string> names;
-    if (!from.network.is_object() || !from.network.contains("image")) return names;
-    const int64_t from_levels = from.network["image"].value("levels", int64_t{0});
-    if (from_levels < 1 || from_levels >= net.options().image.levels) return names;
+    if (!from.network.is_object() || !from.network.contains(kImageSection)) return names;
+    const int64_t from_levels = from.network[kImageSection].value("levels", int64_t{0});
+    if (from_levels < 1 || from_levels >= image_layers(net)->options().levels) return names;
     for (const auto& name : image_layers(net)->start_new_levels(from_levels)) {
       names.push_back(std::string(kImagePrefix) + name);
     }
@@ -340,6 +347,21 @@ torch::Tensor pixel_pseudo_inverses(const torch::Tensor& weights, double lambda)
   const auto a = weights.reshape({n, views, t, t}).permute({2, 3, 0, 1});  // (T, T, N, U V)
   const auto gram = torch::matmul(a, a.transpose(2, 3)) + lambda * torch::eye(n, a.options());
   return at::linalg_solve(gram, a);
+}
+
+ImageNetOptions image_options(const NetworkOptions& o) {
+  // Read strictly but not checked: the architecture's validate checks the values.
+  ImageNetOptions image;
+  const auto it = o.sections.find(kImageSection);
+  if (it == o.sections.end()) return image;
+  JsonReader reader(*it, kImageSection);
+  read_fields(reader, image);
+  reader.finish();
+  return image;
+}
+
+void set_image_options(NetworkOptions& o, const ImageNetOptions& image) {
+  o.set_section(kImageSection, image);
 }
 
 std::shared_ptr<ImageNetImpl> image_layers(const LightFieldNetImpl& net) {

@@ -45,6 +45,25 @@ NetworkOptions NetworkOptions::from_json(const nlohmann::json& j, const std::str
   return options;
 }
 
+NetworkOptions NetworkOptions::from_file_json(const nlohmann::json& j, const std::string& path) {
+  auto own = j;
+  if (own.is_object()) {
+    const auto it = own.find("architecture");
+    const std::string architecture = it != own.end() && it->is_string()
+                                         ? it->get<std::string>()
+                                         : std::string(kPaperArchitecture);
+    std::string kept;  // an unknown architecture is refused by from_json, naming it
+    for (const auto& name : registered_architectures()) {
+      if (name == architecture) kept = find_architecture(name).options_section();
+    }
+    for (const auto& name : registered_architectures()) {
+      const auto key = find_architecture(name).options_section();
+      if (!key.empty() && key != kept) own.erase(key);
+    }
+  }
+  return from_json(own, path);
+}
+
 void NetworkOptions::read(JsonReader& reader) {
   read_fields(reader, *this);
   // The sections of the architectures that own theirs, kept as read (validate parses them).
@@ -305,7 +324,7 @@ double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, in
 double image_pixel_flops(const NetworkOptions& o) {
   const int64_t views = o.patch.rows * o.patch.cols, channels = o.colours() * views;
   return 2.0 * static_cast<double>(o.measurements * views) +
-         o.image.pixel_flops(channels, channels);
+         image_options(o).pixel_flops(channels, channels);
 }
 
 double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {

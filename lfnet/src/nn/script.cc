@@ -200,6 +200,15 @@ std::string ScriptBuilder::literal(double value) {
 }
 
 const char* const kWholeImageScriptSource = R"TS(
+def check_sensor_images(self, sensor: Tensor, phase: int) -> None:
+    if sensor.dim() != 4 or sensor.size(1) != self.measurements:
+        raise ValueError("forward_image: expected sensor images (B, N, H, W) with N the measurements")
+    if phase < 0 or phase >= self.period * self.period:
+        raise ValueError("forward_image: phase outside [0, period^2)")
+
+def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
+    return self.forward_image(sensor, phase, noise_sigma)
+
 def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
     if sensor.dim() != 3 or sensor.size(0) != self.measurements:
         raise ValueError("reconstruct: expected a sensor image (N, H, W) with N the measurements")
@@ -369,7 +378,7 @@ ScriptedNetwork load_script(const std::string& path) {
                             "; this lfnet reads version " + std::to_string(kScriptFormatVersion) +
                             " (export it again)");
     }
-    net.network = NetworkOptions::from_json(net.metadata.at("network"), "$.network");
+    net.network = NetworkOptions::from_file_json(net.metadata.at("network"), "$.network");
     net.meta.phi = net.metadata.at("phi");
     net.meta.config = net.metadata.at("config");
     net.meta.period = net.metadata.at("period").get<int64_t>();

@@ -39,18 +39,7 @@ struct UnrolledOptions {
     f("shared", shared);
     f("denoiser", denoiser);
   }
-  void validate() const {
-    try {
-      denoiser.validate();
-    } catch (const ConfigError& e) {  // ImageNetOptions names its fields "image.*"
-      std::string what = e.what();
-      for (size_t at = 0; (at = what.find("image.", at)) != std::string::npos;) {
-        what.replace(at, 6, "denoiser.");
-        at += 9;
-      }
-      throw ConfigError(what);
-    }
-  }
+  void validate() const { denoiser.validate("denoiser"); }
   int64_t denoisers() const { return shared ? 1 : iterations; }
 };
 
@@ -114,10 +103,7 @@ def pixel_maps(self, period: Tensor, phase: int, h: int, w: int) -> Tensor:
     return period.index_select(0, rows).index_select(1, cols)
 
 def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
-    if sensor.dim() != 4 or sensor.size(1) != self.measurements:
-        raise ValueError("forward_image: expected sensor images (B, N, H, W) with N the measurements")
-    if phase < 0 or phase >= self.period * self.period:
-        raise ValueError("forward_image: phase outside [0, period^2)")
+    self.check_sensor_images(sensor, phase)
     b = sensor.size(0)
     h = sensor.size(2)
     w = sensor.size(3)
@@ -139,9 +125,6 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
         r = y - torch.einsum("ijnk,bkij->bnij", [a, z])
         x = z + self.step[k] * torch.einsum("ijnk,bnij->bkij", [p, r])
     return x.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
-
-def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
-    return self.forward_image(sensor, phase, noise_sigma)
 )TS";
 
 class UnrolledArchitecture : public NetworkArchitecture {

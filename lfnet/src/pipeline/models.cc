@@ -161,7 +161,7 @@ ModelFile load_model(const std::string& path, bool network) {
   model.phi = ckpt.phi;
   model.config = ckpt.config;
   try {
-    model.network = nn::NetworkOptions::from_json(ckpt.network, "$.network");
+    model.network = nn::NetworkOptions::from_file_json(ckpt.network, "$.network");
   } catch (const ConfigError& e) {
     throw CheckpointError(path + " has invalid network options: " + e.what());
   }

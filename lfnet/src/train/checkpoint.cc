@@ -359,7 +359,7 @@ std::vector<std::string> load_code_state(nn::LearnedPhi& code, const TensorMap& 
 nn::LightFieldNet build_net(const Checkpoint& checkpoint, const std::string& what) {
   nn::NetworkOptions options;
   try {
-    options = nn::NetworkOptions::from_json(checkpoint.network, "$.network");
+    options = nn::NetworkOptions::from_file_json(checkpoint.network, "$.network");
   } catch (const ConfigError& e) {
     throw CheckpointError(what + " has invalid network options: " + e.what());
   }

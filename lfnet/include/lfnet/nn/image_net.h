@@ -44,8 +44,9 @@ struct ImageNetOptions {
   }
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
-  // Throws ConfigError naming the bad field.
-  void validate() const;
+  // Throws ConfigError naming the bad field, under `key` when given (e.g. "denoiser.levels:
+  // ..."; read as a section, the section's key comes first).
+  void validate(const std::string& key = "") const;
 
   // Feature channels at `level` (0 = full resolution).
   int64_t width(int64_t level) const {

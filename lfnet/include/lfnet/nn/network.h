@@ -3,9 +3,9 @@
 // two-branch network of Gupta et al. 2017 on patches, docs/training.md; "lfnet", lfnet's U-Net
 // over whole sensor images, and "unrolled", an unrolled data-consistency network,
 // docs/architectures.md). An architecture's layers are its own: it registers them in build()
-// and finds them by name (LightFieldNetImpl::layer); its options are NetworkOptions' typed
-// fields for the built-in paper and lfnet architectures, and its own section of the options
-// (NetworkOptions::sections) for any other.
+// and finds them by name (LightFieldNetImpl::layer). Its options are its own section of the
+// options (NetworkOptions::sections: lfnet's U-Net "image", "unrolled"); the paper
+// architecture's are NetworkOptions' typed fields, the checkpoint format's top-level keys.
 //
 // The Phi is part of the net (the buffer `phi`), so a saved or exported model is
 // self-contained. Registered names are the checkpoint schema. The paper architecture:
@@ -116,8 +116,9 @@ struct CnnOptions {
 struct NetworkOptions {
   // A registered architecture (nn/architecture.h). "paper": the two-branch network of Gupta et
   // al. on patches (ae, cnn, branches, kernel, conv_algorithm, head_weights and residual
-  // apply). "lfnet": lfnet's own whole-image architecture (`image`): a U-Net over the per-pixel
-  // pseudo-inverse of the sensor image, trained on crops of `patch` (docs/architectures.md).
+  // apply). "lfnet": lfnet's own whole-image architecture (its section "image", image_options):
+  // a U-Net over the per-pixel pseudo-inverse of the sensor image, trained on crops of `patch`
+  // (docs/architectures.md).
   std::string architecture = kPaperArchitecture;
   PatchShape patch;                    // the patch the net reconstructs (lfnet: the training crop)
   int64_t measurements = 2;            // N: measurement channels per pixel
@@ -134,7 +135,6 @@ struct NetworkOptions {
   // (the scaled Phi^T y). Off by default: docs/models.md saw no gain from it.
   Residual residual = Residual::kNone;
   double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
-  ImageNetOptions image;      // the lfnet architecture's U-Net
   // A colour net (lfnet architecture): the Bayer pattern ("RGGB", "BGGR", "GRBG", "GBRG") of
   // the colour filter array over the coded pixels. The net reads the single mosaicked sensor
   // image and reconstructs the three colours of every view jointly (docs/architectures.md,
@@ -143,7 +143,7 @@ struct NetworkOptions {
   // How a colour net demosaics its per-pixel pseudo-inverse into its U-Net's input:
   // "bilinear" or "malvar" (gradient-corrected, optics/cfa.h). Grey nets ignore it.
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;
-  // The option sections of the architectures that own theirs (options_section(), e.g.
+  // The option sections of the architectures that own theirs (options_section(): "image",
   // "unrolled"), by key, as read: each is parsed and checked by its architecture
   // (section<T>()). A section of an architecture other than `architecture` is refused.
   nlohmann::json sections = nlohmann::json::object();
@@ -161,12 +161,15 @@ struct NetworkOptions {
     f("residual", residual);
     f("pinv_lambda", pinv_lambda, Range::closed(0, 1e3));
     f("architecture", architecture);
-    f("image", image);
     f("cfa", cfa);
     f("demosaic", demosaic);
   }
   // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
+  // A checkpoint's or an exported file's network options. Files written before each
+  // architecture kept its own section hold every built-in's (a paper net's "image"): the
+  // sections of other architectures are dropped, not refused.
+  static NetworkOptions from_file_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
   // Throws ConfigError naming the bad field (the architecture checks its own).
@@ -177,6 +180,11 @@ struct NetworkOptions {
   T section(const std::string& key) const {
     const auto it = sections.find(key);
     return options_from_json<T>(it == sections.end() ? nlohmann::json::object() : *it, key);
+  }
+  // Sets the section `key` to the fields of `value`.
+  template <typename T>
+  void set_section(const std::string& key, const T& value) {
+    sections[key] = fields_to_json(value);
   }
 
   // The registered class of `architecture`; a ConfigError when none is.
@@ -323,6 +331,11 @@ std::shared_ptr<CnnBranchImpl> cnn_branch(const LightFieldNetImpl& net);
 
 // The lfnet architecture's U-Net, the layer "image" of `net` (null for another architecture).
 std::shared_ptr<ImageNetImpl> image_layers(const LightFieldNetImpl& net);
+// The lfnet architecture's U-Net options: the section "image" of `o` (the defaults where it or a
+// key is absent), read strictly; their values are checked by NetworkOptions::validate.
+// set_image_options writes them.
+ImageNetOptions image_options(const NetworkOptions& o);
+void set_image_options(NetworkOptions& o, const ImageNetOptions& image);
 
 // y (B, M) times the phase's matrix of `stack` (P, M, D): (B, D). Groups the batch by phase.
 torch::Tensor apply_phase_stack(const torch::Tensor& y, const torch::Tensor& phase,

@@ -97,7 +97,8 @@ class ScriptBuilder {
 // forward_image(sensor, phase, noise_sigma) and the root's buffers phi (N, U, V, T, T) and
 // pixel_pinv and attributes multiple, receptive_radius, period and patch_shape:
 // reconstruct(sensor, tile, clamp, noise_sigma), the tiles of nn::image_tiles and
-// recon::reconstruct_sensor_tiled op for op, and simulate(lf).
+// recon::reconstruct_sensor_tiled op for op, simulate(lf), forward (forward_image), and
+// check_sensor_images(sensor, phase), the input checks each forward_image starts with.
 extern const char* const kWholeImageScriptSource;
 
 // The TorchScript module of `net` (its parameters copied, detached). Throws ConfigError when
