@@ -35,7 +35,8 @@ TEST_CASE("a checkpoint round-trips every field bit for bit", "[train][checkpoin
   lfnet::test::TempDir dir;
   Checkpoint ck;
   ck.config = {{"train", {{"lr", 0.001}, {"epochs", 3}}}, {"note", "ünïcode"}};
-  ck.network = NetworkOptions{}.to_json();
+  const NetworkOptions defaults;
+  ck.network = defaults.to_json();
   ck.phi = lfnet::test::synthetic_phi_spec("asp", 2, 0);
   ck.command_line = "lfnet train cfg.json --out 'my dir'";
   auto sparse = torch::zeros({64, 64});

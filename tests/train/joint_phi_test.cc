@@ -119,7 +119,8 @@ TEST_CASE("training the code alone lowers the loss of its network", "[train][joi
   // The code stays physical while it learns.
   CHECK(code->response().min().item<float>() >= 0.0f);
   CHECK(code->response().max().item<float>() <= 1.0f);
-  auto paper = nn::LightFieldNet(nn::NetworkOptions{});  // the paper's architecture
+  const nn::NetworkOptions paper_options;  // the paper's architecture
+  auto paper = nn::LightFieldNet(paper_options);
   CHECK_THROWS_WITH(train::joint_loss(paper, mask_code(1), batch, loss, 0),
                     Catch::Contains("cannot learn a code"));
 }
