@@ -17,7 +17,7 @@ const char* kTinyConfig = R"({
   "name": "tiny", "phi": "asp:2",
   "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
   "dataset": {"train_patches": 128, "validation_patches": 64, "seed": 2},
-  "network": {"residual": "pinv", "cnn": {"channels": 4}},
+  "network": {"paper": {"residual": "pinv", "cnn": {"channels": 4}}},
   "training": {"epochs": 1, "batch_size": 32, "progress": false},
   "stages": ["cnn"],
   "evaluation": {"data": {"random_scenes": 1, "random_seed": 99,

@@ -32,10 +32,12 @@ namespace {
 void write_checkpoint(const std::string& path) {
   auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse("asp:2"));
   lfnet::nn::NetworkOptions o;
-  o.ae.hidden = {64, 32, 64, 32, 64};
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
-  o.residual = lfnet::nn::Residual::kPinv;
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.ae.hidden = {64, 32, 64, 32, 64};
+    p.cnn.channels = 4;
+    p.cnn.depth = 3;
+    p.residual = lfnet::nn::Residual::kPinv;
+  });
   torch::manual_seed(3);
   lfnet::nn::LightFieldNet net(o);
   net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
@@ -62,14 +64,12 @@ lfnet::nn::LightFieldNet noise_aware_image_net(const lfnet::optics::Phi& phi) {
   o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
-  {
-    auto image = lfnet::nn::image_options(o);
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) {
     image.channels = 4;
     image.levels = 2;
     image.blocks = 1;
     image.noise_input = true;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   lfnet::nn::LightFieldNet net(o);
   const int64_t t = phi.period();
   net->set_phi(phi.pixel_weights(0, 0, t, t));

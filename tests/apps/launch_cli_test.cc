@@ -25,7 +25,7 @@ std::string tiny_config(int64_t epochs, int64_t train_patches) {
   "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
   "dataset": {"train_patches": )" +
          std::to_string(train_patches) + R"(, "validation_patches": 64, "seed": 2},
-  "network": {"residual": "pinv", "cnn": {"channels": 4}},
+  "network": {"paper": {"residual": "pinv", "cnn": {"channels": 4}}},
   "training": {"epochs": )" +
          std::to_string(epochs) + R"(, "batch_size": 32, "progress": false},
   "stages": ["cnn"]

@@ -138,7 +138,7 @@ config() {  # config EPOCHS PATCHES
   "name": "hosts", "phi": "asp:2",
   "data": {"random_scenes": 2, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
   "dataset": {"train_patches": $2, "validation_patches": 64, "seed": 2},
-  "network": {"residual": "pinv", "cnn": {"channels": 4}},
+  "network": {"paper": {"residual": "pinv", "cnn": {"channels": 4}}},
   "training": {"epochs": $1, "batch_size": 32, "progress": false},
   "stages": ["cnn"]
 }

@@ -19,6 +19,7 @@
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/train/checkpoint.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -76,9 +77,11 @@ void write_model(const std::string& path, const std::string& phi_name) {
   auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(phi_name));
   lfnet::nn::NetworkOptions o;
   o.measurements = phi->measurements();
-  o.ae.hidden = {16, 8, 16, 8, 16};
-  o.cnn.channels = 2;
-  o.cnn.depth = 2;
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.ae.hidden = {16, 8, 16, 8, 16};
+    p.cnn.channels = 2;
+    p.cnn.depth = 2;
+  });
   lfnet::nn::LightFieldNet net(o);
   net->set_phi(lfnet::optics::patch_matrix_stack(*phi, 9, 9));
   lfnet::train::Checkpoint c;
@@ -93,7 +96,7 @@ const char* kTinyConfig = R"({
   "name": "tiny", "phi": "asp:2",
   "data": {"random_scenes": 1, "random_seed": 5, "random_options": {"height": 64, "width": 64}},
   "dataset": {"train_patches": 64, "validation_patches": 32, "seed": 2},
-  "network": {"ae": {"hidden": [16, 8, 16, 8, 16]}, "cnn": {"channels": 2, "depth": 2}},
+  "network": {"paper": {"ae": {"hidden": [16, 8, 16, 8, 16]}, "cnn": {"channels": 2, "depth": 2}}},
   "training": {"epochs": 1, "batch_size": 32, "progress": false},
   "stages": ["cnn"]
 })";
@@ -119,7 +122,7 @@ TEST_CASE("malformed configs and unknown keys name the file and the JSON path",
       {"[1, 2]", "JSON object"},
       {"{\"name\": \"x\" \"phi\": 1}", "malformed JSON at byte"},
       {with("/trainng", nlohmann::json::object()), "$.trainng: unknown key"},
-      {with("/network/cnn/chanels", 4), "$.network.cnn.chanels: unknown key"},
+      {with("/network/paper/cnn/chanels", 4), "$.network.paper.cnn.chanels: unknown key"},
       {with("/training/epochs", "ten"), "$.training.epochs"},
       {with("/training/lr", -1), "$.training.lr: must lie in (0, 1e+12], got -1"},
       {with("/data/random_scenes", -2), "$.data.random_scenes"},

@@ -21,6 +21,7 @@
 #include "lfnet/optics/sensor.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/recon/reconstruct.h"
+#include "support/small_nets.h"
 
 using namespace lfnet;
 
@@ -149,9 +150,11 @@ nn::LightFieldNet small_net(const optics::Phi& phi) {
   torch::manual_seed(11);
   nn::NetworkOptions o;
   o.measurements = phi.measurements();
-  o.ae.hidden = {32, 16, 32, 16, 32};
-  o.cnn.channels = 2;
-  o.cnn.depth = 2;
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.ae.hidden = {32, 16, 32, 16, 32};
+    p.cnn.channels = 2;
+    p.cnn.depth = 2;
+  });
   nn::LightFieldNet net(o);
   net->set_phi(optics::patch_matrix_stack(phi, kPatch, kPatch));
   return net;

@@ -28,17 +28,19 @@ namespace {
 
 // A config of two quick stages.
 nlohmann::json two_stage_config(double lr = 1e-3) {
-  return {{"name", "two"},
-          {"phi", "asp:2"},
-          {"data",
-           {{"random_scenes", 1},
-            {"random_seed", 5},
-            {"random_options", {{"height", 64}, {"width", 64}}}}},
-          {"dataset", {{"train_patches", 64}, {"validation_patches", 32}, {"seed", 2}}},
-          {"network",
-           {{"ae", {{"hidden", {64, 32, 64, 32, 64}}}}, {"cnn", {{"depth", 2}, {"channels", 4}}}}},
-          {"training", {{"epochs", 1}, {"batch_size", 32}, {"lr", lr}, {"progress", false}}},
-          {"stages", {"ae", "cnn"}}};
+  return {
+      {"name", "two"},
+      {"phi", "asp:2"},
+      {"data",
+       {{"random_scenes", 1},
+        {"random_seed", 5},
+        {"random_options", {{"height", 64}, {"width", 64}}}}},
+      {"dataset", {{"train_patches", 64}, {"validation_patches", 32}, {"seed", 2}}},
+      {"network",
+       {{"paper",
+         {{"ae", {{"hidden", {64, 32, 64, 32, 64}}}}, {"cnn", {{"depth", 2}, {"channels", 4}}}}}}},
+      {"training", {{"epochs", 1}, {"batch_size", 32}, {"lr", lr}, {"progress", false}}},
+      {"stages", {"ae", "cnn"}}};
 }
 
 // A run of two_stage_config() in tmp/run (its config in tmp/two.json) with only its first stage

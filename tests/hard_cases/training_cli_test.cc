@@ -39,7 +39,8 @@ nlohmann::json tiny_config(int64_t epochs, int64_t ae_width, double lr = 1e-3) {
             {"random_options", {{"height", 64}, {"width", 64}}}}},
           {"dataset", {{"train_patches", 64}, {"validation_patches", 32}, {"seed", 2}}},
           {"network",
-           {{"ae", {{"hidden", {ae_width, ae_width / 2, ae_width, ae_width / 2, ae_width}}}}}},
+           {{"paper",
+             {{"ae", {{"hidden", {ae_width, ae_width / 2, ae_width, ae_width / 2, ae_width}}}}}}}},
           {"training", {{"epochs", epochs}, {"batch_size", 32}, {"lr", lr}, {"progress", false}}},
           {"stages", {"ae"}}};
 }

@@ -28,7 +28,9 @@ TEST_CASE("each branch and the two-branch net give (B, 1, U, V, h, w)", "[nn][ne
   for (const std::string branches : {"ae", "cnn", "net"}) {
     INFO(branches);
     NetworkOptions o;  // defaults: 5 x 5 x 9 x 9 patches, N = 2
-    o.branches = lfnet::nn::from_string(branches, o.branches);
+    lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+      p.branches = lfnet::nn::from_string(branches, p.branches);
+    });
     LightFieldNet net(o);
     net->set_phi(random_phi(o, 1, 1));
     auto y = torch::rand({3, 162});
@@ -70,7 +72,7 @@ TEST_CASE("the head averages the branch outputs with the configured weights", "[
     INFO(weights[0] << ", " << weights[1]);
     torch::manual_seed(1);
     auto o = lfnet::test::small_network_options("net");
-    o.head_weights = weights;
+    lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) { p.head_weights = weights; });
     LightFieldNet net(o);
     net->set_phi(random_phi(o, 1, 2));
     auto y = torch::rand({4, o.measurement_size()});
@@ -97,7 +99,9 @@ TEST_CASE("the phi buffer drives the CNN branch, the measurement AE ignores it",
   CHECK((first.cnn - second.cnn).abs().max().item<double>() > 1e-4);
   lfnet::test::require_close(first.ae, second.ae, 0);
 
-  o.ae.input = lfnet::nn::AeInput::kAdjoint;  // then the AE reads Phi^T y and changes too
+  // Then the AE reads Phi^T y and changes too.
+  lfnet::test::edit_paper(
+      o, [](lfnet::nn::PaperOptions& p) { p.ae.input = lfnet::nn::AeInput::kAdjoint; });
   LightFieldNet net2(o);
   net2->set_phi(random_phi(o, 1, 3));
   auto a = net2->forward_all(y).ae;
@@ -146,7 +150,8 @@ TEST_CASE("the adjoint of a flat patch under a view-averaging Phi is the flat pa
 TEST_CASE("the pinv residual adds the Tikhonov pseudo-inverse estimate", "[nn][network]") {
   torch::manual_seed(4);
   auto o = lfnet::test::small_network_options("ae");
-  o.residual = lfnet::nn::Residual::kPinv;
+  lfnet::test::edit_paper(
+      o, [&](lfnet::nn::PaperOptions& p) { p.residual = lfnet::nn::Residual::kPinv; });
   o.pinv_lambda = 1e-2;
   LightFieldNet net(o);
   auto stack = random_phi(o, 2, 6);
@@ -187,25 +192,62 @@ TEST_CASE("Phi switching maps measurement weights through the new Phi's pseudo-i
 
 TEST_CASE("network options parse strictly, round-trip and validate", "[nn][network]") {
   auto j = nlohmann::json::parse(R"({"patch": {"rows": 3, "cols": 3, "height": 7, "width": 7},
-      "measurements": 4, "branches": "cnn", "ae": {"hidden": [10, 5, 10, 5, 10]},
-      "cnn": {"channels": 8, "depth": 2}, "head_weights": [0.25, 0.75], "residual": "pinv"})");
+      "measurements": 4, "paper": {"branches": "cnn", "ae": {"hidden": [10, 5, 10, 5, 10]},
+      "cnn": {"channels": 8, "depth": 2}, "head_weights": [0.25, 0.75], "residual": "pinv"}})");
   auto o = NetworkOptions::from_json(j);
   CHECK(o.patch.size() == 3 * 3 * 7 * 7);
   CHECK(o.measurement_size() == 4 * 49);
-  CHECK(o.cnn.channels == 8);
-  CHECK(o.head_weights[1] == 0.75);
+  const auto paper = lfnet::nn::paper_options(o);
+  CHECK(paper.cnn.channels == 8);
+  CHECK(paper.head_weights[1] == 0.75);
+  CHECK(o.branches() == lfnet::nn::Branches::kCnn);
+  CHECK_FALSE(o.has_ae());
   CHECK(NetworkOptions::from_json(o.to_json()).to_json() == o.to_json());
+  // A file holds the section in full: the keys not given, at their defaults.
+  CHECK(o.to_json()["paper"]["kernel"] == 3);
+  CHECK(o.to_json()["paper"]["conv_algorithm"] == "auto");
 
   CHECK_THROWS_WITH(
-      NetworkOptions::from_json(nlohmann::json::parse(R"({"cnn": {"chanels": 3}})"), "$.network"),
-      Catch::Contains("$.network.cnn.chanels"));
-  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"branches": "both"})")),
-                    Catch::Contains("$.branches") && Catch::Contains("net, ae, cnn"));
+      NetworkOptions::from_json(nlohmann::json::parse(R"({"paper": {"cnn": {"chanels": 3}}})"),
+                                "$.network"),
+      Catch::Contains("$.network.paper.cnn.chanels"));
   CHECK_THROWS_WITH(
-      NetworkOptions::from_json(nlohmann::json::parse(R"({"ae": {"hidden": [1, 2]}})")),
-      Catch::Contains("$.ae.hidden"));
-  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"kernel": 2})")),
-                    Catch::Contains("$.kernel"));
+      NetworkOptions::from_json(nlohmann::json::parse(R"({"paper": {"branches": "both"}})")),
+      Catch::Contains("$.paper.branches") && Catch::Contains("net, ae, cnn"));
+  CHECK_THROWS_WITH(
+      NetworkOptions::from_json(nlohmann::json::parse(R"({"paper": {"ae": {"hidden": [1, 2]}}})")),
+      Catch::Contains("$.paper.ae.hidden"));
+  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(R"({"paper": {"kernel": 2}})")),
+                    Catch::Contains("$.paper.kernel"));
+  // The paper's keys at the top level, as files held them before the section: a config is told
+  // where they go; a checkpoint's are read as the section.
+  CHECK_THROWS_WITH(
+      NetworkOptions::from_json(nlohmann::json::parse(R"({"kernel": 5})"), "$.network"),
+      Catch::Contains("$.network.kernel") && Catch::Contains("$.network.paper.kernel"));
+  const auto old = nlohmann::json::parse(R"({"measurements": 4, "branches": "ae",
+      "patch": {"rows": 5, "cols": 5, "height": 16, "width": 16},
+      "cnn": {"channels": 8, "depth": 2}, "residual": "pinv", "image": {"channels": 32}})");
+  const auto read = NetworkOptions::from_file_json(old);
+  CHECK(read.branches() == lfnet::nn::Branches::kAe);
+  CHECK(lfnet::nn::paper_options(read).cnn.channels == 8);
+  CHECK(lfnet::nn::paper_options(read).residual == lfnet::nn::Residual::kPinv);
+  CHECK_FALSE(read.to_json().contains("image"));
+  CHECK_FALSE(read.to_json().contains("residual"));
+  // Another architecture's file drops them.
+  auto old_lfnet = old;
+  old_lfnet["architecture"] = "lfnet";
+  const auto lfnet_read = NetworkOptions::from_file_json(old_lfnet);
+  CHECK(lfnet_read.branches() == lfnet::nn::Branches::kNet);
+  CHECK_FALSE(lfnet_read.has_ae());
+  CHECK_FALSE(lfnet_read.to_json().contains("paper"));
+  CHECK(lfnet_read.to_json()["image"]["channels"] == 32);
+  // A paper section given to another architecture is refused.
+  CHECK_THROWS_WITH(NetworkOptions::from_json(nlohmann::json::parse(
+                        R"({"architecture": "lfnet", "paper": {"kernel": 5}})")),
+                    Catch::Contains("paper") && Catch::Contains("another architecture"));
+  auto lfnet_options = lfnet_read;
+  CHECK_THROWS_WITH(lfnet_options.set_branches(lfnet::nn::Branches::kAe),
+                    Catch::Contains("no branches"));
   CHECK_THROWS_AS(NetworkOptions::from_json(nlohmann::json::parse(R"({"measurements": "2"})")),
                   lfnet::ConfigError);
 }
@@ -237,7 +279,8 @@ TEST_CASE("the net trains: gradients reach every parameter", "[nn][network]") {
 
 TEST_CASE("forward_all runs only the selected branches", "[nn][network]") {
   auto o = lfnet::test::small_network_options("net");
-  o.residual = lfnet::nn::Residual::kPinv;
+  lfnet::test::edit_paper(
+      o, [&](lfnet::nn::PaperOptions& p) { p.residual = lfnet::nn::Residual::kPinv; });
   torch::manual_seed(5);
   LightFieldNet net(o);
   net->set_phi(random_phi(o, 2, 11));

@@ -43,30 +43,38 @@ std::vector<Variant> variants() {
   {
     Variant x{"net, 4 phases, pinv residual, stacked", lfnet::test::small_network_options("net"),
               2};
-    x.options.residual = lfnet::nn::Residual::kPinv;
-    x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kStacked;
+    lfnet::test::edit_paper(x.options, [&](lfnet::nn::PaperOptions& p) {
+      p.residual = lfnet::nn::Residual::kPinv;
+      p.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kStacked;
+    });
     v.push_back(x);
   }
   {
     Variant x{"net, dense Phi, adjoint residual, fused_input, weights not summing to 1",
               lfnet::test::small_network_options("net"), 1, false};
-    x.options.residual = lfnet::nn::Residual::kAdjoint;
-    x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedInput;
-    x.options.head_weights = {0.7, 0.6};
+    lfnet::test::edit_paper(x.options, [&](lfnet::nn::PaperOptions& p) {
+      p.residual = lfnet::nn::Residual::kAdjoint;
+      p.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedInput;
+      p.head_weights = {0.7, 0.6};
+    });
     v.push_back(x);
   }
   {
     Variant x{"ae on the adjoint, 4 phases, fused_output", lfnet::test::small_network_options("ae"),
               2};
-    x.options.ae.input = lfnet::nn::AeInput::kAdjoint;
-    x.options.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedOutput;
+    lfnet::test::edit_paper(x.options, [&](lfnet::nn::PaperOptions& p) {
+      p.ae.input = lfnet::nn::AeInput::kAdjoint;
+      p.conv_algorithm = lfnet::nn::Conv4dAlgorithm::kFusedOutput;
+    });
     v.push_back(x);
   }
   {
     Variant x{"cnn, 9 phases, dense Phi, pinv residual, kernel 5",
               lfnet::test::small_network_options("cnn"), 3, false};
-    x.options.residual = lfnet::nn::Residual::kPinv;
-    x.options.kernel = 5;
+    lfnet::test::edit_paper(x.options, [&](lfnet::nn::PaperOptions& p) {
+      p.residual = lfnet::nn::Residual::kPinv;
+      p.kernel = 5;
+    });
     v.push_back(x);
   }
   return v;
@@ -137,7 +145,7 @@ TEST_CASE("an exported net gives the C++ net's outputs, in memory and after a ro
                           Catch::Contains("has no '" + branch + "' branch"));
         continue;
       }
-      auto branch_want = variant.options.branches == lfnet::nn::Branches::kNet
+      auto branch_want = variant.options.branches() == lfnet::nn::Branches::kNet
                              ? (parts.base.defined() ? t + parts.base : t)
                              : parts.output;
       CHECK(max_abs_diff(loaded.forward(y, ph, branch), branch_want.reshape(shape)) <= 1e-5);

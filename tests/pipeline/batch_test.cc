@@ -40,12 +40,10 @@ void save_small_lfnet(const std::string& path) {
   no.architecture = nn::kLfnetArchitecture;
   no.measurements = phi->measurements();
   no.patch = {phi->rows(), phi->cols(), 16, 16};
-  {
-    auto no_image = lfnet::nn::image_options(no);
+  lfnet::test::edit_image(no, [&](lfnet::nn::ImageNetOptions& no_image) {
     no_image.channels = 6;
     no_image.blocks = 1;
-    lfnet::nn::set_image_options(no, no_image);
-  }
+  });
   nn::LightFieldNet net(no);
   net->set_phi(phi->pixel_weights(0, 0, phi->period(), phi->period()));
   test::randomise_image_net(net, 5);

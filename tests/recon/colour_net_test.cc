@@ -20,13 +20,11 @@ nn::NetworkOptions colour_options(const optics::Phi& phi, const std::string& cfa
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
-  {
-    auto image = lfnet::nn::image_options(o);
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) {
     image.channels = 6;
     image.levels = 3;
     image.blocks = 1;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   o.cfa = cfa;
   return o;
 }
@@ -142,11 +140,9 @@ TEST_CASE("a colour net starts from a grey one: the grey net's correction of the
           "[recon][image][colour]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto grey_options = colour_options(*phi, "");
-  {
-    auto grey_options_image = lfnet::nn::image_options(grey_options);
+  lfnet::test::edit_image(grey_options, [&](lfnet::nn::ImageNetOptions& grey_options_image) {
     grey_options_image.noise_input = true;
-    lfnet::nn::set_image_options(grey_options, grey_options_image);
-  }
+  });
   auto grey = net_of(grey_options, *phi);
   test::randomise_image_net(grey, 5);
   auto options = grey_options;

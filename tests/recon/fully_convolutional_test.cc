@@ -5,6 +5,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/methods.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 using namespace lfnet;
@@ -15,13 +16,15 @@ nn::LightFieldNet make_net(const optics::Phi& phi, int64_t kernel, const std::st
                            const std::string& residual) {
   nn::NetworkOptions o;
   o.measurements = phi.measurements();
-  o.kernel = kernel;
-  o.branches = lfnet::nn::from_string(branches, o.branches);
-  o.residual = lfnet::nn::from_string(residual, o.residual);
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
-  o.ae.hidden = {32, 16, 32, 16, 32};
-  if (branches == "net") o.head_weights = {0.3, 0.7};
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.kernel = kernel;
+    p.branches = lfnet::nn::from_string(branches, p.branches);
+    p.residual = lfnet::nn::from_string(residual, p.residual);
+    p.cnn.channels = 4;
+    p.cnn.depth = 3;
+    p.ae.hidden = {32, 16, 32, 16, 32};
+    if (branches == "net") p.head_weights = {0.3, 0.7};
+  });
   torch::manual_seed(3);
   nn::LightFieldNet net(o);
   net->set_phi(optics::patch_matrix_stack(phi, 9, 9));
@@ -32,8 +35,10 @@ nn::LightFieldNet make_net(const optics::Phi& phi, int64_t kernel, const std::st
 
 TEST_CASE("the CNN over a light field in tiles equals one pass over the whole", "[recon]") {
   nn::NetworkOptions o;
-  o.cnn.channels = 3;
-  o.cnn.depth = 3;
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.cnn.channels = 3;
+    p.cnn.depth = 3;
+  });
   torch::manual_seed(1);
   nn::CnnBranch cnn(o);
   // Larger biases make the zero padding of every layer's activations at the border matter.

@@ -19,13 +19,11 @@ nn::NetworkOptions image_options(const optics::Phi& phi, int64_t levels = 3) {
   o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = phi.measurements();
   o.patch = {phi.rows(), phi.cols(), 16, 16};
-  {
-    auto image = lfnet::nn::image_options(o);
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) {
     image.channels = 6;
     image.levels = levels;
     image.blocks = 1;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   return o;
 }
 
@@ -39,11 +37,7 @@ nn::LightFieldNet image_net(const optics::Phi& phi, int64_t levels = 3) {
 // A randomised net that reads the noise sigma, with phi's weights over one period.
 nn::LightFieldNet noise_aware_net(const optics::Phi& phi, uint64_t seed) {
   auto o = image_options(phi);
-  {
-    auto image = lfnet::nn::image_options(o);
-    image.noise_input = true;
-    lfnet::nn::set_image_options(o, image);
-  }
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) { image.noise_input = true; });
   nn::LightFieldNet net(o);
   net->set_phi(phi.pixel_weights(0, 0, phi.period(), phi.period()));
   test::randomise_image_net(net, seed);
@@ -153,33 +147,23 @@ TEST_CASE("the U-Net's FLOP count matches its layers", "[recon][image]") {
   nn::NetworkOptions o;
   o.architecture = lfnet::nn::kLfnetArchitecture;
   o.measurements = 2;
-  {
-    auto image = lfnet::nn::image_options(o);
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) {
     image.channels = 8;
     image.levels = 1;
     image.blocks = 1;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   // pinv (2 N V), input conv (V -> c), one block (c -> c), output conv (c -> V), 3 x 3 each.
   const double v = 25, c = 8;
   CHECK(nn::image_pixel_flops(o) ==
         Approx(2 * 2 * v + 2 * 9 * (v * c + c * c + c * v)).epsilon(1e-12));
-  {
-    auto image = lfnet::nn::image_options(o);
-    image.levels = 2;
-    lfnet::nn::set_image_options(o, image);
-  }
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) { image.levels = 2; });
   // The second level adds a block at a quarter of the pixels, and the 2 x 2 down and up
   // convolutions between c and 2 c channels at a quarter of the pixels.
   const double two = 2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c +
                      (2 * 9 * 2 * c * 2 * c + 2 * 2 * 4 * c * 2 * c) / 4;
   CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + two).epsilon(1e-12));
   // Widths {c, 12}: the second level's block and the 2 x 2 convolutions use 12 channels.
-  {
-    auto image = lfnet::nn::image_options(o);
-    image.widths = {8, 12};
-    lfnet::nn::set_image_options(o, image);
-  }
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) { image.widths = {8, 12}; });
   const double narrow =
       2 * 9 * (v * c + c * c + c * v) + 2 * 9 * c * c + (2 * 9 * 12 * 12 + 2 * 2 * 4 * c * 12) / 4;
   CHECK(nn::image_pixel_flops(o) == Approx(2 * 2 * v + narrow).epsilon(1e-12));
@@ -222,17 +206,9 @@ TEST_CASE("the lfnet architecture's options and Phi are checked", "[recon][image
   o.patch = {5, 5, 18, 16};
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("multiples of 4"));
   o.patch = {5, 5, 16, 16};
-  {
-    auto image = lfnet::nn::image_options(o);
-    image.levels = 0;
-    lfnet::nn::set_image_options(o, image);
-  }
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) { image.levels = 0; });
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("image.levels"));
-  {
-    auto image = lfnet::nn::image_options(o);
-    image.levels = 3;
-    lfnet::nn::set_image_options(o, image);
-  }
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) { image.levels = 3; });
   nn::LightFieldNet net(o);
   CHECK_THROWS_WITH(net->set_phi(torch::rand({1, 512, 6400})),
                     Catch::Contains("pixel weights of one period"));
@@ -293,21 +269,17 @@ TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one d
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
   auto narrow_options = image_options(*phi);
-  {
-    auto narrow_options_image = lfnet::nn::image_options(narrow_options);
+  lfnet::test::edit_image(narrow_options, [&](lfnet::nn::ImageNetOptions& narrow_options_image) {
     narrow_options_image.blocks = 2;
-    lfnet::nn::set_image_options(narrow_options, narrow_options_image);
-  }
+  });
   nn::LightFieldNet narrow(narrow_options);
   narrow->set_phi(phi->pixel_weights(0, 0, 1, 1));
   test::randomise_image_net(narrow, 12);
   auto wide_options = narrow_options;
-  {
-    auto wide_options_image = lfnet::nn::image_options(wide_options);
+  lfnet::test::edit_image(wide_options, [&](lfnet::nn::ImageNetOptions& wide_options_image) {
     wide_options_image.channels = 10;
     wide_options_image.noise_input = true;  // the input convolution gains an input channel too
-    lfnet::nn::set_image_options(wide_options, wide_options_image);
-  }
+  });
   nn::LightFieldNet wide(wide_options);
   wide->set_phi(phi->pixel_weights(0, 0, 1, 1));
   test::randomise_image_net(wide, 13);
@@ -367,11 +339,7 @@ TEST_CASE("a deeper U-Net with a narrower new level starts as the shallow one", 
   auto shallow = image_net(*phi, 2);
   test::randomise_image_net(shallow, 25);
   auto o = image_options(*phi, 3);
-  {
-    auto image = lfnet::nn::image_options(o);
-    image.widths = {6, 12, 4};
-    lfnet::nn::set_image_options(o, image);
-  }
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) { image.widths = {6, 12, 4}; });
   nn::LightFieldNet deep(o);
   const int64_t t = phi->period();
   deep->set_phi(phi->pixel_weights(0, 0, t, t));

@@ -5,6 +5,7 @@
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/methods.h"
 #include "lfnet/recon/reconstruct.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 using namespace lfnet;
@@ -21,10 +22,12 @@ nn::NetworkOptions small_options() {
   nn::NetworkOptions o;
   o.patch = {3, 3, 5, 5};
   o.measurements = 2;
-  o.ae.hidden = {40, 20, 40, 20, 40};
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
-  o.residual = lfnet::nn::Residual::kPinv;
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.ae.hidden = {40, 20, 40, 20, 40};
+    p.cnn.channels = 4;
+    p.cnn.depth = 3;
+    p.residual = lfnet::nn::Residual::kPinv;
+  });
   return o;
 }
 

@@ -10,10 +10,12 @@ nn::NetworkOptions small_network_options(const std::string& branches) {
   nn::NetworkOptions o;
   o.patch = {3, 3, 5, 5};
   o.measurements = 2;
-  o.branches = nn::from_string(branches, o.branches);
-  o.ae.hidden = {40, 20, 40, 20, 40};
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
+  edit_paper(o, [&](nn::PaperOptions& p) {
+    p.branches = nn::from_string(branches, p.branches);
+    p.ae.hidden = {40, 20, 40, 20, 40};
+    p.cnn.channels = 4;
+    p.cnn.depth = 3;
+  });
   return o;
 }
 
@@ -41,13 +43,11 @@ void save_small_image_net(const std::string& cfa, uint64_t seed, const std::stri
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {5, 5, 16, 16};
-  {
-    auto image = lfnet::nn::image_options(o);
+  edit_image(o, [&](nn::ImageNetOptions& image) {
     image.channels = channels;
     image.levels = 2;
     image.blocks = 1;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   o.cfa = cfa;
   nn::LightFieldNet net(o);
   net->set_phi(phi->pixel_weights(0, 0, 1, 1));

@@ -9,6 +9,23 @@
 
 namespace lfnet::test {
 
+// Edits the paper architecture's section of `o` in place:
+// edit_paper(o, [](nn::PaperOptions& p) { p.kernel = 5; }).
+template <typename Edit>
+void edit_paper(nn::NetworkOptions& o, Edit&& edit) {
+  auto paper = nn::paper_options(o);
+  edit(paper);
+  nn::set_paper_options(o, paper);
+}
+
+// The same for lfnet's U-Net, the section "image".
+template <typename Edit>
+void edit_image(nn::NetworkOptions& o, Edit&& edit) {
+  auto image = nn::image_options(o);
+  edit(image);
+  nn::set_image_options(o, image);
+}
+
 // The paper's two-branch network at toy size: 3 x 3 x 5 x 5 patches, N = 2, a 40-20-40-20-40
 // autoencoder and a 3-layer CNN of 4 channels; `branches` "net", "ae" or "cnn".
 nn::NetworkOptions small_network_options(const std::string& branches = "net");

@@ -8,6 +8,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/train/trainer.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 #include "synthetic.h"
 
@@ -94,9 +95,11 @@ TEST_CASE("save then load gives identical outputs for every model", "[train][che
         INFO(branches << " residual " << residual << " phases " << phases);
         torch::manual_seed(10 + case_index);
         auto o = lfnet::test::small_net_options(branches);
-        o.residual = lfnet::nn::from_string(residual, o.residual);
-        o.ae.input =
-            case_index % 2 ? lfnet::nn::AeInput::kAdjoint : lfnet::nn::AeInput::kMeasurements;
+        lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+          p.residual = lfnet::nn::from_string(residual, p.residual);
+          p.ae.input =
+              case_index % 2 ? lfnet::nn::AeInput::kAdjoint : lfnet::nn::AeInput::kMeasurements;
+        });
         LightFieldNet net(o);
         net->set_phi(
             lfnet::test::gaussian_phi(phases, o.measurement_size(), o.patch.size(), case_index));
@@ -161,14 +164,14 @@ TEST_CASE("a checkpoint of another architecture is refused with the differences"
   LightFieldNet net(o);
   auto state = lfnet::train::module_state(*net);
   auto wider = o;
-  wider.cnn.channels = 6;
+  lfnet::test::edit_paper(wider, [&](lfnet::nn::PaperOptions& p) { p.cnn.channels = 6; });
   LightFieldNet other(wider);
   CHECK_THROWS_AS(lfnet::train::load_net_state(other, state, "checkpoint x"), CheckpointError);
   CHECK_THROWS_WITH(lfnet::train::load_net_state(other, state, "checkpoint x"),
                     Catch::Contains("checkpoint x holds another architecture") &&
                         Catch::Contains("cnn.conv1.weight"));
   auto deeper = o;
-  deeper.cnn.depth = 4;
+  lfnet::test::edit_paper(deeper, [&](lfnet::nn::PaperOptions& p) { p.cnn.depth = 4; });
   LightFieldNet other2(deeper);
   CHECK_THROWS_WITH(lfnet::train::load_net_state(other2, state, "ck"),
                     Catch::Contains("lacks cnn.conv4.weight"));
@@ -231,11 +234,8 @@ TEST_CASE("an lfnet-architecture checkpoint round-trips for every period", "[tra
   for (int64_t period : {1, 3}) {
     INFO("period " << period);
     auto o = lfnet::test::small_image_options(8, 4);
-    {
-      auto image = lfnet::nn::image_options(o);
-      image.noise_input = period > 1;
-      lfnet::nn::set_image_options(o, image);
-    }
+    lfnet::test::edit_image(
+        o, [&](lfnet::nn::ImageNetOptions& image) { image.noise_input = period > 1; });
     torch::manual_seed(period);
     LightFieldNet net(o);
     net->set_phi(torch::rand({2, 3, 3, period, period}));

@@ -7,6 +7,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/nn/architecture.h"
 #include "lfnet/optics/phi.h"
+#include "support/small_nets.h"
 
 using namespace lfnet;
 
@@ -17,14 +18,12 @@ nn::LightFieldNet small_lfnet(bool noise_input) {
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {5, 5, 12, 12};
-  {
-    auto image = lfnet::nn::image_options(o);
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) {
     image.channels = 6;
     image.levels = 2;
     image.blocks = 1;
     image.noise_input = noise_input;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   return nn::LightFieldNet(o);
 }
 

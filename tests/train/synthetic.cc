@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "support/small_nets.h"
+
 namespace lfnet::test {
 
 torch::Tensor smooth_patches(int64_t n, const nn::PatchShape& shape, uint64_t seed) {
@@ -69,10 +71,12 @@ nn::NetworkOptions small_net_options(const std::string& branches) {
   nn::NetworkOptions o;
   o.patch = {3, 3, 5, 5};
   o.measurements = 2;
-  o.branches = lfnet::nn::from_string(branches, o.branches);
-  o.ae.hidden = {64, 32, 64, 32, 64};
-  o.cnn.channels = 4;
-  o.cnn.depth = 3;
+  lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+    p.branches = lfnet::nn::from_string(branches, p.branches);
+    p.ae.hidden = {64, 32, 64, 32, 64};
+    p.cnn.channels = 4;
+    p.cnn.depth = 3;
+  });
   return o;
 }
 
@@ -81,13 +85,11 @@ nn::NetworkOptions small_image_options(int64_t side, int64_t channels) {
   o.architecture = nn::kLfnetArchitecture;
   o.measurements = 2;
   o.patch = {3, 3, side, side};
-  {
-    auto image = lfnet::nn::image_options(o);
+  lfnet::test::edit_image(o, [&](lfnet::nn::ImageNetOptions& image) {
     image.channels = channels;
     image.levels = 2;
     image.blocks = 1;
-    lfnet::nn::set_image_options(o, image);
-  }
+  });
   return o;
 }
 

@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
   lfnet::nn::NetworkOptions options;
   auto phi = torch::randn({1, options.measurement_size(), options.patch.size()}) / 45.0;
   for (const std::string branches : {"ae", "cnn", "net"}) {
-    options.branches = lfnet::nn::from_string(branches, options.branches);
+    options.set_branches(lfnet::nn::from_string(branches, lfnet::nn::Branches{}));
     lfnet::nn::LightFieldNet net(options);
     net->set_phi(phi);
     torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(1e-3));
@@ -209,7 +209,7 @@ int main(int argc, char** argv) {
                               for (int64_t i = 0; i < n; ++i) step();
                             }) /
                             static_cast<double>(n);
-    const int64_t c = options.cnn.channels;
+    const int64_t c = lfnet::nn::paper_options(options).cnn.channels;
     const double cnn_flops = branches == "ae"
                                  ? 0.0
                                  : 3 * (lfnet::nn::conv4d_flops(batch, 1, c, 5, 5, 9, 9, 3) +

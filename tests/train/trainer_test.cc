@@ -12,6 +12,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/train/checkpoint.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 #include "synthetic.h"
 
@@ -231,7 +232,7 @@ TEST_CASE("resume refuses another Phi, stage or architecture", "[train][trainer]
   CHECK_THROWS_WITH(other_matrices.resume(last), Catch::Contains("other Phi matrices"));
 
   auto wide = o;
-  wide.cnn.channels = 5;
+  lfnet::test::edit_paper(wide, [&](lfnet::nn::PaperOptions& p) { p.cnn.channels = 5; });
   Trainer other_arch(make_net(wide, phi, 1), quick_options("cnn", "", 2), run_info(spec));
   CHECK_THROWS_WITH(other_arch.resume(last), Catch::Contains("another architecture"));
 
@@ -440,7 +441,7 @@ TEST_CASE("Phi switching carries the autoencoder's first layer to the new Phi",
 
   // Finetuning needs the same architecture otherwise.
   auto wide = o3;
-  wide.ae.hidden[2] = 70;
+  lfnet::test::edit_paper(wide, [&](lfnet::nn::PaperOptions& p) { p.ae.hidden[2] = 70; });
   Trainer fourth(make_net(wide, phi3, 36), quick_options("ae", "", 1),
                  run_info(lfnet::test::synthetic_phi_spec("random", 3, 30)));
   CHECK_THROWS_WITH(fourth.init_from(lfnet::train::last_checkpoint_path(dir.path().string())),
@@ -468,11 +469,9 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
   lfnet::train::save_checkpoint(ck, path);
 
   auto wide_options = o;
-  {
-    auto wide_options_image = lfnet::nn::image_options(wide_options);
+  lfnet::test::edit_image(wide_options, [&](lfnet::nn::ImageNetOptions& wide_options_image) {
     wide_options_image.channels = 6;
-    lfnet::nn::set_image_options(wide_options, wide_options_image);
-  }
+  });
   auto wide = make_net(wide_options, weights, 51);
   Trainer t(wide, quick_options("joint", "", 1), run_info(ck.phi));
   auto report = t.init_from(path);
@@ -488,11 +487,9 @@ TEST_CASE("finetuning widens a narrower lfnet U-Net and starts from what it comp
 
   // A deeper U-Net starts from the shallow one's weights and computes what it did.
   auto deep_options = o;
-  {
-    auto deep_options_image = lfnet::nn::image_options(deep_options);
+  lfnet::test::edit_image(deep_options, [&](lfnet::nn::ImageNetOptions& deep_options_image) {
     deep_options_image.levels = 3;
-    lfnet::nn::set_image_options(deep_options, deep_options_image);
-  }
+  });
   auto deep = make_net(deep_options, weights, 53);
   Trainer d(deep, quick_options("joint", "", 1), run_info(ck.phi));
   auto deep_report = d.init_from(path);
@@ -527,7 +524,8 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
       // The pseudo-inverse alone: a net whose branches output zero, plus the pinv base.
       auto o = lfnet::test::small_net_options("ae");
       o.measurements = n;
-      o.residual = lfnet::nn::Residual::kPinv;
+      lfnet::test::edit_paper(
+          o, [&](lfnet::nn::PaperOptions& p) { p.residual = lfnet::nn::Residual::kPinv; });
       auto net = make_net(o, phi, 43);
       torch::NoGradGuard no_grad;
       for (auto& p : lfnet::nn::ae_branch(*net)->parameters()) p.zero_();
@@ -537,7 +535,9 @@ TEST_CASE("residual bases on synthetic patches", "[.][experiment]") {
     }
     for (const std::string residual : {"none", "pinv", "adjoint"}) {
       auto o = base;
-      o.residual = lfnet::nn::from_string(residual, o.residual);
+      lfnet::test::edit_paper(o, [&](lfnet::nn::PaperOptions& p) {
+        p.residual = lfnet::nn::from_string(residual, p.residual);
+      });
       Trainer t(make_net(o, phi, 44), quick_options("joint", "", 12),
                 run_info(lfnet::test::synthetic_phi_spec("random", n, 41)));
       auto records = t.fit(*source);

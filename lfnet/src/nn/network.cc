@@ -52,6 +52,16 @@ NetworkOptions NetworkOptions::from_file_json(const nlohmann::json& j, const std
     const std::string architecture = it != own.end() && it->is_string()
                                          ? it->get<std::string>()
                                          : std::string(kPaperArchitecture);
+    // The paper options at the top level: into the paper's section, dropped for the others.
+    nlohmann::json paper = nlohmann::json::object();
+    for (const char* key : kPaperSectionKeys) {
+      if (!own.contains(key)) continue;
+      paper[key] = own[key];
+      own.erase(key);
+    }
+    if (architecture == kPaperArchitecture && !paper.empty() && !own.contains(kPaperSection)) {
+      own[kPaperSection] = paper;
+    }
     std::string kept;  // an unknown architecture is refused by from_json, naming it
     for (const auto& name : registered_architectures()) {
       if (name == architecture) kept = find_architecture(name).options_section();
@@ -65,6 +75,11 @@ NetworkOptions NetworkOptions::from_file_json(const nlohmann::json& j, const std
 }
 
 void NetworkOptions::read(JsonReader& reader) {
+  for (const char* key : kPaperSectionKeys) {
+    LFNET_CHECK_AS(ConfigError, !reader.has(key), reader.path_of(key),
+                   ": the paper architecture's options are its section \"paper\": write ",
+                   reader.path_of(std::string(kPaperSection) + "." + key));
+  }
   read_fields(reader, *this);
   // The sections of the architectures that own theirs, kept as read (validate parses them).
   sections = nlohmann::json::object();
@@ -78,6 +93,14 @@ void NetworkOptions::read(JsonReader& reader) {
 nlohmann::json NetworkOptions::to_json() const {
   auto j = fields_to_json(*this);
   for (const auto& [key, value] : sections.items()) j[key] = value;
+  // The architecture's own section in full, so a file keeps the values it was built with.
+  const auto& a = arch();
+  const auto key = a.options_section();
+  if (!key.empty()) {
+    auto full = a.default_options();
+    if (sections.contains(key)) full.merge_patch(sections[key]);
+    j[key] = full;
+  }
   return j;
 }
 
@@ -117,24 +140,50 @@ void NetworkOptions::validate() const {
   a->validate(*this);
 }
 
-int64_t NetworkOptions::ae_input_size() const {
-  return ae.input == AeInput::kAdjoint ? patch.size() : measurement_size();
+Branches NetworkOptions::branches() const {
+  return architecture == kPaperArchitecture ? paper_options(*this).branches : Branches::kNet;
+}
+
+void NetworkOptions::set_branches(Branches value) {
+  if (architecture == kPaperArchitecture) {
+    auto paper = paper_options(*this);
+    paper.branches = value;
+    set_paper_options(*this, paper);
+    return;
+  }
+  LFNET_CHECK_AS(ConfigError, value == Branches::kNet, "the ", architecture,
+                 " architecture has no branches to train or run alone (branches '",
+                 to_string(value), "')");
+}
+
+PaperOptions paper_options(const NetworkOptions& o) {
+  // PaperOptions has no validate(): the architecture's validate checks the values.
+  return o.section<PaperOptions>(kPaperSection);
+}
+
+void set_paper_options(NetworkOptions& o, const PaperOptions& paper) {
+  o.set_section(kPaperSection, paper);
+}
+
+int64_t ae_input_size(const NetworkOptions& o, const PaperOptions& paper) {
+  return paper.ae.input == AeInput::kAdjoint ? o.patch.size() : o.measurement_size();
 }
 
 // ---- branches ------------------------------------------------------------------------------
 
 AutoencoderBranchImpl::AutoencoderBranchImpl(const NetworkOptions& options)
     : patch_(options.patch) {
-  std::vector<int64_t> widths{options.ae_input_size()};
-  widths.insert(widths.end(), options.ae.hidden.begin(), options.ae.hidden.end());
+  const auto paper = paper_options(options);
+  std::vector<int64_t> widths{ae_input_size(options, paper)};
+  widths.insert(widths.end(), paper.ae.hidden.begin(), paper.ae.hidden.end());
   widths.push_back(options.patch.size());
   for (size_t i = 0; i + 1 < widths.size(); ++i) {
     fc.push_back(
         register_module("fc" + std::to_string(i + 1), torch::nn::Linear(widths[i], widths[i + 1])));
   }
   Conv4dOptions conv_options;
-  conv_options.kernel = options.kernel;
-  conv_options.algorithm = options.conv_algorithm;
+  conv_options.kernel = paper.kernel;
+  conv_options.algorithm = paper.conv_algorithm;
   conv = register_module("conv", Conv4d(conv_options));
 }
 
@@ -150,13 +199,14 @@ torch::Tensor AutoencoderBranchImpl::forward(const torch::Tensor& input) {
 }
 
 CnnBranchImpl::CnnBranchImpl(const NetworkOptions& options) {
-  const auto algorithm = options.conv_algorithm;
-  for (int64_t i = 0; i < options.cnn.depth; ++i) {
+  const auto paper = paper_options(options);
+  const auto& cnn = paper.cnn;
+  for (int64_t i = 0; i < cnn.depth; ++i) {
     Conv4dOptions conv_options;
-    conv_options.in_channels = i == 0 ? 1 : options.cnn.channels;
-    conv_options.out_channels = i + 1 == options.cnn.depth ? 1 : options.cnn.channels;
-    conv_options.kernel = options.kernel;
-    conv_options.algorithm = algorithm;
+    conv_options.in_channels = i == 0 ? 1 : cnn.channels;
+    conv_options.out_channels = i + 1 == cnn.depth ? 1 : cnn.channels;
+    conv_options.kernel = paper.kernel;
+    conv_options.algorithm = paper.conv_algorithm;
     convs.push_back(register_module("conv" + std::to_string(i + 1), Conv4d(conv_options)));
   }
 }
@@ -299,18 +349,20 @@ torch::Tensor LightFieldNetImpl::forward_image(const torch::Tensor& sensor, int6
 
 double cnn_patch_flops(const NetworkOptions& o) {
   const auto& p = o.patch;
-  const int64_t c = o.cnn.channels;
+  const auto paper = paper_options(o);
+  const int64_t c = paper.cnn.channels, depth = paper.cnn.depth;
   double flops = 0;
-  for (int64_t i = 0; i < o.cnn.depth; ++i) {
-    flops += conv4d_flops(1, i == 0 ? 1 : c, i + 1 == o.cnn.depth ? 1 : c, p.rows, p.cols, p.height,
-                          p.width, o.kernel);
+  for (int64_t i = 0; i < depth; ++i) {
+    flops += conv4d_flops(1, i == 0 ? 1 : c, i + 1 == depth ? 1 : c, p.rows, p.cols, p.height,
+                          p.width, paper.kernel);
   }
   return flops;
 }
 
 double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {
   const double per_position = cnn_patch_flops(o) / static_cast<double>(o.patch.size());
-  const int64_t halo = o.cnn.depth * (o.kernel / 2);
+  const auto paper = paper_options(o);
+  const int64_t halo = paper.cnn.depth * (paper.kernel / 2);
   double positions = 0;
   for (int64_t y0 = 0; y0 < height; y0 += tile) {
     for (int64_t x0 = 0; x0 < width; x0 += tile) {

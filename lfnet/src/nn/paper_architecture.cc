@@ -214,7 +214,7 @@ def simulate(self, lf: Tensor) -> Tensor:
 
 // The exported net's method _parts (forward_all): the traced branches' outputs combined as
 // forward_all combines them.
-std::string parts_source(const NetworkOptions& o) {
+std::string parts_source(const PaperOptions& o) {
   std::ostringstream s;
   const bool need_adjoint =
       o.has_cnn() || o.ae.input == AeInput::kAdjoint || o.residual == Residual::kAdjoint;
@@ -265,11 +265,18 @@ class PaperArchitecture : public NetworkArchitecture {
   }
   bool whole_image() const override { return false; }
   PhiInput phi_input() const override { return PhiInput::kPatchMatrices; }
+  // Its options: the section "paper".
+  std::string options_section() const override { return kPaperSection; }
+  nlohmann::json default_options() const override {
+    const PaperOptions defaults;  // named: GCC 12 warns of a temporary's vectors
+    return fields_to_json(defaults);
+  }
 
-  void validate(const NetworkOptions& o) const override {
+  void validate(const NetworkOptions& options) const override {
     auto fail = [](const std::string& field, const std::string& what) {
-      throw ConfigError(field + ": " + what);
+      throw ConfigError(std::string(kPaperSection) + "." + field + ": " + what);
     };
+    const auto o = paper_options(options);
     if (o.kernel < 1 || o.kernel % 2 == 0) {
       fail("kernel", "must be odd and positive, got " + std::to_string(o.kernel));
     }
@@ -290,14 +297,15 @@ class PaperArchitecture : public NetworkArchitecture {
 
   void build(LightFieldNetImpl& net) const override {
     const auto& o = net.options();
+    const auto paper = paper_options(o);
     const int64_t m = o.measurement_size(), d = o.patch.size();
     net.phi = net.register_buffer("phi", torch::zeros({1, m, d}));
     net.adjoint_scale = net.register_buffer("adjoint_scale", torch::ones({1}));
-    if (o.residual == Residual::kPinv) {
+    if (paper.residual == Residual::kPinv) {
       net.base = net.register_buffer("base", torch::zeros({1, m, d}));
     }
-    if (o.has_ae()) net.register_module("ae", AutoencoderBranch(o));
-    if (o.has_cnn()) net.register_module("cnn", CnnBranch(o));
+    if (paper.has_ae()) net.register_module("ae", AutoencoderBranch(o));
+    if (paper.has_cnn()) net.register_module("cnn", CnnBranch(o));
   }
 
   void set_phi(LightFieldNetImpl& net, const torch::Tensor& stack) const override {
@@ -330,9 +338,9 @@ class PaperArchitecture : public NetworkArchitecture {
   NetworkOutputs forward_all(LightFieldNetImpl& net, const torch::Tensor& y,
                              const torch::Tensor& phase, const torch::Tensor&,
                              const BranchSelection& run) const override {
-    const auto& o = net.options();
+    const auto o = paper_options(net.options());
     auto ph = net.check_phase(y, phase);
-    const auto& p = o.patch;
+    const auto& p = net.options().patch;
     const std::vector<int64_t> shape{y.size(0), 1, p.rows, p.cols, p.height, p.width};
     const bool run_ae = run.ae && o.has_ae(), run_cnn = run.cnn && o.has_cnn();
     const bool need_adjoint =
@@ -360,12 +368,14 @@ class PaperArchitecture : public NetworkArchitecture {
   }
 
   void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
-    if (net.options().has_cnn()) cnn_branch(net)->to(dtype);
+    if (auto cnn = cnn_branch(net)) cnn->to(dtype);
   }
 
-  double patch_flops(const NetworkOptions& o, const BranchSelection& run) const override {
-    const auto& p = o.patch;
-    const double d = static_cast<double>(p.size()), m = static_cast<double>(o.measurement_size());
+  double patch_flops(const NetworkOptions& options, const BranchSelection& run) const override {
+    const auto& p = options.patch;
+    const auto o = paper_options(options);
+    const double d = static_cast<double>(p.size());
+    const double m = static_cast<double>(options.measurement_size());
     auto conv = [&](int64_t cin, int64_t cout) {
       return conv4d_flops(1, cin, cout, p.rows, p.cols, p.height, p.width, o.kernel);
     };
@@ -373,7 +383,7 @@ class PaperArchitecture : public NetworkArchitecture {
     double flops = 0;
     if (cnn || (ae && o.ae.input == AeInput::kAdjoint)) flops += 2 * m * d;
     if (ae) {
-      double in = static_cast<double>(o.ae_input_size());
+      double in = static_cast<double>(ae_input_size(options, o));
       std::vector<int64_t> widths = o.ae.hidden;
       widths.push_back(p.size());
       for (auto w : widths) {
@@ -382,13 +392,13 @@ class PaperArchitecture : public NetworkArchitecture {
       }
       flops += conv(1, 1);
     }
-    if (cnn) flops += cnn_patch_flops(o);
+    if (cnn) flops += cnn_patch_flops(options);
     if (o.residual == Residual::kPinv) flops += 2 * m * d;
     return flops;
   }
 
   std::string script(const LightFieldNetImpl& net, ScriptBuilder& builder) const override {
-    const auto& o = net.options();
+    const auto o = paper_options(net.options());
     std::string accessors;
     for (const auto& b : net.named_buffers()) {
       if (b.key() == "phi") {
@@ -399,13 +409,13 @@ class PaperArchitecture : public NetworkArchitecture {
         builder.buffer(b.key(), b.value());
       }
     }
-    const auto& ps = o.patch;
+    const auto& ps = net.options().patch;
     // Two patches: the traced graph keeps no batch size (ScriptBuilder::trace).
     if (o.has_ae()) {
       auto module = ae_branch(net);  // the same module, callable
       builder.trace(
           "ae", [&](const torch::Tensor& x) { return module->forward(x); },
-          torch::rand({2, o.ae_input_size()}));
+          torch::rand({2, ae_input_size(net.options(), o)}));
     }
     if (o.has_cnn()) {
       auto module = cnn_branch(net);
@@ -421,8 +431,8 @@ class PaperArchitecture : public NetworkArchitecture {
                        const WarmStartSource& from) const override {
     // fc1 reads the measurements of the old Phi: carry it over to the new one (Phi switching,
     // map_measurement_weights), or start it afresh.
-    if (name == "ae.fc1.weight" && net.options().ae.input == AeInput::kMeasurements &&
-        from.phi_changed) {
+    if (name == "ae.fc1.weight" &&
+        paper_options(net.options()).ae.input == AeInput::kMeasurements && from.phi_changed) {
       const auto& old_phi = from.phi;
       if (old_phi.defined() && old_phi.dim() == 3 && old_phi.size(0) == 1 && net.phases() == 1 &&
           src.dim() == 2 && src.size(0) == dst.size(0) && src.size(1) == old_phi.size(1)) {

@@ -283,7 +283,7 @@ torch::jit::Module script_network(const LightFieldNet& net, const ScriptMetadata
   root.register_attribute("format_version", c10::IntType::get(), kScriptFormatVersion);
   root.register_attribute("metadata", c10::StringType::get(), metadata.dump(2));
   root.register_attribute("phi_spec", c10::StringType::get(), meta.phi.dump());
-  root.register_attribute("branches", c10::StringType::get(), to_string(o.branches));
+  root.register_attribute("branches", c10::StringType::get(), to_string(o.branches()));
   root.register_attribute(
       "patch_shape", c10::ListType::ofInts(),
       c10::List<int64_t>({o.patch.rows, o.patch.cols, o.patch.height, o.patch.width}));

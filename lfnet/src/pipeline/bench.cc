@@ -356,7 +356,8 @@ nlohmann::json bench_conv_kernels(const BenchOptions& a, double gemm) {
   torch::InferenceMode guard;
   nn::NetworkOptions o;
   const auto& p = o.patch;
-  const int64_t c = o.cnn.channels, b = a.conv_batch;
+  const auto cnn_options = nn::paper_options(o).cnn;
+  const int64_t c = cnn_options.channels, b = a.conv_batch;
   nlohmann::json out = nlohmann::json::array();
   auto run = [&](const std::string& name, int64_t cin, int64_t cout) {
     auto w = torch::randn({cout, cin, 3, 3, 3, 3}, torch::TensorOptions().device(device)) * 0.1;
@@ -387,7 +388,7 @@ nlohmann::json bench_conv_kernels(const BenchOptions& a, double gemm) {
     if (device.is_cuda()) y.cpu();
   });
   const double f = b * nn::cnn_patch_flops(o);
-  out.push_back({{"layer", "cnn branch (" + std::to_string(o.cnn.depth) + " layers)"},
+  out.push_back({{"layer", "cnn branch (" + std::to_string(cnn_options.depth) + " layers)"},
                  {"batch", b},
                  {"seconds", t},
                  {"gflops", f / t / 1e9},

@@ -412,7 +412,7 @@ train::TrainerOptions ExperimentConfig::stage_options(const StageConfig& stage) 
 
 nn::NetworkOptions ExperimentConfig::stage_network(const StageConfig& stage) const {
   nn::NetworkOptions o = network;
-  o.branches = train::branches_of_stage(trainer_stage(stage));
+  o.set_branches(train::branches_of_stage(trainer_stage(stage)));
   o.validate();
   return o;
 }

@@ -126,7 +126,7 @@ ExportResult export_model(const ExportRequest& a) {
     if (a.check > 0) diff = compare_exported(net, loaded, a.check, r.compared);
   });
   r.phi = spec.label();
-  r.branches = o.patch_grid() ? nn::to_string(o.branches) : o.architecture;
+  r.branches = o.patch_grid() ? nn::to_string(o.branches()) : o.architecture;
   r.phases = net->phases();
   r.megabytes = static_cast<double>(fs::file_size(a.out)) / 1e6;
   r.max_difference = diff;

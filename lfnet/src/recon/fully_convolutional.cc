@@ -69,9 +69,10 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
   options.validate();
   LFNET_CHECK_AS(ConfigError, method == "net" || method == "cnn",
                  "a fully convolutional CNN pass needs the method net or cnn, not '", method, "'");
-  const auto& o = net->options();
-  LFNET_CHECK_AS(ConfigError, o.has_cnn(), "the model was trained as '", nn::to_string(o.branches),
+  LFNET_CHECK_AS(ConfigError, net->options().has_cnn(), "the model was trained as '",
+                 nn::to_string(net->options().branches()),
                  "' and has no CNN branch to run fully convolutionally");
+  const auto o = nn::paper_options(net->options());
   LFNET_CHECK_AS(ConfigError, method == "net" || o.branches != nn::Branches::kAe,
                  "the model has no '", method, "' branch");
   net->eval();

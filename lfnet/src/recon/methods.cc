@@ -13,7 +13,8 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
   LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
                  "' is not a network method (net, ae, cnn)");
   const auto& o = net->options();
-  const auto branches = nn::to_string(o.branches);
+  const auto branches = nn::to_string(o.branches());
+  const bool two_branch = o.branches() == nn::Branches::kNet;
   LFNET_CHECK_AS(ConfigError, method == "net" || branches == "net" || branches == method,
                  "the model was trained as '", branches, "' and has no '", method, "' branch");
   net->eval();
@@ -22,24 +23,25 @@ PatchSolver network_solver(nn::LightFieldNet net, const std::string& method) {
   nn::BranchSelection run;
   run.ae = method != "cnn";
   run.cnn = method != "ae";
-  return [net, method, run](const torch::Tensor& y, const torch::Tensor& phase) mutable {
-    torch::InferenceMode guard;
-    const auto device = net->phi.device();
-    auto out = net->forward_all(y.to(device), phase.defined() ? phase.to(device) : phase, run);
-    torch::Tensor patch = out.output;
-    if (method == "ae" && net->options().branches == nn::Branches::kNet) {
-      patch = out.base.defined() ? out.ae + out.base : out.ae;
-    } else if (method == "cnn" && net->options().branches == nn::Branches::kNet) {
-      patch = out.base.defined() ? out.cnn + out.base : out.cnn;
-    }
-    return patch.reshape({y.size(0), -1}).to(torch::kCPU);
-  };
+  return
+      [net, method, run, two_branch](const torch::Tensor& y, const torch::Tensor& phase) mutable {
+        torch::InferenceMode guard;
+        const auto device = net->phi.device();
+        auto out = net->forward_all(y.to(device), phase.defined() ? phase.to(device) : phase, run);
+        torch::Tensor patch = out.output;
+        if (method == "ae" && two_branch) {
+          patch = out.base.defined() ? out.ae + out.base : out.ae;
+        } else if (method == "cnn" && two_branch) {
+          patch = out.base.defined() ? out.cnn + out.base : out.cnn;
+        }
+        return patch.reshape({y.size(0), -1}).to(torch::kCPU);
+      };
 }
 
 PatchSolver script_solver(const nn::ScriptedNetwork& net, const std::string& method) {
   LFNET_CHECK_AS(ConfigError, needs_network(method), "method '", method,
                  "' is not a network method (net, ae, cnn)");
-  const auto branches = nn::to_string(net.network.branches);
+  const auto branches = nn::to_string(net.network.branches());
   LFNET_CHECK_AS(ConfigError, method == "net" || branches == "net" || branches == method,
                  "the model was trained as '", branches, "' and has no '", method, "' branch");
   return [net, method](const torch::Tensor& y, const torch::Tensor& phase) {

@@ -328,7 +328,7 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
       run_(std::move(run)),
       loss_(options_.loss, net_->options().patch.rows, net_->options().patch.cols) {
   options_.validate();
-  const auto branches = net_->options().branches;
+  const auto branches = net_->options().branches();
   LFNET_CHECK_AS(ConfigError, branches_of_stage(options_.stage) == branches, "stage '",
                  to_string(options_.stage), "' trains a net with branches '",
                  nn::to_string(branches_of_stage(options_.stage)), "', but this net has branches '",

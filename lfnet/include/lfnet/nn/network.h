@@ -4,8 +4,8 @@
 // over whole sensor images, and "unrolled", an unrolled data-consistency network,
 // docs/architectures.md). An architecture's layers are its own: it registers them in build()
 // and finds them by name (LightFieldNetImpl::layer). Its options are its own section of the
-// options (NetworkOptions::sections: lfnet's U-Net "image", "unrolled"); the paper
-// architecture's are NetworkOptions' typed fields, the checkpoint format's top-level keys.
+// options (NetworkOptions::sections: the paper architecture's "paper", lfnet's U-Net "image",
+// "unrolled").
 //
 // The Phi is part of the net (the buffer `phi`), so a saved or exported model is
 // self-contained. Registered names are the checkpoint schema. The paper architecture:
@@ -112,16 +112,8 @@ struct CnnOptions {
   nlohmann::json to_json() const;
 };
 
-// Everything that defines a LightFieldNet; stored in every checkpoint as "network".
-struct NetworkOptions {
-  // A registered architecture (nn/architecture.h). "paper": the two-branch network of Gupta et
-  // al. on patches (ae, cnn, branches, kernel, conv_algorithm, head_weights and residual
-  // apply). "lfnet": lfnet's own whole-image architecture (its section "image", image_options):
-  // a U-Net over the per-pixel pseudo-inverse of the sensor image, trained on crops of `patch`
-  // (docs/architectures.md).
-  std::string architecture = kPaperArchitecture;
-  PatchShape patch;                    // the patch the net reconstructs (lfnet: the training crop)
-  int64_t measurements = 2;            // N: measurement channels per pixel
+// The paper architecture's options: its section "paper" of the network options (paper_options).
+struct PaperOptions {
   Branches branches = Branches::kNet;  // net (both branches, averaged), ae or cnn (one branch)
   int64_t kernel = 3;                  // Conv4d kernel size (odd)
   // Conv4d algorithm: auto, stacked, fused_output, fused_input
@@ -131,19 +123,51 @@ struct NetworkOptions {
   // Weights of the (ae, cnn) outputs in the two-branch head; they apply to "net" only.
   std::vector<double> head_weights = {0.5, 0.5};
   // A fixed linear estimate added to the output, so the branches learn a correction:
-  // "none" (the paper), "pinv" (Tikhonov pseudo-inverse, lambda = pinv_lambda) or "adjoint"
-  // (the scaled Phi^T y). Off by default: docs/models.md saw no gain from it.
+  // "none" (the paper), "pinv" (Tikhonov pseudo-inverse, lambda = network.pinv_lambda) or
+  // "adjoint" (the scaled Phi^T y). Off by default: docs/models.md saw no gain from it.
   Residual residual = Residual::kNone;
-  double pinv_lambda = 1e-3;  // Tikhonov weight of the "pinv" residual and of Phi switching
-  // A colour net (lfnet architecture): the Bayer pattern ("RGGB", "BGGR", "GRBG", "GBRG") of
-  // the colour filter array over the coded pixels. The net reads the single mosaicked sensor
-  // image and reconstructs the three colours of every view jointly (docs/architectures.md,
-  // "Colour"). Empty: a grey net.
+
+  template <typename Fields>
+  void fields(Fields& f) {
+    f("branches", branches);
+    f("kernel", kernel, Range::closed(1, 15));
+    f("conv_algorithm", conv_algorithm);
+    f("ae", ae);
+    f("cnn", cnn);
+    f("head_weights", head_weights, Range::closed(0, 10));
+    f("residual", residual);
+  }
+  bool has_ae() const { return branches != Branches::kCnn; }
+  bool has_cnn() const { return branches != Branches::kAe; }
+};
+
+// The key of the paper architecture's section, and the keys it held at the top level of
+// "network" in files written before it had one (NetworkOptions::from_file_json moves them).
+constexpr const char* kPaperSection = "paper";
+inline constexpr const char* kPaperSectionKeys[] = {
+    "branches", "kernel", "conv_algorithm", "ae", "cnn", "head_weights", "residual"};
+
+// Everything that defines a LightFieldNet; stored in every checkpoint as "network".
+struct NetworkOptions {
+  // A registered architecture (nn/architecture.h). "paper": the two-branch network of Gupta et
+  // al. on patches (its section "paper", paper_options). "lfnet": lfnet's own whole-image
+  // architecture (its section "image", image_options): a U-Net over the per-pixel
+  // pseudo-inverse of the sensor image, trained on crops of `patch` (docs/architectures.md).
+  std::string architecture = kPaperArchitecture;
+  PatchShape patch;          // the patch the net reconstructs (lfnet: the training crop)
+  int64_t measurements = 2;  // N: measurement channels per pixel
+  // Tikhonov weight of every pseudo-inverse derived from the Phi (the paper's "pinv" residual,
+  // the per-pixel pseudo-inverses of local Phis) and of Phi switching.
+  double pinv_lambda = 1e-3;
+  // A colour net (an architecture whose colour() is true): the Bayer pattern ("RGGB", "BGGR",
+  // "GRBG", "GBRG") of the colour filter array over the coded pixels. The net reads the single
+  // mosaicked sensor image and reconstructs the three colours of every view jointly
+  // (docs/architectures.md, "Colour"). Empty: a grey net.
   std::string cfa;
-  // How a colour net demosaics its per-pixel pseudo-inverse into its U-Net's input:
+  // How a colour net demosaics its per-pixel pseudo-inverse into its layers' input:
   // "bilinear" or "malvar" (gradient-corrected, optics/cfa.h). Grey nets ignore it.
   optics::Demosaic demosaic = optics::Demosaic::kBilinear;
-  // The option sections of the architectures that own theirs (options_section(): "image",
+  // The option sections of the architectures (options_section(): "paper", "image",
   // "unrolled"), by key, as read: each is parsed and checked by its architecture
   // (section<T>()). A section of an architecture other than `architecture` is refused.
   nlohmann::json sections = nlohmann::json::object();
@@ -152,13 +176,6 @@ struct NetworkOptions {
   void fields(Fields& f) {
     f("patch", patch);
     f("measurements", measurements);
-    f("branches", branches);
-    f("kernel", kernel, Range::closed(1, 15));
-    f("conv_algorithm", conv_algorithm);
-    f("ae", ae);
-    f("cnn", cnn);
-    f("head_weights", head_weights, Range::closed(0, 10));
-    f("residual", residual);
     f("pinv_lambda", pinv_lambda, Range::closed(0, 1e3));
     f("architecture", architecture);
     f("cfa", cfa);
@@ -167,8 +184,9 @@ struct NetworkOptions {
   // Strict parsing: unknown keys and bad values are ConfigErrors naming the JSON path.
   static NetworkOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   // A checkpoint's or an exported file's network options. Files written before each
-  // architecture kept its own section hold every built-in's (a paper net's "image"): the
-  // sections of other architectures are dropped, not refused.
+  // architecture kept its own section hold every built-in's (a paper net's "image", the paper
+  // options at the top level): the paper's keys move into its section, and the sections of
+  // other architectures are dropped, not refused.
   static NetworkOptions from_file_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
   nlohmann::json to_json() const;
@@ -197,13 +215,23 @@ struct NetworkOptions {
   }
   // Colour channels of the light field the net reconstructs: 3 behind a CFA, else 1.
   int64_t colours() const { return cfa.empty() ? 1 : 3; }
-  // The paper architecture's branches.
-  bool has_ae() const { return architecture == kPaperArchitecture && branches != Branches::kCnn; }
-  bool has_cnn() const { return architecture == kPaperArchitecture && branches != Branches::kAe; }
+  // The branches of the net, which staged training trains one at a time and the `ae` and
+  // `cnn` methods run alone: the paper architecture's; "net" (one whole) for the others.
+  Branches branches() const;
+  // Sets them: the paper architecture's section; the others take "net" alone (a ConfigError).
+  void set_branches(Branches value);
+  bool has_ae() const { return architecture == kPaperArchitecture && branches() != Branches::kCnn; }
+  bool has_cnn() const { return architecture == kPaperArchitecture && branches() != Branches::kAe; }
   int64_t measurement_size() const { return measurements * patch.pixels(); }  // N h w
-  // Width of the autoencoder's input: N h w or U V h w.
-  int64_t ae_input_size() const;
 };
+
+// The paper architecture's options: the section "paper" of `o` (the defaults where it or a key
+// is absent), read strictly; the architecture checks their values. set_paper_options writes
+// them.
+PaperOptions paper_options(const NetworkOptions& o);
+void set_paper_options(NetworkOptions& o, const PaperOptions& paper);
+// Width of the autoencoder's input: N h w ("measurements") or U V h w ("adjoint").
+int64_t ae_input_size(const NetworkOptions& o, const PaperOptions& paper);
 
 // Autoencoder branch: six fully connected layers with ReLU between, reshaped to a patch, then
 // one Conv4d (1 -> 1 channel). No ReLU after fc6: its output is a light-field estimate.
