@@ -206,6 +206,11 @@ TEST_CASE("network options parse strictly, round-trip and validate", "[nn][netwo
   // A file holds the section in full: the keys not given, at their defaults.
   CHECK(o.to_json()["paper"]["kernel"] == 3);
   CHECK(o.to_json()["paper"]["conv_algorithm"] == "auto");
+  // Options not yet checked still print, an unknown architecture's too.
+  NetworkOptions unknown;
+  unknown.architecture = "nosuch";
+  CHECK(unknown.to_json()["architecture"] == "nosuch");
+  CHECK_FALSE(unknown.to_json().contains("paper"));
 
   CHECK_THROWS_WITH(
       NetworkOptions::from_json(nlohmann::json::parse(R"({"paper": {"cnn": {"chanels": 3}}})"),

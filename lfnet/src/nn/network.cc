@@ -93,10 +93,12 @@ void NetworkOptions::read(JsonReader& reader) {
 nlohmann::json NetworkOptions::to_json() const {
   auto j = fields_to_json(*this);
   for (const auto& [key, value] : sections.items()) j[key] = value;
-  // The architecture's own section in full, so a file keeps the values it was built with.
-  const auto& a = arch();
-  const auto key = a.options_section();
-  if (!key.empty()) {
+  // The architecture's own section in full, so a file keeps the values it was built with (an
+  // unknown architecture's is left as read: validate names it).
+  for (const auto& name : registered_architectures()) {
+    const auto& a = find_architecture(name);
+    const auto key = a.options_section();
+    if (name != architecture || key.empty()) continue;
     auto full = a.default_options();
     if (sections.contains(key)) full.merge_patch(sections[key]);
     j[key] = full;
