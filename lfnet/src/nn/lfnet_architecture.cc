@@ -350,14 +350,7 @@ torch::Tensor pixel_pseudo_inverses(const torch::Tensor& weights, double lambda)
 }
 
 ImageNetOptions image_options(const NetworkOptions& o) {
-  // Read strictly but not checked: the architecture's validate checks the values.
-  ImageNetOptions image;
-  const auto it = o.sections.find(kImageSection);
-  if (it == o.sections.end()) return image;
-  JsonReader reader(*it, kImageSection);
-  read_fields(reader, image);
-  reader.finish();
-  return image;
+  return o.unchecked_section<ImageNetOptions>(kImageSection);
 }
 
 void set_image_options(NetworkOptions& o, const ImageNetOptions& image) {

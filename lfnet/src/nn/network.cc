@@ -159,8 +159,7 @@ void NetworkOptions::set_branches(Branches value) {
 }
 
 PaperOptions paper_options(const NetworkOptions& o) {
-  // PaperOptions has no validate(): the architecture's validate checks the values.
-  return o.section<PaperOptions>(kPaperSection);
+  return o.unchecked_section<PaperOptions>(kPaperSection);
 }
 
 void set_paper_options(NetworkOptions& o, const PaperOptions& paper) {

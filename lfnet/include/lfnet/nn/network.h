@@ -199,6 +199,18 @@ struct NetworkOptions {
     const auto it = sections.find(key);
     return options_from_json<T>(it == sections.end() ? nlohmann::json::object() : *it, key);
   }
+  // The same without T's validate(), for an architecture that checks the values itself (with
+  // its own field paths).
+  template <typename T>
+  T unchecked_section(const std::string& key) const {
+    T value;
+    const auto it = sections.find(key);
+    if (it == sections.end()) return value;
+    JsonReader reader(*it, key);
+    read_fields(reader, value);
+    reader.finish();
+    return value;
+  }
   // Sets the section `key` to the fields of `value`.
   template <typename T>
   void set_section(const std::string& key, const T& value) {
