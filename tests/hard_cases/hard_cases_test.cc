@@ -249,7 +249,7 @@ TEST_CASE("every method stays finite on black, white, grey, Nyquist and extreme-
       }
     }
   }
-  CHECK(cases == 2 * 9 * 7);
+  CHECK(cases == int64_t{2} * 9 * 7);
 }
 
 TEST_CASE("saturated highlights: a clipped, quantised white sensor reconstructs finitely",

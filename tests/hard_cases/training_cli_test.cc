@@ -12,8 +12,10 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <thread>
 
 #include "lfnet/io/light_field_io.h"
@@ -27,6 +29,13 @@ using lfnet::test::read_bytes;
 using lfnet::test::run_command;
 
 namespace {
+
+// The pieces of a command or a path, joined.
+std::string cat(std::initializer_list<std::string_view> parts) {
+  std::string out;
+  for (const auto part : parts) out += part;
+  return out;
+}
 
 // A tiny config; `ae_width` sets the autoencoder's widths (wide ones make checkpoint writes
 // take long enough to be interrupted).
@@ -54,7 +63,7 @@ bool writing_checkpoint(const fs::path& dir) {
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
     const auto name = it->path().filename().string();
-    if (name.rfind(".", 0) == 0 && name.find(".tmp") != std::string::npos && name.size() > 5 &&
+    if (name.rfind('.', 0) == 0 && name.find(".tmp") != std::string::npos && name.size() > 5 &&
         name.compare(name.size() - 5, 5, ".ckpt") == 0) {
       return true;
     }
@@ -183,13 +192,13 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
     for (const char* run : {"a", "b"}) {
       const std::string dir = tmp / (std::string(run) + threads);
       const std::string lfnet = lfnet_binary() + " --threads " + threads + " --log-level warn ";
-      REQUIRE(run_command(lfnet + "simulate --lf " + (tmp / "lf") +
-                              " --phi asp:2 --noise 0.05 --seed 9 --out " + dir + "/acq",
+      REQUIRE(run_command(cat({lfnet, "simulate --lf ", tmp / "lf",
+                               " --phi asp:2 --noise 0.05 --seed 9 --out ", dir, "/acq"}),
                           out) == 0);
-      REQUIRE(run_command(lfnet + "train " + (tmp / "c.json") + " --out " + dir + "/run", out) ==
+      REQUIRE(run_command(cat({lfnet, "train ", tmp / "c.json", " --out ", dir, "/run"}), out) ==
               0);
-      REQUIRE(run_command(lfnet + "reconstruct --model " + dir + "/run/models/ae.ckpt --sensor " +
-                              dir + "/acq --stride 3 --out " + dir + "/rec",
+      REQUIRE(run_command(cat({lfnet, "reconstruct --model ", dir, "/run/models/ae.ckpt --sensor ",
+                               dir, "/acq --stride 3 --out ", dir, "/rec"}),
                           out) == 0);
     }
   }
@@ -217,7 +226,7 @@ TEST_CASE("the same seed and thread count give bit-identical simulate, train and
       // The record and the viewer page that shows it hold the wall time.
       if (name == "reconstruction.json" || name == "index.html") continue;
       INFO(name);
-      CHECK(read_bytes(e.path().string()) == read_bytes(b + "/rec/" + name));
+      CHECK(read_bytes(e.path().string()) == read_bytes(cat({b, "/rec/", name})));
     }
   }
   // Across thread counts.

@@ -195,8 +195,8 @@ TEST_CASE("network options parse strictly, round-trip and validate", "[nn][netwo
       "measurements": 4, "paper": {"branches": "cnn", "ae": {"hidden": [10, 5, 10, 5, 10]},
       "cnn": {"channels": 8, "depth": 2}, "head_weights": [0.25, 0.75], "residual": "pinv"}})");
   auto o = NetworkOptions::from_json(j);
-  CHECK(o.patch.size() == 3 * 3 * 7 * 7);
-  CHECK(o.measurement_size() == 4 * 49);
+  CHECK(o.patch.size() == int64_t{3} * 3 * 7 * 7);
+  CHECK(o.measurement_size() == int64_t{4} * 49);
   const auto paper = lfnet::nn::paper_options(o);
   CHECK(paper.cnn.channels == 8);
   CHECK(paper.head_weights[1] == 0.75);

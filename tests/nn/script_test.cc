@@ -190,7 +190,7 @@ TEST_CASE("exported files store sparse Phi stacks compactly and carry their meta
   auto m = lfnet::nn::script_network(net, metadata_for(2));
   CHECK(m.hasattr("phi_index"));
   CHECK_FALSE(m.hasattr("phi"));
-  CHECK(m.attr("phi_values").toTensor().numel() == 4 * 2 * 25 * 9);
+  CHECK(m.attr("phi_values").toTensor().numel() == int64_t{4} * 2 * 25 * 9);
   CHECK(m.attr("format_version").toInt() == lfnet::nn::kScriptFormatVersion);
   CHECK(m.attr("period").toInt() == 2);
   CHECK(m.attr("measurements").toInt() == 2);

@@ -155,7 +155,9 @@ void read_config(const json& j) { (void)lfnet::pipeline::ExperimentConfig::from_
 // list is a list of whole numbers.
 void numeric_leaves(const json& j, const std::string& pointer, std::vector<NumericField>& out) {
   for (const auto& [key, value] : j.items()) {
-    const auto p = pointer + "/" + key;
+    std::string p = pointer;
+    p += "/";
+    p += key;
     if (value.is_object()) {
       numeric_leaves(value, p, out);
     } else if (value.is_number()) {

@@ -137,6 +137,7 @@ int main(int argc, char** argv) {
     std::printf("%-8s %-13s %10s %10s %12s %12s %6s\n", "Cin->Cout", "algorithm", "fwd s",
                 "fwd GF/s", "fwd+bwd s", "f+b GF/s", "util");
     std::vector<std::pair<int64_t, int64_t>> shapes;
+    shapes.reserve(3 * channels.size() + 1);
     for (auto c : channels) shapes.emplace_back(c, c);
     if (thin) {
       for (auto c : channels) {
