@@ -37,6 +37,17 @@ nlohmann::json AutoencoderOptions::to_json() const { return fields_to_json(*this
 void CnnOptions::read(JsonReader& reader) { read_fields(reader, *this); }
 nlohmann::json CnnOptions::to_json() const { return fields_to_json(*this); }
 
+namespace {
+// The keys of the paper's section, from its fields (the keys files held at the top level).
+std::vector<std::string> paper_section_keys() {
+  const PaperOptions defaults;  // named: GCC 12 warns of a temporary's vectors
+  const auto fields = fields_to_json(defaults);
+  std::vector<std::string> keys;
+  for (const auto& item : fields.items()) keys.push_back(item.key());
+  return keys;
+}
+}  // namespace
+
 NetworkOptions NetworkOptions::from_json(const nlohmann::json& j, const std::string& path) {
   NetworkOptions options;
   JsonReader reader(j, path);
@@ -54,7 +65,7 @@ NetworkOptions NetworkOptions::from_file_json(const nlohmann::json& j, const std
                                          : std::string(kPaperArchitecture);
     // The paper options at the top level: into the paper's section, dropped for the others.
     nlohmann::json paper = nlohmann::json::object();
-    for (const char* key : kPaperSectionKeys) {
+    for (const auto& key : paper_section_keys()) {
       if (!own.contains(key)) continue;
       paper[key] = own[key];
       own.erase(key);
@@ -75,7 +86,7 @@ NetworkOptions NetworkOptions::from_file_json(const nlohmann::json& j, const std
 }
 
 void NetworkOptions::read(JsonReader& reader) {
-  for (const char* key : kPaperSectionKeys) {
+  for (const auto& key : paper_section_keys()) {
     LFNET_CHECK_AS(ConfigError, !reader.has(key), reader.path_of(key),
                    ": the paper architecture's options are its section \"paper\": write ",
                    reader.path_of(std::string(kPaperSection) + "." + key));

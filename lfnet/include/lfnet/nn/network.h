@@ -141,11 +141,9 @@ struct PaperOptions {
   bool has_cnn() const { return branches != Branches::kAe; }
 };
 
-// The key of the paper architecture's section, and the keys it held at the top level of
-// "network" in files written before it had one (NetworkOptions::from_file_json moves them).
+// The key of the paper architecture's section. Files written before it had one hold its keys
+// at the top level of "network" (NetworkOptions::from_file_json moves them).
 constexpr const char* kPaperSection = "paper";
-inline constexpr const char* kPaperSectionKeys[] = {
-    "branches", "kernel", "conv_algorithm", "ae", "cnn", "head_weights", "residual"};
 
 // Everything that defines a LightFieldNet; stored in every checkpoint as "network".
 struct NetworkOptions {
