@@ -2,7 +2,8 @@
 """Writes the `measured` block of every card in models/zoo.json from the records under results/:
 its margins over pinv on the light fields of the benchmark section that measured it (the
 cross-scene benchmark for ASP N = 2, the other cameras' sections otherwise) with its seconds, and
-its worst margin over pinv on the validation and test sets (docs/protocol.md). A card's
+its worst and mean margins over pinv on the validation and test sets (docs/protocol.md; the
+validation mean ranks models for --budget). A card's
 `measured_as.variant` names its records. Usage: scripts/zoo.py [--check]  (--check: exit 1 if
 the file would change)."""
 import json
@@ -72,7 +73,9 @@ def measure(card):
         if m:
             worst = min(m, key=m.get)
             measured[role] = {"over": over, "worst_margin_over_pinv_db": m[worst],
-                              "worst_light_field": worst, "light_fields": len(m)}
+                              "worst_light_field": worst,
+                              "mean_margin_over_pinv_db": round(sum(m.values()) / len(m), 2),
+                              "light_fields": len(m)}
     return measured
 
 

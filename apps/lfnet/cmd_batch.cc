@@ -75,8 +75,12 @@ void add_batch_command(CLI::App& app, const GlobalOptions&) {
   cmd->add_flag("--resume", o.resume,
                 "continue the batch in --out: only the item-method pairs without a record of "
                 "success are done (same options as the batch it continues)");
+  add_budget_option(cmd, o.budget);
   add_dist_flags(cmd, a->dist);
-  cmd->callback([a] { run(*a); });
+  cmd->callback([a, cmd] {
+    a->options.budget_precision = given_precision(cmd, a->options.precision);
+    run(*a);
+  });
 }
 
 }  // namespace lfnet::app

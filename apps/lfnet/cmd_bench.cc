@@ -15,6 +15,7 @@
 #include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
 #include "lfnet/pipeline/bench.h"
+#include "lfnet/pipeline/budget.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
 
@@ -28,10 +29,32 @@ struct BenchArgs {
   bool force = false;      // replace an existing --json file
   bool phi_given = false;  // --phi on the command line (else the default, for untrained nets)
   bool in_process = false;
+  bool calibrate = false;  // time the zoo's models for --budget instead
   // Child mode: one case "method:stride", with the parent's GEMM figure.
   std::string one_case;
   double gemm = 0;
 };
+
+// --calibrate: the zoo's models (or those of --model) timed for --budget on this machine.
+void run_calibrate(const BenchArgs& args, std::optional<pipeline::Precision> precision) {
+  const auto& a = args.options;
+  parse_device(a.device);
+  pipeline::CalibrateOptions o;
+  o.models = a.models;
+  o.device = a.device;
+  o.precision = precision;
+  o.height = a.height;
+  o.width = a.width;
+  o.seed = a.seed;
+  std::printf("timing zoo models for --budget on this machine (%d thread(s)) into %s\n",
+              thread_count(), pipeline::calibration_path().c_str());
+  std::fflush(stdout);
+  const auto timed = pipeline::calibrate_machine(o, [](const std::string& line) {
+    std::printf("%s\n", line.c_str());
+    std::fflush(stdout);
+  });
+  std::printf("wrote %s (%zu timing(s))\n", pipeline::calibration_path().c_str(), timed.size());
+}
 
 void run_bench(const BenchArgs& args) {
   const auto& a = args.options;
@@ -155,8 +178,17 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                   "run one case method:stride and print it as JSON (used by the parent run)")
       ->group("");
   cmd->add_option("--gemm", args->gemm, "GEMM FLOP/s measured by the parent run")->group("");
+  cmd->add_flag("--calibrate", args->calibrate,
+                "time the zoo's models (or those of --model) and pinv on this machine for "
+                "--budget, at --height x --width and a quarter of it, and write them to the "
+                "calibration file ($LFNET_CALIBRATION, else ~/.cache/lfnet/calibration.json)");
   cmd->callback([args, cmd] {
     args->phi_given = cmd->count("--phi") > 0;
+    if (args->calibrate) {
+      LFNET_CHECK_AS(ConfigError, args->json.empty() && args->one_case.empty(),
+                     "--calibrate writes the calibration file, not --json");
+      return run_calibrate(*args, given_precision(cmd, args->options.precision));
+    }
     run_bench(*args);
   });
 }

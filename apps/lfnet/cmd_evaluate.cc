@@ -11,6 +11,7 @@
 #include "lfnet/core/output.h"
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/pipeline/budget.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/models.h"
 
@@ -21,10 +22,25 @@ struct EvaluateArgs {
   pipeline::EvaluateRequest request;
   std::string json, out;
   bool force = false;
+  double budget = 0;  // --budget SECONDS; 0: none
+  bool method_given = false;
+  std::optional<pipeline::Precision> precision;  // --precision as given; nullopt: auto
 };
 
 void run_evaluate(EvaluateArgs& a) {
   auto& q = a.request;
+  std::optional<pipeline::BudgetChoice> budget;
+  if (a.budget > 0) {
+    pipeline::check_budget_request(
+        {!q.model.empty(), a.method_given, q.self_ensemble, q.self_calibrate});
+    LFNET_CHECK_AS(ConfigError, q.mode == optics::SimulationMode::kSensor,
+                   "--budget times reconstructions of sensor images: leave out --mode per_patch");
+    budget = pipeline::budget_for_light_field(a.budget,
+                                              pipeline::light_field_pixels(q.lf, q.layout, q.scene),
+                                              q.phi, q.cfa, q.device, a.precision);
+    q.model = budget->path;
+    q.precision = budget->setting.precision;
+  }
   OutputFolderPolicy policy;
   policy.force = a.force;
   // Every file it reads: a noise switch's members and the files of its JSON options too.
@@ -48,6 +64,7 @@ void run_evaluate(EvaluateArgs& a) {
   q.keep_estimate = !a.out.empty();
   const auto r = pipeline::evaluate_request(q);
   auto record = r.record;
+  if (budget) pipeline::record_budget(*budget, record);
   // The outputs first, the records last: a record's end_to_end_seconds is the command's time
   // from its start up to that record, every other output written.
   if (!a.out.empty()) {
@@ -105,8 +122,9 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
       ->needs(camera_error);
   add_flat_field_option(cmd, q.flat_field);
   add_mode_option(cmd, q.mode);
-  cmd->add_option("--method", q.method,
-                  pipeline::method_list() + " (default net with --model, pinv without)");
+  auto* method = cmd->add_option(
+      "--method", q.method, pipeline::method_list() + " (default net with --model, pinv without)");
+  add_budget_option(cmd, a->budget);
   add_dictionary_option(cmd, q.dictionary);
   add_json_option(cmd, a->json);
   output_folder(cmd->add_option(
@@ -120,7 +138,11 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
                   "(docs/protocol.md)");
   add_batch_option(cmd, q.batch);
   add_window_flag(cmd, q.window);
-  cmd->callback([a] { run_evaluate(*a); });
+  cmd->callback([a, method, cmd] {
+    a->method_given = method->count() > 0;
+    a->precision = given_precision(cmd, a->request.precision);
+    run_evaluate(*a);
+  });
 }
 
 }  // namespace lfnet::app

@@ -2,11 +2,14 @@
 // own sensor images and a Phi spec.
 #include <spdlog/spdlog.h>
 
+#include <optional>
+
 #include "command.h"
 #include "flags.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
+#include "lfnet/pipeline/budget.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/experiment.h"
 #include "lfnet/pipeline/models.h"
@@ -22,6 +25,8 @@ struct ReconstructArgs {
   std::string out;
   bool force = false;
   bool method_given = false;
+  double budget = 0;                             // --budget SECONDS; 0: none
+  std::optional<pipeline::Precision> precision;  // --precision as given; nullopt: auto
 };
 
 // Neither --model nor --method: the zoo's default model for the sensor's camera and colour
@@ -41,6 +46,15 @@ void choose_default_model(pipeline::ReconstructRequest& q) {
 }
 
 void run_reconstruct(ReconstructArgs a) {
+  std::optional<pipeline::BudgetChoice> budget;
+  if (a.budget > 0) {
+    auto& q = a.request;
+    pipeline::check_budget_request(
+        {!q.model.empty(), a.method_given, q.self_ensemble, q.self_calibrate});
+    budget = pipeline::budget_for_sensor(a.budget, q.sensor, q.phi, q.cfa, q.device, a.precision);
+    q.model = budget->path;
+    q.precision = budget->setting.precision;
+  }
   if (a.request.model.empty() && !a.method_given) choose_default_model(a.request);
   OutputFolderPolicy policy;
   policy.force = a.force;
@@ -70,6 +84,7 @@ void run_reconstruct(ReconstructArgs a) {
       },
       &cache);
   bar.finish();
+  if (budget) pipeline::record_budget(*budget, r.record);
   pipeline::write_reconstruction(r, a.out, policy);
   spdlog::info("reconstructed {} with {} in {:.2f} s ({:.2f} s end to end) into {}",
                r.lf.shape_string(), a.request.method, r.record["seconds"].get<double>(),
@@ -117,8 +132,10 @@ void add_reconstruct_command(CLI::App& app, const GlobalOptions&) {
                   "what the acquisition's sensor.json records, else estimated from the sensor "
                   "image, docs/acquisition.md)")
       ->check(kNoiseSigma);
-  cmd->callback([a, method] {
+  add_budget_option(cmd, a->budget);
+  cmd->callback([a, method, cmd] {
     a->method_given = method->count() > 0;
+    a->precision = given_precision(cmd, a->request.precision);
     run_reconstruct(*a);
   });
 }

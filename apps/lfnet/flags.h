@@ -13,6 +13,7 @@
 #include <CLI/CLI.hpp>
 
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -197,6 +198,25 @@ struct ReconstructionFlags {
   int64_t* ensemble_passes = nullptr;
   std::string* method_options = nullptr;
 };
+
+// --budget SECONDS (reconstruct, evaluate, batch): the most accurate zoo model that fits.
+inline CLI::Option* add_budget_option(CLI::App* cmd, double& budget) {
+  return cmd
+      ->add_option("--budget", budget,
+                   "seconds: run the most accurate zoo model for the camera whose reconstruction "
+                   "fits them on this machine, as timed by lfnet bench --calibrate (timed on "
+                   "first use; docs/models.md, \"A time budget\")")
+      ->check(CLI::PositiveNumber);
+}
+
+// The --precision given on the command line; nullopt for auto (the default), which a budget
+// decides per model.
+inline std::optional<pipeline::Precision> given_precision(const CLI::App* cmd,
+                                                          pipeline::Precision resolved) {
+  const auto* o = cmd->get_option("--precision");
+  if (o->count() == 0 || o->results().back() == "auto") return std::nullopt;
+  return resolved;
+}
 
 inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f) {
   if ((f.model == nullptr) == (f.models == nullptr) ||

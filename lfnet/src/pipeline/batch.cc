@@ -21,6 +21,7 @@
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/nn/auto_precision.h"
 #include "lfnet/optics/cfa.h"
+#include "lfnet/pipeline/budget.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sources.h"
@@ -151,7 +152,12 @@ class ItemProcessor {
   ItemProcessor(const BatchItem& item, const BatchOptions& options,
                 const std::vector<std::string>& methods, const std::string& out_dir,
                 ModelCache& cache)
-      : item_(item), a_(options), methods_(methods), out_dir_(out_dir), cache_(cache) {}
+      : item_(item),
+        a_(options),
+        methods_(methods),
+        out_dir_(out_dir),
+        cache_(cache),
+        model_(options.model) {}
 
   std::vector<nlohmann::json> run() {
     if (item_.kind == "unreadable") {
@@ -185,7 +191,13 @@ class ItemProcessor {
     // methods' options (checked for all methods at the start, read again here).
     nlohmann::json all_options;
     try {
-      if (!a_.model.empty()) check_phi_argument(cache_.model(a_.model), a_.phi);
+      if (a_.budget > 0) {
+        choose_model([&] {
+          return budget_for_sensor(a_.budget, item_.path, a_.phi, a_.cfa, a_.device,
+                                   a_.budget_precision);
+        });
+      }
+      if (!model_.empty()) check_phi_argument(cache_.model(model_), a_.phi);
       all_options = method_options_argument(a_.method_options, methods_);
     } catch (const std::exception& e) {
       return fail_all(e.what());
@@ -203,7 +215,7 @@ class ItemProcessor {
     ReconstructRequest q;
     q.sensor = item_.path;
     q.method = method;
-    q.model = a_.model;
+    q.model = model_;
     q.dictionary = a_.dictionary;
     if (all_options.contains(method)) {
       q.method_options = nlohmann::json{{method, all_options[method]}}.dump();
@@ -219,10 +231,11 @@ class ItemProcessor {
     q.self_ensemble_passes = a_.self_ensemble_passes;
     q.self_calibrate = a_.self_calibrate;
     q.device = a_.device;
-    q.precision = a_.precision;
+    q.precision = budget_ ? budget_->setting.precision : a_.precision;
     q.tile = a_.tile;
     q.coded = true;  // as reconstruct: a grey light field in 16-bit codes
     auto r = reconstruct_acquisition(q, {}, &cache_);
+    if (budget_) record_budget(*budget_, r.record);
     const std::string target = (fs::path(out_dir_) / item_.name / method).string();
     OutputFolderPolicy policy;
     policy.inputs = batch_inputs(a_);
@@ -251,12 +264,18 @@ class ItemProcessor {
   }
 
   void read_truth() {
+    if (a_.budget > 0) {
+      choose_model([&] {
+        return budget_for_light_field(a_.budget, light_field_pixels(item_.path, "", ""), a_.phi,
+                                      a_.cfa, a_.device, a_.budget_precision);
+      });
+    }
     optics::PhiSpec spec;
-    if (!a_.model.empty()) {
-      const auto& model = cache_.model(a_.model);
-      spec = optics::PhiSpec::from_json(model.phi, a_.model + ":$.phi");
+    if (!model_.empty()) {
+      const auto& model = cache_.model(model_);
+      spec = optics::PhiSpec::from_json(model.phi, model_ + ":$.phi");
       check_phi_argument(model, a_.phi);
-      place_network(model, a_.device, a_.precision);
+      place_network(model, a_.device, budget_ ? budget_->setting.precision : a_.precision);
       use_model(context_, model);
       patch_ = model.network.patch_grid();
     } else {
@@ -282,8 +301,8 @@ class ItemProcessor {
   }
 
   nlohmann::json evaluate_with(const std::string& method) {
-    if (!a_.model.empty() && recon::needs_network(method)) {
-      cache_.model(a_.model).check_cfa(cfa_ ? cfa_->pattern() : "");
+    if (!model_.empty() && recon::needs_network(method)) {
+      cache_.model(model_).check_cfa(cfa_ ? cfa_->pattern() : "");
     }
     auto o = make_eval_options(a_.mode, a_.noise, a_.seed, a_.stride, a_.batch, a_.window, patch_);
     o.cfa = cfa_;
@@ -292,10 +311,18 @@ class ItemProcessor {
     o.demosaic = a_.demosaic;
     context_.coded = o.reconstruct.coded = !cfa_;  // as evaluate: a grey estimate in 16-bit codes
     auto record = ok(evaluate_method(truths_[0], method, context_, o, nullptr, false));
+    if (budget_) record_budget(*budget_, record);
     const auto needs = recon::find_method(method).needs();
-    if (needs == recon::MethodNeeds::kNetwork) record["model"] = a_.model;
+    if (needs == recon::MethodNeeds::kNetwork) record["model"] = model_;
     if (needs == recon::MethodNeeds::kDictionary) record["model"] = a_.dictionary;
     return record;
+  }
+
+  // --budget: this item's model, chosen for its camera and size.
+  template <typename Choose>
+  void choose_model(const Choose& choose) {
+    budget_ = choose();
+    model_ = budget_->path;
   }
 
   const BatchItem& item_;
@@ -303,6 +330,8 @@ class ItemProcessor {
   const std::vector<std::string>& methods_;
   const std::string& out_dir_;
   ModelCache& cache_;
+  std::string model_;                   // --model, or the one the budget chose
+  std::optional<BudgetChoice> budget_;  // with --budget
   std::vector<nlohmann::json> records_;
   // An evaluated item's truth, camera and method context.
   std::vector<NamedLightField> truths_;
@@ -378,6 +407,7 @@ nlohmann::json batch_manifest(const BatchOptions& a, const std::vector<std::stri
     options[key] = content;
   }
   if (a.self_calibrate) options["self_calibrate"] = true;
+  if (a.budget > 0) options["budget"] = a.budget;
   return options;
 }
 
@@ -446,6 +476,14 @@ class Batch {
 
   void check() {
     methods_ = a_.methods;
+    if (a_.budget > 0) {
+      check_budget_request({!a_.model.empty(),
+                            !methods_.empty() && methods_ != std::vector<std::string>{"net"},
+                            a_.self_ensemble, a_.self_calibrate});
+      LFNET_CHECK_AS(ConfigError, a_.mode == optics::SimulationMode::kSensor,
+                     "--budget times reconstructions of sensor images: leave out --mode per_patch");
+      methods_ = {"net"};
+    }
     if (methods_.empty()) methods_ = {a_.model.empty() ? "pinv" : "net"};
     for (const auto& m : methods_) {
       try {

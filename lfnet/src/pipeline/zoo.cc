@@ -78,10 +78,9 @@ std::string resolve_model_name(const std::string& text) {
   return text;
 }
 
-ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
-                             const std::string& cfa) {
-  ZooDefault d;
-  d.colour = "grey";
+SensorCamera sensor_camera(const std::string& sensor, const std::string& phi,
+                           const std::string& cfa) {
+  SensorCamera c;
   try {
     std::error_code ec;
     optics::PhiSpec spec;
@@ -89,16 +88,32 @@ ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
       const auto meta = read_json_file((fs::path(sensor) / "sensor.json").string());
       spec = optics::PhiSpec::from_json(meta.at("phi"), sensor + "/sensor.json:$.phi");
       if (meta.contains("cfa")) {
-        d.colour = optics::ColourFilterArray::from_json(meta["cfa"], sensor + "/sensor.json:$.cfa")
+        c.colour = optics::ColourFilterArray::from_json(meta["cfa"], sensor + "/sensor.json:$.cfa")
                        .pattern();
       }
     } else if (!phi.empty()) {
       spec = phi_from_argument(phi);
-      if (const auto given = optics::resolve_cfa(cfa, spec.to_json())) d.colour = given->pattern();
+      if (const auto given = optics::resolve_cfa(cfa, spec.to_json())) c.colour = given->pattern();
     } else {
-      return d;
+      return c;
     }
-    d.camera = spec.label();
+    c.camera = spec.label();
+  } catch (const Error&) {
+    c.camera.clear();
+  } catch (const nlohmann::json::exception&) {
+    c.camera.clear();
+  }
+  return c;
+}
+
+ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
+                             const std::string& cfa) {
+  const auto c = sensor_camera(sensor, phi, cfa);
+  ZooDefault d;
+  d.camera = c.camera;
+  d.colour = c.colour;
+  if (d.camera.empty()) return d;
+  try {
     const Zoo zoo = read_zoo();
     if (const auto* m = zoo.default_for(d.camera, d.colour)) {
       d.name = m->name;
@@ -106,7 +121,6 @@ ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
     }
   } catch (const Error&) {
     // No default: the reconstruction reads the same files and reports what is wrong with them.
-  } catch (const nlohmann::json::exception&) {
   }
   return d;
 }

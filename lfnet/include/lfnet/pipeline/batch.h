@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -43,7 +44,12 @@ struct BatchOptions {
   bool self_ensemble = false;        // net with an lfnet checkpoint: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
   bool self_calibrate = false;       // net with an lfnet checkpoint: estimate the angular shift
-  bool force = false;                // write into an existing non-empty output folder
+  // --budget SECONDS: each item runs the most accurate zoo model for its camera that fits
+  // (pipeline/budget.h) instead of `model`; 0: none. `budget_precision` is --precision as
+  // given (nullopt: auto, per model).
+  double budget = 0;
+  std::optional<nn::Precision> budget_precision;
+  bool force = false;  // write into an existing non-empty output folder
   // Continue the batch in `out`: the item-method pairs with a record of status "ok" are kept,
   // the others (failed, or never finished) are done. The batch's options must be the same.
   bool resume = false;

@@ -35,11 +35,19 @@ Zoo read_zoo(const std::string& dir = zoo_dir());
 // path of the zoo model it names, if any. Never throws.
 std::string resolve_model_name(const std::string& text);
 
-// The zoo's default model for a sensor image: its camera and colour read from `sensor` (an
-// acquisition folder's sensor.json) or from `phi` and `cfa` (a plain sensor image's --phi and
-// --cfa, or the colour filter array a calibrated Phi names), and the card
-// marked default for them. `name` and `path` are empty when the zoo has no default for the
-// camera, and `camera` too when the camera cannot be read (the reconstruction then says why).
+// The camera (a Phi spec's label) and colour (grey, or a colour filter array's pattern) of a
+// sensor image: read from `sensor` (an acquisition folder's sensor.json) or from `phi` and `cfa`
+// (a plain sensor image's --phi and --cfa, or the colour filter array a calibrated Phi names).
+// `camera` is empty when they cannot be read (the reconstruction then says why); never throws.
+//
+// The zoo's default model for a sensor image: the card marked default for its camera and colour.
+// `name` and `path` are empty when the zoo has no default for the camera, and `camera` too when the
+// camera cannot be read (the reconstruction then says why).
+struct SensorCamera {
+  std::string camera, colour = "grey";
+};
+SensorCamera sensor_camera(const std::string& sensor, const std::string& phi,
+                           const std::string& cfa = "");
 struct ZooDefault {
   std::string camera, colour, name, path;
 };
