@@ -351,6 +351,15 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
       << noisy.dump() << "\n"
       << noisy_pinv.dump() << "\n";
   }
+  // Another camera on the paper's scene: a front page plot of its own.
+  fs::create_directories(tmp / "results/f");
+  std::ofstream(tmp / "results/f/section.json") << R"({"title": "Fifteen", "order": 6})";
+  {
+    auto n15 = nlohmann::json::parse(record("pinv", 29.8, 0.5));
+    n15["measurements"] = 15;
+    n15["phi"]["n"] = 15;
+    std::ofstream(tmp / "results/f/records.jsonl") << n15.dump() << "\n";
+  }
   std::string out;
   REQUIRE(run_command(lfnet_binary() + " --log-level warn report " + (tmp / "results") + " --out " +
                           (tmp / "docs/RESULTS.md"),
@@ -477,6 +486,17 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
     }
   }
   CHECK(whole_points == 1);
+  // N = 15 on a plot of its own, beside no-parallax, and on its own front.
+  REQUIRE(by_stem.count("pareto-asp-15"));
+  REQUIRE(by_stem["pareto-asp-15"]["points"].size() == 2);
+  for (const auto& p : by_stem["pareto-asp-15"]["points"]) {
+    CHECK((p["method"] == "no-parallax" || p["n"] == 15));
+    CHECK(p["front"] == true);
+  }
+  CHECK_THAT(by_stem["pareto-asp-15"]["title"].get<std::string>(), Catch::Contains("ASP N = 15"));
+  CHECK(text.find("![ASP N = 15: PSNR against seconds](images/results/pareto-asp-15.png)") !=
+        std::string::npos);
+  CHECK(text.find("| pinv |  | 15 | 5 | 29.80 | 0.900 | 0.50 | 2.50 | yes |") != std::string::npos);
   CHECK(text.find("| lfnet | whole image |") != std::string::npos);
   CHECK(text.find("| PSNR dB | SSIM | seconds | estimated sigma |") != std::string::npos);
   CHECK(text.find("| 30.50 | 0.900 | 20.00 | 0.0987 |") != std::string::npos);
@@ -503,7 +523,7 @@ TEST_CASE("report writes tables with the mode, margins, the paper's numbers and 
       read_bytes((tmp.path() / "recon/images/results/figures.json").string()));
   for (const auto& f : spec2["figures"]) {
     if (f["kind"] != "pareto") continue;
-    CHECK(f["points"].size() == 7);
+    CHECK(f["points"].size() == (f["stem"] == "pareto" ? 7 : 2));
     CHECK(f["xlabel"] == "reconstruction time (s, log scale)");
   }
   CHECK(run_command(lfnet_binary() + " report " + (tmp / "results") + " --pareto-time wall", out) !=

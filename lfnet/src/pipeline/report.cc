@@ -168,8 +168,8 @@ void write_section_viewer(const std::vector<LightField>& lfs,
 }
 
 // The front page: what accuracy costs in time on the paper's scene at 5 cm (sensor mode, no
-// noise), every method and architecture of every section once, as a table and the Pareto plot
-// against `time`. Empty when no section measured that scene.
+// noise), every method and architecture of every section once, as a table and a Pareto plot
+// per camera against `time`. Empty when no section measured that scene.
 std::string front_page(const std::vector<Section>& sections, ParetoTime time, FigureSet& figure_set,
                        const std::string& figures_link) {
   std::vector<nlohmann::json> rows;
@@ -198,38 +198,76 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
   if (rows.empty()) return "";
   const bool end_to_end = time == ParetoTime::kEndToEnd;
   const char* time_key = end_to_end ? "end_to_end_seconds" : "seconds";
-  std::vector<ParetoPoint> points;
-  std::vector<size_t> plotted;  // the row of each point
-  for (size_t i = 0; i < rows.size(); ++i) {
-    if (!std::isfinite(number(rows[i], time_key))) continue;  // older records lack end to end
-    auto p = pareto_point(rows[i]);
-    p.seconds = number(rows[i], time_key);
-    points.push_back(p);
-    plotted.push_back(i);
+  // One plot per camera (Phi and N), fewest measurements first; no-parallax, which sees no
+  // camera, is on each. A row is on the front of its own camera (no-parallax: of the first).
+  auto camera_of = [](const nlohmann::json& r) {
+    const bool camera_free =
+        recon::find_method(r.value("method", "")).needs() == recon::MethodNeeds::kTruth;
+    return camera_free ? std::string() : phi_name(r) + " " + setting(r, "n");
+  };
+  std::vector<std::pair<int64_t, std::string>> cameras;  // (N, camera)
+  for (const auto& r : rows) {
+    const auto camera = camera_of(r);
+    const std::pair<int64_t, std::string> key{r.value("measurements", int64_t{0}), camera};
+    if (!camera.empty() && std::find(cameras.begin(), cameras.end(), key) == cameras.end()) {
+      cameras.push_back(key);
+    }
   }
-  mark_pareto_front(points);
+  std::sort(cameras.begin(), cameras.end());
+  if (cameras.empty()) cameras.emplace_back(0, "");
   std::vector<bool> on_front(rows.size(), false);
-  for (size_t k = 0; k < points.size(); ++k) on_front[plotted[k]] = points[k].front;
+  std::vector<std::string> plots;  // their markdown
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    const auto& camera = cameras[c].second;
+    std::vector<ParetoPoint> points;
+    std::vector<size_t> plotted;  // the row of each point
+    for (size_t i = 0; i < rows.size(); ++i) {
+      const auto own = camera_of(rows[i]);
+      if (!own.empty() && own != camera) continue;
+      if (!std::isfinite(number(rows[i], time_key))) continue;  // older records lack end to end
+      auto p = pareto_point(rows[i]);
+      p.seconds = number(rows[i], time_key);
+      points.push_back(p);
+      plotted.push_back(i);
+    }
+    mark_pareto_front(points);
+    for (size_t k = 0; k < points.size(); ++k) {
+      if (!camera_of(rows[plotted[k]]).empty() || c == 0) on_front[plotted[k]] = points[k].front;
+    }
+    // The camera's words: "ASP N = 2".
+    std::string name = camera.substr(0, camera.find(' '));
+    for (auto& ch : name) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+    const std::string words =
+        camera.empty() ? "" : name + " N = " + std::to_string(cameras[c].first);
+    const std::string stem = c == 0 ? "pareto"
+                                    : "pareto-" + camera.substr(0, camera.find(' ')) + "-" +
+                                          std::to_string(cameras[c].first);
+    auto spec = pareto_spec(points,
+                            "What accuracy costs in time: the paper's scene, aperture 5 cm, " +
+                                words + " (sensor mode, no noise)",
+                            end_to_end ? "end-to-end time of the command (s, log scale)"
+                                       : "reconstruction time (s, log scale)");
+    spec["stem"] = stem;
+    figure_set.add(spec);
+    plots.push_back(figure_markdown(words + ": PSNR against seconds", figures_link, stem));
+  }
   std::vector<size_t> order(rows.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
     return number(rows[a], time_key, INFINITY) < number(rows[b], time_key, INFINITY);
   });
   const std::string what = end_to_end ? "end-to-end time" : "reconstruction time";
-  figure_set.add(pareto_spec(points,
-                             "What accuracy costs in time: the paper's scene, aperture 5 cm "
-                             "(sensor mode, no noise)",
-                             end_to_end ? "end-to-end time of the command (s, log scale)"
-                                        : "reconstruction time (s, log scale)"));
   std::ostringstream md;
   md << "## What accuracy costs in time, on the paper's scene\n\n"
      << "Every method and architecture below on the paper's own test scene, Dragons and Bunnies "
         "at the 5 cm aperture (593 x 840 x 5 x 5), `sensor` mode, no noise, against the "
      << what << " (`lfnet report --pareto-time`): \"seconds\" is the reconstruction alone, "
      << "\"end to end\" the whole `lfnet evaluate` command as its user waits for it (loading "
-        "included). The other apertures are in the sections below (\"The paper's scene\").\n\n"
-     << figure_markdown("PSNR against seconds", figures_link, "pareto") << "\n\n"
-     << "| method | variant | N | stride | PSNR dB | SSIM | seconds | end to end s | on the front "
+        "included). One plot per camera, each with `no-parallax`, which sees none; \"on the "
+        "front\" is within the row's camera. The other apertures are in the sections below "
+        "(\"The paper's scene\").\n\n";
+  for (const auto& plot : plots) md << plot << "\n\n";
+  md << "| method | variant | N | stride | PSNR dB | SSIM | seconds | end to end s | on the front "
         "|\n|---|---|---:|---|---:|---:|---:|---:|---|\n";
   for (const size_t i : order) {
     const auto& r = rows[i];
