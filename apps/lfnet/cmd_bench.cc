@@ -30,6 +30,7 @@ struct BenchArgs {
   bool phi_given = false;  // --phi on the command line (else the default, for untrained nets)
   bool in_process = false;
   bool calibrate = false;  // time the zoo's models for --budget instead
+  bool ladder = false;     // --model: the zoo's ladder for --phi
   // Child mode: one case "method:stride", with the parent's GEMM figure.
   std::string one_case;
   double gemm = 0;
@@ -182,8 +183,17 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                 "time the zoo's models (or those of --model) and pinv on this machine for "
                 "--budget, at --height x --width and a quarter of it, and write them to the "
                 "calibration file ($LFNET_CALIBRATION, else ~/.cache/lfnet/calibration.json)");
+  cmd->add_flag("--ladder", args->ladder,
+                "time the zoo's grey checkpoints for --phi (default asp:2) that --budget chooses "
+                "among, most accurate first, as if each were given as --model");
   cmd->callback([args, cmd] {
     args->phi_given = cmd->count("--phi") > 0;
+    if (args->ladder) {
+      LFNET_CHECK_AS(ConfigError, args->options.models.empty(),
+                     "--ladder times the zoo's models: leave out --model");
+      args->options.models =
+          pipeline::ladder_models(pipeline::phi_from_argument(args->options.phi).label());
+    }
     if (args->calibrate) {
       LFNET_CHECK_AS(ConfigError, args->json.empty() && args->one_case.empty(),
                      "--calibrate writes the calibration file, not --json");

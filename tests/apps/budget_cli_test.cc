@@ -62,6 +62,18 @@ TEST_CASE("--budget runs the zoo model that fits and records its predicted and a
   CHECK_THAT(out, Catch::Contains("--calibrate writes the calibration file"));
   CHECK_FALSE(fs::exists(tmp / "x.json"));
 
+  // bench --ladder times the camera's checkpoints in one run, most accurate first.
+  const std::string ladder = tmp / "ladder.json";
+  REQUIRE(run_command(lfnet + "bench --ladder --methods net --strides 5 --height 36 --width 45 " +
+                          "--skip-kernels --json " + ladder,
+                      out) == 0);
+  const auto cases = read_record(ladder)["cases"];
+  REQUIRE(cases.size() == 2);
+  CHECK(cases[0]["model"] == zoo + "/wide.ckpt");
+  CHECK(cases[1]["model"] == zoo + "/narrow.ckpt");
+  CHECK(run_command(lfnet + "bench --ladder --phi mask:2 --methods net", out) != 0);
+  CHECK_THAT(out, Catch::Contains("no measured checkpoint for mask:2"));
+
   // Timings the test sets: wide 2 s, narrow 0.5 s, pinv 0.1 s per light field of any size.
   for (auto& e : c["entries"]) {
     const double s = e["model"] == "wide" ? 2.0 : e["model"] == "narrow" ? 0.5 : 0.1;

@@ -195,7 +195,7 @@ TEST_CASE("a budget runs the most accurate model that fits, or says none does", 
 TEST_CASE("a budget times what the calibration lacks, once, and a changed file again", "[budget]") {
   SmallZoo zoo(nlohmann::json::array({card("only", 1.0, 1.0)}));
   const auto first =
-      pipeline::choose_within_budget(1000, "asp:2", "grey", 64 * 64, "cpu", std::nullopt);
+      pipeline::choose_within_budget(1000, "asp:2", "grey", int64_t{64} * 64, "cpu", std::nullopt);
   CHECK(first.model == "only");
   const auto c = pipeline::read_calibration(zoo.calibration);
   REQUIRE(c.entries.size() == 2);  // the model and its camera's pinv
@@ -203,8 +203,8 @@ TEST_CASE("a budget times what the calibration lacks, once, and a changed file a
   const auto* e = c.find("only", "asp:2", "grey", setting);
   REQUIRE(e != nullptr);
   CHECK(e->timings.size() == 2);
-  CHECK(e->timings[1].first == 593 * 840);
-  CHECK(e->timings[0].first == 297 * 420);
+  CHECK(e->timings[1].first == int64_t{593} * 840);
+  CHECK(e->timings[0].first == int64_t{297} * 420);
   CHECK(e->timings[1].second > 0);
   CHECK(e->setting.threads == thread_count());
   // Told the timings, the next choice reads them: a file with other timings is kept as it is.

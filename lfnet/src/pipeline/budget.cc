@@ -397,6 +397,16 @@ std::vector<BudgetCandidate> budget_candidates(const Zoo& zoo, const std::string
   return out;
 }
 
+std::vector<std::string> ladder_models(const std::string& camera) {
+  std::vector<std::string> paths;
+  for (const auto& c : budget_candidates(read_zoo(), camera, "grey")) {
+    if (model_file_kind(c.path) == ModelFileKind::kCheckpoint) paths.push_back(c.path);
+  }
+  LFNET_CHECK_AS(ConfigError, !paths.empty(), "--ladder: the zoo has no measured checkpoint for ",
+                 camera, " (grey)");
+  return paths;
+}
+
 nlohmann::json BudgetChoice::record() const {
   return {{"seconds", budget},
           {"model", model},

@@ -101,6 +101,11 @@ struct BudgetCandidate {
 std::vector<BudgetCandidate> budget_candidates(const Zoo& zoo, const std::string& camera,
                                                const std::string& colour);
 
+// The ladder of a camera: the checkpoints among its grey candidates, most accurate first (a
+// noise switch is left out: its quiet member is a checkpoint of the zoo). `lfnet bench --ladder`
+// times them in one run.
+std::vector<std::string> ladder_models(const std::string& camera);
+
 // The choice a budget made; `record()` is what reconstruction records hold as "budget".
 struct BudgetChoice {
   double budget = 0;
