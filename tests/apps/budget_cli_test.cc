@@ -23,7 +23,7 @@ nlohmann::json read_record(const std::string& path) {
 
 }  // namespace
 
-TEST_CASE("--budget runs the zoo model that fits and records its predicted and actual seconds",
+TEST_CASE("a budget runs the zoo model that fits and records its predicted and actual seconds",
           "[app]") {
   lfnet::test::TempDir tmp;
   const auto zoo = tmp / "zoo";
