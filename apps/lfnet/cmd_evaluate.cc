@@ -31,10 +31,8 @@ void run_evaluate(EvaluateArgs& a) {
   auto& q = a.request;
   std::optional<pipeline::BudgetChoice> budget;
   if (a.budget > 0) {
-    pipeline::check_budget_request(
-        {!q.model.empty(), a.method_given, q.self_ensemble, q.self_calibrate});
-    LFNET_CHECK_AS(ConfigError, q.mode == optics::SimulationMode::kSensor,
-                   "--budget times reconstructions of sensor images: leave out --mode per_patch");
+    pipeline::check_budget_request({!q.model.empty(), a.method_given, q.self_ensemble,
+                                    q.self_calibrate, q.mode != optics::SimulationMode::kSensor});
     budget = pipeline::budget_for_light_field(a.budget,
                                               pipeline::light_field_pixels(q.lf, q.layout, q.scene),
                                               q.phi, q.cfa, q.device, a.precision);

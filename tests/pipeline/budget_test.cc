@@ -220,8 +220,9 @@ TEST_CASE("a budget times what the calibration lacks, once, and a changed file a
   CHECK(again.predicted_seconds < 100);
 }
 
-TEST_CASE("a budget is refused with a model, a method, a self-ensemble or self-calibration",
-          "[budget]") {
+TEST_CASE(
+    "a budget is refused with a model, a method, a self-ensemble, self-calibration or per_patch",
+    "[budget]") {
   CHECK_NOTHROW(pipeline::check_budget_request({}));
   CHECK_THROWS_WITH(pipeline::check_budget_request({true, false, false, false}),
                     Catch::Contains("give --budget or --model, not both"));
@@ -231,4 +232,6 @@ TEST_CASE("a budget is refused with a model, a method, a self-ensemble or self-c
                     Catch::Contains("--self-ensemble"));
   CHECK_THROWS_WITH(pipeline::check_budget_request({false, false, false, true}),
                     Catch::Contains("--self-calibrate"));
+  CHECK_THROWS_WITH(pipeline::check_budget_request({false, false, false, false, true}),
+                    Catch::Contains("leave out --mode per_patch"));
 }

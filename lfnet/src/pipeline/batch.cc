@@ -231,7 +231,7 @@ class ItemProcessor {
     q.self_ensemble_passes = a_.self_ensemble_passes;
     q.self_calibrate = a_.self_calibrate;
     q.device = a_.device;
-    q.precision = budget_ ? budget_->setting.precision : a_.precision;
+    q.precision = precision();
     q.tile = a_.tile;
     q.coded = true;  // as reconstruct: a grey light field in 16-bit codes
     auto r = reconstruct_acquisition(q, {}, &cache_);
@@ -275,7 +275,7 @@ class ItemProcessor {
       const auto& model = cache_.model(model_);
       spec = optics::PhiSpec::from_json(model.phi, model_ + ":$.phi");
       check_phi_argument(model, a_.phi);
-      place_network(model, a_.device, budget_ ? budget_->setting.precision : a_.precision);
+      place_network(model, a_.device, precision());
       use_model(context_, model);
       patch_ = model.network.patch_grid();
     } else {
@@ -317,6 +317,9 @@ class ItemProcessor {
     if (needs == recon::MethodNeeds::kDictionary) record["model"] = a_.dictionary;
     return record;
   }
+
+  // The precision the model runs in: the budget's choice's, else --precision.
+  nn::Precision precision() const { return budget_ ? budget_->setting.precision : a_.precision; }
 
   // --budget: this item's model, chosen for its camera and size.
   template <typename Choose>
@@ -477,11 +480,9 @@ class Batch {
   void check() {
     methods_ = a_.methods;
     if (a_.budget > 0) {
-      check_budget_request({!a_.model.empty(),
-                            !methods_.empty() && methods_ != std::vector<std::string>{"net"},
-                            a_.self_ensemble, a_.self_calibrate});
-      LFNET_CHECK_AS(ConfigError, a_.mode == optics::SimulationMode::kSensor,
-                     "--budget times reconstructions of sensor images: leave out --mode per_patch");
+      check_budget_request(
+          {!a_.model.empty(), !methods_.empty() && methods_ != std::vector<std::string>{"net"},
+           a_.self_ensemble, a_.self_calibrate, a_.mode != optics::SimulationMode::kSensor});
       methods_ = {"net"};
     }
     if (methods_.empty()) methods_ = {a_.model.empty() ? "pinv" : "net"};

@@ -128,22 +128,28 @@ CalibrationEntry CalibrationEntry::from_json(const nlohmann::json& j) {
   return e;
 }
 
+namespace {
+
+bool same_key(const CalibrationEntry& e, const std::string& model, const std::string& camera,
+              const std::string& colour, const TimingSetting& setting) {
+  return e.model == model && e.camera == camera && e.colour == colour &&
+         same_setting(e.setting, setting);
+}
+
+}  // namespace
+
 const CalibrationEntry* Calibration::find(const std::string& model, const std::string& camera,
                                           const std::string& colour,
                                           const TimingSetting& setting) const {
   for (const auto& e : entries) {
-    if (e.model == model && e.camera == camera && e.colour == colour &&
-        same_setting(e.setting, setting)) {
-      return &e;
-    }
+    if (same_key(e, model, camera, colour, setting)) return &e;
   }
   return nullptr;
 }
 
 void Calibration::put(const CalibrationEntry& entry) {
   for (auto& e : entries) {
-    if (e.model == entry.model && e.camera == entry.camera && e.colour == entry.colour &&
-        same_setting(e.setting, entry.setting)) {
+    if (same_key(e, entry.model, entry.camera, entry.colour, entry.setting)) {
       e = entry;
       return;
     }
@@ -271,15 +277,16 @@ std::vector<CalibrationJob> calibration_jobs(const Zoo& zoo,
   std::vector<CalibrationJob> jobs;
   std::set<std::pair<std::string, std::string>> cameras;
   // A name, or the card's file (a command line's zoo names arrive resolved to files).
-  auto named = [&](const ZooCard& m, const std::string& path) {
-    return std::any_of(names.begin(), names.end(), [&](const std::string& n) {
-      std::error_code ec;
-      return n == m.name || fs::equivalent(n, path, ec);
-    });
+  auto names_card = [&](const std::string& name, const ZooCard& m) {
+    std::error_code ec;
+    return name == m.name || fs::equivalent(name, zoo.path(m), ec);
   };
   for (const auto& m : zoo.models) {
-    const auto path = (fs::path(zoo.dir) / m.file).string();
-    if (!names.empty() && !named(m, path)) continue;
+    const auto path = zoo.path(m);
+    if (!names.empty() && std::none_of(names.begin(), names.end(),
+                                       [&](const std::string& n) { return names_card(n, m); })) {
+      continue;
+    }
     const auto spec = card_camera(m.card);
     if (!spec || !is_network_file(path)) {
       LFNET_CHECK_AS(ConfigError, names.empty(), "the zoo model ", m.name,
@@ -293,10 +300,8 @@ std::vector<CalibrationJob> calibration_jobs(const Zoo& zoo,
     }
   }
   for (const auto& name : names) {
-    const bool found = std::any_of(zoo.models.begin(), zoo.models.end(), [&](const ZooCard& m) {
-      std::error_code ec;
-      return name == m.name || fs::equivalent(name, (fs::path(zoo.dir) / m.file).string(), ec);
-    });
+    const bool found = std::any_of(zoo.models.begin(), zoo.models.end(),
+                                   [&](const ZooCard& m) { return names_card(name, m); });
     LFNET_CHECK_AS(ConfigError, found, "--calibrate times zoo models; ", name,
                    " is none of them (lfnet models)");
   }
@@ -377,7 +382,7 @@ std::vector<BudgetCandidate> budget_candidates(const Zoo& zoo, const std::string
   for (const auto& m : zoo.models) {
     const auto spec = card_camera(m.card);
     if (spec && spec->label() == camera && m.card.value("colour", "grey") == colour &&
-        is_network_file((fs::path(zoo.dir) / m.file).string())) {
+        is_network_file(zoo.path(m))) {
       cards.push_back(&m);
     }
   }
@@ -387,7 +392,7 @@ std::vector<BudgetCandidate> budget_candidates(const Zoo& zoo, const std::string
       if (const auto a = card_accuracy(m->card, basis)) {
         const auto section =
             basis == "validation" ? basis : m->card["measured"]["benchmark"].value("section", "");
-        out.push_back({m->name, (fs::path(zoo.dir) / m->file).string(), *a, section});
+        out.push_back({m->name, zoo.path(*m), *a, section});
       }
     }
     if (!out.empty()) break;
@@ -534,6 +539,8 @@ void check_budget_request(const BudgetConflicts& given) {
   LFNET_CHECK_AS(ConfigError, !given.self_calibrate,
                  "--budget predicts a reconstruction without self-calibration: leave out "
                  "--self-calibrate");
+  LFNET_CHECK_AS(ConfigError, !given.per_patch,
+                 "--budget times reconstructions of sensor images: leave out --mode per_patch");
 }
 
 BudgetChoice budget_for_sensor(double budget, const std::string& sensor, const std::string& phi,

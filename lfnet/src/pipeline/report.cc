@@ -167,6 +167,11 @@ void write_section_viewer(const std::vector<LightField>& lfs,
   io::write_viewer(estimate, path, page);
 }
 
+// A method that sees no camera (no-parallax reads the true light field's centre view).
+bool sees_no_camera(const nlohmann::json& r) {
+  return recon::find_method(r.value("method", "")).needs() == recon::MethodNeeds::kTruth;
+}
+
 // The front page: what accuracy costs in time on the paper's scene at 5 cm (sensor mode, no
 // noise), every method and architecture of every section once, as a table and a Pareto plot
 // per camera against `time`. Empty when no section measured that scene.
@@ -183,8 +188,7 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
       // camera) is listed once, under the first section's variant; no-parallax, which sees no
       // camera, once.
       const std::string method = r.value("method", "");
-      const bool camera_free = recon::find_method(method).needs() == recon::MethodNeeds::kTruth;
-      const std::string key = camera_free
+      const std::string key = sees_no_camera(r)
                                   ? method
                                   : method + "|" +
                                         (recon::is_baseline(method) ? phi_name(r) + setting(r, "n")
@@ -198,32 +202,31 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
   if (rows.empty()) return "";
   const bool end_to_end = time == ParetoTime::kEndToEnd;
   const char* time_key = end_to_end ? "end_to_end_seconds" : "seconds";
-  // One plot per camera (Phi and N), fewest measurements first; no-parallax, which sees no
+  // One plot per camera (N and Phi), fewest measurements first; no-parallax, which sees no
   // camera, is on each. A row is on the front of its own camera (no-parallax: of the first).
-  auto camera_of = [](const nlohmann::json& r) {
-    const bool camera_free =
-        recon::find_method(r.value("method", "")).needs() == recon::MethodNeeds::kTruth;
-    return camera_free ? std::string() : phi_name(r) + " " + setting(r, "n");
-  };
-  std::vector<std::pair<int64_t, std::string>> cameras;  // (N, camera)
+  using Camera = std::pair<int64_t, std::string>;  // (N, Phi name); none: (0, "")
+  std::vector<Camera> row_camera;
+  row_camera.reserve(rows.size());
   for (const auto& r : rows) {
-    const auto camera = camera_of(r);
-    const std::pair<int64_t, std::string> key{r.value("measurements", int64_t{0}), camera};
-    if (!camera.empty() && std::find(cameras.begin(), cameras.end(), key) == cameras.end()) {
-      cameras.push_back(key);
+    row_camera.push_back(
+        sees_no_camera(r) ? Camera{} : Camera{r.value("measurements", int64_t{0}), phi_name(r)});
+  }
+  std::vector<Camera> cameras;
+  for (const auto& c : row_camera) {
+    if (c != Camera{} && std::find(cameras.begin(), cameras.end(), c) == cameras.end()) {
+      cameras.push_back(c);
     }
   }
   std::sort(cameras.begin(), cameras.end());
-  if (cameras.empty()) cameras.emplace_back(0, "");
+  if (cameras.empty()) cameras.emplace_back();
   std::vector<bool> on_front(rows.size(), false);
   std::vector<std::string> plots;  // their markdown
   for (size_t c = 0; c < cameras.size(); ++c) {
-    const auto& camera = cameras[c].second;
+    const auto& [n, phi] = cameras[c];
     std::vector<ParetoPoint> points;
     std::vector<size_t> plotted;  // the row of each point
     for (size_t i = 0; i < rows.size(); ++i) {
-      const auto own = camera_of(rows[i]);
-      if (!own.empty() && own != camera) continue;
+      if (row_camera[i] != Camera{} && row_camera[i] != cameras[c]) continue;
       if (!std::isfinite(number(rows[i], time_key))) continue;  // older records lack end to end
       auto p = pareto_point(rows[i]);
       p.seconds = number(rows[i], time_key);
@@ -232,16 +235,13 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
     }
     mark_pareto_front(points);
     for (size_t k = 0; k < points.size(); ++k) {
-      if (!camera_of(rows[plotted[k]]).empty() || c == 0) on_front[plotted[k]] = points[k].front;
+      if (row_camera[plotted[k]] != Camera{} || c == 0) on_front[plotted[k]] = points[k].front;
     }
     // The camera's words: "ASP N = 2".
-    std::string name = camera.substr(0, camera.find(' '));
+    std::string name = phi;
     for (auto& ch : name) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
-    const std::string words =
-        camera.empty() ? "" : name + " N = " + std::to_string(cameras[c].first);
-    const std::string stem = c == 0 ? "pareto"
-                                    : "pareto-" + camera.substr(0, camera.find(' ')) + "-" +
-                                          std::to_string(cameras[c].first);
+    const std::string words = phi.empty() ? "" : name + " N = " + std::to_string(n);
+    const std::string stem = c == 0 ? "pareto" : "pareto-" + phi + "-" + std::to_string(n);
     auto spec = pareto_spec(points,
                             "What accuracy costs in time: the paper's scene, aperture 5 cm, " +
                                 words + " (sensor mode, no noise)",
@@ -273,7 +273,7 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
     const auto& r = rows[i];
     // A baseline's variant names the model it was measured beside, not the baseline.
     const std::string method = r.value("method", "");
-    const bool camera_free = recon::find_method(method).needs() == recon::MethodNeeds::kTruth;
+    const bool camera_free = sees_no_camera(r);
     md << "| " << method << " | " << (recon::is_baseline(method) ? "" : r.value("variant", ""))
        << " | " << (camera_free ? "" : setting(r, "n")) << " | "
        << (camera_free ? "" : setting(r, "stride")) << " | " << fmt("%.2f", number(r, "psnr_db"))

@@ -26,6 +26,8 @@ const ZooCard* Zoo::find(const std::string& name) const {
   return nullptr;
 }
 
+std::string Zoo::path(const ZooCard& card) const { return (fs::path(dir) / card.file).string(); }
+
 const ZooCard* Zoo::default_for(const std::string& camera, const std::string& colour) const {
   for (const auto& m : models) {
     if (m.card.value("default", false) && m.card.value("camera", "") == camera &&
@@ -71,7 +73,7 @@ std::string resolve_model_name(const std::string& text) {
   if (text.empty() || fs::exists(text, ec) || text.find('/') != std::string::npos) return text;
   try {
     const Zoo zoo = read_zoo();
-    if (const auto* m = zoo.find(text)) return (fs::path(zoo.dir) / m->file).string();
+    if (const auto* m = zoo.find(text)) return zoo.path(*m);
   } catch (const Error&) {
     // Not a zoo name after all: the command reports the missing file as it would.
   }
@@ -117,7 +119,7 @@ ZooDefault zoo_default_model(const std::string& sensor, const std::string& phi,
     const Zoo zoo = read_zoo();
     if (const auto* m = zoo.default_for(d.camera, d.colour)) {
       d.name = m->name;
-      d.path = (fs::path(zoo.dir) / m->file).string();
+      d.path = zoo.path(*m);
     }
   } catch (const Error&) {
     // No default: the reconstruction reads the same files and reports what is wrong with them.
@@ -133,7 +135,7 @@ struct FileFacts {
 
 FileFacts file_facts(const Zoo& zoo, const ZooCard& m) {
   FileFacts f;
-  const auto path = (fs::path(zoo.dir) / m.file).string();
+  const auto path = zoo.path(m);
   std::error_code ec;
   if (!fs::exists(path, ec)) return {"missing", "missing"};
   char buf[32];
@@ -201,7 +203,7 @@ std::string zoo_card(const Zoo& zoo, const std::string& name) {
   }
   auto card = m->card;
   const auto f = file_facts(zoo, *m);
-  card["path"] = (fs::path(zoo.dir) / m->file).string();
+  card["path"] = zoo.path(*m);
   if (!f.parameters.empty()) card["parameters"] = f.parameters;
   card["megabytes"] = f.megabytes;
   return card.dump(2) + "\n";

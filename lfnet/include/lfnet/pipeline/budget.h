@@ -130,10 +130,11 @@ BudgetChoice choose_within_budget(double budget, const std::string& camera,
                                   std::optional<nn::Precision> precision);
 
 // What a budget is refused with, as ConfigErrors naming the flag: a model or method of one's own
-// (the budget chooses them), and the self-ensemble and self-calibration (which its timings do
-// not include).
+// (the budget chooses them), and the self-ensemble, self-calibration and per-patch measurements
+// (which its timings do not include).
 struct BudgetConflicts {
-  bool model = false, method = false, self_ensemble = false, self_calibrate = false;
+  bool model = false, method = false, self_ensemble = false, self_calibrate = false,
+       per_patch = false;
 };
 void check_budget_request(const BudgetConflicts& given);
 

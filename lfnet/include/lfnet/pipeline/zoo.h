@@ -19,6 +19,7 @@ struct Zoo {
   std::string dir;  // the folder of zoo.json and the models
   std::vector<ZooCard> models;
   const ZooCard* find(const std::string& name) const;
+  std::string path(const ZooCard& card) const;  // the card's file in the zoo's folder
   // The card marked `default` for a camera (a Phi spec's label, "asp:2") and colour ("grey", or
   // a colour filter array's pattern, "RGGB"); nullptr when the zoo has none.
   const ZooCard* default_for(const std::string& camera, const std::string& colour) const;
