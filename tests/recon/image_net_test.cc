@@ -265,6 +265,53 @@ TEST_CASE("lfnet's U-Net in bfloat16 stays close to float32 and keeps float32 ou
     CHECK(p.scalar_type() == torch::kFloat32);
 }
 
+TEST_CASE("a U-Net trained for bfloat16 computes what it computes in bfloat16, float32 weights",
+          "[recon][image]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto net = image_net(*phi);
+  test::randomise_image_net(net, 21);
+  const auto sensor = optics::simulate_sensor(*phi, random_light_field(*phi, 32, 24, 22));
+  torch::Tensor fp32, bf16;
+  {
+    // (The round trip leaves the weights rounded to bfloat16, so both runs share them.)
+    torch::NoGradGuard no_grad;
+    nn::set_cnn_precision(net, nn::Precision::kBFloat16);
+    bf16 = net->forward_image(sensor.unsqueeze(0));
+    nn::set_cnn_precision(net, nn::Precision::kFloat32);
+    fp32 = net->forward_image(sensor.unsqueeze(0));
+  }
+  nn::emulate_precision(net, nn::Precision::kBFloat16);
+  CHECK(lfnet::nn::image_layers(*net)->emulates_bfloat16());
+  const auto emulated = net->forward_image(sensor.unsqueeze(0));
+  // The rounding of a bfloat16 run, up to the order of float32 sums: far closer to bfloat16's
+  // output than float32's is.
+  const double off = (fp32 - bf16).abs().max().item<double>();
+  const double emulated_off = (emulated - bf16).abs().max().item<double>();
+  REQUIRE(off > 0.0);
+  CHECK(emulated_off < 0.1 * off);
+  // Its weights stay float32 and receive gradients through the rounding.
+  emulated.square().sum().backward();
+  for (const auto& p : lfnet::nn::image_layers(*net)->parameters()) {
+    CHECK(p.scalar_type() == torch::kFloat32);
+    REQUIRE(p.grad().defined());
+  }
+  const auto& input = lfnet::nn::image_layers(*net)->named_parameters()["input.weight"];
+  CHECK(input.grad().abs().sum().item<double>() > 0.0);
+  nn::emulate_precision(net, nn::Precision::kFloat32);
+  torch::NoGradGuard no_grad;
+  CHECK(torch::equal(net->forward_image(sensor.unsqueeze(0)), fp32));
+}
+
+TEST_CASE("training for bfloat16 is refused where the architecture has no bfloat16 layers",
+          "[recon][image]") {
+  nn::NetworkOptions o;  // the paper's architecture
+  nn::LightFieldNet net(o);
+  CHECK_NOTHROW(nn::emulate_precision(net, nn::Precision::kFloat32));
+  CHECK_THROWS_AS(nn::emulate_precision(net, nn::Precision::kBFloat16), ConfigError);
+  CHECK_THROWS_WITH(nn::emulate_precision(net, nn::Precision::kBFloat16),
+                    Catch::Contains("training.precision") && Catch::Contains("paper"));
+}
+
 TEST_CASE("a narrow U-Net embedded in a wider one computes what the narrow one did",
           "[recon][image]") {
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));

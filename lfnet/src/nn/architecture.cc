@@ -31,6 +31,12 @@ torch::Tensor NetworkArchitecture::forward_image(LightFieldNetImpl&, const torch
                     " architecture reconstructs patches, not whole sensor images");
 }
 
+void NetworkArchitecture::emulate_precision(LightFieldNetImpl&, torch::Dtype dtype) const {
+  if (dtype == torch::kFloat32) return;
+  throw ConfigError("training.precision: the " + name() +
+                    " architecture trains in float32 only (lfnet and unrolled train for bfloat16)");
+}
+
 ImageTiling NetworkArchitecture::image_tiling(const NetworkOptions&) const {
   throw ConfigError("the " + name() +
                     " architecture reconstructs patches, not whole sensor images");

@@ -160,10 +160,55 @@ std::vector<std::string> ImageNetImpl::start_new_levels(int64_t from_levels) {
   return names;
 }
 
+void ImageNetImpl::emulate_precision(torch::Dtype dtype) {
+  LFNET_CHECK(dtype == torch::kFloat32 || dtype == torch::kBFloat16, "ImageNet: no emulation of ",
+              dtype);
+  emulate_bfloat16_ = dtype == torch::kBFloat16;
+}
+
+namespace {
+// A float32 tensor rounded to the nearest bfloat16 (ties to even), still float32; its gradient
+// is the identity (the casts' backward casts back).
+torch::Tensor round_bfloat16(const torch::Tensor& t) {
+  return t.to(torch::kBFloat16).to(t.scalar_type());
+}
+}  // namespace
+
+torch::Tensor ImageNetImpl::forward_emulated(const torch::Tensor& x) {
+  namespace F = torch::nn::functional;
+  const auto q = round_bfloat16;
+  auto conv = [&](torch::nn::Conv2d& c, const torch::Tensor& in) {
+    return q(F::conv2d(in, q(c->weight),
+                       F::Conv2dFuncOptions()
+                           .bias(q(c->bias))
+                           .stride(c->options.stride())
+                           .padding(c->options.padding())));
+  };
+  // As forward() runs in bfloat16: every value a bfloat16 tensor would hold is rounded.
+  auto h = torch::relu(conv(input_, q(x.to(torch::kFloat32))));
+  std::vector<torch::Tensor> skips;
+  const int64_t levels = options_.levels;
+  for (int64_t l = 0; l < levels; ++l) {
+    for (auto& c : encoder_[l]) h = torch::relu(conv(c, h));
+    if (l + 1 < levels) {
+      skips.push_back(h);
+      h = torch::relu(conv(down_[l], h));
+    }
+  }
+  for (int64_t l = levels - 2; l >= 0; --l) {
+    h = q(torch::relu(q(up_[l]->forward(h))) + skips[l]);
+    for (auto& c : decoder_[l]) h = torch::relu(conv(c, h));
+  }
+  return conv(output_, h).to(x.scalar_type());
+}
+
 torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
   const int64_t m = options_.multiple();
   LFNET_CHECK(x.dim() == 4 && x.size(2) % m == 0 && x.size(3) % m == 0,
               "ImageNet: expected (B, C, H, W) with H and W multiples of ", m, ", got ", x.sizes());
+  if (emulate_bfloat16_ && input_->weight.scalar_type() == torch::kFloat32) {
+    return forward_emulated(x);
+  }
   // In the weights' type (bfloat16 after set_cnn_precision), the output in the input's.
   auto h = torch::relu(input_->forward(x.to(input_->weight.scalar_type())));
   std::vector<torch::Tensor> skips;

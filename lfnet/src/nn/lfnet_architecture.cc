@@ -248,6 +248,9 @@ class LfnetArchitecture : public NetworkArchitecture {
   void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
     image_layers(net)->set_precision(dtype);
   }
+  void emulate_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
+    image_layers(net)->emulate_precision(dtype);
+  }
 
   double patch_flops(const NetworkOptions& o, const BranchSelection&) const override {
     return image_pixel_flops(o) * static_cast<double>(o.patch.pixels());

@@ -294,6 +294,11 @@ void set_cnn_precision(LightFieldNet& net, Precision precision) {
   net->architecture().set_precision(*net, dtype);
 }
 
+void emulate_precision(LightFieldNet& net, Precision precision) {
+  const auto dtype = precision == Precision::kBFloat16 ? torch::kBFloat16 : torch::kFloat32;
+  net->architecture().emulate_precision(*net, dtype);
+}
+
 int64_t parameter_count(const torch::nn::Module& module) {
   int64_t n = 0;
   for (const auto& p : module.parameters()) n += p.numel();

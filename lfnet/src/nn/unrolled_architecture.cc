@@ -207,6 +207,12 @@ class UnrolledArchitecture : public NetworkArchitecture {
       net.layer<ImageNetImpl>(denoiser_name(u, k))->set_precision(dtype);
     }
   }
+  void emulate_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
+    const auto u = unrolled_options(net.options());
+    for (int64_t k = 0; k < u.denoisers(); ++k) {
+      net.layer<ImageNetImpl>(denoiser_name(u, k))->emulate_precision(dtype);
+    }
+  }
 
   // Per pixel: the pseudo-inverse, then per iteration the denoiser, A z and A^+ r.
   double patch_flops(const NetworkOptions& o, const BranchSelection&) const override {

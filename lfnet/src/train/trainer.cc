@@ -339,6 +339,7 @@ Trainer::Trainer(nn::LightFieldNet net, TrainerOptions options, RunInfo run)
               "the net's Phi is not set: call set_phi with the patch matrices first");
   device_ = parse_device(options_.device);
   net_->to(device_);
+  nn::emulate_precision(net_, options_.precision);
   optimizer_ = make_adam(net_, options_);
   state_.stage = to_string(options_.stage);
   comm_ = std::make_shared<dist::LocalCommunicator>();

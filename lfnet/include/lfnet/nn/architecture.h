@@ -113,6 +113,10 @@ class NetworkArchitecture {
   virtual ImageTiling image_tiling(const NetworkOptions& options) const;
   // Converts the layers that run in reduced precision for inference (bfloat16) to `dtype`.
   virtual void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const = 0;
+  // Training for a run in `dtype` (training.precision): the layers set_precision converts keep
+  // float32 weights but round as `dtype` would (ImageNetImpl::emulate_precision); float32 turns
+  // it off. Default: float32 is a no-op and anything else a ConfigError.
+  virtual void emulate_precision(LightFieldNetImpl& net, torch::Dtype dtype) const;
 
   // The FLOP model (lfnet bench): nominal floating-point operations of one patch (or one
   // training crop) through the parts `run` selects, and of a whole H x W image in tiles of

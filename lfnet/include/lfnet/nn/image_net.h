@@ -97,6 +97,14 @@ class ImageNetImpl : public torch::nn::Module {
   // transposed ones: LibTorch 1.13's oneDNN path runs a bfloat16 transposed convolution as a
   // plain one, so those stay float32 and convert their input and output.
   void set_precision(torch::Dtype dtype);
+  // Training for a bfloat16 run (training.precision, docs/performance.md): with `dtype`
+  // bfloat16 the forward pass rounds to bfloat16 every tensor that set_precision(bfloat16)
+  // would hold in it (the convolutions' inputs, weights, biases and outputs, the transposed
+  // convolutions' outputs and the skip sums) and computes in float32, so the net meets the
+  // rounding of a bfloat16 run while the optimiser keeps float32 weights; gradients pass the
+  // rounding unchanged. float32 turns it off. The weights stay float32 either way.
+  void emulate_precision(torch::Dtype dtype);
+  bool emulates_bfloat16() const { return emulate_bfloat16_; }
   // Finetuning a deeper U-Net from a shallower one of `from_levels` levels (train --init), once
   // the shallow net's parameters are in place: the up-sampling from the shallow net's bottom
   // level starts at zero and that level's decoder blocks as the identity, so the deeper net
@@ -107,11 +115,14 @@ class ImageNetImpl : public torch::nn::Module {
   const ImageNetOptions& options() const { return options_; }
 
  private:
+  torch::Tensor forward_emulated(const torch::Tensor& x);
+
   ImageNetOptions options_;
   torch::nn::Conv2d input_{nullptr}, output_{nullptr};
   std::vector<std::vector<torch::nn::Conv2d>> encoder_, decoder_;  // per level
   std::vector<torch::nn::Conv2d> down_;                            // level l -> l + 1
   std::vector<torch::nn::ConvTranspose2d> up_;                     // level l + 1 -> l
+  bool emulate_bfloat16_ = false;                                  // emulate_precision
 };
 TORCH_MODULE(ImageNet);
 

@@ -408,6 +408,9 @@ inline Precision from_string(const std::string& name, Precision) { return parse_
 // output back to the input's type, so the rest of the net (the pseudo-inverse, the residual
 // sum) stays float32.
 void set_cnn_precision(LightFieldNet& net, Precision precision);
+// Training for a run in `precision`: those layers keep float32 weights and round as `precision`
+// would (NetworkArchitecture::emulate_precision); a ConfigError for an architecture without it.
+void emulate_precision(LightFieldNet& net, Precision precision);
 
 // The FLOP model (lfnet bench), from the same options that build the modules: nominal
 // floating-point operations of one patch through the parts `run` selects (the architecture's

@@ -83,6 +83,10 @@ struct TrainerOptions {
   // Where the net trains: "cpu" or "cuda[:K]" (lfnet::parse_device). Batches are moved there;
   // checkpoints always hold CPU tensors, so a run resumes on either.
   std::string device = "cpu";
+  // The arithmetic the model is trained for: bfloat16 rounds its reduced-precision layers as a
+  // --precision bfloat16 run does, in the forward pass of training and validation, with float32
+  // weights (nn::emulate_precision; docs/performance.md, "Training for bfloat16").
+  nn::Precision precision = nn::Precision::kFloat32;
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -103,6 +107,7 @@ struct TrainerOptions {
     f("out_dir", out_dir);
     f("progress", progress);
     f("device", device);
+    f("precision", precision);
   }
   static TrainerOptions from_json(const nlohmann::json& j, const std::string& path = "$");
   void read(JsonReader& reader);
