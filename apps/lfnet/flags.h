@@ -252,8 +252,8 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
         }
       },
       "auto (default), float32 or bfloat16 for the paper net's CNN branch or lfnet's U-Net; "
-      "auto: bfloat16 on a CPU with native bfloat16 for models verified in it (bfloat16.json "
-      "beside the model), float32 elsewhere (docs/performance.md)");
+      "auto: bfloat16 on a CPU where native bfloat16 is measured faster, for models verified in "
+      "it (bfloat16.json beside the model), float32 elsewhere (docs/performance.md)");
   cmd->parse_complete_callback([f, precision_auto] {
     if (!*precision_auto) return;
     std::vector<std::string> models;

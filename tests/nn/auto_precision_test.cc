@@ -1,5 +1,5 @@
-// --precision auto's choice (nn/auto_precision.h): float32 unless the CPU has native bfloat16
-// and every model is verified in the bfloat16.json beside it.
+// --precision auto's choice (nn/auto_precision.h): float32 unless the CPU has native bfloat16,
+// measured faster than float32, and every model is verified in the bfloat16.json beside it.
 #include "lfnet/nn/auto_precision.h"
 
 #include <catch2/catch.hpp>
@@ -77,4 +77,21 @@ TEST_CASE("precision auto picks bfloat16 only for verified models on a native CP
   std::ofstream(tmp / "bfloat16.json", std::ios::trunc) << "{";
   CHECK(choose_precision({model}, "cpu").precision == Precision::kFloat32);
   CHECK(choose_precision({tmp / "none.ckpt"}, "cpu").precision == Precision::kFloat32);
+}
+
+TEST_CASE("precision auto measures whether bfloat16 is faster on this CPU", "[nn]") {
+  // Measured: both times positive, and the same answer for the rest of the process.
+  const auto speed = lfnet::nn::precision_speed();
+  CHECK(speed.float32_ms > 0.0);
+  CHECK(speed.bfloat16_ms > 0.0);
+  CHECK(lfnet::nn::precision_speed().float32_ms == speed.float32_ms);
+  CHECK(lfnet::nn::PrecisionSpeed{1.0, 0.85}.bfloat16_faster());
+  CHECK_FALSE(lfnet::nn::PrecisionSpeed{1.0, 0.95}.bfloat16_faster());
+  // LFNET_NATIVE_BFLOAT16 stands for the measurement too.
+  {
+    NativeBfloat16 native(true);
+    CHECK(lfnet::nn::precision_speed().bfloat16_faster());
+  }
+  NativeBfloat16 native(false);
+  CHECK_FALSE(lfnet::nn::precision_speed().bfloat16_faster());
 }
