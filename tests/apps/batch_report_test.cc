@@ -715,3 +715,51 @@ TEST_CASE("a section's sweep can keep one light field", "[app]") {
     CHECK(series["x"].size() == 2);
   }
 }
+
+TEST_CASE("a front section is the front page: its records alone, its text, not repeated", "[app]") {
+  lfnet::test::TempDir tmp;
+  auto line = [](const std::string& method, const std::string& variant, double psnr,
+                 double seconds) {
+    return nlohmann::json({{"method", method},
+                           {"variant", variant},
+                           {"model", variant},
+                           {"psnr_db", psnr},
+                           {"ssim", 0.9},
+                           {"seconds", seconds},
+                           {"end_to_end_seconds", seconds + 1},
+                           {"stride", 5},
+                           {"mode", "sensor"},
+                           {"measurements", 2},
+                           {"noise_sigma", 0.0},
+                           {"phi", {{"name", "asp"}, {"n", 2}}},
+                           {"light_field", "mit_dragons_bunnies_5x5_ap5"}})
+               .dump() +
+           "\n";
+  };
+  // An older section on the same scene, and the front section measured in one run.
+  fs::create_directories(tmp / "results/old");
+  std::ofstream(tmp / "results/old/section.json") << R"({"title": "Older runs", "order": 1})";
+  std::ofstream(tmp / "results/old/records.jsonl") << line("net", "old-model", 40.0, 0.5);
+  fs::create_directories(tmp / "results/front");
+  std::ofstream(tmp / "results/front/section.json")
+      << R"({"title": "Front", "order": 0, "front": true, "text": "One run of the zoo.",
+             "command": "scripts/results.sh front"})";
+  std::ofstream(tmp / "results/front/records.jsonl")
+      << line("net", "fast-rung", 31.0, 0.3) << line("net", "slow-rung", 33.0, 3.0)
+      << line("pinv", "", 28.0, 0.6);
+  const std::string md = report_of(tmp / "results", tmp / "R.md");
+  const auto front = md.find("## What accuracy costs in time, on the paper's scene");
+  REQUIRE(front != std::string::npos);
+  CHECK(md.find("One run of the zoo.") > front);
+  CHECK(md.find("    scripts/results.sh front\n") != std::string::npos);
+  CHECK(md.find("| net | fast-rung | 2 |") != std::string::npos);
+  CHECK(md.find("| net | slow-rung | 2 |") != std::string::npos);
+  // pinv is slower and worse than the fast rung: off the front.
+  CHECK(md.find("| pinv |  | 2 | 5 | 28.00 | 0.900 | 0.60 | 1.60 |  |") != std::string::npos);
+  // The older section's record is in its own section, not on the front page; the front section
+  // is not repeated below.
+  const auto older = md.find("## Older runs");
+  REQUIRE(older != std::string::npos);
+  CHECK(md.find("old-model") > older);
+  CHECK(md.find("## Front") == std::string::npos);
+}

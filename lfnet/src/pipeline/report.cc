@@ -172,15 +172,28 @@ bool sees_no_camera(const nlohmann::json& r) {
   return recon::find_method(r.value("method", "")).needs() == recon::MethodNeeds::kTruth;
 }
 
+// A section whose records are the front page (`"front": true` in its section.json): measured in
+// one run, so that its seconds compare.
+bool is_front(const Section& s) { return s.meta.value("front", false); }
+
 // The front page: what accuracy costs in time on the paper's scene at 5 cm (sensor mode, no
-// noise), every method and architecture of every section once, as a table and a Pareto plot
-// per camera against `time`. Empty when no section measured that scene.
+// noise), as a table and a Pareto plot per camera against `time`: the records of the front
+// sections, else every method and architecture of every section once. Empty when none
+// measured that scene.
 std::string front_page(const std::vector<Section>& sections, ParetoTime time, FigureSet& figure_set,
                        const std::string& figures_link) {
+  std::vector<const Section*> sources;
+  for (const auto& s : sections) {
+    if (is_front(s)) sources.push_back(&s);
+  }
+  const bool own_sections = !sources.empty();
+  if (!own_sections) {
+    for (const auto& s : sections) sources.push_back(&s);
+  }
   std::vector<nlohmann::json> rows;
   std::set<std::string> seen;
-  for (const auto& s : sections) {
-    for (const auto& r : s.records) {
+  for (const Section* s : sources) {
+    for (const auto& r : s->records) {
       if (r.value("light_field", "") != kFrontLightField || r.value("mode", "") != "sensor" ||
           noise_level(r) != 0 || !std::isfinite(number(r, "psnr_db")))
         continue;
@@ -258,14 +271,28 @@ std::string front_page(const std::vector<Section>& sections, ParetoTime time, Fi
   });
   const std::string what = end_to_end ? "end-to-end time" : "reconstruction time";
   std::ostringstream md;
-  md << "## What accuracy costs in time, on the paper's scene\n\n"
-     << "Every method and architecture below on the paper's own test scene, Dragons and Bunnies "
-        "at the 5 cm aperture (593 x 840 x 5 x 5), `sensor` mode, no noise, against the "
-     << what << " (`lfnet report --pareto-time`): \"seconds\" is the reconstruction alone, "
-     << "\"end to end\" the whole `lfnet evaluate` command as its user waits for it (loading "
-        "included). One plot per camera, each with `no-parallax`, which sees none; \"on the "
-        "front\" is within the row's camera. The other apertures are in the sections below "
-        "(\"The paper's scene\").\n\n";
+  md << "## What accuracy costs in time, on the paper's scene\n\n";
+  if (own_sections) {
+    for (const Section* s : sources) {
+      if (s->meta.contains("text")) md << s->meta["text"].get<std::string>() << "\n\n";
+    }
+  }
+  md << (own_sections ? "On" : "Every method and architecture below on")
+     << " the paper's own test scene, Dragons and Bunnies at the "
+     << "5 cm aperture (593 x 840 x 5 x 5), `sensor` mode, no noise, against the " << what
+     << " (`lfnet report --pareto-time`): \"seconds\" is the reconstruction alone, \"end to "
+        "end\" the whole `lfnet evaluate` command as its user waits for it (loading included). "
+        "One plot per camera, each with `no-parallax`, which sees none; \"on the front\" is "
+        "within the row's camera. The other apertures are in the sections below (\"The paper's "
+        "scene\").\n\n";
+  if (own_sections) {
+    md << "Records made by:\n\n";
+    for (const Section* s : sources) {
+      if (s->meta.contains("command"))
+        md << "    " << s->meta["command"].get<std::string>() << "\n";
+    }
+    md << "\n";
+  }
   for (const auto& plot : plots) md << plot << "\n\n";
   md << "| method | variant | N | stride | PSNR dB | SSIM | seconds | end to end s | on the front "
         "|\n|---|---|---:|---|---:|---:|---:|---:|---|\n";
@@ -501,6 +528,7 @@ void write_results_report(const std::string& results_dir, const std::string& out
     std::vector<Claim> claims;
     std::vector<GapClaim> gaps;
     for (const auto& s : sections) {
+      if (is_front(s)) continue;  // it is the front page
       for (auto& g : gap_claims(s)) gaps.push_back(std::move(g));
       md << section_markdown(s, claims, figure_set, figures_link, drawing);
     }
