@@ -4,9 +4,12 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <set>
 
 #include "lfnet/core/error.h"
+#include "lfnet/nn/auto_precision.h"
+#include "lfnet/pipeline/catalog.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/pipeline/zoo.h"
 #include "lfnet/train/checkpoint.h"
@@ -136,4 +139,32 @@ TEST_CASE("the zoo's learned codes carry what it takes to make them", "[pipeline
     CHECK(code.contains(family == "mask" ? "transmittance" : "alpha"));
   }
   CHECK(learned >= 2);
+}
+
+TEST_CASE("precision auto judges a noise switch by its two members", "[zoo]") {
+  lfnet::test::TempDir tmp;
+  std::ofstream(tmp / "quiet.ckpt") << "quiet weights";
+  std::ofstream(tmp / "noisy.ckpt") << "noisy weights";
+  std::ofstream(tmp / "switch.json") << R"({"format": "lfnet-noise-switch", "version": 1,
+    "quiet": "quiet.ckpt", "noisy": "noisy.ckpt", "switch_sigma": 0.01})";
+  auto list = [&](bool noisy_verified) {
+    std::ofstream(tmp / "bfloat16.json", std::ios::trunc)
+        << nlohmann::json{{"models",
+                           {{"quiet.ckpt",
+                             {{"fingerprint", lfnet::nn::file_fingerprint(tmp / "quiet.ckpt")},
+                              {"verified", true}}},
+                            {"noisy.ckpt",
+                             {{"fingerprint", lfnet::nn::file_fingerprint(tmp / "noisy.ckpt")},
+                              {"verified", noisy_verified}}}}}}
+               .dump();
+  };
+  ::setenv("LFNET_NATIVE_BFLOAT16", "1", 1);
+  using lfnet::nn::Precision;
+  list(true);
+  CHECK(lfnet::pipeline::choose_precision({tmp / "switch.json"}, "cpu") == Precision::kBFloat16);
+  CHECK(lfnet::pipeline::choose_precision({tmp / "quiet.ckpt"}, "cpu") == Precision::kBFloat16);
+  list(false);  // one member not verified: the switch runs in float32, as that member does
+  CHECK(lfnet::pipeline::choose_precision({tmp / "switch.json"}, "cpu") == Precision::kFloat32);
+  CHECK(lfnet::pipeline::choose_precision({tmp / "noisy.ckpt"}, "cpu") == Precision::kFloat32);
+  ::unsetenv("LFNET_NATIVE_BFLOAT16");
 }

@@ -2,6 +2,7 @@
 
 #include "lfnet/nn/architecture.h"
 #include "lfnet/nn/auto_precision.h"
+#include "lfnet/pipeline/models.h"
 #include "lfnet/recon/method_registry.h"
 #include "lfnet/recon/methods.h"
 
@@ -22,7 +23,14 @@ bool needs_network(const std::string& method) { return recon::needs_network(meth
 Precision parse_precision(const std::string& text) { return nn::parse_precision(text); }
 
 Precision choose_precision(const std::vector<std::string>& models, const std::string& device) {
-  return nn::choose_precision(models, device).precision;
+  // A noise switch runs its members: they decide, as if given themselves.
+  std::vector<std::string> files;
+  for (const auto& model : models) {
+    auto read = model_input_files(model);
+    if (read.size() > 1) read.erase(read.begin());
+    files.insert(files.end(), read.begin(), read.end());
+  }
+  return nn::choose_precision(files, device).precision;
 }
 
 }  // namespace lfnet::pipeline
