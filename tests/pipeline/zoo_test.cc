@@ -148,15 +148,13 @@ TEST_CASE("precision auto judges a noise switch by its two members", "[zoo]") {
   std::ofstream(tmp / "switch.json") << R"({"format": "lfnet-noise-switch", "version": 1,
     "quiet": "quiet.ckpt", "noisy": "noisy.ckpt", "switch_sigma": 0.01})";
   auto list = [&](bool noisy_verified) {
-    std::ofstream(tmp / "bfloat16.json", std::ios::trunc)
-        << nlohmann::json{{"models",
-                           {{"quiet.ckpt",
-                             {{"fingerprint", lfnet::nn::file_fingerprint(tmp / "quiet.ckpt")},
-                              {"verified", true}}},
-                            {"noisy.ckpt",
-                             {{"fingerprint", lfnet::nn::file_fingerprint(tmp / "noisy.ckpt")},
-                              {"verified", noisy_verified}}}}}}
-               .dump();
+    std::ofstream(tmp / "bfloat16.json", std::ios::trunc) << nlohmann::json{
+        {"models",
+         {{"quiet.ckpt",
+           {{"fingerprint", lfnet::nn::file_fingerprint(tmp / "quiet.ckpt")}, {"verified", true}}},
+          {"noisy.ckpt",
+           {{"fingerprint", lfnet::nn::file_fingerprint(tmp / "noisy.ckpt")},
+            {"verified", noisy_verified}}}}}}.dump();
   };
   ::setenv("LFNET_NATIVE_BFLOAT16", "1", 1);
   using lfnet::nn::Precision;
