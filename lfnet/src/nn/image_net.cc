@@ -174,18 +174,25 @@ torch::Tensor round_bfloat16(const torch::Tensor& t) {
 }
 }  // namespace
 
-torch::Tensor ImageNetImpl::forward_emulated(const torch::Tensor& x) {
+torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
+  const int64_t m = options_.multiple();
+  LFNET_CHECK(x.dim() == 4 && x.size(2) % m == 0 && x.size(3) % m == 0,
+              "ImageNet: expected (B, C, H, W) with H and W multiples of ", m, ", got ", x.sizes());
+  // In the weights' type (bfloat16 after set_cnn_precision), the output in the input's. Trained
+  // for bfloat16 (emulate_precision), float32 weights and every value a bfloat16 run would hold
+  // rounded to it (q).
   namespace F = torch::nn::functional;
-  const auto q = round_bfloat16;
+  const bool emulate = emulate_bfloat16_ && input_->weight.scalar_type() == torch::kFloat32;
+  auto q = [emulate](const torch::Tensor& t) { return emulate ? round_bfloat16(t) : t; };
   auto conv = [&](torch::nn::Conv2d& c, const torch::Tensor& in) {
+    if (!emulate) return c->forward(in);
     return q(F::conv2d(in, q(c->weight),
                        F::Conv2dFuncOptions()
                            .bias(q(c->bias))
                            .stride(c->options.stride())
                            .padding(c->options.padding())));
   };
-  // As forward() runs in bfloat16: every value a bfloat16 tensor would hold is rounded.
-  auto h = torch::relu(conv(input_, q(x.to(torch::kFloat32))));
+  auto h = torch::relu(conv(input_, q(x.to(input_->weight.scalar_type()))));
   std::vector<torch::Tensor> skips;
   const int64_t levels = options_.levels;
   for (int64_t l = 0; l < levels; ++l) {
@@ -196,36 +203,11 @@ torch::Tensor ImageNetImpl::forward_emulated(const torch::Tensor& x) {
     }
   }
   for (int64_t l = levels - 2; l >= 0; --l) {
-    h = q(torch::relu(q(up_[l]->forward(h))) + skips[l]);
+    const auto type = h.scalar_type();
+    h = q(torch::relu(q(up_[l]->forward(h.to(up_[l]->weight.scalar_type())).to(type))) + skips[l]);
     for (auto& c : decoder_[l]) h = torch::relu(conv(c, h));
   }
   return conv(output_, h).to(x.scalar_type());
-}
-
-torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
-  const int64_t m = options_.multiple();
-  LFNET_CHECK(x.dim() == 4 && x.size(2) % m == 0 && x.size(3) % m == 0,
-              "ImageNet: expected (B, C, H, W) with H and W multiples of ", m, ", got ", x.sizes());
-  if (emulate_bfloat16_ && input_->weight.scalar_type() == torch::kFloat32) {
-    return forward_emulated(x);
-  }
-  // In the weights' type (bfloat16 after set_cnn_precision), the output in the input's.
-  auto h = torch::relu(input_->forward(x.to(input_->weight.scalar_type())));
-  std::vector<torch::Tensor> skips;
-  const int64_t levels = options_.levels;
-  for (int64_t l = 0; l < levels; ++l) {
-    for (auto& conv : encoder_[l]) h = torch::relu(conv->forward(h));
-    if (l + 1 < levels) {
-      skips.push_back(h);
-      h = torch::relu(down_[l]->forward(h));
-    }
-  }
-  for (int64_t l = levels - 2; l >= 0; --l) {
-    const auto type = h.scalar_type();
-    h = torch::relu(up_[l]->forward(h.to(up_[l]->weight.scalar_type())).to(type)) + skips[l];
-    for (auto& conv : decoder_[l]) h = torch::relu(conv->forward(h));
-  }
-  return output_->forward(h).to(x.scalar_type());
 }
 
 }  // namespace lfnet::nn

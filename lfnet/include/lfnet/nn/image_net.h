@@ -115,8 +115,6 @@ class ImageNetImpl : public torch::nn::Module {
   const ImageNetOptions& options() const { return options_; }
 
  private:
-  torch::Tensor forward_emulated(const torch::Tensor& x);
-
   ImageNetOptions options_;
   torch::nn::Conv2d input_{nullptr}, output_{nullptr};
   std::vector<std::vector<torch::nn::Conv2d>> encoder_, decoder_;  // per level
