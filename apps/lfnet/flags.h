@@ -30,8 +30,9 @@ namespace lfnet::app {
 inline CLI::Option* add_phi_option(CLI::App* cmd, std::string& phi) {
   return input_path(cmd->add_option(
                         "--phi", phi,
-                        "the camera: a Phi model NAME[:N] (asp, mask, aperture, random, "
-                        "lenslet), a PHI.json spec, a calibrated-Phi folder, a model file or a zoo "
+                        "the camera: a Phi model NAME[:N][@T] (asp, mask, aperture, random, "
+                        "lenslet; over T sub-frames also time_aperture, coded_exposure, "
+                        "exposure_aperture: docs/video.md), a PHI.json spec, a calibrated-Phi folder, a model file or a zoo "
                         "model's name; with a model or an acquisition, for what they do not say, "
                         "and it must match the model"))
       ->transform(zoo_model_file);

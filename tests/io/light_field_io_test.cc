@@ -381,3 +381,23 @@ TEST_CASE("grey 16-bit views are read into 16-bit codes, exactly; others as floa
     CHECK(torch::equal(read.raw(), io::read_light_field(tmp / dir).data()));
   }
 }
+
+TEST_CASE("light-field sequences round-trip through frame_K folders", "[io][sequence]") {
+  lfnet::test::TempDir tmp;
+  lfnet::LightFieldSequence seq(torch::rand({3, 1, 2, 3, 5, 6}));
+  const auto dir = tmp / "seq";
+  io::write_light_field_sequence(seq, dir, {"exr", 32});
+  CHECK(fs::exists(fs::path(dir) / "frame_2" / "lf_2_3.exr"));
+  CHECK(io::sequence_frames(dir) == 3);
+  CHECK(torch::equal(io::read_light_field_sequence(dir).data(), seq.data()));
+  // A still light field is no sequence; a gap in the frames is an error naming the frame.
+  CHECK(io::sequence_frames(dir + "/frame_0") == 0);
+  fs::rename(fs::path(dir) / "frame_1", fs::path(dir) / "frame_7");
+  CHECK_THROWS_WITH(io::sequence_frames(dir), Catch::Contains("no frame_1"));
+  CHECK_THROWS_AS(io::read_light_field_sequence(dir + "/frame_0"), lfnet::IoError);
+  // Frames of two shapes are refused.
+  fs::remove_all(fs::path(dir) / "frame_7");
+  io::write_light_field(LightField(torch::rand({1, 2, 3, 5, 7})), fs::path(dir) / "frame_1",
+                        {"exr", 32});
+  CHECK_THROWS_WITH(io::read_light_field_sequence(dir), Catch::Contains("frame_1"));
+}

@@ -44,6 +44,22 @@ TEST_CASE("a Phi written as a calibrated folder reads back as the same camera", 
   }
 }
 
+TEST_CASE("a time-coded Phi is written and read with its sub-frames", "[io][phi][time]") {
+  lfnet::test::TempDir tmp;
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("exposure_aperture:2@3"));
+  const std::string dir = tmp / "video";
+  io::write_calibrated_phi(*phi, dir);
+  const auto meta = lfnet::read_json_file(dir + "/phi.json");
+  CHECK(meta.at("rows") == 5);
+  CHECK(meta.at("frames") == 3);
+  const auto back_spec = io::read_calibrated_phi(dir);
+  CHECK(back_spec.frames == 3);
+  const auto back = optics::make_phi(back_spec);
+  REQUIRE(back->rows() == 15);
+  auto lf = torch::rand({15, 5, 12, 10}, torch::kFloat64);
+  CHECK(torch::equal(back->forward(lf), phi->forward(lf)));
+}
+
 TEST_CASE("a calibrated folder names its camera's colour filter array", "[io][phi]") {
   lfnet::test::TempDir tmp;
   const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));

@@ -368,7 +368,8 @@ TEST_CASE("Phi specs round-trip through JSON and resolve their parameters", "[op
 
 TEST_CASE("bad Phi specs are ConfigErrors that say what is wrong", "[optics][spec]") {
   CHECK_THROWS_WITH(make_phi(spec_of("ASP", 2)),
-                    Catch::Contains("known: aperture, asp, calibrated, lenslet, mask, random"));
+                    Catch::Contains("known: aperture, asp, calibrated, coded_exposure, "
+                                    "exposure_aperture, lenslet, mask, random, time_aperture"));
   auto measured = spec_of("calibrated", 2);
   measured.params["weights"].erase(measured.params["weights"].begin());
   CHECK_THROWS_WITH(make_phi(measured), Catch::Contains("$.params.weights: expected N x U x V x "

@@ -95,6 +95,26 @@ nlohmann::json score(const LightFieldViews& estimate, const LightFieldViews& tru
           {"per_view_psnr_db", table}};
 }
 
+nlohmann::json per_frame_psnr(const nlohmann::json& per_view_psnr_db, int64_t frames) {
+  const auto rows = static_cast<int64_t>(per_view_psnr_db.size());
+  LFNET_CHECK(frames >= 1 && rows % frames == 0, "cannot split ", rows, " view rows into ", frames,
+              " frames");
+  const int64_t per_frame = rows / frames;
+  nlohmann::json out = nlohmann::json::array();
+  for (int64_t t = 0; t < frames; ++t) {
+    double mse = 0;
+    int64_t views = 0;
+    for (int64_t u = t * per_frame; u < (t + 1) * per_frame; ++u) {
+      for (const auto& psnr_db : per_view_psnr_db.at(static_cast<size_t>(u))) {
+        if (!psnr_db.is_null()) mse += std::pow(10.0, -psnr_db.get<double>() / 10.0);
+        ++views;
+      }
+    }
+    out.push_back(finite_or_null(-10.0 * std::log10(mse / static_cast<double>(views))));
+  }
+  return out;
+}
+
 namespace {
 
 // Colour and luma scores of a colour reconstruction.

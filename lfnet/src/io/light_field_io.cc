@@ -705,6 +705,50 @@ void write_light_field(const LightFieldViews& lf, const std::string& dir,
   });
 }
 
+int64_t sequence_frames(const std::string& dir) {
+  std::error_code ec;
+  if (!fs::is_directory(fs::path(dir) / "frame_0", ec)) return 0;
+  static const std::regex kFrame(R"(frame_(0|[1-9][0-9]{0,5}))");
+  int64_t count = 0, last = -1;
+  for (const auto& entry : fs::directory_iterator(dir, ec)) {
+    std::smatch m;
+    const auto name = entry.path().filename().string();
+    if (!entry.is_directory() || !std::regex_match(name, m, kFrame)) continue;
+    ++count;
+    last = std::max<int64_t>(last, std::stoll(m[1]));
+  }
+  LFNET_CHECK_AS(IoError, !ec, "cannot list ", dir, ": ", ec.message());
+  if (count != last + 1) {
+    for (int64_t t = 0; t <= last; ++t) {
+      LFNET_CHECK_AS(IoError, fs::is_directory(fs::path(dir) / ("frame_" + std::to_string(t))), dir,
+                     " is a sequence of frames up to frame_", last, " but has no frame_", t);
+    }
+  }
+  return count;
+}
+
+LightFieldSequence read_light_field_sequence(const std::string& dir, int threads,
+                                             const std::string& layout) {
+  const int64_t frames = sequence_frames(dir);
+  LFNET_CHECK_AS(IoError, frames > 0, dir, " is not a light-field sequence (no frame_0 folder)");
+  std::vector<LightField> out;
+  for (int64_t t = 0; t < frames; ++t) {
+    const auto frame = (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+    out.push_back(read_light_field(frame, threads, layout));
+    LFNET_CHECK_AS(IoError, out.back().data().sizes() == out.front().data().sizes(), frame, " is ",
+                   out.back().shape_string(), " but frame_0 is ", out.front().shape_string());
+  }
+  return LightFieldSequence(out);
+}
+
+void write_light_field_sequence(const LightFieldSequence& seq, const std::string& dir,
+                                const WriteOptions& options) {
+  for (int64_t t = 0; t < seq.frames(); ++t) {
+    write_light_field(seq.frame(t), (fs::path(dir) / ("frame_" + std::to_string(t))).string(),
+                      options);
+  }
+}
+
 namespace {
 // The cell of view (u, v) in a grid of h x w views `gap` pixels apart, whose rows run along
 // dimension `row_dim` and columns along the next.

@@ -94,7 +94,7 @@ void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
   nlohmann::json meta = {{"format", kCalibratedPhiFormat},
                          {"version", kCalibratedPhiFormatVersion},
                          {"n", n},
-                         {"rows", u},
+                         {"rows", phi.spec().rows},
                          {"cols", v},
                          {"period", t},
                          {"files", files},
@@ -102,6 +102,8 @@ void write_calibrated_phi(const optics::Phi& phi, const std::string& dir) {
                          {"normalise", false},
                          {"source", phi.spec().label()},
                          {"exported_from", phi.spec().to_json()}};
+  // A time-coded camera's response stacks its sub-frames' views along the rows.
+  if (phi.frames() > 1) meta["frames"] = phi.frames();
   if (const auto cfa = optics::camera_cfa(phi.spec().to_json())) meta["cfa"] = cfa->to_json();
   write_json_file((fs::path(dir) / kCalibratedPhiSidecar).string(), meta);
 }
@@ -144,7 +146,7 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   const auto meta = read_json_file(sidecar);
   LFNET_CHECK_AS(IoError, meta.is_object(), sidecar, ": expected a JSON object");
   std::string format;
-  int64_t version = 0, n = 0, rows = 0, cols = 0, period = 1;
+  int64_t version = 0, n = 0, rows = 0, cols = 0, period = 1, frames = 1;
   std::vector<std::string> file_names;
   double scale = 1.0;
   bool normalise = true;
@@ -157,6 +159,7 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
     r.require("n", n);
     r.require("rows", rows);
     r.require("cols", cols);
+    r.get("frames", frames);
     r.get("period", period);
     r.require("files", file_names);
     r.get("scale", scale);
@@ -177,8 +180,10 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   LFNET_CHECK_AS(
       IoError, rows >= 1 && cols >= 1 && rows <= optics::kMaxViews && cols <= optics::kMaxViews,
       sidecar, ": rows and cols must be in 1..", optics::kMaxViews, ", got ", rows, "x", cols);
-  LFNET_CHECK_AS(IoError, n >= 1 && n <= rows * cols, sidecar, ": n must be in 1..", rows * cols,
-                 ", got ", n);
+  LFNET_CHECK_AS(IoError, frames >= 1 && frames <= optics::kMaxFrames, sidecar,
+                 ": frames must be in 1..", optics::kMaxFrames, ", got ", frames);
+  LFNET_CHECK_AS(IoError, n >= 1 && n <= frames * rows * cols, sidecar, ": n must be in 1..",
+                 frames * rows * cols, ", got ", n);
   LFNET_CHECK_AS(IoError, period >= 1 && period <= 64, sidecar, ": period must be in 1..64, got ",
                  period);
   LFNET_CHECK_AS(IoError, static_cast<int64_t>(file_names.size()) == n, sidecar, ": files lists ",
@@ -189,14 +194,15 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   for (const auto& name : file_names) {
     LFNET_CHECK_AS(IoError, !name.empty() && fs::path(name).filename() == fs::path(name), sidecar,
                    ": files must name images inside the folder, got \"", name, "\"");
-    auto image = read_response((dir / name).string(), period * rows, period * cols);
+    auto image = read_response((dir / name).string(), period * frames * rows, period * cols);
     // A measurement that responds to no ray records nothing: a failed or unexposed capture.
     LFNET_CHECK_AS(IoError, image.ne(0).any().item<bool>(), (dir / name).string(),
                    " is zero everywhere: its measurement would record nothing (recalibrate, or "
                    "leave the measurement out and lower n in ",
                    sidecar, ")");
     // (T U, T V) -> (T, U, T, V) -> (U, V, T, T)
-    responses.push_back(image.view({period, rows, period, cols}).permute({1, 3, 0, 2}) * scale);
+    responses.push_back(image.view({period, frames * rows, period, cols}).permute({1, 3, 0, 2}) *
+                        scale);
   }
   auto code = torch::stack(responses).contiguous();
   optics::PhiSpec spec;
@@ -204,6 +210,7 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   spec.n = n;
   spec.rows = rows;
   spec.cols = cols;
+  spec.frames = frames;
   spec.params = {{"period", period},
                  {"weights", std::vector<double>(code.data_ptr<double>(),
                                                  code.data_ptr<double>() + code.numel())},

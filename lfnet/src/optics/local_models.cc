@@ -134,20 +134,21 @@ std::unique_ptr<Phi> make_calibrated(const PhiSpec& spec) {
   if (!cfa.is_null()) cfa = ColourFilterArray::from_json(cfa, r.path_of("cfa")).to_json();
   LFNET_CHECK_AS(ConfigError, period >= 1 && period <= 64, r.path_of("period"),
                  ": the period T must be in 1..64, got ", period);
-  const int64_t expected = spec.n * spec.rows * spec.cols * period * period;
+  const int64_t expected = spec.n * spec.coded_rows() * spec.cols * period * period;
   check_code_size(spec, expected, "a calibrated code");
   LFNET_CHECK_AS(ConfigError, static_cast<int64_t>(weights.size()) == expected,
-                 r.path_of("weights"), ": expected N x U x V x T x T = ", spec.n, " x ", spec.rows,
-                 " x ", spec.cols, " x ", period, " x ", period, " = ", expected, " values, got ",
-                 weights.size());
+                 r.path_of("weights"), ": expected N x U x V x T x T = ", spec.n, " x ",
+                 spec.coded_rows(), " x ", spec.cols, " x ", period, " x ", period, " = ", expected,
+                 " values, got ", weights.size());
   for (size_t i = 0; i < weights.size(); ++i) {
     LFNET_CHECK_AS(ConfigError, std::isfinite(weights[i]) && weights[i] >= 0, r.path_of("weights"),
                    "[", i, "]: a measured response must be finite and non-negative, got ",
                    weights[i]);
   }
-  auto code = torch::from_blob(weights.data(), {spec.n, spec.rows, spec.cols, period, period},
-                               torch::kFloat64)
-                  .clone();
+  auto code =
+      torch::from_blob(weights.data(), {spec.n, spec.coded_rows(), spec.cols, period, period},
+                       torch::kFloat64)
+          .clone();
   PhiSpec resolved = spec;
   resolved.params = {{"period", period}, {"weights", weights}, {"normalise", normalise}};
   if (!source.empty()) resolved.params["source"] = source;

@@ -87,9 +87,10 @@ void check_light_field(const torch::Tensor& lf, const PhiSpec& spec) {
   LFNET_CHECK(lf.defined() && lf.dim() >= 4, "Phi '", spec.label(),
               "' expects a light field (..., U, V, H, W), got a tensor of rank ",
               lf.defined() ? lf.dim() : 0);
-  LFNET_CHECK(lf.size(-4) == spec.rows && lf.size(-3) == spec.cols, "Phi '", spec.label(),
-              "' codes ", spec.rows, "x", spec.cols, " views, but the light field has ",
-              lf.size(-4), "x", lf.size(-3));
+  LFNET_CHECK(lf.size(-4) == spec.coded_rows() && lf.size(-3) == spec.cols, "Phi '", spec.label(),
+              "' codes ", spec.coded_rows(), "x", spec.cols,
+              spec.frames > 1 ? " views (its frames stacked along the rows)" : " views",
+              ", but the light field has ", lf.size(-4), "x", lf.size(-3));
   LFNET_CHECK(lf.scalar_type() == torch::kFloat32 || lf.scalar_type() == torch::kFloat64,
               "Phi expects float32 or float64 light fields");
 }
@@ -115,14 +116,14 @@ torch::Tensor tikhonov_pinv(const torch::Tensor& a, double lambda) {
 
 void check_code_size(const PhiSpec& spec, int64_t values, const std::string& what) {
   constexpr int64_t kMaxValues = int64_t{1} << 27;
-  LFNET_CHECK_AS(ConfigError, values <= kMaxValues, "Phi '", spec.label(), "' on ", spec.rows, "x",
-                 spec.cols, " views needs ", what, " of ", values,
+  LFNET_CHECK_AS(ConfigError, values <= kMaxValues, "Phi '", spec.label(), "' on ",
+                 spec.coded_rows(), "x", spec.cols, " views needs ", what, " of ", values,
                  " values, more than the 2^27 lfnet builds: use fewer views, measurements or a "
                  "smaller period");
 }
 
 LocalPhi::LocalPhi(PhiSpec spec, const torch::Tensor& code) : Phi(std::move(spec)) {
-  LFNET_CHECK(code.dim() == 5 && code.size(0) == spec_.n && code.size(1) == spec_.rows &&
+  LFNET_CHECK(code.dim() == 5 && code.size(0) == spec_.n && code.size(1) == rows() &&
                   code.size(2) == spec_.cols && code.size(3) == code.size(4),
               "internal: a local Phi code must be (N, U, V, T, T)");
   code_ = code.to(torch::kFloat64).contiguous();
@@ -132,12 +133,12 @@ LocalPhi::LocalPhi(PhiSpec spec, const torch::Tensor& code) : Phi(std::move(spec
 torch::Tensor LocalPhi::phase_matrices(torch::ScalarType dtype) const {
   const auto& c = dtype == torch::kFloat64 ? code_ : code32_;
   const int64_t t = period();
-  return c.permute({3, 4, 0, 1, 2}).reshape({t * t, spec_.n, spec_.rows * spec_.cols});
+  return c.permute({3, 4, 0, 1, 2}).reshape({t * t, spec_.n, rows() * spec_.cols});
 }
 
 torch::Tensor LocalPhi::forward(const torch::Tensor& lf) const {
   check_light_field(lf, spec_);
-  const int64_t n = spec_.n, uv = spec_.rows * spec_.cols, t = period();
+  const int64_t n = spec_.n, uv = rows() * spec_.cols, t = period();
   const int64_t h = lf.size(-2), w = lf.size(-1), b = lead_size(lf, 4);
   auto mats = phase_matrices(lf.scalar_type());
   auto op = [&](const torch::Tensor& x) {
@@ -155,7 +156,7 @@ torch::Tensor LocalPhi::forward(const torch::Tensor& lf) const {
 
 torch::Tensor LocalPhi::adjoint(const torch::Tensor& y) const {
   check_sensor(y, spec_);
-  const int64_t n = spec_.n, uv = spec_.rows * spec_.cols, t = period();
+  const int64_t n = spec_.n, uv = rows() * spec_.cols, t = period();
   const int64_t h = y.size(-2), w = y.size(-1), b = lead_size(y, 3);
   auto mats = phase_matrices(y.scalar_type()).transpose(1, 2).contiguous();
   auto op = [&](const torch::Tensor& s) {
@@ -166,10 +167,9 @@ torch::Tensor LocalPhi::adjoint(const torch::Tensor& y) const {
     } else {
       x = from_phases(torch::bmm(mats, to_phases(s.reshape({b, n, sh, w}), t)), t, b, sh, w);
     }
-    return x.reshape(lead_shape(s, 3, {spec_.rows, spec_.cols, sh, w})).contiguous();
+    return x.reshape(lead_shape(s, 3, {rows(), spec_.cols, sh, w})).contiguous();
   };
-  return banded(y, band_rows(b * uv * w, t, h), lead_shape(y, 3, {spec_.rows, spec_.cols, h, w}),
-                op);
+  return banded(y, band_rows(b * uv * w, t, h), lead_shape(y, 3, {rows(), spec_.cols, h, w}), op);
 }
 
 torch::Tensor LocalPhi::pixel_weights(int64_t y0, int64_t x0, int64_t h, int64_t w,
@@ -189,13 +189,13 @@ torch::Tensor LocalPhi::patch_matrix(int64_t y0, int64_t x0, int64_t h, int64_t 
   // A[n, y, x, u, v, Y, X] = M[n, u, v, y, x] [y == Y] [x == X]
   auto a =
       torch::einsum("nuvyx,yY,xX->nyxuvYX", {weights, torch::eye(h, opts), torch::eye(w, opts)});
-  return a.reshape({spec_.n * h * w, spec_.rows * spec_.cols * h * w});
+  return a.reshape({spec_.n * h * w, rows() * spec_.cols * h * w});
 }
 
 torch::Tensor LocalPhi::pinv_matrix(int64_t y0, int64_t x0, int64_t h, int64_t w, double lambda,
                                     torch::ScalarType dtype) const {
   auto weights = pixel_weights(y0, x0, h, w, torch::kFloat64);  // (N, U, V, h, w)
-  const int64_t n = spec_.n, uv = spec_.rows * spec_.cols;
+  const int64_t n = spec_.n, uv = rows() * spec_.cols;
   auto per_pixel = weights.permute({3, 4, 0, 1, 2}).reshape({h * w, n, uv});
   auto pinv = tikhonov_pinv(per_pixel, lambda).view({h, w, uv, n});  // (h, w, UV, N)
   auto opts = torch::TensorOptions().dtype(torch::kFloat64);

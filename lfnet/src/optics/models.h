@@ -62,6 +62,14 @@ std::unique_ptr<Phi> make_mask(const PhiSpec& spec);
 std::unique_ptr<Phi> make_aperture(const PhiSpec& spec);
 std::unique_ptr<Phi> make_lenslet(const PhiSpec& spec);
 std::unique_ptr<Phi> make_random(const PhiSpec& spec);
+// Time-coded models (docs/acquisition.md, "Time-coded cameras"): an aperture that changes per
+// sub-frame, per-pixel exposure codes, and the two together.
+std::unique_ptr<Phi> make_time_aperture(const PhiSpec& spec);
+std::unique_ptr<Phi> make_coded_exposure(const PhiSpec& spec);
+std::unique_ptr<Phi> make_exposure_aperture(const PhiSpec& spec);
+// A still local camera over an exposure of spec.frames sub-frames: its weights in every
+// sub-frame, each a T-th. ConfigError for models that mix pixels.
+std::unique_ptr<Phi> still_over_frames(const Phi& still, const PhiSpec& spec);
 // A measured local response given value by value (docs/acquisition.md, "Calibrated Phi").
 std::unique_ptr<Phi> make_calibrated(const PhiSpec& spec);
 

@@ -7,6 +7,7 @@
 #include <map>
 #include <mutex>
 #include <regex>
+#include <set>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -15,8 +16,11 @@
 namespace lfnet::optics {
 
 nlohmann::json PhiSpec::to_json() const {
-  return {{"name", name}, {"n", n},       {"rows", rows},
-          {"cols", cols}, {"seed", seed}, {"params", params}};
+  nlohmann::json j = {{"name", name}, {"n", n},       {"rows", rows},
+                      {"cols", cols}, {"seed", seed}, {"params", params}};
+  // Still cameras keep the JSON (and the hashes of specs) they always had.
+  if (frames != 1) j["frames"] = frames;
+  return j;
 }
 
 PhiSpec PhiSpec::from_json(const nlohmann::json& j, const std::string& path) {
@@ -26,6 +30,7 @@ PhiSpec PhiSpec::from_json(const nlohmann::json& j, const std::string& path) {
   r.get("n", spec.n);
   r.get("rows", spec.rows);
   r.get("cols", spec.cols);
+  r.get("frames", spec.frames);
   if (j.contains("seed") && j.at("seed").is_number_integer() &&
       !j.at("seed").is_number_unsigned() && j.at("seed").get<int64_t>() < 0) {
     throw ConfigError(r.path_of("seed") + ": the seed must be a non-negative integer, got " +
@@ -42,17 +47,23 @@ PhiSpec PhiSpec::from_json(const nlohmann::json& j, const std::string& path) {
       ConfigError,
       spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews && spec.cols <= kMaxViews, path,
       ": rows and cols must be in 1..", kMaxViews, ", got ", spec.rows, "x", spec.cols);
-  LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.rows * spec.cols, r.path_of("n"),
-                 ": N must be in 1..", spec.rows * spec.cols, " (U V) for ", spec.rows, "x",
-                 spec.cols, " views, got ", spec.n);
+  LFNET_CHECK_AS(ConfigError, spec.frames >= 1 && spec.frames <= kMaxFrames, r.path_of("frames"),
+                 ": the sub-frames T must be in 1..", kMaxFrames, ", got ", spec.frames);
+  LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.coded_rows() * spec.cols,
+                 r.path_of("n"), ": N must be in 1..", spec.coded_rows() * spec.cols,
+                 spec.frames > 1 ? " (T U V)" : " (U V)", " for ", spec.rows, "x", spec.cols,
+                 " views", spec.frames > 1 ? " of " + std::to_string(spec.frames) + " frames" : "",
+                 ", got ", spec.n);
   return spec;
 }
 
 PhiSpec PhiSpec::parse(const std::string& text) {
-  static const std::regex kPattern(R"(^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?::\s*(\d+))?\s*$)");
+  static const std::regex kPattern(
+      R"(^\s*([A-Za-z_][A-Za-z0-9_]*)\s*(?::\s*(\d+))?\s*(?:@\s*(\d+))?\s*$)");
   std::smatch m;
   LFNET_CHECK_AS(ConfigError, std::regex_match(text, m, kPattern), "Phi '", text,
-                 "' is not of the form NAME[:N], e.g. asp:2 (or give a PHI.json file)");
+                 "' is not of the form NAME[:N][@T], e.g. asp:2 or exposure_aperture:1@4 (or give "
+                 "a PHI.json file)");
   PhiSpec spec;
   spec.name = m[1];
   if (m[2].matched) {
@@ -61,14 +72,24 @@ PhiSpec PhiSpec::parse(const std::string& text) {
     spec.n = std::stoll(m[2]);
     LFNET_CHECK_AS(ConfigError, spec.n >= 1, "Phi '", text, "': N must be >= 1");
   }
+  if (m[3].matched) {
+    LFNET_CHECK_AS(ConfigError, m[3].length() <= 9, "Phi '", text, "': T must be in 1..",
+                   kMaxFrames);
+    spec.frames = std::stoll(m[3]);
+    LFNET_CHECK_AS(ConfigError, spec.frames >= 1 && spec.frames <= kMaxFrames, "Phi '", text,
+                   "': T must be in 1..", kMaxFrames);
+  }
   return spec;
 }
 
-std::string PhiSpec::label() const { return name + ":" + std::to_string(n); }
+std::string PhiSpec::label() const {
+  auto text = name + ":" + std::to_string(n);
+  return frames == 1 ? text : text + "@" + std::to_string(frames);
+}
 
 bool PhiSpec::operator==(const PhiSpec& other) const {
   return name == other.name && n == other.n && rows == other.rows && cols == other.cols &&
-         seed == other.seed && params == other.params;
+         frames == other.frames && seed == other.seed && params == other.params;
 }
 
 torch::Tensor Phi::pixel_weights(int64_t, int64_t, int64_t, int64_t, torch::ScalarType) const {
@@ -86,6 +107,9 @@ namespace {
 struct Registry {
   std::mutex mutex;
   std::map<std::string, PhiFactory> factories;
+  // Models that build time-coded codes themselves; the others are still cameras, built at
+  // T = 1 and held for every sub-frame of a spec with frames > 1.
+  std::set<std::string> time_coded;
 };
 
 Registry& registry() {
@@ -93,10 +117,15 @@ Registry& registry() {
   return instance;
 }
 
-void add_factory(const std::string& name, PhiFactory factory) {
+void add_factory(const std::string& name, PhiFactory factory, bool time_coded = false) {
   auto& reg = registry();
   std::lock_guard<std::mutex> lock(reg.mutex);
   reg.factories[name] = std::move(factory);
+  if (time_coded) {
+    reg.time_coded.insert(name);
+  } else {
+    reg.time_coded.erase(name);
+  }
 }
 
 // The built-ins are registered before anything else, so a model registered by name later
@@ -109,15 +138,18 @@ void ensure_builtins() {
     add_factory("aperture", detail::make_aperture);
     add_factory("random", detail::make_random);
     add_factory("lenslet", detail::make_lenslet);
-    add_factory("calibrated", detail::make_calibrated);
+    add_factory("calibrated", detail::make_calibrated, /*time_coded=*/true);
+    add_factory("time_aperture", detail::make_time_aperture, /*time_coded=*/true);
+    add_factory("coded_exposure", detail::make_coded_exposure, /*time_coded=*/true);
+    add_factory("exposure_aperture", detail::make_exposure_aperture, /*time_coded=*/true);
   });
 }
 
 }  // namespace
 
-void register_phi(const std::string& name, PhiFactory factory) {
+void register_phi(const std::string& name, PhiFactory factory, bool time_coded) {
   ensure_builtins();
-  add_factory(name, std::move(factory));
+  add_factory(name, std::move(factory), time_coded);
 }
 
 std::vector<std::string> phi_names() {
@@ -139,11 +171,13 @@ torch::Tensor normalise_white(const torch::Tensor& code) {
 std::unique_ptr<Phi> make_phi(const PhiSpec& spec) {
   ensure_builtins();
   PhiFactory factory;
+  bool time_coded = false;
   {
     auto& reg = registry();
     std::lock_guard<std::mutex> lock(reg.mutex);
     auto it = reg.factories.find(spec.name);
     if (it != reg.factories.end()) factory = it->second;
+    time_coded = reg.time_coded.count(spec.name) > 0;
   }
   if (!factory) {
     std::string known;
@@ -155,12 +189,17 @@ std::unique_ptr<Phi> make_phi(const PhiSpec& spec) {
       spec.rows >= 1 && spec.cols >= 1 && spec.rows <= kMaxViews && spec.cols <= kMaxViews, "Phi '",
       spec.label(), "': the angular grid must be 1x1 to ", kMaxViews, "x", kMaxViews, ", got ",
       spec.rows, "x", spec.cols);
-  LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.rows * spec.cols, "Phi '", spec.label(),
-                 "': N must be in 1..", spec.rows * spec.cols, " for ", spec.rows, "x", spec.cols,
-                 " views");
+  LFNET_CHECK_AS(ConfigError, spec.frames >= 1 && spec.frames <= kMaxFrames, "Phi '", spec.label(),
+                 "': the sub-frames T must be in 1..", kMaxFrames);
+  LFNET_CHECK_AS(ConfigError, spec.n >= 1 && spec.n <= spec.coded_rows() * spec.cols, "Phi '",
+                 spec.label(), "': N must be in 1..", spec.coded_rows() * spec.cols, " for ",
+                 spec.rows, "x", spec.cols, " views", spec.frames > 1 ? " of T frames" : "");
   LFNET_CHECK_AS(ConfigError, spec.params.is_object(), "Phi '", spec.label(),
                  "': params must be a JSON object");
-  return factory(spec);
+  if (spec.frames == 1 || time_coded) return factory(spec);
+  PhiSpec still = spec;
+  still.frames = 1;
+  return detail::still_over_frames(*factory(still), spec);
 }
 
 PhiConditioning conditioning(const Phi& phi) {

@@ -16,6 +16,7 @@
 #include "lfnet/cv/opencv.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/viewer.h"
+#include "lfnet/pipeline/reconstruct.h"
 #include "lfnet/pipeline/sets.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -265,7 +266,7 @@ class Evaluation {
     if (!a_.flat_field.empty()) flat_field = read_flat_field(a_.flat_field, *phi_, cfa_);
     // A grey truth of 16-bit views is held in 16-bit codes, as the estimate is.
     const auto truths = load_sources(sources_, phi_->rows(), phi_->cols(), false, cfa_.has_value(),
-                                     !cfa_.has_value());
+                                     !cfa_.has_value(), phi_->frames());
     auto o = options(truths[0], flat_field);
     if (a_.tell_camera_error) tell_camera_error();
     EvaluateResult result;
@@ -404,6 +405,11 @@ class Evaluation {
     if (!a_.choice.empty()) record["choice"] = a_.choice;
     if (a_.tell_camera_error) record["camera_error_told"] = true;
     if (network_) record["precision"] = nn::to_string(a_.precision);
+    if (phi_->frames() > 1) {
+      record["frames"] = phi_->frames();
+      record["per_frame_psnr_db"] =
+          eval::per_frame_psnr(record.at("per_view_psnr_db"), phi_->frames());
+    }
   }
 
   const EvaluateRequest& a_;
@@ -431,16 +437,11 @@ EvaluateResult evaluate_request(const EvaluateRequest& a) {
 
 void write_evaluation(const EvaluateResult& r, nlohmann::json& record, const std::string& dir) {
   const LightFieldViews est(r.estimate);  // 16-bit codes or float32
-  release_free_memory();
-  io::write_light_field(est, dir);
-  release_free_memory();
-  io::write_previews(est, dir);
-  release_free_memory();
   io::ViewerPage page;
   page.title = record["method"].get<std::string>() + " on " + r.light_field;
   page.truth = LightFieldViews(r.truth);
   page.record = record;
-  io::write_viewer(est, (fs::path(dir) / "index.html").string(), page);
+  write_estimate(est, dir, page, record.value("frames", 1));
   record["end_to_end_seconds"] = process_seconds();
   write_json_file((fs::path(dir) / "evaluation.json").string(), record);
 }

@@ -393,26 +393,50 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   return AcquisitionReconstruction(a, progress, cache ? *cache : local).run();
 }
 
+void write_estimate(const LightFieldViews& lf, const std::string& dir, const io::ViewerPage& page,
+                    int64_t frames) {
+  if (frames > 1) {
+    // A sequence: each frame's rows of the stacked estimate in its own frame_t folder.
+    const int64_t rows = lf.rows() / frames;
+    for (int64_t t = 0; t < frames; ++t) {
+      const AngularRange ru{t * rows, (t + 1) * rows}, rv{0, lf.cols()};
+      auto frame_page = page;
+      frame_page.title += " (frame " + std::to_string(t) + " of " + std::to_string(frames) + ")";
+      if (page.truth) frame_page.truth = page.truth->window(ru, rv);
+      if (page.record.contains("per_view_psnr_db")) {
+        const auto& table = page.record["per_view_psnr_db"];
+        frame_page.record["per_view_psnr_db"] =
+            nlohmann::json(table.begin() + t * rows, table.begin() + (t + 1) * rows);
+      }
+      write_estimate(lf.window(ru, rv), (fs::path(dir) / ("frame_" + std::to_string(t))).string(),
+                     frame_page, 1);
+    }
+    return;
+  }
+  // What each step freed is returned before the next (the peak is one step's, not all).
+  release_free_memory();
+  Stopwatch step;
+  io::write_light_field(lf, dir);
+  spdlog::debug("views written in {:.2f} s", step.seconds());
+  step.reset();
+  release_free_memory();
+  io::write_previews(lf, dir);
+  spdlog::debug("grid and EPIs written in {:.2f} s", step.seconds());
+  step.reset();
+  release_free_memory();
+  io::write_viewer(lf, (fs::path(dir) / "index.html").string(), page);
+  spdlog::debug("viewer written in {:.2f} s", step.seconds());
+}
+
 void write_reconstruction(const Reconstruction& r, const std::string& out,
                           const OutputFolderPolicy& policy, bool end_to_end) {
   write_folder(out, policy, [&](const std::string& dir) {
-    // What each step freed is returned before the next (the peak is one step's, not all).
-    release_free_memory();
-    Stopwatch step;
-    io::write_light_field(r.lf, dir);
-    spdlog::debug("views written in {:.2f} s", step.seconds());
-    step.reset();
-    release_free_memory();
-    io::write_previews(r.lf, dir);
-    spdlog::debug("grid and EPIs written in {:.2f} s", step.seconds());
-    step.reset();
-    release_free_memory();
     io::ViewerPage page;
     page.title = r.record.value("method", "") + " reconstruction of " +
                  fs::path(r.record.value("sensor", "")).filename().string();
     page.record = r.record;
-    io::write_viewer(r.lf, (fs::path(dir) / "index.html").string(), page);
-    spdlog::debug("viewer written in {:.2f} s", step.seconds());
+    write_estimate(r.lf, dir, page,
+                   r.record.contains("phi") ? r.record["phi"].value("frames", 1) : 1);
     // Last: the command's time from its start, every other output written.
     auto record = r.record;
     if (end_to_end) record["end_to_end_seconds"] = process_seconds();

@@ -15,8 +15,10 @@
 #include "lfnet/core/patches.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/core/text.h"
 #include "lfnet/core/version.h"
+#include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
 #include "lfnet/optics/asp.h"
 #include "lfnet/pipeline/figures.h"
@@ -131,7 +133,44 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
   return meta;
 }
 
-SimulateInput load_simulate_input(const SimulateSource& args) {
+namespace {
+// A sequence folder's first frame as a source of its own.
+SimulateSource still_frame_source(const SimulateSource& args) {
+  auto frame = args;
+  if (io::sequence_frames(args.lf) > 0) frame.lf = (fs::path(args.lf) / "frame_0").string();
+  return frame;
+}
+}  // namespace
+
+SimulateInput load_simulate_input(const SimulateSource& args, int64_t frames) {
+  LFNET_CHECK_AS(ConfigError, frames >= 1, "a camera codes at least one frame");
+  if (frames > 1 || (!args.lf.empty() && io::sequence_frames(args.lf) > 0)) {
+    auto in = load_simulate_input(args.lf.empty() ? args : still_frame_source(args), 1);
+    if (!args.lf.empty() && io::sequence_frames(args.lf) > 0) {
+      const int64_t folder_frames = io::sequence_frames(args.lf);
+      LFNET_CHECK_AS(ConfigError, folder_frames == frames, args.lf, " is a sequence of ",
+                     folder_frames,
+                     " frames: code it with a time-coded camera of as many "
+                     "sub-frames (NAME:N@",
+                     folder_frames, ", docs/video.md)");
+      std::vector<LightField> out{in.lf};
+      for (int64_t t = 1; t < frames; ++t) {
+        auto frame = args;
+        frame.lf = (fs::path(args.lf) / ("frame_" + std::to_string(t))).string();
+        out.push_back(load_simulate_input(frame, 1).lf);
+      }
+      in.lf = LightFieldSequence(out).stacked();
+      in.source["path"] = fs::absolute(args.lf).string();
+      in.source["frames"] = frames;
+    } else {
+      // A still light field, scene or white frame: the same in every sub-frame.
+      spdlog::info("a still source, coded as a scene that does not move over {} sub-frames",
+                   frames);
+      in.lf = LightFieldSequence(in.lf.data().unsqueeze(0).expand({frames, -1, -1, -1, -1, -1}))
+                  .stacked();
+    }
+    return in;
+  }
   SimulateInput in;
   LightField lf;
   if (!args.white.empty()) {
@@ -262,9 +301,16 @@ std::string describe_phi(const optics::Phi& phi) {
   auto print = [&text](const char* format, auto... args) { text += format_text(format, args...); };
   const auto c = optics::conditioning(phi);
   const auto& spec = phi.spec();
-  print("phi:        %s on %lldx%lld views, compression %.1f%% (N / (U V))\n", spec.label().c_str(),
-        static_cast<long long>(spec.rows), static_cast<long long>(spec.cols),
-        100.0 * spec.n / (spec.rows * spec.cols));
+  if (spec.frames > 1) {
+    print("phi:        %s on %lld frames of %lldx%lld views, compression %.1f%% (N / (T U V))\n",
+          spec.label().c_str(), static_cast<long long>(spec.frames),
+          static_cast<long long>(spec.rows), static_cast<long long>(spec.cols),
+          100.0 * spec.n / (spec.coded_rows() * spec.cols));
+  } else {
+    print("phi:        %s on %lldx%lld views, compression %.1f%% (N / (U V))\n",
+          spec.label().c_str(), static_cast<long long>(spec.rows),
+          static_cast<long long>(spec.cols), 100.0 * spec.n / (spec.rows * spec.cols));
+  }
   print("spec:       %s\n", spec.to_json().dump().c_str());
   if (spec.name == "asp") {
     const auto table = optics::asp_table(
@@ -364,17 +410,14 @@ class Simulation {
 
   SimulateResult run() {
     SimulateInput input;
-    int64_t rows = 0, cols = 0;
+    // The window is --views or the central 5 x 5, whatever the source holds.
+    const auto [rows, cols] = window_size(a_.source.views);
+    const auto phi = optics::make_phi(phi_for_window(a_.phi, rows, cols));
     if (simulate_) {
       Stopwatch load;
-      input = load_simulate_input(a_.source);
-      rows = input.lf.rows();
-      cols = input.lf.cols();
+      input = load_simulate_input(a_.source, phi->frames());
       spdlog::info("light field {} ({} s)", input.lf.shape_string(), load.seconds());
-    } else {
-      std::tie(rows, cols) = window_size(a_.source.views);
     }
-    const auto phi = optics::make_phi(phi_for_window(a_.phi, rows, cols));
     SimulateResult r;
     if (a_.describe) r.description = describe_phi(*phi);
     if (!a_.plot_weights.empty()) r.weights_file = plot_weights(*phi, a_.plot_weights, weights_);

@@ -79,6 +79,36 @@ LightField select_views(const LightField& lf, const std::string& views, int64_t 
   const auto out = lf.window(ru, rv);
   return colour ? out : out.grey();
 }
+// A sequence folder (or a still one, filmed still) as the stacked light field of `frames`
+// frames that a time-coded Phi of rows x cols (rows = frames U) codes, each frame windowed.
+LightField read_sequence_source(const std::string& dir, const LightFieldSources& sources,
+                                int64_t rows, int64_t cols, int64_t frames, bool colour) {
+  const int64_t folder_frames = io::sequence_frames(dir);
+  LFNET_CHECK_AS(ConfigError, frames > 1, dir, " is a sequence of ", folder_frames,
+                 " frames: code it with a time-coded Phi of as many sub-frames (NAME:N@",
+                 folder_frames, ", docs/video.md)");
+  LFNET_CHECK_AS(ConfigError, folder_frames == 0 || folder_frames == frames, dir,
+                 " is a sequence of ", folder_frames, " frames, but the Phi codes ", frames,
+                 " sub-frames");
+  std::vector<LightField> out;
+  for (int64_t t = 0; t < frames; ++t) {
+    if (folder_frames == 0 && t > 0) {  // a still light field: the same in every sub-frame
+      out.push_back(out.front());
+      continue;
+    }
+    const auto frame =
+        folder_frames == 0 ? dir : (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+    const auto lf = read_oriented(frame, sources.orient, "orient", sources.layout);
+    out.push_back(select_views(lf, sources.views, rows / frames, cols, frame, colour));
+  }
+  if (folder_frames == 0) {
+    spdlog::info(
+        "{} is a still light field: coded as a scene that does not move over the {} "
+        "sub-frames",
+        dir, frames);
+  }
+  return LightFieldSequence(out).stacked();
+}
 }  // namespace
 
 LightField read_oriented(const std::string& dir, const std::string& orient, const std::string& what,
@@ -134,7 +164,8 @@ torch::Tensor read_flat_field(const std::string& path, const optics::Phi& phi,
 }
 
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
-                                          int64_t cols, bool whole_grids, bool colour, bool coded) {
+                                          int64_t cols, bool whole_grids, bool colour, bool coded,
+                                          int64_t frames) {
   std::vector<NamedLightField> out;
   const int64_t total = static_cast<int64_t>(sources.light_fields.size() + sources.scenes.size()) +
                         sources.random_scenes;
@@ -142,6 +173,12 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
   const bool whole = whole_grids && sources.views.empty();
   for (const auto& dir : sources.light_fields) {
     const std::string name = fs::path(dir).filename().string();
+    const int64_t folder_frames = io::sequence_frames(dir);
+    if (frames > 1 || folder_frames > 0) {
+      out.push_back({name, read_sequence_source(dir, sources, rows, cols, frames, colour), {}});
+      bar.advance();
+      continue;
+    }
     LightField lf;
     if (coded && !colour) {
       const auto orientation = AngularOrientation::parse(sources.orient, "orient");
@@ -204,7 +241,11 @@ void check_sources(const LightFieldSources& sources, const std::string& where) {
   for (size_t i = 0; i < sources.light_fields.size(); ++i) {
     const std::string path = where + ".light_fields[" + std::to_string(i) + "]";
     try {
-      io::scan_folder(sources.light_fields[i], sources.layout);
+      const auto& dir = sources.light_fields[i];
+      const int64_t frames = io::sequence_frames(dir);
+      for (int64_t t = 0; t < std::max<int64_t>(frames, 1); ++t) {
+        io::scan_folder(frames == 0 ? dir : dir + "/frame_" + std::to_string(t), sources.layout);
+      }
     } catch (const Error& e) {
       throw ConfigError(path + ": " + e.what());
     }

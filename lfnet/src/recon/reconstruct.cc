@@ -56,7 +56,7 @@ torch::Tensor reconstruct_patches(const optics::Phi& phi, const PatchGrid& grid,
                                   const ReconstructOptions& options,
                                   const ProgressCallback& progress) {
   options.validate();
-  const int64_t u = phi.spec().rows, v = phi.spec().cols;
+  const int64_t u = phi.rows(), v = phi.cols();
   const int64_t h = grid.patch_h(), w = grid.patch_w();
   Stitcher stitcher(grid, 1, u, v, options.window ? hann_window(h, w) : torch::Tensor(),
                     options.coded);

@@ -63,6 +63,11 @@ EvalResult evaluate(const LightFieldViews& truth, const optics::Phi& phi, const 
 EvalResult evaluate_no_parallax(const LightField& truth, const optics::Phi& phi,
                                 const EvalOptions& options);
 
+// The PSNR of each of `frames` sub-frames, from a record's per_view_psnr_db of a stacked
+// sequence ((T U) x V, docs/video.md): the views' mean squared errors averaged per frame.
+// Null (a perfect view) counts as no error; an all-perfect frame is null.
+nlohmann::json per_frame_psnr(const nlohmann::json& per_view_psnr_db, int64_t frames);
+
 // The metric fields of a record: psnr_db, ssim, per_view_psnr_db (U x V).
 nlohmann::json score(const LightFieldViews& estimate, const LightFieldViews& truth);
 

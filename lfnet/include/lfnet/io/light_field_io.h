@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lfnet/core/light_field.h"
+#include "lfnet/core/sequence.h"
 
 namespace lfnet::io {
 
@@ -112,6 +113,18 @@ struct WriteOptions {
 // Writes views as DIR/lf_R_C.ext (1-based). The folder must not hold views already.
 void write_light_field(const LightFieldViews& lf, const std::string& dir,
                        const WriteOptions& options = {});
+
+// Light-field sequences (docs/video.md): a folder of sub-folders frame_0, frame_1, ...,
+// frame_{T-1}, each a light-field folder of any naming scheme read_light_field reads.
+// The frame count of a sequence folder: 0 when `dir` holds no frame_0 (a still light field).
+// A gap in the numbering (frame_0, frame_2) is an IoError naming the missing frame.
+int64_t sequence_frames(const std::string& dir);
+// Reads every frame; frames of different shapes are an IoError naming the frame.
+LightFieldSequence read_light_field_sequence(const std::string& dir, int threads = 0,
+                                             const std::string& layout = "");
+// Writes frame t's views as DIR/frame_t/lf_R_C.ext (write_light_field).
+void write_light_field_sequence(const LightFieldSequence& seq, const std::string& dir,
+                                const WriteOptions& options = {});
 
 // The sub-aperture views tiled into one (C, U * (H + gap) - gap, V * (W + gap) - gap) image.
 torch::Tensor grid_image(const LightField& lf, int64_t gap = 2);

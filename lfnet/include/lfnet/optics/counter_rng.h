@@ -51,6 +51,8 @@ namespace stream {
 constexpr uint64_t kMaskCode = 1;
 constexpr uint64_t kApertureCode = 2;
 constexpr uint64_t kRandomMatrix = 3;
+constexpr uint64_t kExposureCode = 4;
+constexpr uint64_t kTimeApertureCode = 5;
 constexpr uint64_t kGaussianNoise = 11;
 constexpr uint64_t kShotNoise = 12;
 constexpr uint64_t kReadNoise = 13;

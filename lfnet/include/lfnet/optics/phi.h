@@ -16,6 +16,8 @@ namespace lfnet::optics {
 // The most views a Phi codes along each angular axis (light-field cameras and gantries have
 // at most 17; Phi codes the central window).
 constexpr int64_t kMaxViews = 64;
+// The most sub-frames a time-coded Phi codes within one exposure.
+constexpr int64_t kMaxFrames = 64;
 
 // Everything that defines a Phi; stored as JSON in every simulation, model and result.
 struct PhiSpec {
@@ -23,6 +25,7 @@ struct PhiSpec {
   int64_t n = 2;             // measurements per pixel, 1 .. U * V
   int64_t rows = 5;          // U: angular rows of the light field it codes
   int64_t cols = 5;          // V: angular columns
+  int64_t frames = 1;        // T: sub-frames of one exposure (time-coded models; 1: a still camera)
   uint64_t seed = 0;         // for the random codes (mask, aperture, random)
   nlohmann::json params = nlohmann::json::object();  // model-specific parameters, resolved
 
@@ -30,10 +33,14 @@ struct PhiSpec {
   // Strict: unknown keys and wrong types are ConfigErrors naming the JSON path. `params` are
   // checked when the model is built (make_phi), which also fills in their defaults.
   static PhiSpec from_json(const nlohmann::json& j, const std::string& path = "$");
-  // Parses "asp", "asp:2", "mask:15" (name[:N]); N defaults to 2.
+  // Parses "asp", "asp:2", "mask:15", "exposure_aperture:1@4" (name[:N][@T]); N defaults to 2
+  // and T, the sub-frames, to 1.
   static PhiSpec parse(const std::string& text);
-  // "asp:2" (name and N; the other fields are in to_json()).
+  // "asp:2", or "exposure_aperture:1@4" when time-coded (the other fields are in to_json()).
   std::string label() const;
+  // Angular rows of the light field the Phi takes: U, or T U for a time-coded one, whose
+  // sequences are coded with their frames stacked along the rows (LightFieldSequence::stacked).
+  int64_t coded_rows() const { return rows * frames; }
 
   bool operator==(const PhiSpec& other) const;
   bool operator!=(const PhiSpec& other) const { return !(*this == other); }
@@ -56,8 +63,11 @@ class Phi {
 
   const PhiSpec& spec() const { return spec_; }
   int64_t measurements() const { return spec_.n; }
-  int64_t rows() const { return spec_.rows; }
+  // Angular rows of the light field it codes: U, or T U for a time-coded Phi (frames() > 1),
+  // whose input is a sequence's stacked light field (C, T U, V, H, W).
+  int64_t rows() const { return spec_.coded_rows(); }
   int64_t cols() const { return spec_.cols; }
+  int64_t frames() const { return spec_.frames; }
 
   // Sensor image (..., N, H, W) of a light field (..., U, V, H, W), no sensor effects.
   virtual torch::Tensor forward(const torch::Tensor& lf) const = 0;
@@ -121,8 +131,10 @@ std::vector<std::string> phi_names();
 // A factory of one model.
 using PhiFactory = std::function<std::unique_ptr<Phi>(const PhiSpec& spec)>;
 
-// Adds a model to the registry, replacing one of the same name (built-ins included).
-void register_phi(const std::string& name, PhiFactory factory);
+// Adds a model to the registry, replacing one of the same name (built-ins included). A
+// `time_coded` factory builds specs of any frames T itself; any other is a still camera, built
+// at T = 1 and, for frames > 1, held the same in every sub-frame.
+void register_phi(const std::string& name, PhiFactory factory, bool time_coded = false);
 
 // Singular values of a Phi's self-contained pieces: how much each camera can recover.
 struct PhiConditioning {

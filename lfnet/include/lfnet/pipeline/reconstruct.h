@@ -8,6 +8,7 @@
 
 #include "lfnet/core/light_field.h"
 #include "lfnet/core/output.h"
+#include "lfnet/io/viewer.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/pipeline/models.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -62,6 +63,12 @@ struct Reconstruction {
 Reconstruction reconstruct_acquisition(const ReconstructRequest& request,
                                        const recon::ProgressCallback& progress = {},
                                        ModelCache* cache = nullptr);
+
+// Writes an estimate's views, previews (grid, EPIs) and viewer (index.html) into `dir`; a
+// stacked sequence of `frames` > 1 frames (docs/video.md) as one such folder per frame,
+// dir/frame_t, each with its rows of page.truth and of the record's per-view table.
+void write_estimate(const LightFieldViews& lf, const std::string& dir, const io::ViewerPage& page,
+                    int64_t frames = 1);
 
 // Writes a reconstruction as a light-field folder with previews and reconstruction.json, by
 // the output-folder policy (core/output.h). With `end_to_end`, the record written gets

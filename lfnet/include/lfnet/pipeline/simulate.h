@@ -62,8 +62,10 @@ struct SimulateInput {
   std::optional<nlohmann::json> scene_effects;  // a scene's own sensor block, if it names one
 };
 
-// Reads (or renders) and windows the light field of `source`.
-SimulateInput load_simulate_input(const SimulateSource& source);
+// Reads (or renders) and windows the light field of `source`. For a camera of `frames` > 1
+// sub-frames (docs/video.md), the stacked light field of a sequence folder's frames, each
+// windowed, or a still source's held in every frame; a sequence folder needs as many frames.
+SimulateInput load_simulate_input(const SimulateSource& source, int64_t frames = 1);
 
 // The window size `views` selects ("" = 5 x 5), for a Phi without a light field to look at.
 std::pair<int64_t, int64_t> window_size(const std::string& views);

@@ -78,9 +78,14 @@ LightField read_oriented(const std::string& dir, const std::string& orient, cons
 // With `colour`, light fields keep their colour channels (a grey folder stays grey). With
 // `coded`, for commands that only simulate and score, grey folders of 16-bit views are held
 // in 16-bit codes (NamedLightField::codes), half the memory.
+// With `frames` > 1 (a time-coded Phi, rows = frames U), every folder is read as a sequence
+// (docs/video.md): each frame windowed to U x cols, the frames stacked along the rows
+// (LightFieldSequence::stacked); a still folder is the same in every frame. A sequence folder
+// with `frames` 1 is a ConfigError.
 std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int64_t rows,
                                           int64_t cols, bool whole_grids = false,
-                                          bool colour = false, bool coded = false);
+                                          bool colour = false, bool coded = false,
+                                          int64_t frames = 1);
 
 // Render options for a scene file: image textures are read with io::read_image, relative to
 // the scene file's folder ("" for none).

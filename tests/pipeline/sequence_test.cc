@@ -1,0 +1,93 @@
+// Light-field sequences through simulate, evaluate and reconstruct with time-coded cameras.
+#include <catch2/catch.hpp>
+
+#include <filesystem>
+
+#include "lfnet/core/error.h"
+#include "lfnet/core/json.h"
+#include "lfnet/core/sequence.h"
+#include "lfnet/io/light_field_io.h"
+#include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/simulate.h"
+#include "support/test_support.h"
+
+namespace fs = std::filesystem;
+namespace io = lfnet::io;
+namespace pipeline = lfnet::pipeline;
+namespace test = lfnet::test;
+using lfnet::LightField;
+using lfnet::LightFieldSequence;
+
+namespace {
+// Four frames of a 7 x 7 light field whose content moves right by 2 px per frame.
+LightFieldSequence moving_sequence() {
+  const auto lf = test::parallax_light_field(7, 7, 16, 40, 1, -1);
+  std::vector<LightField> frames;
+  for (int64_t t = 0; t < 4; ++t) frames.emplace_back(torch::roll(lf.data(), {2 * t}, {4}));
+  return LightFieldSequence(frames);
+}
+}  // namespace
+
+TEST_CASE("simulate stacks a sequence's windowed frames for a time-coded camera",
+          "[pipeline][sequence]") {
+  test::TempDir tmp;
+  const auto seq = moving_sequence();
+  io::write_light_field_sequence(seq, tmp / "seq", {"exr", 32});
+  pipeline::SimulateSource source;
+  source.lf = tmp / "seq";
+  const auto input = pipeline::load_simulate_input(source, 4);
+  REQUIRE(input.lf.rows() == 20);
+  CHECK(input.source.at("frames") == 4);
+  // Rows 5 t .. 5 t + 4 are frame t's central 5 x 5 views.
+  const auto central = seq.central(5);
+  CHECK(torch::equal(input.lf.view(5 * 3 + 2, 4), central.frame(3).view(2, 4)));
+  CHECK(torch::equal(input.lf.view(5 * 1 + 0, 0), central.frame(1).view(0, 0)));
+  // A still camera, or one of other sub-frames, does not code it.
+  CHECK_THROWS_WITH(pipeline::load_simulate_input(source, 1), Catch::Contains("NAME:N@4"));
+  CHECK_THROWS_WITH(pipeline::load_simulate_input(source, 3), Catch::Contains("@4"));
+  // A still folder is the same in every sub-frame.
+  io::write_light_field(seq.frame(0), tmp / "still", {"exr", 32});
+  source.lf = tmp / "still";
+  const auto still = pipeline::load_simulate_input(source, 4);
+  CHECK(torch::equal(still.lf.view(5 * 3 + 1, 1), still.lf.view(1, 1)));
+}
+
+TEST_CASE("evaluate scores a sequence per frame and writes a folder per frame",
+          "[pipeline][sequence]") {
+  test::TempDir tmp;
+  io::write_light_field_sequence(moving_sequence(), tmp / "seq", {"exr", 32});
+  pipeline::EvaluateRequest q;
+  q.lf = tmp / "seq";
+  q.phi = "exposure_aperture:2@4";
+  q.method = "pinv";
+  q.keep_estimate = true;
+  auto result = pipeline::evaluate_request(q);
+  auto& record = result.record;
+  CHECK(record.at("frames") == 4);
+  const auto per_frame = record.at("per_frame_psnr_db");
+  REQUIRE(per_frame.size() == 4);
+  REQUIRE(record.at("per_view_psnr_db").size() == 20);
+  // The frames' mean squared errors average to the whole sequence's.
+  double mse = 0;
+  for (const auto& p : per_frame) mse += std::pow(10.0, -p.get<double>() / 10) / 4;
+  CHECK(-10 * std::log10(mse) == Approx(record.at("psnr_db").get<double>()).epsilon(1e-6));
+  pipeline::write_evaluation(result, record, tmp / "out");
+  for (int t = 0; t < 4; ++t) {
+    const auto frame = tmp / ("out/frame_" + std::to_string(t));
+    CHECK(fs::exists(frame + "/lf_5_5.png"));
+    CHECK(fs::exists(frame + "/index.html"));
+  }
+  CHECK(io::sequence_frames(tmp / "out") == 4);
+  // The sequence in a still camera's evaluation is refused, naming the camera it needs.
+  q.phi = "asp:2";
+  CHECK_THROWS_WITH(pipeline::evaluate_request(q), Catch::Contains("@4"));
+}
+
+TEST_CASE("per-frame PSNR averages the views' errors of each frame", "[pipeline][sequence]") {
+  // Two frames of 1 x 2 views: 20 and 30 dB (MSE 0.01 and 0.001) average to 0.0055.
+  const nlohmann::json table = {{20.0, 30.0}, {10.0, nullptr}};
+  const auto frames = lfnet::eval::per_frame_psnr(table, 2);
+  CHECK(frames[0].get<double>() == Approx(-10 * std::log10(0.0055)));
+  CHECK(frames[1].get<double>() == Approx(-10 * std::log10(0.05)));
+  CHECK_THROWS(lfnet::eval::per_frame_psnr(table, 3));
+}
