@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -306,6 +307,31 @@ double max_gradient(const RandomSceneOptions& o) {
   return smax > 0 ? 0.45 / smax : 1.0;
 }
 
+// Draws the layers' motion from a stream of its own. The layers of a frame (wall, posts, rails)
+// move as one.
+void add_motion(SceneSpec& s, uint64_t seed, const RandomSceneOptions& o) {
+  Rng rng(detail::derive_seed(seed, 0x6d6f74696f6eULL));
+  std::optional<MotionSpec> frame_motion;
+  for (size_t i = 0; i < s.layers.size(); ++i) {
+    LayerSpec& layer = s.layers[i];
+    const bool moves = rng.bernoulli(o.motion_probability);
+    const double heading = rng.uniform(0.0, 2.0 * kPi);
+    MotionSpec m;
+    const double speed = rng.uniform(0.0, o.max_speed);
+    m.shift = Point{speed * std::cos(heading), speed * std::sin(heading)};
+    m.disparity = rng.uniform(-o.max_disparity_speed, o.max_disparity_speed);
+    m.rotation = i == 0 ? 0.0 : rng.uniform(-o.max_rotation, o.max_rotation);
+    const bool in_frame = layer.name.rfind("frame-", 0) == 0 || layer.name.rfind("wall", 0) == 0;
+    if (in_frame) {
+      if (!frame_motion) frame_motion = moves ? m : MotionSpec{};
+      m = *frame_motion;
+    } else if (!moves) {
+      continue;
+    }
+    if (m.moves()) layer.motion = m;
+  }
+}
+
 }  // namespace
 
 RandomSceneOptions RandomSceneOptions::from_json(JsonReader& r) {
@@ -341,9 +367,17 @@ void RandomSceneOptions::validate(const std::string& p) const {
       {"vignetting_probability", vignetting_probability},
       {"defocus_probability", defocus_probability},
       {"frame_probability", frame_probability},
-      {"image_probability", image_probability}};
+      {"image_probability", image_probability},
+      {"motion_probability", motion_probability}};
   for (const auto& [key, value] : probabilities) {
     if (!(value >= 0.0 && value <= 1.0)) fail(p + "." + key, "a probability must lie in [0, 1]");
+  }
+  if (!(max_speed >= 0.0 && max_speed <= 64.0)) fail(p + ".max_speed", "must lie in [0, 64]");
+  if (!(max_disparity_speed >= 0.0 && max_disparity_speed <= 4.0)) {
+    fail(p + ".max_disparity_speed", "must lie in [0, 4]");
+  }
+  if (!(max_rotation >= 0.0 && max_rotation <= 30.0)) {
+    fail(p + ".max_rotation", "must lie in [0, 30]");
   }
   if (image_probability > 0.0 && texture_images.empty()) {
     fail(p + ".texture_images", "image_probability > 0 needs at least one image or folder");
@@ -474,6 +508,7 @@ SceneSpec random_scene(uint64_t seed, const RandomSceneOptions& o) {
     d.blur = rng.uniform(0.1, 0.5);
     s.defocus = d;
   }
+  if (o.moves()) add_motion(s, seed, o);
   // The spec is what gets saved beside the render; round it so that a file and the spec it came
   // from are the same scene.
   return SceneSpec::from_json(rounded(s.to_json()));

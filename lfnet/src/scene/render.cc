@@ -10,6 +10,7 @@
 #include <memory>
 #include <vector>
 
+#include "lfnet/core/constants.h"
 #include "lfnet/core/error.h"
 #include "raster.h"
 #include "rng.h"
@@ -527,6 +528,266 @@ void update_disparity(torch::Tensor& disparity, const torch::Tensor& alpha, cons
   });
 }
 
+// A layer on its canvas, ready to composite.
+struct LayerCanvas {
+  Canvas canvas;
+  torch::Tensor alpha;   // (Hc, Wc) before defocus: coverage for the disparity map and highlights
+  torch::Tensor planes;  // (C + 1, Hc, Wc): premultiplied colour, then alpha
+  Box box;               // outside it the planes are zero
+};
+
+double defocus_sigma(const SceneSpec& spec, double disparity) {
+  if (!spec.defocus) return 0.0;
+  return std::min(spec.defocus->max_sigma,
+                  spec.defocus->blur * std::abs(disparity - spec.defocus->focus_disparity));
+}
+
+int64_t blur_radius(double sigma) { return static_cast<int64_t>(std::ceil(3.0 * sigma)); }
+
+// Layer `li` at its spec pose on a canvas of `margin`: premultiplied colour and alpha, unblurred.
+// The texture is generated only where the shape covers the canvas (textures depend on position
+// alone, so a window gives the same).
+LayerCanvas rasterise(const SceneSpec& spec, size_t li, int64_t margin,
+                      const RenderOptions& options) {
+  const LayerSpec& layer = spec.layers[li];
+  const int64_t channels = spec.color ? 3 : 1;
+  LayerCanvas lc;
+  lc.canvas = Canvas{spec.height, spec.width, margin};
+  const Canvas& canvas = lc.canvas;
+  lc.alpha = detail::render_alpha(layer.shape, canvas);
+  if (layer.opacity != 1.0) lc.alpha.mul_(layer.opacity);
+  lc.box = support(lc.alpha);
+  lc.planes = torch::zeros({channels + 1, canvas.height(), canvas.width()}, torch::kFloat32);
+  const Box& box = lc.box;
+  if (!box.empty()) {
+    const Canvas window = canvas.window(box.i0, box.j0, box.i1 - box.i0 + 1, box.j1 - box.j0 + 1);
+    const torch::Tensor colour = detail::render_texture(
+        layer.texture, window, spec.color, detail::derive_seed(spec.seed, li), options);
+    premultiply(colour, lc.alpha, box, lc.planes);
+  }
+  return lc;
+}
+
+// Blurs the planes by `sigma`, growing the box by the blur radius: outside the box everything is
+// zero, so this is the same as blurring the whole canvas.
+void defocus(LayerCanvas& lc, double sigma) {
+  if (!(sigma > 0.0) || lc.box.empty()) return;
+  const int64_t radius = blur_radius(sigma);
+  Box& box = lc.box;
+  box = Box{std::max<int64_t>(0, box.i0 - radius),
+            std::min<int64_t>(lc.canvas.height() - 1, box.i1 + radius),
+            std::max<int64_t>(0, box.j0 - radius),
+            std::min<int64_t>(lc.canvas.width() - 1, box.j1 + radius)};
+  auto region = lc.planes.slice(1, box.i0, box.i1 + 1).slice(2, box.j0, box.j1 + 1);
+  auto blurred = region.contiguous();
+  gaussian_blur(blurred, sigma);
+  region.copy_(blurred);
+}
+
+// Layer `li` of `spec` (whose plane is `plane`) over the target, and into the disparity map.
+void composite_layer(const SceneSpec& spec, size_t li, const Plane& plane, const LayerCanvas& lc,
+                     const Target& target, torch::Tensor& disparity) {
+  const LayerSpec& layer = spec.layers[li];
+  const Canvas& canvas = lc.canvas;
+  update_disparity(disparity, lc.alpha, canvas, plane, li == 0);
+  Highlights hl;
+  if (spec.specular && layer.gloss > 0.0 && spec.specular->count > 0 &&
+      spec.specular->strength > 0.0) {
+    const auto inner = lc.alpha.slice(0, canvas.margin, canvas.margin + spec.height)
+                           .slice(1, canvas.margin, canvas.margin + spec.width);
+    const uint64_t seed =
+        detail::derive_seed(spec.specular->seed.value_or(spec.seed), 0x5370ULL + li);
+    hl = specular_spots(*spec.specular, layer, plane, inner, seed, target.grid);
+    const Rgb& c = spec.specular->color;
+    if (spec.color) {
+      hl.color = {static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])};
+    } else {
+      hl.color[0] = static_cast<float>(detail::luma(c));
+    }
+  }
+  if (plane.gx != 0.0 || plane.gy != 0.0) {
+    composite_slanted(lc.planes, canvas, plane, lc.box, target, hl);
+  } else {
+    composite_fronto(lc.planes, canvas, plane.d0, lc.box, target, hl);
+  }
+}
+
+std::vector<std::string> effects_of(const SceneSpec& spec, bool motion) {
+  std::vector<std::string> run;
+  if (spec.layers.size() > 1) run.emplace_back("occlusion");
+  if (motion) run.emplace_back("motion");
+  if (spec.defocus) run.emplace_back("defocus");
+  if (spec.specular) run.emplace_back("specular");
+  if (spec.vignetting) run.emplace_back("vignetting");
+  return run;
+}
+
+// ---- Motion ----------------------------------------------------------------------------------
+
+// An affine map of image points: (x, y) -> (a00 x + a01 y + bx, a10 x + a11 y + by).
+struct Affine {
+  double a00 = 1.0, a01 = 0.0, a10 = 0.0, a11 = 1.0, bx = 0.0, by = 0.0;
+  Point operator()(double x, double y) const {
+    return Point{a00 * x + a01 * y + bx, a10 * x + a11 * y + by};
+  }
+  // A pure translation by whole pixels: resampling is an exact copy.
+  bool integer_shift() const {
+    return a00 == 1.0 && a01 == 0.0 && a10 == 0.0 && a11 == 1.0 && bx == std::floor(bx) &&
+           by == std::floor(by);
+  }
+};
+
+// A moving layer in one sub-frame: where its points go (p -> c + tau shift + k R (p - c)) and
+// back, and its moved disparity plane.
+struct Pose {
+  Affine forward;
+  Affine inverse;
+  double disparity = 0.0;  // at the image centre
+  Point gradient;
+};
+
+Pose layer_pose(const LayerSpec& layer, const SceneSpec& spec, double tau) {
+  const MotionSpec& m = *layer.motion;
+  const Point c = motion_center(layer, spec);
+  const double angle = m.rotation * tau * kPi / 180.0;
+  const double k = std::pow(m.scale, tau);
+  const double cs = m.rotation == 0.0 ? 1.0 : std::cos(angle);
+  const double sn = m.rotation == 0.0 ? 0.0 : std::sin(angle);
+  const double tx = tau * m.shift.x;
+  const double ty = tau * m.shift.y;
+  Pose pose;
+  Affine& f = pose.forward;
+  f = Affine{k * cs, -k * sn, k * sn, k * cs, 0.0, 0.0};
+  f.bx = c.x + tx - (f.a00 * c.x + f.a01 * c.y);
+  f.by = c.y + ty - (f.a10 * c.x + f.a11 * c.y);
+  // p = c + R^T (q - c - t) / k.
+  Affine& i = pose.inverse;
+  i = Affine{cs / k, sn / k, -sn / k, cs / k, 0.0, 0.0};
+  i.bx = c.x - (i.a00 * (c.x + tx) + i.a01 * (c.y + ty));
+  i.by = c.y - (i.a10 * (c.x + tx) + i.a11 * (c.y + ty));
+  // d'(q) = d(inverse(q)) + tau dd: still a plane, of gradient R g / k.
+  const Point& g = layer.disparity_gradient;
+  pose.gradient = Point{(cs * g.x - sn * g.y) / k, (sn * g.x + cs * g.y) / k};
+  const Point centre{(spec.width - 1) / 2.0, (spec.height - 1) / 2.0};
+  const Point back = pose.inverse(centre.x, centre.y);
+  pose.disparity =
+      layer.disparity + g.x * (back.x - centre.x) + g.y * (back.y - centre.y) + tau * m.disparity;
+  return pose;
+}
+
+// The margin a canvas needs so that `inverse` maps every point of a canvas of `margin` (plus
+// the cubic taps) inside it.
+int64_t source_margin(const Affine& inverse, const SceneSpec& spec, int64_t margin) {
+  const double w = static_cast<double>(spec.width - 1);
+  const double h = static_cast<double>(spec.height - 1);
+  const auto m = static_cast<double>(margin);
+  double need = 0.0;
+  for (const double x : {-m, w + m}) {
+    for (const double y : {-m, h + m}) {
+      const Point p = inverse(x, y);
+      need = std::max({need, -p.x, p.x - w, -p.y, p.y - h});
+    }
+  }
+  return static_cast<int64_t>(std::ceil(need)) + 4;
+}
+
+// `from` resampled onto canvas `to`: an output point q shows the source point inverse(q).
+// Integer translations copy; anything else is 2D Catmull-Rom, zero outside the source canvas.
+LayerCanvas warp(const LayerCanvas& from, const Canvas& to, const Pose& pose) {
+  LayerCanvas out;
+  out.canvas = to;
+  const int64_t k = from.planes.size(0);
+  const int64_t hs = from.canvas.height();
+  const int64_t ws = from.canvas.width();
+  const int64_t ho = to.height();
+  const int64_t wo = to.width();
+  out.planes = torch::zeros({k, ho, wo}, torch::kFloat32);
+  out.box = Box{0, -1, 0, -1};
+  if (from.box.empty()) {
+    out.alpha = out.planes[k - 1].clone();
+    return out;
+  }
+  const auto ms = static_cast<double>(from.canvas.margin);
+  const auto mo = static_cast<double>(to.margin);
+  // The output box: the source box's corners moved, plus the taps.
+  double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
+  for (const int64_t i : {from.box.i0, from.box.i1}) {
+    for (const int64_t j : {from.box.j0, from.box.j1}) {
+      const Point q = pose.forward(static_cast<double>(j) - ms, static_cast<double>(i) - ms);
+      x0 = std::min(x0, q.x);
+      x1 = std::max(x1, q.x);
+      y0 = std::min(y0, q.y);
+      y1 = std::max(y1, q.y);
+    }
+  }
+  Box& box = out.box;
+  box.i0 = std::max<int64_t>(0, static_cast<int64_t>(std::floor(y0 + mo)) - 3);
+  box.i1 = std::min<int64_t>(ho - 1, static_cast<int64_t>(std::ceil(y1 + mo)) + 3);
+  box.j0 = std::max<int64_t>(0, static_cast<int64_t>(std::floor(x0 + mo)) - 3);
+  box.j1 = std::min<int64_t>(wo - 1, static_cast<int64_t>(std::ceil(x1 + mo)) + 3);
+  if (box.empty()) {
+    out.alpha = out.planes[k - 1].clone();
+    return out;
+  }
+  const float* src = from.planes.data_ptr<float>();
+  float* dst = out.planes.data_ptr<float>();
+  const Affine& inv = pose.inverse;
+  if (inv.integer_shift()) {
+    // Output canvas (i, j) reads source canvas (i + di, j + dj).
+    const auto di = static_cast<int64_t>(inv.by + ms - mo);
+    const auto dj = static_cast<int64_t>(inv.bx + ms - mo);
+    const int64_t i0 = std::max(box.i0, -di);
+    const int64_t i1 = std::min(box.i1, hs - 1 - di);
+    const int64_t j0 = std::max(box.j0, -dj);
+    const int64_t j1 = std::min(box.j1, ws - 1 - dj);
+    if (i0 <= i1 && j0 <= j1) {
+      out.planes.slice(1, i0, i1 + 1)
+          .slice(2, j0, j1 + 1)
+          .copy_(from.planes.slice(1, i0 + di, i1 + di + 1).slice(2, j0 + dj, j1 + dj + 1));
+    }
+  } else {
+    const int64_t bw = box.j1 - box.j0 + 1;
+    detail::parallel_items(box.i1 - box.i0 + 1, 40 * k * bw, [&](int64_t b, int64_t e) {
+      for (int64_t r = b; r < e; ++r) {
+        const int64_t i = box.i0 + r;
+        for (int64_t j = box.j0; j <= box.j1; ++j) {
+          const Point p = inv(static_cast<double>(j) - mo, static_cast<double>(i) - mo);
+          const double px = p.x + ms;
+          const double py = p.y + ms;
+          const double fx = std::floor(px);
+          const double fy = std::floor(py);
+          if (fx < -2.0 || fy < -2.0 || fx > static_cast<double>(ws) ||
+              fy > static_cast<double>(hs)) {
+            continue;
+          }
+          const auto ix = static_cast<int64_t>(fx);
+          const auto iy = static_cast<int64_t>(fy);
+          const auto wx = keys_weights(px - fx);
+          const auto wy = keys_weights(py - fy);
+          for (int64_t c = 0; c < k; ++c) {
+            const float* plane = src + c * hs * ws;
+            float acc = 0.0f;
+            for (int64_t dy = 0; dy < 4; ++dy) {
+              const int64_t y = iy - 1 + dy;
+              if (y < 0 || y >= hs) continue;
+              const float* row = plane + y * ws;
+              float racc = 0.0f;
+              for (int64_t dx = 0; dx < 4; ++dx) {
+                const int64_t x = ix - 1 + dx;
+                if (x >= 0 && x < ws) racc += wx[dx] * row[x];
+              }
+              acc += wy[dy] * racc;
+            }
+            dst[(c * ho + i) * wo + j] = acc;
+          }
+        }
+      }
+    });
+  }
+  out.alpha = out.planes[k - 1].clone();
+  return out;
+}
+
 }  // namespace
 
 RenderResult render_scene(const SceneSpec& spec, const RenderOptions& options) {
@@ -538,78 +799,143 @@ RenderResult render_scene(const SceneSpec& spec, const RenderOptions& options) {
   Target target{out.data_ptr<float>(), channels, grid, spec.height, spec.width};
 
   RenderResult result;
-  if (spec.layers.size() > 1) result.effects_run.push_back("occlusion");
-  if (spec.defocus) result.effects_run.push_back("defocus");
-  if (spec.specular) result.effects_run.push_back("specular");
-  if (spec.vignetting) result.effects_run.push_back("vignetting");
-
+  result.effects_run = effects_of(spec, false);
   torch::Tensor disparity;
   for (size_t li = 0; li < spec.layers.size(); ++li) {
-    const LayerSpec& layer = spec.layers[li];
-    const Plane plane = layer_plane(layer, spec);
-    double sigma = 0.0;
-    if (spec.defocus) {
-      sigma =
-          std::min(spec.defocus->max_sigma,
-                   spec.defocus->blur * std::abs(layer.disparity - spec.defocus->focus_disparity));
-    }
-    const auto blur_radius = static_cast<int64_t>(std::ceil(3.0 * sigma));
-    const Canvas canvas{spec.height, spec.width, layer_margin(plane, spec, grid, blur_radius)};
-    const uint64_t layer_seed = detail::derive_seed(spec.seed, li);
-
-    torch::Tensor alpha = detail::render_alpha(layer.shape, canvas);
-    if (layer.opacity != 1.0) alpha.mul_(layer.opacity);
-    update_disparity(disparity, alpha, canvas, plane, li == 0);
-    const auto inner = alpha.slice(0, canvas.margin, canvas.margin + spec.height)
-                           .slice(1, canvas.margin, canvas.margin + spec.width);
-
-    // Premultiplied colour and alpha, (C + 1, Hc, Wc); the texture is generated only where the
-    // shape covers the canvas (textures depend on position alone, so a window gives the same).
-    Box box = support(alpha);
-    auto planes = torch::zeros({channels + 1, canvas.height(), canvas.width()}, torch::kFloat32);
-    if (!box.empty()) {
-      const Canvas window = canvas.window(box.i0, box.j0, box.i1 - box.i0 + 1, box.j1 - box.j0 + 1);
-      const torch::Tensor colour =
-          detail::render_texture(layer.texture, window, spec.color, layer_seed, options);
-      premultiply(colour, alpha, box, planes);
-    }
-    if (sigma > 0.0 && !box.empty()) {
-      // Blur the support and a blur radius around it: outside it everything is zero, so this is
-      // the same as blurring the whole canvas.
-      box = Box{std::max<int64_t>(0, box.i0 - blur_radius),
-                std::min<int64_t>(canvas.height() - 1, box.i1 + blur_radius),
-                std::max<int64_t>(0, box.j0 - blur_radius),
-                std::min<int64_t>(canvas.width() - 1, box.j1 + blur_radius)};
-      auto region = planes.slice(1, box.i0, box.i1 + 1).slice(2, box.j0, box.j1 + 1);
-      auto blurred = region.contiguous();
-      gaussian_blur(blurred, sigma);
-      region.copy_(blurred);
-    }
-
-    Highlights hl;
-    if (spec.specular && layer.gloss > 0.0 && spec.specular->count > 0 &&
-        spec.specular->strength > 0.0) {
-      const uint64_t seed =
-          detail::derive_seed(spec.specular->seed.value_or(spec.seed), 0x5370ULL + li);
-      hl = specular_spots(*spec.specular, layer, plane, inner, seed, grid);
-      const Rgb& c = spec.specular->color;
-      if (spec.color) {
-        hl.color = {static_cast<float>(c[0]), static_cast<float>(c[1]), static_cast<float>(c[2])};
-      } else {
-        hl.color[0] = static_cast<float>(detail::luma(c));
-      }
-    }
-    if (layer.slanted()) {
-      composite_slanted(planes, canvas, plane, box, target, hl);
-    } else {
-      composite_fronto(planes, canvas, layer.disparity, box, target, hl);
-    }
+    const Plane plane = layer_plane(spec.layers[li], spec);
+    const double sigma = defocus_sigma(spec, spec.layers[li].disparity);
+    LayerCanvas lc =
+        rasterise(spec, li, layer_margin(plane, spec, grid, blur_radius(sigma)), options);
+    defocus(lc, sigma);
+    composite_layer(spec, li, plane, lc, target, disparity);
   }
   if (spec.vignetting) apply_vignetting(*spec.vignetting, target);
   out.clamp_(0.0, 1.0);
 
   result.light_field = LightField(out);
   result.disparity = disparity;
+  return result;
+}
+
+SequenceResult render_sequence(const SceneSpec& spec, int64_t frames,
+                               const RenderOptions& options) {
+  LFNET_CHECK_AS(ConfigError, frames >= 1 && frames <= kMaxFrames, "frames must lie in [1, ",
+                 kMaxFrames, "], got ", frames);
+  spec.validate();
+  SequenceResult result;
+  if (frames == 1 || !spec.moves()) {
+    // Still: one render, filmed T times.
+    const RenderResult still = render_scene(spec, options);
+    const auto& lf = still.light_field.data();
+    std::vector<int64_t> shape{frames};
+    shape.insert(shape.end(), lf.sizes().begin(), lf.sizes().end());
+    result.light_fields = LightFieldSequence(lf.unsqueeze(0).expand(shape));
+    result.disparity =
+        still.disparity.unsqueeze(0).expand({frames, spec.height, spec.width}).contiguous();
+    result.effects_run = still.effects_run;
+    return result;
+  }
+
+  // Each sub-frame's pose of every moving layer, checked against the scene's limits.
+  const size_t n = spec.layers.size();
+  std::vector<std::vector<Pose>> poses(n);
+  std::vector<SceneSpec> posed(static_cast<size_t>(frames), spec);
+  for (int64_t t = 0; t < frames; ++t) {
+    const double tau = static_cast<double>(t) - (static_cast<double>(frames) - 1.0) / 2.0;
+    SceneSpec& s = posed[t];
+    for (size_t li = 0; li < n; ++li) {
+      const LayerSpec& layer = spec.layers[li];
+      if (!layer.moves()) continue;
+      const std::string path = "$.layers[" + std::to_string(li) + "].motion";
+      const double k = std::pow(layer.motion->scale, tau);
+      LFNET_CHECK_AS(ConfigError, k >= 0.25 && k <= 4.0, path, ".scale: scales the layer by ", k,
+                     " in sub-frame ", t, " of ", frames, "; the limit is 4 either way");
+      LFNET_CHECK_AS(ConfigError,
+                     std::abs(tau * layer.motion->shift.x) <= 1024.0 &&
+                         std::abs(tau * layer.motion->shift.y) <= 1024.0,
+                     path, ".shift: moves the layer more than 1024 px by sub-frame ", t, " of ",
+                     frames);
+      poses[li].push_back(layer_pose(layer, spec, tau));
+      s.layers[li].disparity = poses[li].back().disparity;
+      s.layers[li].disparity_gradient = poses[li].back().gradient;
+    }
+    try {
+      s.validate();
+    } catch (const ConfigError& e) {
+      throw ConfigError("sub-frame " + std::to_string(t) + " of " + std::to_string(frames) + ": " +
+                        e.what());
+    }
+  }
+
+  Grid grid{spec.rows, spec.cols, (spec.rows - 1) / 2.0, (spec.cols - 1) / 2.0};
+  const int64_t channels = spec.color ? 3 : 1;
+  // Still layers once, on the canvas render_scene gives them; moving ones once at their spec
+  // pose on a canvas that every sub-frame's canvas maps into.
+  std::vector<LayerCanvas> canvases(n);
+  std::vector<std::vector<int64_t>> margins(n);
+  for (size_t li = 0; li < n; ++li) {
+    const LayerSpec& layer = spec.layers[li];
+    if (!layer.moves()) {
+      const Plane plane = layer_plane(layer, spec);
+      const double sigma = defocus_sigma(spec, layer.disparity);
+      canvases[li] =
+          rasterise(spec, li, layer_margin(plane, spec, grid, blur_radius(sigma)), options);
+      defocus(canvases[li], sigma);
+      continue;
+    }
+    int64_t source = 0;
+    for (int64_t t = 0; t < frames; ++t) {
+      const SceneSpec& s = posed[t];
+      const Plane plane = layer_plane(s.layers[li], s);
+      const int64_t margin =
+          layer_margin(plane, s, grid, blur_radius(defocus_sigma(s, s.layers[li].disparity)));
+      margins[li].push_back(margin);
+      source = std::max(source, source_margin(poses[li][t].inverse, spec, margin));
+    }
+    canvases[li] = rasterise(spec, li, source, options);
+  }
+
+  // The still layers behind every moving one, composited once.
+  size_t first_moving = 0;
+  while (!spec.layers[first_moving].moves()) ++first_moving;
+  auto base =
+      torch::zeros({channels, spec.rows, spec.cols, spec.height, spec.width}, torch::kFloat32);
+  auto base_disparity = torch::empty({spec.height, spec.width}, torch::kFloat32);
+  {
+    Target target{base.data_ptr<float>(), channels, grid, spec.height, spec.width};
+    for (size_t li = 0; li < first_moving; ++li) {
+      composite_layer(spec, li, layer_plane(spec.layers[li], spec), canvases[li], target,
+                      base_disparity);
+    }
+  }
+
+  auto out = torch::empty({frames, channels, spec.rows, spec.cols, spec.height, spec.width},
+                          torch::kFloat32);
+  auto disparity = torch::empty({frames, spec.height, spec.width}, torch::kFloat32);
+  for (int64_t t = 0; t < frames; ++t) {
+    const SceneSpec& s = posed[t];
+    auto frame = out[t];
+    frame.copy_(base);
+    torch::Tensor frame_disparity = disparity[t];
+    frame_disparity.copy_(base_disparity);
+    Target target{frame.data_ptr<float>(), channels, grid, spec.height, spec.width};
+    for (size_t li = first_moving; li < n; ++li) {
+      const Plane plane = layer_plane(s.layers[li], s);
+      if (!spec.layers[li].moves()) {
+        composite_layer(s, li, plane, canvases[li], target, frame_disparity);
+        continue;
+      }
+      const Canvas canvas{spec.height, spec.width, margins[li][t]};
+      LayerCanvas lc = warp(canvases[li], canvas, poses[li][t]);
+      defocus(lc, defocus_sigma(s, s.layers[li].disparity));
+      composite_layer(s, li, plane, lc, target, frame_disparity);
+    }
+    if (spec.vignetting) apply_vignetting(*spec.vignetting, target);
+    frame.clamp_(0.0, 1.0);
+  }
+  result.light_fields = LightFieldSequence(out);
+  result.disparity = disparity;
+  result.effects_run = effects_of(spec, true);
   return result;
 }
 

@@ -430,6 +430,34 @@ void ShapeSpec::validate(const std::string& path) const {
   check_range(softness, 0.05, 1e4, path + ".softness");
 }
 
+// ---- MotionSpec -----------------------------------------------------------------------------
+
+MotionSpec MotionSpec::from_json(JsonReader& r) {
+  MotionSpec m;
+  read_point(r, "shift", m.shift);
+  r.get("disparity", m.disparity);
+  r.get("rotation", m.rotation);
+  r.get("scale", m.scale);
+  r.finish();
+  m.validate(r.path());
+  return m;
+}
+
+json MotionSpec::to_json() const {
+  return {{"shift", point_json(shift)},
+          {"disparity", disparity},
+          {"rotation", rotation},
+          {"scale", scale}};
+}
+
+void MotionSpec::validate(const std::string& path) const {
+  check_range(shift.x, -256.0, 256.0, path + ".shift");
+  check_range(shift.y, -256.0, 256.0, path + ".shift");
+  check_range(disparity, -64.0, 64.0, path + ".disparity");
+  check_range(rotation, -180.0, 180.0, path + ".rotation");
+  check_range(scale, 0.5, 2.0, path + ".scale");
+}
+
 // ---- LayerSpec ------------------------------------------------------------------------------
 
 LayerSpec LayerSpec::from_json(JsonReader& r) {
@@ -451,6 +479,10 @@ LayerSpec LayerSpec::from_json(JsonReader& r) {
   }
   r.get("opacity", layer.opacity);
   r.get("gloss", layer.gloss);
+  if (r.has("motion")) {
+    JsonReader mr = r.child("motion");
+    layer.motion = MotionSpec::from_json(mr);
+  }
   r.finish();
   layer.validate(r.path());
   return layer;
@@ -465,6 +497,7 @@ json LayerSpec::to_json() const {
   if (slanted()) j["disparity_gradient"] = point_json(disparity_gradient);
   j["opacity"] = opacity;
   j["gloss"] = gloss;
+  if (motion) j["motion"] = motion->to_json();
   return j;
 }
 
@@ -474,6 +507,7 @@ void LayerSpec::validate(const std::string& path) const {
   check_range(disparity, -1024.0, 1024.0, path + ".disparity");
   check_range(opacity, 0.0, 1.0, path + ".opacity");
   check_range(gloss, 0.0, 10.0, path + ".gloss");
+  if (motion) motion->validate(path + ".motion");
 }
 
 // ---- Effects --------------------------------------------------------------------------------
@@ -666,6 +700,26 @@ double SceneSpec::max_abs_disparity() const {
     m = std::max(m, d);
   }
   return m;
+}
+
+bool SceneSpec::moves() const {
+  return std::any_of(layers.begin(), layers.end(), [](const LayerSpec& l) { return l.moves(); });
+}
+
+Point motion_center(const LayerSpec& layer, const SceneSpec& spec) {
+  const Point image{(spec.width - 1) / 2.0, (spec.height - 1) / 2.0};
+  const ShapeSpec& shape = layer.shape;
+  if (shape.kind == ShapeKind::kPolygon && !shape.points.empty()) {
+    Point c;
+    for (const auto& p : shape.points) {
+      c.x += p.x;
+      c.y += p.y;
+    }
+    const auto n = static_cast<double>(shape.points.size());
+    return Point{c.x / n, c.y / n};
+  }
+  if (shape.kind == ShapeKind::kFull) return image;
+  return shape.center.value_or(image);
 }
 
 SceneSpec load_scene(const std::string& path) { return SceneSpec::from_json(read_json_file(path)); }

@@ -39,6 +39,14 @@ struct RandomSceneOptions {
   // (zoom 1..4) with this probability; 0 keeps the procedural textures only.
   std::vector<std::string> texture_images;
   double image_probability = 0.0;
+  // Motion for light-field video (render_sequence), per sub-frame. With all three maxima 0
+  // (default) nothing moves and scenes stay as they were; otherwise each layer moves with
+  // motion_probability, its speed, depth speed and (not the background) rotation drawn
+  // uniformly up to these, from a stream of its own: the still scene is the same.
+  double max_speed = 0.0;            // px per sub-frame, in a random direction
+  double max_disparity_speed = 0.0;  // change of disparity per sub-frame, either sign
+  double max_rotation = 0.0;         // degrees per sub-frame, either sign
+  double motion_probability = 0.5;   // per layer
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -59,7 +67,12 @@ struct RandomSceneOptions {
     f("frame_probability", frame_probability);
     f("texture_images", texture_images);
     f("image_probability", image_probability);
+    f("max_speed", max_speed);
+    f("max_disparity_speed", max_disparity_speed);
+    f("max_rotation", max_rotation);
+    f("motion_probability", motion_probability);
   }
+  bool moves() const { return max_speed > 0.0 || max_disparity_speed > 0.0 || max_rotation > 0.0; }
   static RandomSceneOptions from_json(JsonReader& reader);
   nlohmann::json to_json() const;
   // Throws ConfigError naming the bad key under `json_path`.

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "lfnet/core/light_field.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/scene/scene_spec.h"
 
 namespace lfnet::scene {
@@ -37,6 +38,28 @@ struct RenderResult {
 // slanted layers) and composited back to front with premultiplied alpha. Deterministic: the
 // same spec gives bit-identical output for any thread count. Throws ConfigError for image
 // textures without a loader.
+// Layer motion is ignored: the spec's pose (the middle of an exposure) is rendered.
 RenderResult render_scene(const SceneSpec& spec, const RenderOptions& options = {});
+
+// The most sub-frames render_sequence renders.
+constexpr int64_t kMaxFrames = 64;
+
+// What render_sequence produced.
+struct SequenceResult {
+  LightFieldSequence light_fields;  // (T, C, U, V, H, W) in [0, 1]
+  torch::Tensor disparity;          // (T, H, W) float32: each sub-frame's centre-view disparity
+  // As RenderResult's, with "motion" after "occlusion" when a layer moves and T > 1.
+  std::vector<std::string> effects_run;
+};
+
+// Renders the T = `frames` sub-frames of an exposure: sub-frame t shows every layer moved by
+// its motion (MotionSpec) times tau = t - (T - 1) / 2. A moving layer is rasterised once and
+// resampled into each sub-frame (integer translations exactly, anything else by 2D Catmull-Rom);
+// still layers are rasterised once and those behind every moving one composited once. Without
+// motion, or with T = 1, every sub-frame is bit-identical to render_scene. Throws ConfigError
+// for T outside [1, kMaxFrames] and for motion that leaves the scene's limits within T
+// sub-frames (naming the sub-frame).
+SequenceResult render_sequence(const SceneSpec& spec, int64_t frames,
+                               const RenderOptions& options = {});
 
 }  // namespace lfnet::scene

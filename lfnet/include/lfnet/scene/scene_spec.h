@@ -90,17 +90,38 @@ struct ShapeSpec {
   void validate(const std::string& path) const;
 };
 
+// How a layer moves during an exposure (render_sequence), per sub-frame. Sub-frame t of T shows
+// the layer moved by tau = t - (T - 1) / 2 steps: the middle of the exposure is the spec's pose.
+// A point p of the layer goes to c + tau shift + scale^tau R(tau rotation) (p - c), c the
+// shape's centre (motion_center), and its disparity grows by tau disparity.
+struct MotionSpec {
+  Point shift;             // px per sub-frame along x and y
+  double disparity = 0.0;  // change of disparity per sub-frame (motion in depth)
+  double rotation = 0.0;   // degrees per sub-frame, from +x towards +y
+  double scale = 1.0;      // size factor per sub-frame (> 1: growing, coming nearer)
+
+  // False for the zero motion: such a layer renders as a still one.
+  bool moves() const {
+    return shift.x != 0.0 || shift.y != 0.0 || disparity != 0.0 || rotation != 0.0 || scale != 1.0;
+  }
+  static MotionSpec from_json(JsonReader& reader);
+  nlohmann::json to_json() const;
+  void validate(const std::string& path) const;
+};
+
 // One layer: a texture cut out by a shape, at a disparity in px per view step.
 struct LayerSpec {
   std::string name;  // optional, for people
   TextureSpec texture;
-  ShapeSpec shape;           // default full
-  double disparity = 0.0;    // px per view step at the image centre
-  Point disparity_gradient;  // slanted plane: d(p) = disparity + g . (p - image centre)
-  double opacity = 1.0;      // multiplies the shape's alpha
-  double gloss = 1.0;        // scales specular highlights (used only with "specular")
+  ShapeSpec shape;                   // default full
+  double disparity = 0.0;            // px per view step at the image centre
+  Point disparity_gradient;          // slanted plane: d(p) = disparity + g . (p - image centre)
+  double opacity = 1.0;              // multiplies the shape's alpha
+  double gloss = 1.0;                // scales specular highlights (used only with "specular")
+  std::optional<MotionSpec> motion;  // none: still in every sub-frame
 
   bool slanted() const { return disparity_gradient.x != 0.0 || disparity_gradient.y != 0.0; }
+  bool moves() const { return motion && motion->moves(); }
   static LayerSpec from_json(JsonReader& reader);
   nlohmann::json to_json() const;
   void validate(const std::string& path) const;
@@ -174,7 +195,13 @@ struct SceneSpec {
 
   // The largest |disparity| anywhere in the image over all layers.
   double max_abs_disparity() const;
+  // True when some layer declares a non-zero motion.
+  bool moves() const;
 };
+
+// The point a layer's rotation and scaling turn about: its shape's `center` (rectangle, disk,
+// bars), the mean of a polygon's vertices, or the image centre (full shapes).
+Point motion_center(const LayerSpec& layer, const SceneSpec& spec);
 
 // Reads and parses a scene file.
 SceneSpec load_scene(const std::string& path);
