@@ -113,6 +113,10 @@ void add_evaluate_command(CLI::App& app, const GlobalOptions&) {
   add_cfa_option(cmd, q.cfa);
   add_demosaic_option(cmd, q.demosaic);
   auto* camera_error = add_camera_error_option(cmd, q.camera_error);
+  cmd->add_flag("--as-still", q.as_still,
+                "the still-scene baseline of a time-coded camera (--phi NAME:N@T): the method (or "
+                "--model, of the camera's still equivalent) reconstructs as if nothing moved, its "
+                "estimate held in every frame (docs/video.md)");
   cmd->add_flag("--tell-camera-error", q.tell_camera_error,
                 "lfnet models: the net is told the camera's Phi with that error (its weights over "
                 "one period; no vignetting), as if it had been measured (docs/acquisition.md, "

@@ -15,7 +15,7 @@ namespace {
 
 struct RenderArgs {
   pipeline::RenderRequest request;
-  std::string size, views, disparity_range;  // as typed: HxW, RxC, MIN:MAX
+  std::string size, views, disparity_range, shift;  // as typed: HxW, RxC, MIN:MAX, DX,DY
 };
 
 // Parses "AxB" into two positive integers.
@@ -57,13 +57,19 @@ void run_render(RenderArgs& a) {
   if (!a.size.empty()) q.size = parse_pair(a.size, 'x', "--size");
   if (!a.views.empty()) q.views = parse_pair(a.views, 'x', "--views");
   if (!a.disparity_range.empty()) q.disparity_range = parse_range(a.disparity_range);
+  if (!a.shift.empty()) q.shift = parse_pair(a.shift, ',', "--shift");
   const auto s = pipeline::render_to_folder(q);
   std::string effects;
   for (const auto& e : s.effects) effects += (effects.empty() ? "" : ", ") + e;
-  spdlog::info("rendered {} ({} C x U x V x H x W) in {:.3f} s on {} threads; effects: {}", s.name,
-               s.shape, s.seconds, s.threads, effects.empty() ? "none" : effects);
-  spdlog::info("disparity {:.3f} .. {:.3f} px per view; written to {}", s.min_disparity,
-               s.max_disparity, q.out);
+  spdlog::info("rendered {} ({} {}C x U x V x H x W) in {:.3f} s on {} threads; effects: {}",
+               s.name, s.shape, s.frames > 1 ? "T x " : "", s.seconds, s.threads,
+               effects.empty() ? "none" : effects);
+  if (q.lf.empty()) {
+    spdlog::info("disparity {:.3f} .. {:.3f} px per view; written to {}", s.min_disparity,
+                 s.max_disparity, q.out);
+  } else {
+    spdlog::info("written to {}", q.out);
+  }
 }
 
 }  // namespace
@@ -91,6 +97,17 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
   add_force_flag(cmd, args->request.force);
   cmd->add_option("--bits", args->request.bits, "bits per PNG sample, 8 or 16")
       ->check(CLI::IsMember({8, 16}));
+  cmd->add_option("--frames", args->request.frames,
+                  "sub-frames of a moving scene (1..64): frame_0/ .. frame_{T-1}/ (default 1)");
+  input_path(cmd->add_option("--lf", args->request.lf,
+                             "a real still light field to give synthetic motion (with --frames, "
+                             "--shift, --walk; docs/video.md)"));
+  cmd->add_option("--shift", args->shift,
+                  "with --lf: DX,DY whole px the image moves per sub-frame (default 0,0)");
+  cmd->add_option("--walk", args->request.walk,
+                  "with --lf: view columns the camera moves per sub-frame, so each point moves by "
+                  "its disparity (default 0)")
+      ->check(kWhole);
   cmd->add_option("--epi-row", args->request.epi_row,
                   "spatial row of the EPI in preview.png (default: the centre row)")
       ->check(kWhole);

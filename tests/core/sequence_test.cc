@@ -34,3 +34,28 @@ TEST_CASE("a sequence is built from frames of one shape", "[core][sequence]") {
   CHECK_THROWS_AS(LightFieldSequence(std::vector<LightField>{a, c}), lfnet::ConfigError);
   CHECK_THROWS_AS(LightFieldSequence(std::vector<LightField>{}), lfnet::ConfigError);
 }
+
+TEST_CASE("synthetic motion shifts a still light field whole or walks its views",
+          "[core][sequence]") {
+  torch::manual_seed(4);
+  LightField lf(torch::rand({1, 5, 9, 20, 30}));
+  const auto pan = lfnet::synthetic_motion(lf, 4, {2, -1, 0});
+  REQUIRE(pan.shape_string() == "4x1x5x9x17x24");
+  // Content moves right by 2 and up by 1 per sub-frame: pixel (y, x) of frame t is pixel
+  // (y + 1, x - 2) of frame t + 1.
+  for (int64_t t = 0; t + 1 < 4; ++t) {
+    const auto a = pan.frame(t).data().narrow(3, 1, 16).narrow(4, 0, 22);
+    const auto b = pan.frame(t + 1).data().narrow(3, 0, 16).narrow(4, 2, 22);
+    CHECK(torch::equal(a, b));
+  }
+  CHECK_FALSE(torch::equal(pan.frame(0).data(), pan.frame(1).data()));
+  // Walking one view a sub-frame: frame t's view column v is the source's column v + t.
+  const auto walk = lfnet::synthetic_motion(lf, 3, {0, 0, 1});
+  REQUIRE(walk.cols() == 7);
+  CHECK(torch::equal(walk.frame(2).view(1, 0), lf.view(1, 2)));
+  CHECK(torch::equal(walk.frame(0).view(4, 6), lf.view(4, 6)));
+  // Standing still repeats the light field.
+  CHECK(torch::equal(lfnet::synthetic_motion(lf, 2, {}).frame(1).data(), lf.data()));
+  CHECK_THROWS_AS(lfnet::synthetic_motion(lf, 4, {0, 0, 3}), lfnet::ConfigError);
+  CHECK_THROWS_AS(lfnet::synthetic_motion(lf, 4, {11, 0, 0}), lfnet::ConfigError);
+}

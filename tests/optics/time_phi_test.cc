@@ -126,3 +126,34 @@ TEST_CASE("a calibrated time-coded response is read as N x T U x V x P x P value
   spec.params = {{"weights", std::vector<double>(25, 1.0)}};        // one frame's worth
   CHECK_THROWS_AS(make_phi(spec), lfnet::ConfigError);
 }
+
+TEST_CASE("a time-coded camera's still equivalent is what a still scene sees", "[optics][time]") {
+  torch::manual_seed(6);
+  auto lf = torch::rand({5, 5, 16, 16}, torch::kFloat64);
+  const auto still_scene = lf.repeat({4, 1, 1, 1});  // the stacked sequence of 4 equal frames
+  for (const char* name : {"exposure_aperture", "time_aperture", "coded_exposure", "mask"}) {
+    INFO(name);
+    const auto phi = make_phi(time_spec(name, 2, 4));
+    const auto still = lfnet::optics::still_equivalent(*phi);
+    CHECK(still->frames() == 1);
+    CHECK(still->rows() == 5);
+    lfnet::test::require_close(still->forward(lf), phi->forward(still_scene), 1e-12);
+  }
+  // A still model over sub-frames gives the model back, spec and all.
+  CHECK(lfnet::optics::still_equivalent(*make_phi(time_spec("asp", 2, 4)))->spec() ==
+        make_phi(time_spec("asp", 2, 1))->spec());
+  // ASP pixels coded in time: a still scene sees the ASP itself.
+  auto spec = time_spec("coded_exposure", 2, 4);
+  spec.params = {{"base", "asp"}, {"base_params", {{"pair_alpha", 90}}}};
+  const auto asp_exposure = make_phi(spec);
+  auto asp = PhiSpec::parse("asp:2");
+  asp.params = {{"pair_alpha", 90}};
+  const auto still = lfnet::optics::still_equivalent(*asp_exposure);
+  CHECK(lfnet::optics::same_response(*still, *make_phi(asp)));
+  CHECK_FALSE(lfnet::optics::same_response(*still, *make_phi(PhiSpec::parse("mask:2"))));
+  // Its sub-frames differ pixel by pixel: the exposure code.
+  const auto w = asp_exposure->pixel_weights(0, 0, 4, 4, torch::kFloat64).view({2, 4, 5, 5, 4, 4});
+  CHECK_FALSE(torch::equal(w.select(1, 0), w.select(1, 1)));
+  spec.params = {{"base", "exposure_aperture"}};
+  CHECK_THROWS_AS(make_phi(spec), lfnet::ConfigError);
+}

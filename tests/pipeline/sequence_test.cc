@@ -8,6 +8,7 @@
 #include "lfnet/core/sequence.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/render.h"
 #include "lfnet/pipeline/simulate.h"
 #include "support/test_support.h"
 
@@ -90,4 +91,56 @@ TEST_CASE("per-frame PSNR averages the views' errors of each frame", "[pipeline]
   CHECK(frames[0].get<double>() == Approx(-10 * std::log10(0.0055)));
   CHECK(frames[1].get<double>() == Approx(-10 * std::log10(0.05)));
   CHECK_THROWS(lfnet::eval::per_frame_psnr(table, 3));
+}
+
+TEST_CASE("the still-scene baseline of a still camera over sub-frames is the still method",
+          "[pipeline][sequence]") {
+  test::TempDir tmp;
+  io::write_light_field(moving_sequence().frame(0), tmp / "still", {"exr", 32});
+  pipeline::EvaluateRequest q;
+  q.lf = tmp / "still";
+  q.phi = "asp:2";
+  q.method = "pinv";
+  const double still = pipeline::evaluate_request(q).record.at("psnr_db").get<double>();
+  q.phi = "asp:2@4";
+  q.as_still = true;
+  const auto record = pipeline::evaluate_request(q).record;
+  CHECK(record.at("as_still") == true);
+  CHECK(record.at("still_phi").at("name") == "asp");
+  CHECK(record.at("psnr_db").get<double>() == Approx(still).epsilon(1e-5));
+  // Without --as-still, pinv of the 100 rays of 4 sub-frames is another estimate.
+  q.as_still = false;
+  CHECK(pipeline::evaluate_request(q).record.at("psnr_db").get<double>() != Approx(still));
+  // A still camera has no still-scene baseline.
+  q.phi = "asp:2";
+  q.as_still = true;
+  CHECK_THROWS_WITH(pipeline::evaluate_request(q), Catch::Contains("time-coded"));
+}
+
+TEST_CASE("render --lf gives a real light field synthetic motion, said as such",
+          "[pipeline][sequence]") {
+  test::TempDir tmp;
+  io::write_light_field(moving_sequence().frame(0), tmp / "still", {"png", 16});
+  pipeline::RenderRequest r;
+  r.lf = tmp / "still";
+  r.frames = 3;
+  r.shift = {2, 0};
+  r.walk = 1;
+  r.out = tmp / "seq";
+  const auto summary = pipeline::render_to_folder(r);
+  CHECK(summary.shape == "3x1x7x5x16x36");
+  CHECK(io::sequence_frames(tmp / "seq") == 3);
+  const auto meta = lfnet::read_json_file(tmp / "seq/sequence.json");
+  CHECK(meta.at("synthetic_motion").at("walk") == 1);
+  const auto seq = io::read_light_field_sequence(tmp / "seq");
+  const auto lf = io::read_light_field(tmp / "still");
+  // Frame 2 is the source's views 3.. moved right by 4 px (crop from 0), frame 0 from 4.
+  CHECK(torch::equal(seq.frame(2).view(0, 0), lf.view(0, 2).narrow(2, 0, 36)));
+  CHECK(torch::equal(seq.frame(0).view(0, 0), lf.view(0, 0).narrow(2, 4, 36)));
+  r.frames = 1;
+  r.out = tmp / "seq1";
+  CHECK_THROWS_AS(pipeline::render_to_folder(r), lfnet::ConfigError);
+  r.lf.clear();
+  r.random_seed = 3;
+  CHECK_THROWS_WITH(pipeline::render_to_folder(r), Catch::Contains("--lf only"));
 }

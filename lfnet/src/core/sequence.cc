@@ -1,5 +1,6 @@
 #include "lfnet/core/sequence.h"
 
+#include <cstdlib>
 #include <sstream>
 
 #include "lfnet/core/error.h"
@@ -71,6 +72,35 @@ std::string LightFieldSequence::shape_string() const {
   s << frames() << "x" << channels() << "x" << rows() << "x" << cols() << "x" << height() << "x"
     << width();
   return s.str();
+}
+
+LightFieldSequence synthetic_motion(const LightField& lf, int64_t frames,
+                                    const SyntheticMotion& motion) {
+  LFNET_CHECK_AS(ConfigError, frames >= 1, "a sequence has at least one frame, got ", frames);
+  LFNET_CHECK_AS(ConfigError, motion.walk >= 0,
+                 "the camera walks a non-negative number of views "
+                 "per sub-frame, got ",
+                 motion.walk);
+  const int64_t span = frames - 1;
+  const int64_t h = lf.height() - std::abs(motion.dy) * span;
+  const int64_t w = lf.width() - std::abs(motion.dx) * span;
+  const int64_t cols = lf.cols() - motion.walk * span;
+  LFNET_CHECK_AS(ConfigError, h >= 1 && w >= 1 && cols >= 1, "motion of (", motion.dx, ", ",
+                 motion.dy, ") px and ", motion.walk, " views per sub-frame over ", frames,
+                 " sub-frames leaves nothing of a ", lf.shape_string(), " light field");
+  // Content moving right by dx is the crop moving left: sub-frame t's crop starts dx t before
+  // the first one's.
+  const int64_t y_first = motion.dy > 0 ? motion.dy * span : 0;
+  const int64_t x_first = motion.dx > 0 ? motion.dx * span : 0;
+  std::vector<LightField> out;
+  for (int64_t t = 0; t < frames; ++t) {
+    const int64_t y0 = y_first - motion.dy * t, x0 = x_first - motion.dx * t;
+    out.emplace_back(lf.data()
+                         .narrow(axis::kV, motion.walk * t, cols)
+                         .narrow(axis::kH, y0, h)
+                         .narrow(axis::kW, x0, w));
+  }
+  return LightFieldSequence(out);
 }
 
 }  // namespace lfnet

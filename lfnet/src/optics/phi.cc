@@ -152,6 +152,13 @@ void register_phi(const std::string& name, PhiFactory factory, bool time_coded) 
   add_factory(name, std::move(factory), time_coded);
 }
 
+bool phi_is_time_coded(const std::string& name) {
+  ensure_builtins();
+  auto& reg = registry();
+  std::lock_guard<std::mutex> lock(reg.mutex);
+  return reg.time_coded.count(name) > 0;
+}
+
 std::vector<std::string> phi_names() {
   ensure_builtins();
   auto& reg = registry();

@@ -1,6 +1,7 @@
 // Time-coded cameras: codes that change within one exposure of T sub-frames, and still cameras
 // filming one (docs/acquisition.md, "Time-coded cameras").
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <numeric>
 
 #include "lfnet/core/error.h"
@@ -106,15 +107,40 @@ std::unique_ptr<Phi> make_time_aperture(const PhiSpec& spec) {
 std::unique_ptr<Phi> make_coded_exposure(const PhiSpec& spec) {
   JsonReader r(spec.params, "$.params");
   const auto p = read_exposure(r);
+  std::string base;  // a still local model whose pixels are exposure-coded ("": open pixels)
+  nlohmann::json base_params = nlohmann::json::object();
+  r.get("base", base);
+  r.get("base_params", base_params);
   r.finish();
-  check_code_size(spec, spec.n * spec.coded_rows() * spec.cols * p.period * p.period,
-                  "an exposure code");
   PhiSpec resolved = spec;
   resolved.params = {{"period", p.period}, {"open", p.open}};
-  auto e = exposure_codes(spec, p.period, p.open);  // (N, T, P, P)
-  auto code = e.view({spec.n, spec.frames, 1, 1, p.period, p.period})
-                  .expand({spec.n, spec.frames, spec.rows, spec.cols, p.period, p.period});
-  return local_time_phi(resolved, code);
+  // The base camera's weights (N, 1, U, V, B, B), B its period (1: open pixels).
+  torch::Tensor weights = torch::ones({spec.n, 1, spec.rows, spec.cols, 1, 1}, torch::kFloat64);
+  if (!base.empty()) {
+    LFNET_CHECK_AS(ConfigError, !phi_is_time_coded(base) || base == "calibrated", r.path_of("base"),
+                   ": the base is a still camera, not '", base, "'");
+    PhiSpec still = spec;
+    still.name = base;
+    still.frames = 1;
+    still.params = base_params;
+    const auto camera = make_phi(still);
+    LFNET_CHECK_AS(ConfigError, camera->local(), r.path_of("base"), ": '", base,
+                   "' mixes pixels; an exposure code needs a local camera");
+    const int64_t b = camera->period();
+    weights = camera->pixel_weights(0, 0, b, b, torch::kFloat64).unsqueeze(1);
+    resolved.params["base"] = base;
+    resolved.params["base_params"] = camera->spec().params;
+  }
+  // Both codes on their common period.
+  const int64_t period = std::lcm(p.period, weights.size(-1));
+  check_code_size(spec, spec.n * spec.coded_rows() * spec.cols * period * period,
+                  "an exposure code");
+  auto e = exposure_codes(spec, p.period, p.open)
+               .view({spec.n, spec.frames, 1, 1, p.period, p.period})
+               .repeat({1, 1, 1, 1, period / p.period, period / p.period});
+  const int64_t b = weights.size(-1);
+  auto w = weights.repeat({1, 1, 1, 1, period / b, period / b});
+  return local_time_phi(resolved, e * w);
 }
 
 std::unique_ptr<Phi> make_exposure_aperture(const PhiSpec& spec) {
@@ -131,6 +157,50 @@ std::unique_ptr<Phi> make_exposure_aperture(const PhiSpec& spec) {
       exposure_codes(spec, p.period, p.open).view({spec.n, spec.frames, 1, 1, p.period, p.period});
   return local_time_phi(resolved, a * e);
 }
+
+}  // namespace lfnet::optics::detail
+
+namespace lfnet::optics {
+
+bool same_response(const Phi& a, const Phi& b) {
+  if (!a.local() || !b.local() || a.rows() != b.rows() || a.cols() != b.cols() ||
+      a.measurements() != b.measurements()) {
+    return false;
+  }
+  const int64_t p = std::lcm(a.period(), b.period());
+  const auto wa = a.pixel_weights(0, 0, p, p, torch::kFloat64);
+  const auto wb = b.pixel_weights(0, 0, p, p, torch::kFloat64);
+  const double top = std::max(wa.abs().max().item<double>(), wb.abs().max().item<double>());
+  return (wa - wb).abs().max().item<double>() <= 1e-9 * top;
+}
+
+std::unique_ptr<Phi> still_equivalent(const Phi& phi) {
+  auto spec = phi.spec();
+  if (phi.frames() == 1) return make_phi(spec);
+  // A still model over sub-frames holds the same weights in each: its sum is the model.
+  spec.frames = 1;
+  if (!phi_is_time_coded(spec.name)) return make_phi(spec);
+  LFNET_CHECK_AS(ConfigError, phi.local(), "Phi '", phi.spec().label(),
+                 "' mixes pixels: it has no still equivalent");
+  const int64_t p = phi.period(), t = phi.frames();
+  auto w = phi.pixel_weights(0, 0, p, p, torch::kFloat64);  // (N, T U, V, P, P)
+  auto sum = w.view({w.size(0), t, w.size(1) / t, w.size(2), p, p}).sum(1).contiguous();
+  PhiSpec still;
+  still.name = "calibrated";
+  still.n = spec.n;
+  still.rows = spec.rows;
+  still.cols = spec.cols;
+  still.params = {{"period", p},
+                  {"weights", std::vector<double>(sum.data_ptr<double>(),
+                                                  sum.data_ptr<double>() + sum.numel())},
+                  {"normalise", false},
+                  {"source", "still equivalent of " + phi.spec().label()}};
+  return make_phi(still);
+}
+
+}  // namespace lfnet::optics
+
+namespace lfnet::optics::detail {
 
 std::unique_ptr<Phi> still_over_frames(const Phi& still, const PhiSpec& spec) {
   LFNET_CHECK_AS(ConfigError, still.local(), "Phi '", still.spec().label(),

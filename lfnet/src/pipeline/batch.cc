@@ -295,8 +295,8 @@ class ItemProcessor {
     LightFieldSources sources;
     sources.light_fields = {item_.path};
     // As evaluate: a grey truth of 16-bit views in 16-bit codes.
-    truths_ =
-        load_sources(sources, phi_->rows(), phi_->cols(), false, !a_.cfa.empty(), a_.cfa.empty());
+    truths_ = load_sources(sources, phi_->rows(), phi_->cols(), false, !a_.cfa.empty(),
+                           a_.cfa.empty(), phi_->frames());
     if (!a_.cfa.empty()) cfa_ = optics::ColourFilterArray::parse(a_.cfa);
   }
 

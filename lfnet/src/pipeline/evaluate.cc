@@ -126,14 +126,42 @@ nlohmann::json method_options_argument(const std::string& text,
   return options;
 }
 
+namespace {
+// A still method's estimates held in each of `frames` frames: patches (B, U V h w) and images
+// (1, U, V, H, W) repeated along the stacked rows (docs/video.md).
+void hold_still(PreparedMethod& p, int64_t frames) {
+  if (p.solver) {
+    p.solver = [solver = p.solver, frames](const torch::Tensor& y, const torch::Tensor& phase) {
+      return solver(y, phase).repeat({1, frames});
+    };
+  }
+  if (p.image) {
+    p.image = [image = p.image, frames](const torch::Tensor& sensor, double sigma) {
+      return image(sensor, sigma).repeat({1, frames, 1, 1, 1});
+    };
+  }
+}
+}  // namespace
+
 nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& method,
                                const MethodContext& context, const eval::EvalOptions& options,
                                torch::Tensor* estimate, bool show_progress) {
   LFNET_CHECK(context.phi != nullptr, "evaluation without a Phi");
   const auto& phi = *context.phi;
   eval::EvalResult result;
-  auto prepared =
-      prepare_method(method, context, options.reconstruct.patch_h, options.reconstruct.patch_w);
+  std::unique_ptr<optics::Phi> still;
+  auto method_context = context;
+  if (context.as_still) {
+    LFNET_CHECK_AS(ConfigError, phi.frames() > 1,
+                   "the still-scene baseline needs a time-coded "
+                   "camera (NAME:N@T), not ",
+                   phi.spec().label());
+    still = optics::still_equivalent(phi);
+    method_context.phi = still.get();
+  }
+  auto prepared = prepare_method(method, method_context, options.reconstruct.patch_h,
+                                 options.reconstruct.patch_w);
+  if (still) hold_still(prepared, phi.frames());
   // A whole-image model has no stride and no patches: its progress counts pixels.
   const bool whole_image = static_cast<bool>(prepared.image);
   const std::string label =
@@ -167,6 +195,10 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
         image);
   }
   result.record["light_field"] = truth.name;
+  if (still) {
+    result.record["as_still"] = true;
+    result.record["still_phi"] = still->spec().to_json();
+  }
   if (!prepared.options.empty()) result.record["method_options"] = prepared.options;
   if (context.self_ensemble) {
     result.record["self_ensemble"] = true;
@@ -255,6 +287,7 @@ class Evaluation {
     context_.self_ensemble = a_.self_ensemble;
     context_.self_ensemble_passes = a_.self_ensemble_passes;
     context_.self_calibrate = a_.self_calibrate;
+    context_.as_still = a_.as_still;
     context_.tile = a_.tile;
     context_.dictionary = a_.dictionary;
   }
@@ -330,7 +363,20 @@ class Evaluation {
       noise_switch_ = model.noise_switch_record();
     }
     spec_ = optics::PhiSpec::from_json(model.phi, a_.model + ":$.phi");
-    check_phi_argument(model, a_.phi);
+    if (a_.as_still) {
+      // The model is a still camera's; --phi is the time-coded camera it stands in for.
+      LFNET_CHECK_AS(ConfigError, !a_.phi.empty(),
+                     "--as-still with --model needs --phi, the time-coded camera (NAME:N@T)");
+      const auto camera = phi_from_argument(a_.phi);
+      const auto still = optics::still_equivalent(*optics::make_phi(camera));
+      LFNET_CHECK_AS(ConfigError, optics::same_response(*still, *optics::make_phi(spec_)),
+                     "--as-still: ", a_.model, " was trained for ", spec_.label(),
+                     ", but the still equivalent of ", camera.label(), " is ",
+                     still->spec().label());
+      spec_ = camera;
+    } else {
+      check_phi_argument(model, a_.phi);
+    }
     if (network_) {
       use_model(context_, model);
       network_patch_ = model.network.patch_grid();

@@ -295,7 +295,7 @@ void read_dictionary(JsonReader& r, ExperimentConfig& c) {
 void derive_network_shape(ExperimentConfig& c, const nlohmann::json& j, const std::string& source) {
   const auto given = c.network;
   c.network.measurements = c.phi.n;
-  c.network.patch.rows = c.phi.rows;
+  c.network.patch.rows = c.phi.coded_rows();  // T U for a time-coded camera (docs/video.md)
   c.network.patch.cols = c.phi.cols;
   c.network.patch.height = c.dataset.patch_h;
   c.network.patch.width = c.dataset.patch_w;

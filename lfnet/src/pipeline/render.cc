@@ -10,6 +10,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/pipeline/sources.h"
 #include "lfnet/scene/scene.h"
@@ -64,24 +65,83 @@ torch::Tensor render_preview(const LightField& lf, const torch::Tensor& disparit
   return canvas.clamp(0.0, 1.0);
 }
 
+namespace {
+// render --lf: a real light field moved synthetically.
+RenderSummary synthetic_sequence_to_folder(const RenderRequest& args) {
+  LFNET_CHECK_AS(ConfigError, args.random_seed < 0 && args.scene.empty(),
+                 "give one of --lf DIR, --scene SCENE.json and --random SEED");
+  LFNET_CHECK_AS(ConfigError, args.frames >= 2 && args.frames <= scene::kMaxFrames,
+                 "--lf makes a sequence: --frames must lie in [2, ", scene::kMaxFrames, "], got ",
+                 args.frames);
+  OutputFolderPolicy policy;
+  policy.force = args.force;
+  policy.inputs = {args.lf};
+  check_output_folder(args.out, policy);
+  const auto start = std::chrono::steady_clock::now();
+  LightField lf = read_oriented(args.lf, "", "--lf");
+  if (args.grey) lf = lf.grey();
+  const auto seq =
+      synthetic_motion(lf, args.frames, {args.shift.first, args.shift.second, args.walk});
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const nlohmann::json record = {
+      {"frames", args.frames},
+      {"source", fs::absolute(args.lf).string()},
+      {"synthetic_motion",
+       {{"shift", {args.shift.first, args.shift.second}},
+        {"walk", args.walk},
+        {"note",
+         "a still light field moved synthetically: whole-image shifts (px per "
+         "sub-frame) and a sideways walk of the view window (views per sub-frame)"}}}};
+  write_folder(args.out, policy, [&](const std::string& dir) {
+    for (int64_t t = 0; t < args.frames; ++t) {
+      const auto frame_dir = (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+      io::write_light_field(seq.frame(t), frame_dir, {"png", args.bits});
+      io::write_previews(seq.frame(t), frame_dir);
+    }
+    write_json_file((fs::path(dir) / "sequence.json").string(), record);
+  });
+  RenderSummary summary;
+  summary.name = fs::path(args.lf).filename().string() + " (synthetic motion)";
+  summary.frames = args.frames;
+  summary.shape = seq.shape_string();
+  summary.effects = {"synthetic motion"};
+  summary.seconds = seconds;
+  summary.threads = torch::get_num_threads();
+  return summary;
+}
+}  // namespace
+
 RenderSummary render_to_folder(const RenderRequest& args) {
+  if (!args.lf.empty()) return synthetic_sequence_to_folder(args);
+  LFNET_CHECK_AS(ConfigError, args.shift.first == 0 && args.shift.second == 0 && args.walk == 0,
+                 "--shift and --walk move a real light field: they apply to --lf only");
   const bool random = args.random_seed >= 0;
   if (random == !args.scene.empty()) {
-    throw ConfigError("give exactly one of --scene SCENE.json and --random SEED");
+    throw ConfigError("give exactly one of --scene SCENE.json, --random SEED and --lf DIR");
   }
   if (!random &&
       (!args.random_options.empty() || args.size || args.views || args.disparity_range)) {
     throw ConfigError(
         "--random-options, --size, --views and --disparity-range apply to --random only");
   }
+  if (args.frames < 1 || args.frames > scene::kMaxFrames) {
+    throw ConfigError("--frames must lie in [1, " + std::to_string(scene::kMaxFrames) + "], got " +
+                      std::to_string(args.frames));
+  }
   scene::SceneSpec spec;
   scene::RandomSceneOptions options;
   if (random) {
+    bool motion_set = false;
     if (!args.random_options.empty()) {
       const auto doc = read_json_argument(args.random_options, "--random-options");
       JsonReader reader(doc, json_argument_source(args.random_options, "--random-options") + ":$");
       options = scene::RandomSceneOptions::from_json(reader);
+      for (const char* key : {"max_speed", "max_disparity_speed", "max_rotation"}) {
+        motion_set = motion_set || doc.contains(key);
+      }
     }
+    if (args.frames > 1 && !motion_set) options.max_speed = kRandomVideoSpeed;
     if (args.size) std::tie(options.height, options.width) = *args.size;
     if (args.views) std::tie(options.rows, options.cols) = *args.views;
     if (args.disparity_range) {
@@ -109,7 +169,21 @@ RenderSummary render_to_folder(const RenderRequest& args) {
 
   const scene::RenderOptions render_options = scene_render_options(random ? "" : args.scene);
   const auto start = std::chrono::steady_clock::now();
-  const scene::RenderResult result = scene::render_scene(spec, render_options);
+  // One frame is a still render; several are a sequence (a still scene filmed, without motion).
+  scene::SequenceResult result;
+  if (args.frames == 1) {
+    scene::RenderResult still = scene::render_scene(spec, render_options);
+    result.light_fields = LightFieldSequence(still.light_field.data().unsqueeze(0));
+    result.disparity = still.disparity.unsqueeze(0);
+    result.effects_run = still.effects_run;
+  } else {
+    try {
+      result = scene::render_sequence(spec, args.frames, render_options);
+    } catch (const ConfigError& e) {
+      throw ConfigError((random ? "random scene " + std::to_string(args.random_seed) : args.scene) +
+                        ": " + e.what());
+    }
+  }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
@@ -119,19 +193,29 @@ RenderSummary render_to_folder(const RenderRequest& args) {
       {"seconds", seconds},
       {"threads", torch::get_num_threads()},
       {"source", random ? "random " + std::to_string(args.random_seed) : args.scene}};
+  if (args.frames > 1) record["rendered"]["frames"] = args.frames;
   if (random) record["rendered"]["random_options"] = options.to_json();
   write_folder(args.out, policy, [&](const std::string& dir) {
-    io::write_light_field(result.light_field, dir, {"png", args.bits});
-    io::write_pfm((fs::path(dir) / "disparity.pfm").string(), result.disparity);
-    io::write_previews(result.light_field, dir);
-    io::write_image((fs::path(dir) / "preview.png").string(),
-                    render_preview(result.light_field, result.disparity, args.epi_row), 8);
+    for (int64_t t = 0; t < args.frames; ++t) {
+      const std::string frame_dir =
+          args.frames == 1 ? dir : (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+      if (args.frames > 1) fs::create_directories(frame_dir);
+      const LightField lf = result.light_fields.frame(t);
+      const torch::Tensor disparity = result.disparity[t];
+      io::write_light_field(lf, frame_dir, {"png", args.bits});
+      io::write_pfm((fs::path(frame_dir) / "disparity.pfm").string(), disparity);
+      io::write_previews(lf, frame_dir);
+      io::write_image((fs::path(frame_dir) / "preview.png").string(),
+                      render_preview(lf, disparity, args.epi_row), 8);
+    }
     write_json_file((fs::path(dir) / "scene.json").string(), record);
   });
 
   RenderSummary summary;
   summary.name = spec.name.empty() ? "scene" : spec.name;
-  summary.shape = result.light_field.shape_string();
+  summary.frames = args.frames;
+  summary.shape = args.frames == 1 ? result.light_fields.frame(0).shape_string()
+                                   : result.light_fields.shape_string();
   summary.effects = result.effects_run;
   summary.seconds = seconds;
   summary.threads = torch::get_num_threads();

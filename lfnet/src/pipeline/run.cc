@@ -307,7 +307,8 @@ void evaluate_experiment(const ExperimentConfig& config, const std::string& out)
   }
   // A colour net is evaluated behind its colour filter array, on colour light fields.
   const bool colour = !config.network.cfa.empty();
-  const auto truths = load_sources(ev.data, phi->rows(), phi->cols(), false, colour);
+  const auto truths =
+      load_sources(ev.data, phi->rows(), phi->cols(), false, colour, false, phi->frames());
   std::string lines;  // results.jsonl appears whole, once every evaluation is done
   for (const auto& truth : truths) {
     for (const auto& method : ev.methods) {

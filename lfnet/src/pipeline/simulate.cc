@@ -134,43 +134,33 @@ nlohmann::json write_acquisition(const SimulateRequest& r, const std::string& di
 }
 
 namespace {
-// A sequence folder's first frame as a source of its own.
-SimulateSource still_frame_source(const SimulateSource& args) {
-  auto frame = args;
-  if (io::sequence_frames(args.lf) > 0) frame.lf = (fs::path(args.lf) / "frame_0").string();
-  return frame;
-}
-}  // namespace
-
-SimulateInput load_simulate_input(const SimulateSource& args, int64_t frames) {
-  LFNET_CHECK_AS(ConfigError, frames >= 1, "a camera codes at least one frame");
-  if (frames > 1 || (!args.lf.empty() && io::sequence_frames(args.lf) > 0)) {
-    auto in = load_simulate_input(args.lf.empty() ? args : still_frame_source(args), 1);
-    if (!args.lf.empty() && io::sequence_frames(args.lf) > 0) {
-      const int64_t folder_frames = io::sequence_frames(args.lf);
-      LFNET_CHECK_AS(ConfigError, folder_frames == frames, args.lf, " is a sequence of ",
-                     folder_frames,
-                     " frames: code it with a time-coded camera of as many "
-                     "sub-frames (NAME:N@",
-                     folder_frames, ", docs/video.md)");
-      std::vector<LightField> out{in.lf};
-      for (int64_t t = 1; t < frames; ++t) {
-        auto frame = args;
-        frame.lf = (fs::path(args.lf) / ("frame_" + std::to_string(t))).string();
-        out.push_back(load_simulate_input(frame, 1).lf);
-      }
-      in.lf = LightFieldSequence(out).stacked();
-      in.source["path"] = fs::absolute(args.lf).string();
-      in.source["frames"] = frames;
-    } else {
-      // A still light field, scene or white frame: the same in every sub-frame.
-      spdlog::info("a still source, coded as a scene that does not move over {} sub-frames",
-                   frames);
-      in.lf = LightFieldSequence(in.lf.data().unsqueeze(0).expand({frames, -1, -1, -1, -1, -1}))
-                  .stacked();
-    }
-    return in;
+// `lf`'s window (--views, else the central 5 x 5), grey unless --color, recorded in `in`.
+LightField window_input(LightField lf, const SimulateSource& args, SimulateInput& in) {
+  AngularRange ru, rv;
+  if (args.views.empty()) {
+    const int64_t n = 5;
+    LFNET_CHECK_AS(ConfigError, lf.rows() >= n && lf.cols() >= n, "the light field in ", args.lf,
+                   " has ", lf.rows(), "x", lf.cols(), " views, fewer than the default central ", n,
+                   "x", n, ": choose views with --views R0:R1,C0:C1");
+    ru = {central_start(lf.rows(), n), central_start(lf.rows(), n) + n};
+    rv = {central_start(lf.cols(), n), central_start(lf.cols(), n) + n};
+  } else {
+    std::tie(ru, rv) = parse_views(args.views);
   }
+  in.views = {{"rows", {ru.begin + 1, ru.end}},
+              {"cols", {rv.begin + 1, rv.end}},
+              {"source_grid", {lf.rows(), lf.cols()}}};
+  lf = lf.window(ru, rv);
+  if (!args.color) {
+    lf = lf.grey();
+  } else if (lf.channels() == 1) {
+    spdlog::warn("--color given but {} is grey: simulating one channel", args.lf);
+  }
+  return lf;
+}
+
+// The still light field of `args`: a folder, a rendered scene or a white frame, windowed.
+SimulateInput load_still_input(const SimulateSource& args) {
   SimulateInput in;
   LightField lf;
   if (!args.white.empty()) {
@@ -210,27 +200,58 @@ SimulateInput load_simulate_input(const SimulateSource& args, int64_t frames) {
     if (!args.orient.empty()) in.source["orient"] = args.orient;
     if (!args.layout.empty()) in.source["layout"] = args.layout;
   }
-  AngularRange ru, rv;
-  if (args.views.empty()) {
-    const int64_t n = 5;
-    LFNET_CHECK_AS(ConfigError, lf.rows() >= n && lf.cols() >= n, "the light field in ", args.lf,
-                   " has ", lf.rows(), "x", lf.cols(), " views, fewer than the default central ", n,
-                   "x", n, ": choose views with --views R0:R1,C0:C1");
-    ru = {central_start(lf.rows(), n), central_start(lf.rows(), n) + n};
-    rv = {central_start(lf.cols(), n), central_start(lf.cols(), n) + n};
-  } else {
-    std::tie(ru, rv) = parse_views(args.views);
+  in.lf = window_input(lf, args, in);
+  return in;
+}
+
+// A scene's sub-frames, each windowed, as a stacked light field (docs/video.md).
+SimulateInput load_scene_sequence(const SimulateSource& args, int64_t frames) {
+  scene::SceneSpec spec;
+  try {
+    spec = scene::load_scene(args.scene);
+  } catch (const ConfigError& e) {
+    throw ConfigError(args.scene + ": " + e.what());
   }
-  in.views = {{"rows", {ru.begin + 1, ru.end}},
-              {"cols", {rv.begin + 1, rv.end}},
-              {"source_grid", {lf.rows(), lf.cols()}}};
-  lf = lf.window(ru, rv);
-  if (!args.color) {
-    lf = lf.grey();
-  } else if (lf.channels() == 1) {
-    spdlog::warn("--color given but {} is grey: simulating one channel", args.lf);
+  const auto seq =
+      scene::render_sequence(spec, frames, scene_render_options(args.scene)).light_fields;
+  SimulateInput in;
+  in.scene_effects = spec.sensor;
+  in.source = {{"kind", "scene"}, {"path", fs::absolute(args.scene).string()}, {"frames", frames}};
+  std::vector<LightField> out;
+  for (int64_t t = 0; t < frames; ++t) out.push_back(window_input(seq.frame(t), args, in));
+  in.lf = LightFieldSequence(out).stacked();
+  return in;
+}
+}  // namespace
+
+SimulateInput load_simulate_input(const SimulateSource& args, int64_t frames) {
+  LFNET_CHECK_AS(ConfigError, frames >= 1, "a camera codes at least one frame");
+  const int64_t folder_frames = args.lf.empty() ? 0 : io::sequence_frames(args.lf);
+  if (frames == 1 && folder_frames == 0) return load_still_input(args);
+  LFNET_CHECK_AS(ConfigError, folder_frames == 0 || folder_frames == frames, args.lf,
+                 " is a sequence of ", folder_frames,
+                 " frames: code it with a time-coded camera of as many sub-frames (NAME:N@",
+                 folder_frames, ", docs/video.md)");
+  if (!args.scene.empty()) return load_scene_sequence(args, frames);
+  if (folder_frames > 0) {
+    std::vector<LightField> out;
+    SimulateInput in;
+    for (int64_t t = 0; t < frames; ++t) {
+      auto frame = args;
+      frame.lf = (fs::path(args.lf) / ("frame_" + std::to_string(t))).string();
+      in = load_still_input(frame);
+      out.push_back(in.lf);
+    }
+    in.lf = LightFieldSequence(out).stacked();
+    in.source["path"] = fs::absolute(args.lf).string();
+    in.source["frames"] = frames;
+    return in;
   }
-  in.lf = lf;
+  // A still light field or white frame: the same in every sub-frame.
+  spdlog::info("a still source, coded as a scene that does not move over {} sub-frames", frames);
+  auto in = load_still_input(args);
+  in.lf =
+      LightFieldSequence(in.lf.data().unsqueeze(0).expand({frames, -1, -1, -1, -1, -1})).stacked();
   return in;
 }
 

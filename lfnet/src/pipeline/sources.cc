@@ -208,21 +208,34 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
       throw ConfigError(path + ": " + e.what());
     }
     spec.color = colour;
+    const auto name = fs::path(path).stem().string();
+    if (frames > 1) {
+      const auto seq = scene::render_sequence(spec, frames, scene_render_options(path));
+      std::vector<LightField> views;
+      for (int64_t t = 0; t < frames; ++t) {
+        views.push_back(
+            select_views(seq.light_fields.frame(t), "", rows / frames, cols, path, colour));
+      }
+      out.push_back({name, LightFieldSequence(views).stacked(), {}});
+      bar.advance();
+      continue;
+    }
     auto lf = scene::render_scene(spec, scene_render_options(path)).light_field;
-    out.push_back(
-        {fs::path(path).stem().string(), select_views(lf, "", rows, cols, path, colour), {}});
+    out.push_back({name, select_views(lf, "", rows, cols, path, colour), {}});
     bar.advance();
   }
   if (sources.random_scenes > 0) {
     JsonReader reader(sources.random_options, "$.random_options");
     auto options = scene::RandomSceneOptions::from_json(reader);
-    options.rows = rows;
+    options.rows = rows / frames;
     options.cols = cols;
     options.color = colour;
     for (int64_t i = 0; i < sources.random_scenes; ++i) {
       const uint64_t seed = sources.random_seed + static_cast<uint64_t>(i);
-      auto lf = scene::render_scene(scene::random_scene(seed, options), scene_render_options(""))
-                    .light_field;
+      const auto spec = scene::random_scene(seed, options);
+      auto lf = frames > 1 ? scene::render_sequence(spec, frames, scene_render_options(""))
+                                 .light_fields.stacked()
+                           : scene::render_scene(spec, scene_render_options("")).light_field;
       out.push_back({"random-" + std::to_string(seed), colour ? lf : lf.grey(), {}});
       bar.advance();
     }

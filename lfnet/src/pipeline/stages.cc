@@ -31,7 +31,7 @@ std::unique_ptr<data::PatchDataset> make_dataset(const ExperimentConfig& config,
                                                  const optics::Phi& phi) {
   const bool colour = !config.network.cfa.empty();
   auto named = load_sources(config.train_data, phi.rows(), phi.cols(),
-                            config.dataset.needs_whole_grids(), colour);
+                            config.dataset.needs_whole_grids(), colour, false, phi.frames());
   LFNET_CHECK_AS(ConfigError, !named.empty(), "the config names no training data ($.data)");
   std::vector<LightField> lfs;
   lfs.reserve(named.size());
@@ -255,6 +255,8 @@ std::string train_stage(const ExperimentConfig& config, const StageConfig& stage
 
 std::string train_dictionary_stage(const ExperimentConfig& config, const std::string& run_dir,
                                    const std::string& command_line) {
+  LFNET_CHECK_AS(ConfigError, config.phi.frames == 1, "the dict stage learns still light fields; ",
+                 config.phi.label(), " codes sequences (docs/video.md)");
   auto sampling = config.dictionary_sampling;
   sampling.views = config.phi.rows;
   sampling.patch_size = config.dataset.patch_h;

@@ -55,4 +55,18 @@ class LightFieldSequence {
   torch::Tensor data_;
 };
 
+// Synthetic motion of a still light field, for testing video methods on real captures
+// (docs/video.md, "Synthetic motion"): T frames in which the whole image moves by (dx, dy)
+// px per sub-frame (integers: no resampling) and, with `walk` > 0, the camera moves sideways by
+// `walk` views per sub-frame, so each point moves by its own disparity times `walk` (real
+// parallax, not a model of it). Frames are cropped so that nothing wraps: H - |dy| (T - 1) x
+// W - |dx| (T - 1) pixels and V - walk (T - 1) view columns. ConfigError when nothing is left.
+struct SyntheticMotion {
+  int64_t dx = 0;    // px per sub-frame, rightwards
+  int64_t dy = 0;    // px per sub-frame, downwards
+  int64_t walk = 0;  // view columns per sub-frame
+};
+LightFieldSequence synthetic_motion(const LightField& lf, int64_t frames,
+                                    const SyntheticMotion& motion);
+
 }  // namespace lfnet

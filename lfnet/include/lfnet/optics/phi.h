@@ -136,6 +136,20 @@ using PhiFactory = std::function<std::unique_ptr<Phi>(const PhiSpec& spec)>;
 // at T = 1 and, for frames > 1, held the same in every sub-frame.
 void register_phi(const std::string& name, PhiFactory factory, bool time_coded = false);
 
+// The still camera that a scene standing still sees through a time-coded `phi`: its sub-frames'
+// weights summed (docs/video.md, "The still-scene baseline"). A still model over T sub-frames
+// (asp:2@4) gives the model itself (asp:2); a still Phi is returned as it is. ConfigError for
+// Phis that mix pixels.
+std::unique_ptr<Phi> still_equivalent(const Phi& phi);
+
+// Whether two local Phis weigh every ray of every pixel alike (to 1e-9 of the largest weight),
+// whatever their specs say: a time-coded camera's still equivalent against a model's camera.
+bool same_response(const Phi& a, const Phi& b);
+
+// Whether the model `name` builds codes over sub-frames itself (register_phi's `time_coded`);
+// false for still cameras and unknown names.
+bool phi_is_time_coded(const std::string& name);
+
 // Singular values of a Phi's self-contained pieces: how much each camera can recover.
 struct PhiConditioning {
   std::string piece;              // "pixel" (local models) or "block" (random)

@@ -45,6 +45,9 @@ struct MethodContext {
   // Whole-image networks estimate the camera's angular shift from each sensor image and are told
   // the Phi so displaced (recon/self_calibration.h; --self-calibrate).
   bool self_calibrate = false;
+  // A time-coded Phi's sequence reconstructed as if nothing moved: the method runs on the
+  // Phi's still equivalent (optics::still_equivalent) and its estimate is held in every frame.
+  bool as_still = false;
 };
 
 // A method ready to run on one Phi and patch size.
@@ -125,6 +128,7 @@ struct EvaluateRequest {
   std::string effects;          // sensor effects JSON file (shot, read, ...); noise on top
   bool estimate_noise = false;  // noise-aware methods are told the noise estimated, not the truth
   std::string camera_error;     // --camera-error: JSON or file (optics/calibration.h); "" none
+  bool as_still = false;        // the still-scene baseline (MethodContext::as_still, docs/video.md)
   bool tell_camera_error = false;  // lfnet nets are told the camera's Phi with that error
   std::string flat_field;  // --flat-field: the camera's white frame (read_flat_field); "" none
   std::string cfa;         // --cfa: a Bayer pattern or a JSON file (optics/cfa.h); "" a grey sensor
