@@ -679,6 +679,26 @@ TEST_CASE("report shows colour records' luma PSNR beside their colour PSNR", "[a
   CHECK(md.find("| 30.00 | 0.800 | 0.10 |  |") != std::string::npos);
 }
 
+TEST_CASE("report shows a sequence's PSNR per frame", "[app]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "results/v");
+  std::ofstream(tmp / "results/v/section.json") << R"({"title": "Video", "order": 1})";
+  std::ofstream(tmp / "results/v/records.jsonl")
+      << nlohmann::json({{"method", "pinv"},
+                         {"psnr_db", 25.0},
+                         {"per_frame_psnr_db", {24.5, 25.25, nullptr, 25.0}},
+                         {"ssim", 0.9},
+                         {"seconds", 1.0},
+                         {"mode", "sensor"},
+                         {"light_field", "lf"}})
+             .dump()
+      << "\n"
+      << no_parallax_line(20.0, 0.8);
+  const std::string md = report_of(tmp / "results", tmp / "R.md");
+  CHECK(md.find("| per frame dB |") != std::string::npos);
+  CHECK(md.find("| 24.50 / 25.25 / inf / 25.00 |") != std::string::npos);
+}
+
 TEST_CASE("a section's sweep can keep one light field", "[app]") {
   lfnet::test::TempDir tmp;
   fs::create_directories(tmp / "results/s");

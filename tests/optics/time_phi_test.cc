@@ -89,6 +89,13 @@ TEST_CASE("each pixel of a coded exposure integrates its share of the sub-frames
   auto frames_of = on.select(2, 0).select(2, 0)[0];  // (T, 4, 4)
   auto first = frames_of.select(1, 0).select(1, 0).unsqueeze(1).unsqueeze(2);
   CHECK_FALSE(torch::equal(frames_of, first.expand_as(frames_of)));
+  // A pixel's measurements share its shutter unless asked otherwise.
+  auto spec = time_spec("coded_exposure", 2, 4);
+  auto two = make_phi(spec)->pixel_weights(0, 0, 4, 4, torch::kFloat64).view({2, 4, 5, 5, 4, 4});
+  CHECK(torch::equal(two[0] > 0, two[1] > 0));
+  spec.params = {{"shared", false}};
+  two = make_phi(spec)->pixel_weights(0, 0, 4, 4, torch::kFloat64).view({2, 4, 5, 5, 4, 4});
+  CHECK_FALSE(torch::equal(two[0] > 0, two[1] > 0));
   // The aperture codes change from sub-frame to sub-frame.
   auto ap = make_phi(time_spec("time_aperture", 1, 4))->pixel_weights(0, 0, 1, 1, torch::kFloat64);
   auto per_frame = ap.view({4, 25});

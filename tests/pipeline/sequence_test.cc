@@ -7,6 +7,8 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/sequence.h"
 #include "lfnet/io/light_field_io.h"
+#include "lfnet/nn/network.h"
+#include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/render.h"
 #include "lfnet/pipeline/simulate.h"
@@ -132,6 +134,15 @@ TEST_CASE("render --lf gives a real light field synthetic motion, said as such",
   CHECK(io::sequence_frames(tmp / "seq") == 3);
   const auto meta = lfnet::read_json_file(tmp / "seq/sequence.json");
   CHECK(meta.at("synthetic_motion").at("walk") == 1);
+  // Records name the motion their source declares.
+  CHECK(pipeline::declared_motion_speed(tmp / "seq") == Approx(2.0));
+  CHECK_FALSE(pipeline::declared_motion_speed(tmp / "still").has_value());
+  CHECK(pipeline::declared_motion_speed(std::string(LFNET_SOURCE_DIR) +
+                                        "/configs/video/scenes/heldout_window-s2.json")
+            .value() == Approx(2.0).epsilon(1e-3));
+  CHECK(pipeline::declared_motion_speed(std::string(LFNET_SOURCE_DIR) +
+                                        "/configs/video/scenes/heldout_window-s0.json")
+            .value() == 0.0);
   const auto seq = io::read_light_field_sequence(tmp / "seq");
   const auto lf = io::read_light_field(tmp / "still");
   // Frame 2 is the source's views 3.. moved right by 4 px (crop from 0), frame 0 from 4.
@@ -143,4 +154,49 @@ TEST_CASE("render --lf gives a real light field synthetic motion, said as such",
   r.lf.clear();
   r.random_seed = 3;
   CHECK_THROWS_WITH(pipeline::render_to_folder(r), Catch::Contains("--lf only"));
+}
+
+TEST_CASE("an lfnet net of a time-coded camera starts from the still estimate in every frame",
+          "[pipeline][sequence]") {
+  auto spec = lfnet::optics::PhiSpec::from_json(
+      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json"));
+  const auto phi = lfnet::optics::make_phi(spec);
+  auto options = lfnet::nn::NetworkOptions::from_json(
+      {{"architecture", "lfnet"},
+       {"measurements", 2},
+       {"frames", 4},
+       {"patch", {{"rows", 20}, {"cols", 5}, {"height", 16}, {"width", 16}}},
+       {"image", {{"channels", 4}, {"levels", 2}, {"blocks", 1}}}});
+  CHECK(options.to_json().at("frames") == 4);
+  lfnet::nn::LightFieldNet net(options);
+  const int64_t p = phi->period();
+  net->set_phi(phi->pixel_weights(0, 0, p, p));
+  // The base of a still scene is the still camera's pseudo-inverse, the same in every frame.
+  const auto lf = test::parallax_light_field(5, 5, 16, 16, 1, -1).data()[0];
+  const auto still_scene = lf.repeat({4, 1, 1, 1});
+  const auto sensor = phi->forward(still_scene);
+  const auto base = net->pixel_hold_image(sensor.unsqueeze(0))[0].view({4, 25, 16, 16});
+  // A fresh net's output is that base; what it reads is the minimum-norm pseudo-inverse, dark
+  // where a pixel's sub-frame was not exposed.
+  {
+    torch::NoGradGuard no_grad;
+    net->eval();
+    const auto out = net->forward_image(sensor.unsqueeze(0))[0].reshape({4, 25, 16, 16});
+    CHECK(torch::allclose(out, base, 1e-4, 1e-5));
+    const auto read = net->pixel_pinv_image(sensor.unsqueeze(0))[0].view({4, 25, 16, 16});
+    CHECK((read.abs().sum(1) < 1e-6).sum().item<int64_t>() > 0);
+  }
+  CHECK(torch::allclose(base[0], base[3]));
+  const auto still = lfnet::optics::still_equivalent(*phi);
+  const auto still_pinv = still->pinv_matrix(4, 4, 1, 1, net->options().pinv_lambda);
+  const auto pixel = sensor.select(1, 4).select(1, 4).to(torch::kFloat32);  // (N)
+  CHECK(
+      torch::allclose(base[2].select(1, 4).select(1, 4), torch::mv(still_pinv, pixel), 1e-4, 1e-5));
+  // Still nets keep the JSON they had: no "frames".
+  options.frames = 1;
+  options.patch.rows = 5;
+  CHECK_FALSE(options.to_json().contains("frames"));
+  auto bad = options.to_json();
+  bad["frames"] = 3;
+  CHECK_THROWS_AS(lfnet::nn::NetworkOptions::from_json(bad), lfnet::ConfigError);
 }

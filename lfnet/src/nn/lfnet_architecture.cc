@@ -60,16 +60,17 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
 constexpr std::string_view kImagePrefix = "image.";
 constexpr const char* kImageSection = "image";
 
-// The pseudo-inverse plus the U-Net's correction on a base (B, C U V, h, w), with a noise
-// channel (B sigmas, undefined: 0) when the net is noise-aware.
-torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base,
-                     const torch::Tensor& noise) {
+// `start` (the pseudo-inverse, or a time-coded Phi's held still estimate) plus the U-Net's
+// correction read from `base` (B, C U V, h, w), with a noise channel (B sigmas, undefined: 0)
+// when the net is noise-aware.
+torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base, const torch::Tensor& noise,
+                     const torch::Tensor& start) {
   const auto image = image_layers(net);
-  if (!image->options().noise_input) return base + image->forward(base);
+  if (!image->options().noise_input) return start + image->forward(base);
   auto sigma =
       noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
   auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
-  return base + image->forward(torch::cat({base, channel}, 1));
+  return start + image->forward(torch::cat({base, channel}, 1));
 }
 
 // A colour net's CFA response at every pixel of crops (B, h, w) whose pixel (0, 0) has phase
@@ -214,9 +215,10 @@ class LfnetArchitecture : public NetworkArchitecture {
     auto sensor = y.reshape({y.size(0), o.measurements, p.height, p.width});
     auto base = colour_base(net, net.pixel_pinv_image(sensor, ph), ph);
     const std::vector<int64_t> shape{y.size(0), o.colours(), p.rows, p.cols, p.height, p.width};
+    const auto start = o.frames > 1 ? net.pixel_hold_image(sensor, ph) : base;
     NetworkOutputs out;
-    out.base = base.view(shape);
-    out.output = refine(net, base, noise).view(shape);
+    out.base = start.view(shape);
+    out.output = refine(net, base, noise, start).view(shape);
     return out;
   }
 
@@ -234,8 +236,12 @@ class LfnetArchitecture : public NetworkArchitecture {
         phase == 0 ? torch::Tensor() : torch::full({sensor.size(0)}, phase, torch::kInt64);
     // Demosaiced before padding: the padding is no measurement.
     auto base = colour_base(net, net.pixel_pinv_image(sensor, phases), phases);
-    if (ph > 0 || pw > 0) base = torch::constant_pad_nd(base, {0, pw, 0, ph});
-    auto out = refine(net, base, torch::full({sensor.size(0)}, noise_sigma, base.options()));
+    auto start = o.frames > 1 ? net.pixel_hold_image(sensor, phases) : base;
+    if (ph > 0 || pw > 0) {
+      base = torch::constant_pad_nd(base, {0, pw, 0, ph});
+      start = torch::constant_pad_nd(start, {0, pw, 0, ph});
+    }
+    auto out = refine(net, base, torch::full({sensor.size(0)}, noise_sigma, base.options()), start);
     out = out.slice(2, 0, h).slice(3, 0, w);
     if (o.colours() == 1) return out.reshape({sensor.size(0), p.rows, p.cols, h, w});
     return out.reshape({sensor.size(0), o.colours(), p.rows, p.cols, h, w});
@@ -265,6 +271,8 @@ class LfnetArchitecture : public NetworkArchitecture {
     const auto& o = net.options();
     LFNET_CHECK_AS(ConfigError, o.colours() == 1, "a colour net (cfa ", o.cfa,
                    ") cannot be exported to TorchScript yet; ", "use its checkpoint");
+    LFNET_CHECK_AS(ConfigError, o.frames == 1, "a net of a time-coded camera (", o.frames,
+                   " sub-frames) cannot be exported to TorchScript yet; use its checkpoint");
     for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
     auto module = image_layers(net);  // the same module, callable
     const auto& image = module->options();
@@ -315,10 +323,23 @@ class LfnetArchitecture : public NetworkArchitecture {
 
 }  // namespace
 
+torch::Tensor LightFieldNetImpl::pixel_hold_image(const torch::Tensor& sensor,
+                                                  const torch::Tensor& phase) const {
+  LFNET_CHECK(pixel_hold.defined(), "pixel_hold_image: a net of ", options_.frames,
+              " frame(s) holds no still estimate");
+  return pixel_map_image(pixel_hold, sensor, phase);
+}
+
 torch::Tensor LightFieldNetImpl::pixel_pinv_image(const torch::Tensor& sensor,
                                                   const torch::Tensor& phase) const {
   LFNET_CHECK(pixel_pinv.defined(), "pixel_pinv_image: the ", architecture().name(),
               " architecture has no per-pixel pseudo-inverse");
+  return pixel_map_image(pixel_pinv, sensor, phase);
+}
+
+torch::Tensor LightFieldNetImpl::pixel_map_image(const torch::Tensor& pixel_pinv,
+                                                 const torch::Tensor& sensor,
+                                                 const torch::Tensor& phase) const {
   LFNET_CHECK(sensor.dim() == 4 && sensor.size(1) == options_.measurements,
               "pixel_pinv_image: expected sensor crops (B, ", options_.measurements,
               ", h, w), got ", sensor.sizes());

@@ -92,6 +92,7 @@ void NetworkOptions::read(JsonReader& reader) {
                    reader.path_of(std::string(kPaperSection) + "." + key));
   }
   read_fields(reader, *this);
+  reader.get("frames", frames);
   // The sections of the architectures that own theirs, kept as read (validate parses them).
   sections = nlohmann::json::object();
   for (const auto& name : registered_architectures()) {
@@ -103,6 +104,7 @@ void NetworkOptions::read(JsonReader& reader) {
 
 nlohmann::json NetworkOptions::to_json() const {
   auto j = fields_to_json(*this);
+  if (frames != 1) j["frames"] = frames;  // still nets keep the JSON they always had
   for (const auto& [key, value] : sections.items()) j[key] = value;
   // The architecture's own section in full, so a file keeps the values it was built with (an
   // unknown architecture's is left as read: validate names it).
@@ -131,6 +133,10 @@ void NetworkOptions::validate() const {
     fail("patch", "every size must be positive, got " + patch.to_json().dump());
   }
   if (measurements < 1) fail("measurements", "must be >= 1, got " + std::to_string(measurements));
+  if (frames < 1 || frames > 64 || patch.rows % frames != 0) {
+    fail("frames", "must be in 1..64 and divide patch.rows (" + std::to_string(patch.rows) +
+                       "), got " + std::to_string(frames));
+  }
   if (!(pinv_lambda > 0) || !std::isfinite(pinv_lambda)) {
     fail("pinv_lambda", "must be positive and finite");
   }

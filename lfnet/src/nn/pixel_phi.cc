@@ -22,6 +22,10 @@ void register_pixel_phi(LightFieldNetImpl& net) {
   net.phi = net.register_buffer("phi", torch::zeros({o.measurements, p.rows, p.cols, 1, 1}));
   net.pixel_pinv =
       net.register_buffer("pixel_pinv", torch::zeros({1, 1, o.measurements, p.rows * p.cols}));
+  if (o.frames > 1) {
+    net.pixel_hold =
+        net.register_buffer("pixel_hold", torch::zeros({1, 1, o.measurements, p.rows * p.cols}));
+  }
 }
 
 void check_pixel_weights(const LightFieldNetImpl& net, const torch::Tensor& weights,
@@ -39,8 +43,19 @@ void check_pixel_weights(const LightFieldNetImpl& net, const torch::Tensor& weig
 
 void store_pixel_phi(LightFieldNetImpl& net, const torch::Tensor& weights) {
   torch::NoGradGuard no_grad;
-  const auto inverse =
-      pixel_pseudo_inverses(weights.to(torch::kFloat64), net.options().pinv_lambda);
+  const int64_t frames = net.options().frames;
+  auto w = weights.to(torch::kFloat64);
+  const auto inverse = pixel_pseudo_inverses(w, net.options().pinv_lambda);
+  if (frames > 1) {
+    // A time-coded Phi: the still-equivalent pseudo-inverse (the sub-frames' weights summed)
+    // held in every frame, the estimate of a scene that does not move; the minimum-norm one
+    // leaves each pixel's unexposed sub-frames dark (docs/video.md).
+    const auto s = w.sizes();
+    const auto still = w.view({s[0], frames, s[1] / frames, s[2], s[3], s[4]}).sum(1);
+    const auto hold =
+        pixel_pseudo_inverses(still, net.options().pinv_lambda).repeat({1, 1, 1, frames});
+    net.pixel_hold.set_(hold.to(net.phi.options()).contiguous());
+  }
   net.phi.set_(weights.to(net.phi.options()).contiguous().clone());
   net.pixel_pinv.set_(inverse.to(net.phi.options()).contiguous());
 }
@@ -60,7 +75,7 @@ int64_t pixel_phases(const LightFieldNetImpl& net) { return net.phi.size(3) * ne
 
 std::vector<size_t> pixel_phase_axes(const std::string& name, size_t rank) {
   if (name == "phi" && rank == 5) return {3, 4};
-  if (name == "pixel_pinv") return {0, 1};
+  if (name == "pixel_pinv" || name == "pixel_hold") return {0, 1};
   return {};
 }
 

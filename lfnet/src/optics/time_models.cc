@@ -35,17 +35,26 @@ torch::Tensor aperture_codes(const PhiSpec& spec, const std::string& kind) {
   return a.view({spec.n, frames, spec.rows, spec.cols});
 }
 
+struct ExposureParams {
+  int64_t period = 4;  // P: the exposure code's tile is P x P pixels
+  double open = 0.5;   // fraction of the T sub-frames each pixel integrates
+  bool shared = true;  // one shutter per pixel: its N measurements integrate the same sub-frames
+};
+
 // Each pixel's exposure e_n(t, y, x) over a P x P tile: (N, T, P, P) in {0, 1}. Every pixel of
 // every measurement integrates max(1, round(open T)) of the T sub-frames, drawn by a seeded
-// shuffle, so each pixel sees part of the exposure and no sub-frame is favoured.
-torch::Tensor exposure_codes(const PhiSpec& spec, int64_t period, double open) {
+// shuffle, so each pixel sees part of the exposure and no sub-frame is favoured; with `shared`
+// a pixel's N measurements take measurement 0's.
+torch::Tensor exposure_codes(const PhiSpec& spec, const ExposureParams& p) {
+  const int64_t period = p.period;
+  const double open = p.open;
   const int64_t frames = spec.frames, cells = period * period;
   const int64_t on = std::max<int64_t>(1, std::llround(open * static_cast<double>(frames)));
   const CounterRng rng(spec.seed, stream::kExposureCode);
   auto e = torch::zeros({spec.n, frames, period, period}, torch::kFloat64);
   auto acc = e.accessor<double, 4>();
   std::vector<int64_t> order(static_cast<size_t>(frames));
-  for (int64_t n = 0; n < spec.n; ++n) {
+  for (int64_t n = 0; n < (p.shared ? 1 : spec.n); ++n) {
     for (int64_t cell = 0; cell < cells; ++cell) {
       std::iota(order.begin(), order.end(), 0);
       const uint64_t base = static_cast<uint64_t>((n * cells + cell) * frames);
@@ -58,18 +67,15 @@ torch::Tensor exposure_codes(const PhiSpec& spec, int64_t period, double open) {
         acc[n][order[static_cast<size_t>(k)]][cell / period][cell % period] = 1.0;
     }
   }
+  if (p.shared) e.copy_(e[0].unsqueeze(0).expand_as(e).clone());
   return e;
 }
-
-struct ExposureParams {
-  int64_t period = 4;  // P: the exposure code's tile is P x P pixels
-  double open = 0.5;   // fraction of the T sub-frames each pixel integrates
-};
 
 ExposureParams read_exposure(JsonReader& r) {
   ExposureParams p;
   r.get("period", p.period);
   r.get("open", p.open);
+  r.get("shared", p.shared);
   LFNET_CHECK_AS(ConfigError, p.period >= 1 && p.period <= 64, r.path_of("period"),
                  ": the exposure tile period P must be in 1..64, got ", p.period);
   LFNET_CHECK_AS(ConfigError, p.open > 0 && p.open <= 1, r.path_of("open"),
@@ -113,7 +119,7 @@ std::unique_ptr<Phi> make_coded_exposure(const PhiSpec& spec) {
   r.get("base_params", base_params);
   r.finish();
   PhiSpec resolved = spec;
-  resolved.params = {{"period", p.period}, {"open", p.open}};
+  resolved.params = {{"period", p.period}, {"open", p.open}, {"shared", p.shared}};
   // The base camera's weights (N, 1, U, V, B, B), B its period (1: open pixels).
   torch::Tensor weights = torch::ones({spec.n, 1, spec.rows, spec.cols, 1, 1}, torch::kFloat64);
   if (!base.empty()) {
@@ -135,7 +141,7 @@ std::unique_ptr<Phi> make_coded_exposure(const PhiSpec& spec) {
   const int64_t period = std::lcm(p.period, weights.size(-1));
   check_code_size(spec, spec.n * spec.coded_rows() * spec.cols * period * period,
                   "an exposure code");
-  auto e = exposure_codes(spec, p.period, p.open)
+  auto e = exposure_codes(spec, p)
                .view({spec.n, spec.frames, 1, 1, p.period, p.period})
                .repeat({1, 1, 1, 1, period / p.period, period / p.period});
   const int64_t b = weights.size(-1);
@@ -151,10 +157,9 @@ std::unique_ptr<Phi> make_exposure_aperture(const PhiSpec& spec) {
   check_code_size(spec, spec.n * spec.coded_rows() * spec.cols * p.period * p.period,
                   "an exposure and aperture code");
   PhiSpec resolved = spec;
-  resolved.params = {{"code", kind}, {"period", p.period}, {"open", p.open}};
+  resolved.params = {{"code", kind}, {"period", p.period}, {"open", p.open}, {"shared", p.shared}};
   auto a = aperture_codes(spec, kind).view({spec.n, spec.frames, spec.rows, spec.cols, 1, 1});
-  auto e =
-      exposure_codes(spec, p.period, p.open).view({spec.n, spec.frames, 1, 1, p.period, p.period});
+  auto e = exposure_codes(spec, p).view({spec.n, spec.frames, 1, 1, p.period, p.period});
   return local_time_phi(resolved, a * e);
 }
 

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 
 #include "lfnet/core/error.h"
@@ -124,6 +125,34 @@ nlohmann::json method_options_argument(const std::string& text,
   auto options = read_json_argument(text, source);
   check_method_options(options, methods, json_argument_source(text, source));
   return options;
+}
+
+std::optional<double> declared_motion_speed(const std::string& source) {
+  std::error_code ec;
+  const fs::path path(source);
+  nlohmann::json doc;
+  bool scene = false;
+  if (fs::is_regular_file(path, ec)) {
+    doc = read_json_file(source);
+    scene = true;
+  } else if (fs::is_regular_file(path / "scene.json", ec)) {  // render --frames
+    doc = read_json_file((path / "scene.json").string());
+    scene = true;
+  } else if (fs::is_regular_file(path / "sequence.json", ec)) {  // render --lf
+    doc = read_json_file((path / "sequence.json").string());
+    const auto shift = doc.at("synthetic_motion").at("shift");
+    return std::hypot(shift.at(0).get<double>(), shift.at(1).get<double>());
+  } else {
+    return std::nullopt;
+  }
+  if (!scene || !doc.contains("layers")) return std::nullopt;
+  double fastest = 0;
+  for (const auto& layer : doc["layers"]) {
+    if (!layer.contains("motion") || !layer["motion"].contains("shift")) continue;
+    const auto& s = layer["motion"]["shift"];
+    fastest = std::max(fastest, std::hypot(s.at(0).get<double>(), s.at(1).get<double>()));
+  }
+  return fastest;
 }
 
 namespace {
@@ -453,6 +482,8 @@ class Evaluation {
     if (network_) record["precision"] = nn::to_string(a_.precision);
     if (phi_->frames() > 1) {
       record["frames"] = phi_->frames();
+      const auto speed = declared_motion_speed(a_.scene.empty() ? a_.lf : a_.scene);
+      if (speed) record["motion_speed"] = *speed;
       record["per_frame_psnr_db"] =
           eval::per_frame_psnr(record.at("per_view_psnr_db"), phi_->frames());
     }

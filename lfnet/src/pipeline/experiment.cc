@@ -296,6 +296,7 @@ void derive_network_shape(ExperimentConfig& c, const nlohmann::json& j, const st
   const auto given = c.network;
   c.network.measurements = c.phi.n;
   c.network.patch.rows = c.phi.coded_rows();  // T U for a time-coded camera (docs/video.md)
+  c.network.frames = c.phi.frames;
   c.network.patch.cols = c.phi.cols;
   c.network.patch.height = c.dataset.patch_h;
   c.network.patch.width = c.dataset.patch_w;

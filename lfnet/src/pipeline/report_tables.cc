@@ -141,6 +141,17 @@ class RecordTable {
                                                           : std::string();
                           }});
     }
+    if (any("per_frame_psnr_db")) {  // sequences (docs/video.md): each sub-frame's PSNR
+      results_.push_back({"per frame dB", [](const nlohmann::json& r) {
+                            std::string text;
+                            if (!r.contains("per_frame_psnr_db")) return text;
+                            for (const auto& p : r["per_frame_psnr_db"]) {
+                              text += (text.empty() ? "" : " / ") +
+                                      (p.is_number() ? fmt("%.2f", p.get<double>()) : "inf");
+                            }
+                            return text;
+                          }});
+    }
     if (any("noise_sigma_estimated")) {  // noise-blind records: the sigma they estimated
       results_.push_back({"estimated sigma", [=](const nlohmann::json& r) {
                             return r.contains("noise_sigma_estimated")

@@ -169,6 +169,11 @@ struct NetworkOptions {
   // "unrolled"), by key, as read: each is parsed and checked by its architecture
   // (section<T>()). A section of an architecture other than `architecture` is refused.
   nlohmann::json sections = nlohmann::json::object();
+  // T: the sub-frames of a time-coded Phi (docs/video.md), whose views the patch stacks along
+  // its rows (patch.rows = T U). The lfnet architecture then adds its U-Net's output to the
+  // Phi's still-equivalent pseudo-inverse held in every frame (`pixel_hold`), and reads the
+  // minimum-norm one, which shows each pixel's exposure code. Written only when above 1.
+  int64_t frames = 1;
 
   template <typename Fields>
   void fields(Fields& f) {
@@ -325,6 +330,13 @@ class LightFieldNetImpl : public torch::nn::Module {
   // (B, N, h, w) whose pixel (0, 0) has phase `phase` (B) (undefined: 0), as (B, U V, h, w).
   torch::Tensor pixel_pinv_image(const torch::Tensor& sensor,
                                  const torch::Tensor& phase = {}) const;
+  // `maps` (T, T, N, K) applied per pixel phase: (B, K, h, w).
+  torch::Tensor pixel_map_image(const torch::Tensor& maps, const torch::Tensor& sensor,
+                                const torch::Tensor& phase) const;
+  // The same through `pixel_hold` (a net of a time-coded Phi, options().frames > 1): the
+  // still-equivalent pseudo-inverse held in every frame (docs/video.md).
+  torch::Tensor pixel_hold_image(const torch::Tensor& sensor,
+                                 const torch::Tensor& phase = {}) const;
 
   // The scaled adjoint s_p Phi_p^T y as (B, U V h w), s_p the least-squares scale that maps
   // Phi_p^T Phi_p 1 closest to 1 (so a flat grey patch comes back near its own level).
@@ -349,6 +361,9 @@ class LightFieldNetImpl : public torch::nn::Module {
 
   torch::Tensor phi, adjoint_scale, base;
   torch::Tensor pixel_pinv;  // local Phis: (T, T, N, U V) per-pixel pseudo-inverses
+  // Time-coded Phis (frames > 1): (T, T, N, U V), the still-equivalent pseudo-inverse in every
+  // frame; undefined otherwise.
+  torch::Tensor pixel_hold;
   // A colour net: the CFA's response (3, T, T) over the period T of `phi` and `pixel_pinv`,
   // the least common multiple of the code's and the CFA's.
   torch::Tensor cfa_response;

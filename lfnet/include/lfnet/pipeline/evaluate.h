@@ -161,6 +161,11 @@ struct EvaluateResult {
 
 // Checks the request (before any work), loads the model, the Phi and the truth, and evaluates.
 EvaluateResult evaluate_request(const EvaluateRequest& request);
+// The motion a sequence's source declares, in px per sub-frame: the fastest layer's shift of a
+// scene file or of a rendered sequence's scene.json, or the whole-image shift of a synthetic one
+// (sequence.json; docs/video.md). None for a source that declares nothing (a still folder).
+std::optional<double> declared_motion_speed(const std::string& source);
+
 // Writes an evaluation's estimate into `dir`: its views, their previews, the viewer page beside
 // the truth (r.keep_estimate), then evaluation.json of `record`, whose end_to_end_seconds is set
 // once the rest is written. Each step's memory is returned before the next.
