@@ -99,11 +99,10 @@ void add_render_command(CLI::App& app, const GlobalOptions& global) {
       ->check(CLI::IsMember({8, 16}));
   cmd->add_option("--frames", args->request.frames,
                   "sub-frames of a moving scene (1..64): frame_0/ .. frame_{T-1}/ (default 1)");
-  input_path(cmd->add_option("--lf", args->request.lf,
-                             "a real still light field to give synthetic motion (with --frames, "
-                             "--shift, --walk; docs/video.md)"));
+  add_lf_option(cmd, args->request.lf);
   cmd->add_option("--shift", args->shift,
-                  "with --lf: DX,DY whole px the image moves per sub-frame (default 0,0)");
+                  "with --lf, a real still light field given synthetic motion over --frames: DX,DY "
+                  "whole px the image moves per sub-frame (default 0,0; docs/video.md)");
   cmd->add_option("--walk", args->request.walk,
                   "with --lf: view columns the camera moves per sub-frame, so each point moves by "
                   "its disparity (default 0)")
