@@ -32,7 +32,8 @@ inline CLI::Option* add_phi_option(CLI::App* cmd, std::string& phi) {
                         "--phi", phi,
                         "the camera: a Phi model NAME[:N][@T] (asp, mask, aperture, random, "
                         "lenslet; over T sub-frames also time_aperture, coded_exposure, "
-                        "exposure_aperture: docs/video.md), a PHI.json spec, a calibrated-Phi folder, a model file or a zoo "
+                        "exposure_aperture: docs/video.md), a PHI.json spec, a calibrated-Phi "
+                        "folder, a model file or a zoo "
                         "model's name; with a model or an acquisition, for what they do not say, "
                         "and it must match the model"))
       ->transform(zoo_model_file);

@@ -170,7 +170,8 @@ TEST_CASE("simulate describes a Phi and plots its weights", "[app][simulate]") {
   CHECK(rows[0] != rows[2]);
   CHECK(fs::file_size(tmp / "tile/calibrated-n2.png") > 1000);
   CHECK(run_command(simulate("--phi prism:2 --describe"), out) != 0);
-  CHECK(out.find("known: aperture, asp, calibrated, coded_exposure, exposure_aperture, lenslet, mask, random, time_aperture") != std::string::npos);
+  CHECK(out.find("known: aperture, asp, calibrated, coded_exposure, exposure_aperture, lenslet, "
+                 "mask, random, time_aperture") != std::string::npos);
   CHECK(run_command(simulate("--phi asp:2"), out) != 0);
   CHECK(out.find("nothing to do") != std::string::npos);
 }
