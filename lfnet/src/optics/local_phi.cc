@@ -1,4 +1,6 @@
 // LocalPhi: forward and adjoint as one batched matrix product per pixel phase of the period.
+#include <torch/torch.h>
+// After torch.h: linalg.h alone does not declare Tensor.
 #include <torch/linalg.h>
 
 #include <algorithm>
