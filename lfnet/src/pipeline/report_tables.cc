@@ -7,6 +7,7 @@
 #include <sstream>
 #include <utility>
 
+#include "lfnet/pipeline/sets.h"
 #include "report_records.h"
 
 namespace lfnet::pipeline::report {
