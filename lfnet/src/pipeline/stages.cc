@@ -98,7 +98,7 @@ class StageTraining {
     if (lead_) start(init, resume);  // fit() hands rank 0's state to the other ranks
     auto taught = teacher_source();
     trainer_->fit(taught ? static_cast<train::BatchSource&>(*taught) : dataset_, hooks(on_saved));
-    const std::string target = (fs::path(models_) / (stage_.name + ".ckpt")).string();
+    std::string target = (fs::path(models_) / (stage_.name + ".ckpt")).string();
     if (lead_) publish(train::best_checkpoint_path(options_.out_dir), target);
     return target;
   }
