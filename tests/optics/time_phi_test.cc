@@ -64,7 +64,7 @@ TEST_CASE("time-coded models are exact adjoints, measure white as 1 and crop to 
     auto white = phi->forward(torch::ones({20, 5, 72, 72}, torch::kFloat64));
     CHECK(white.mean().item<double>() == Approx(1.0).epsilon(1e-12));
     auto a = phi->patch_matrix(5, 7, 9, 9, torch::kFloat64);
-    REQUIRE(a.sizes() == torch::IntArrayRef({2 * 81, 4 * 25 * 81}));
+    REQUIRE(a.sizes() == torch::IntArrayRef({int64_t{2} * 81, int64_t{4} * 25 * 81}));
     auto lf = x[0];
     auto patch = lf.slice(2, 5, 14).slice(3, 7, 16).reshape({-1});
     auto want = ax[0].slice(1, 5, 14).slice(2, 7, 16).reshape({-1});
