@@ -79,7 +79,8 @@ TEST_CASE("a still scene renders every sub-frame bit-identically to render_scene
   const auto one = render_sequence(spec2, 1);
   CHECK(torch::equal(one.light_fields.frame(0).data(), render_scene(spec2).light_field.data()));
   CHECK(one.effects_run == std::vector<std::string>{"occlusion"});
-  CHECK(render_sequence(spec2, 3).effects_run == std::vector<std::string>{"occlusion", "motion"});
+  const std::vector<std::string> expected_effects = {"occlusion", "motion"};
+  CHECK(render_sequence(spec2, 3).effects_run == expected_effects);
 }
 
 TEST_CASE("a layer shifting 2 px per sub-frame moves its content by exactly 2 px",
