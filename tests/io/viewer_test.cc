@@ -137,3 +137,27 @@ TEST_CASE("without the truth the page has no error map data", "[io][viewer]") {
   CHECK(data["per_view_psnr_db"].is_null());
   CHECK(data["views"].size() == 4);
 }
+
+TEST_CASE("a sequence's page holds its frames' views in order and a frame's rows per frame",
+          "[io][viewer]") {
+  // Three frames of 2 x 4 views stacked along the rows.
+  const auto lf = test::parallax_light_field(6, 4, 12, 16, 1, -2);
+  io::ViewerPage page;
+  page.frames = 3;
+  const auto data = page_data(io::viewer_html(lf, page));
+  CHECK(data["frames"] == 3);
+  CHECK(data["rows"] == 2);
+  CHECK(data["cols"] == 4);
+  REQUIRE(data["views"].size() == 24);
+  // Frame 2's view (1, 3) is stacked row 2 * 2 + 1: index (2 * 2 + 1) * 4 + 3.
+  const std::string uri = data["views"][(2 * 2 + 1) * 4 + 3];
+  test::TempDir dir;
+  test::write_bytes(dir / "view.png",
+                    from_base64(uri.substr(std::string("data:image/png;base64,").size())));
+  const auto decoded = io::read_image(dir / "view.png");
+  CHECK((decoded - lf.view(5, 3)).abs().max().item<float>() <= 0.5f / 255 + 1e-6f);
+  // A still page says one frame; rows that are not whole frames are refused.
+  CHECK(page_data(io::viewer_html(lf))["frames"] == 1);
+  page.frames = 4;
+  CHECK_THROWS_WITH(io::viewer_html(lf, page), Catch::Contains("frames"));
+}

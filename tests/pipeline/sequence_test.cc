@@ -2,6 +2,8 @@
 #include <catch2/catch.hpp>
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -78,9 +80,15 @@ TEST_CASE("evaluate scores a sequence per frame and writes a folder per frame",
   for (int t = 0; t < 4; ++t) {
     const auto frame = tmp / ("out/frame_" + std::to_string(t));
     CHECK(fs::exists(frame + "/lf_5_5.png"));
-    CHECK(fs::exists(frame + "/index.html"));
+    CHECK_FALSE(fs::exists(frame + "/index.html"));
   }
   CHECK(io::sequence_frames(tmp / "out") == 4);
+  // One viewer page for the sequence, with a time slider over its 4 frames of 5 x 5 views.
+  std::ifstream in(tmp / "out/index.html");
+  const std::string page((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  CHECK(page.find("\"frames\":4") != std::string::npos);
+  CHECK(page.find("\"rows\":5") != std::string::npos);
+  CHECK(page.find("id=\"time\"") != std::string::npos);
   // The sequence in a still camera's evaluation is refused, naming the camera it needs.
   q.phi = "asp:2";
   CHECK_THROWS_WITH(pipeline::evaluate_request(q), Catch::Contains("@4"));

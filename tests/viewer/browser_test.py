@@ -10,7 +10,9 @@ network, no extra package), and then, with real input events:
     must change each time;
   - drags the refocus slider: the refocused picture must change;
   - clicks a point: the EPIs must change;
-  - checks that the page logged no error or exception.
+  - checks that the page logged no error or exception;
+  - opens the page of a moving scene's 4 frames and steps its time slider and the ] key: the
+    view must change each time, and the per-view PSNR table must follow the frame.
 Screenshots of each step are written to WORK_DIR. Exit 0: passed; 77: skipped (no Chromium);
 anything else: failed.
 
@@ -151,6 +153,29 @@ def make_page(lfnet, work, source):
     return os.path.join(out, "index.html")
 
 
+def make_sequence_page(lfnet, work, source):
+    """An evaluation of the held-out window scene moving 2 px per sub-frame, 4 sub-frames, at
+    128 x 160 pixels."""
+    with open(os.path.join(source, "configs", "video", "scenes", "heldout_window-s2.json")) as f:
+        scene = json.load(f)
+    scene["height"], scene["width"] = 128, 160
+    scene_path = os.path.join(work, "moving-scene.json")
+    with open(scene_path, "w") as f:
+        json.dump(scene, f)
+    out = os.path.join(work, "sequence")
+    subprocess.run([lfnet, "evaluate", "--scene", scene_path, "--phi", os.path.join(source, "configs", "video", "asp-exposure.json"),
+                    "--method", "pinv", "--out", out, "--force"],
+                   check=True, stdout=subprocess.DEVNULL)
+    return os.path.join(out, "index.html")
+
+
+def open_page(browser, page):
+    browser.send("Page.navigate", {"url": "file://" + os.path.abspath(page)})
+    browser.evaluate("new Promise(r => { const t = setInterval(() => { if (window.lfnetViewer)"
+                     " { clearInterval(t); r(); } }, 10); })")
+    browser.evaluate("window.lfnetViewer.ready")
+
+
 def main(argv):
     if len(argv) < 3:
         print(__doc__)
@@ -245,6 +270,37 @@ def main(argv):
         browser.screenshot(os.path.join(work, "3-epi-picked.png"))
 
         page_errors = browser.evaluate("window.lfnetViewer.errors")
+
+        # A sequence: the time slider beside the view pad steps the frames.
+        open_page(browser, make_sequence_page(lfnet, work, source))
+        shown = browser.evaluate("!document.getElementById('time-control').hidden")
+        frames = browser.evaluate("document.getElementById('time').max")
+        print(f"sequence page: time slider shown {shown}, last frame {frames}")
+        if not shown or frames != "3":
+            failures.append(f"the sequence page's time slider: shown {shown}, max {frames}")
+        frame = lambda: browser.evaluate("lfnetViewer.state.t")  # noqa: E731
+        psnr_row = lambda: browser.evaluate(  # noqa: E731
+            "[...document.querySelectorAll('#psnr td[data-u]')].map(c => c.textContent).join()")
+        first_row = psnr_row()
+
+        def drag_time():
+            x0, y0 = browser.centre("time", 0.02, 0.5)
+            x1, _ = browser.centre("time", 0.98, 0.5)
+            browser.mouse("mousePressed", x0, y0)
+            browser.mouse("mouseMoved", x1, y0)
+            browser.mouse("mouseReleased", x1, y0)
+        changed("time slider dragged to the end", "view", drag_time)
+        print(f"  frame now {frame()}")
+        if frame() != 3:
+            failures.append(f"the time slider dragged to its end shows frame {frame()}, not 3")
+        if psnr_row() == first_row:
+            failures.append("the per-view PSNR table did not follow the frame")
+        browser.evaluate("lfnetViewer.setTime(1)")
+        changed("key ] (next frame)", "view", lambda: browser.key("]", "BracketRight"))
+        if frame() != 2:
+            failures.append(f"] after frame 1 shows frame {frame()}, not 2")
+        browser.screenshot(os.path.join(work, "4-sequence.png"))
+        page_errors += browser.evaluate("window.lfnetViewer.errors")
         logged = [e for e in browser.events
                   if e.get("method") in ("Runtime.exceptionThrown",)
                   or (e.get("method") == "Log.entryAdded"

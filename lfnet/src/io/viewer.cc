@@ -140,9 +140,12 @@ PagePieces page_pieces(const LightFieldViews& lf, const ViewerPage& page) {
   // Views larger than kViewerMaxSide are shown averaged over f x f pixels: the page stays a size
   // a browser opens, and its disparities are in the pixels shown.
   const int64_t f = viewer_scale(lf.height(), lf.width());
+  LFNET_CHECK(page.frames >= 1 && lf.rows() % page.frames == 0, "the viewer's ", lf.rows(),
+              " stacked rows are not ", page.frames, " frames");
   PagePieces p;
   nlohmann::json data = {{"title", page.title.empty() ? "light field" : page.title},
-                         {"rows", lf.rows()},
+                         {"frames", page.frames},
+                         {"rows", lf.rows() / page.frames},
                          {"cols", lf.cols()},
                          {"height", lf.height() / f},  // as downscale_views drops the rest
                          {"width", lf.width() / f},

@@ -393,26 +393,10 @@ Reconstruction reconstruct_acquisition(const ReconstructRequest& a,
   return AcquisitionReconstruction(a, progress, cache ? *cache : local).run();
 }
 
-void write_estimate(const LightFieldViews& lf, const std::string& dir, const io::ViewerPage& page,
-                    int64_t frames) {
-  if (frames > 1) {
-    // A sequence: each frame's rows of the stacked estimate in its own frame_t folder.
-    const int64_t rows = lf.rows() / frames;
-    for (int64_t t = 0; t < frames; ++t) {
-      const AngularRange ru{t * rows, (t + 1) * rows}, rv{0, lf.cols()};
-      auto frame_page = page;
-      frame_page.title += " (frame " + std::to_string(t) + " of " + std::to_string(frames) + ")";
-      if (page.truth) frame_page.truth = page.truth->window(ru, rv);
-      if (page.record.contains("per_view_psnr_db")) {
-        const auto& table = page.record["per_view_psnr_db"];
-        frame_page.record["per_view_psnr_db"] =
-            nlohmann::json(table.begin() + t * rows, table.begin() + (t + 1) * rows);
-      }
-      write_estimate(lf.window(ru, rv), (fs::path(dir) / ("frame_" + std::to_string(t))).string(),
-                     frame_page, 1);
-    }
-    return;
-  }
+namespace {
+
+// The views of one light field in `dir`, with its grid and EPIs.
+void write_views(const LightFieldViews& lf, const std::string& dir) {
   // What each step freed is returned before the next (the peak is one step's, not all).
   release_free_memory();
   Stopwatch step;
@@ -422,9 +406,30 @@ void write_estimate(const LightFieldViews& lf, const std::string& dir, const io:
   release_free_memory();
   io::write_previews(lf, dir);
   spdlog::debug("grid and EPIs written in {:.2f} s", step.seconds());
-  step.reset();
+}
+
+}  // namespace
+
+void write_estimate(const LightFieldViews& lf, const std::string& dir, const io::ViewerPage& page,
+                    int64_t frames) {
+  LFNET_CHECK(frames >= 1 && lf.rows() % frames == 0, "write_estimate: ", lf.rows(),
+              " stacked rows are not ", frames, " frames");
+  if (frames > 1) {
+    // A sequence: each frame's rows of the stacked estimate in its own frame_t folder.
+    const int64_t rows = lf.rows() / frames;
+    for (int64_t t = 0; t < frames; ++t) {
+      write_views(lf.window({t * rows, (t + 1) * rows}, {0, lf.cols()}),
+                  (fs::path(dir) / ("frame_" + std::to_string(t))).string());
+    }
+  } else {
+    write_views(lf, dir);
+  }
+  // One page for the whole sequence: its time slider steps the frames.
   release_free_memory();
-  io::write_viewer(lf, (fs::path(dir) / "index.html").string(), page);
+  Stopwatch step;
+  auto viewer = page;
+  viewer.frames = frames;
+  io::write_viewer(lf, (fs::path(dir) / "index.html").string(), viewer);
   spdlog::debug("viewer written in {:.2f} s", step.seconds());
 }
 

@@ -18,6 +18,9 @@ struct ViewerPage {
   // per_view_psnr_db fills the per-view table.
   nlohmann::json record = nlohmann::json::object();
   double max_disparity = 4;  // the refocus slider spans +-max(4, this) px per view step
+  // T: the light field is T frames of a sequence stacked along the angular rows (frame t's rows
+  // t U to (t + 1) U - 1), and the page has a time slider beside the view pad.
+  int64_t frames = 1;
 };
 
 // The longest side of a view the page shows at full resolution; larger views are averaged over

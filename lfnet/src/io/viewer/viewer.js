@@ -1,7 +1,8 @@
 // The lfnet light-field viewer: parallax under the mouse, shift-and-add refocus, EPIs through
 // a clicked point, and (with the truth) the error map and per-view PSNR. Plain JavaScript, no
 // network: io::write_viewer embeds this file and the views (PNG data URIs) in index.html.
-// Axes follow docs/conventions.md: u is the angular row (vertical parallax), v the column.
+// Axes follow docs/conventions.md: u is the angular row (vertical parallax), v the column. A
+// sequence's T frames come frame by frame (views[(t * U + u) * V + v]) with a time slider.
 'use strict';
 (function () {
   const kErrorMax = 0.1;  // |error| at the top of the error map's colour bar
@@ -12,15 +13,18 @@
   window.addEventListener('unhandledrejection', (e) => errors.push(String(e.reason)));
 
   const data = JSON.parse(document.getElementById('lfnet-data').textContent);
-  const U = data.rows, V = data.cols, H = data.height, W = data.width;
+  const U = data.rows, V = data.cols, H = data.height, W = data.width, T = data.frames || 1;
   const uc = (U - 1) / 2, vc = (V - 1) / 2;
   const state = {
     u: Math.floor(U / 2), v: Math.floor(V / 2), x: Math.floor(W / 2), y: Math.floor(H / 2),
-    disparity: 0, show: 'estimate',
+    disparity: 0, show: 'estimate', t: 0,
   };
   const $ = (id) => document.getElementById(id);
-  const images = {estimate: null, truth: null};  // [u * V + v] -> HTMLImageElement
+  const images = {estimate: null, truth: null};  // [at(u, v)] -> HTMLImageElement
   const pixels = {estimate: [], truth: []};      // lazily read grey values per view
+  // The index of view (u, v) of the current frame.
+  const at = (u, v) => (state.t * U + u) * V + v;
+  const frameText = () => (T > 1 ? `frame ${state.t + 1} of ${T}, ` : '');
 
   function canvas(id, width, height) {
     const c = $(id);
@@ -63,7 +67,7 @@
 
   function drawView() {
     const g = $('view').getContext('2d');
-    g.drawImage(images[state.show][state.u * V + state.v], 0, 0);
+    g.drawImage(images[state.show][at(state.u, state.v)], 0, 0);
     g.strokeStyle = 'rgba(255, 80, 80, 0.9)';
     g.lineWidth = Math.max(1, W / 400);
     g.beginPath();
@@ -72,7 +76,7 @@
     g.moveTo(state.x + 0.5, 0);
     g.lineTo(state.x + 0.5, H);
     g.stroke();
-    $('view-label').textContent = `${state.show}, view (u, v) = (${state.u + 1}, ${state.v + 1})` +
+    $('view-label').textContent = `${state.show}, ${frameText()}view (u, v) = (${state.u + 1}, ${state.v + 1})` +
         ` of ${U} x ${V}; EPIs through (x, y) = (${state.x}, ${state.y})`;
   }
 
@@ -87,7 +91,7 @@
     for (let u = 0; u < U; ++u) {
       for (let v = 0; v < V; ++v, ++k) {
         g.globalAlpha = 1 / (k + 1);
-        g.drawImage(images[state.show][u * V + v], -state.disparity * (v - vc),
+        g.drawImage(images[state.show][at(u, v)], -state.disparity * (v - vc),
             -state.disparity * (u - uc));
       }
     }
@@ -99,13 +103,13 @@
   function drawEpis() {
     const h = $('epi-h').getContext('2d');
     for (let v = 0; v < V; ++v) {
-      h.drawImage(images[state.show][state.u * V + v], 0, state.y, W, 1, 0, v * kEpiScale, W,
+      h.drawImage(images[state.show][at(state.u, v)], 0, state.y, W, 1, 0, v * kEpiScale, W,
           kEpiScale);
     }
     const t = $('epi-v').getContext('2d');
     t.setTransform(0, 1, 1, 0, 0, 0);  // swap axes: the column reads left to right
     for (let u = 0; u < U; ++u) {
-      t.drawImage(images[state.show][u * V + state.v], state.x, 0, 1, H, u * kEpiScale, 0,
+      t.drawImage(images[state.show][at(u, state.v)], state.x, 0, 1, H, u * kEpiScale, 0,
           kEpiScale, H);
     }
     t.setTransform(1, 0, 0, 1, 0, 0);
@@ -113,7 +117,7 @@
 
   function drawError() {
     if (!images.truth) return;
-    const index = state.u * V + state.v;
+    const index = at(state.u, state.v);
     const a = grey('estimate', index), b = grey('truth', index);
     const g = $('error').getContext('2d');
     const out = g.createImageData(W, H);
@@ -128,9 +132,9 @@
       out.data[4 * i + 3] = 255;
     }
     g.putImageData(out, 0, 0);
-    const psnr = data.per_view_psnr_db ? data.per_view_psnr_db[state.u][state.v] :
+    const psnr = data.per_view_psnr_db ? data.per_view_psnr_db[state.t * U + state.u][state.v] :
         10 * Math.log10(a.length / Math.max(sq, 1e-12));
-    $('error-label').textContent = `|estimate - truth|, view (${state.u + 1}, ${state.v + 1}): ` +
+    $('error-label').textContent = `|estimate - truth|, ${frameText()}view (${state.u + 1}, ${state.v + 1}): ` +
         `PSNR ${psnr === null ? 'inf' : psnr.toFixed(2)} dB`;
   }
 
@@ -143,14 +147,18 @@
     }
   }
 
-  // The U x V table of per-view PSNR, coloured on one fixed range, the current view outlined.
+  // The U x V table of the current frame's per-view PSNR, coloured on one range for every
+  // frame, the current view outlined.
   function psnrTable() {
     const table = $('psnr');
-    const values = data.per_view_psnr_db;
-    if (!values) return;
-    const finite = values.flat().filter((x) => x !== null);
+    const all = data.per_view_psnr_db;
+    if (!all) return;
+    table.replaceChildren();
+    const values = all.slice(state.t * U, (state.t + 1) * U);
+    const finite = all.flat().filter((x) => x !== null);
     const lo = Math.min(...finite), hi = Math.max(...finite);
-    $('psnr-range').textContent = `colour: ${lo.toFixed(2)} dB (dark) to ${hi.toFixed(2)} dB`;
+    $('psnr-range').textContent = `${frameText()}colour: ${lo.toFixed(2)} dB (dark) to ` +
+        `${hi.toFixed(2)} dB`;
     const head = table.insertRow();
     head.insertCell().textContent = 'u \\ v';
     for (let v = 0; v < V; ++v) head.insertCell().textContent = v + 1;
@@ -192,6 +200,17 @@
     state.u = u;
     state.v = v;
     redraw();
+  }
+
+  function setTime(t) {
+    t = Math.min(Math.max(Math.round(t), 0), T - 1);
+    $('time').value = t;
+    $('time-label').textContent = `${t + 1} of ${T}`;
+    if (t === state.t) return;
+    state.t = t;
+    psnrTable();
+    redraw();
+    drawRefocus();
   }
 
   function setDisparity(d) {
@@ -236,6 +255,7 @@
     });
     $('disparity').addEventListener('input', (e) => setDisparity(+e.target.value));
     $('show').addEventListener('change', (e) => setShow(e.target.value));
+    $('time').addEventListener('input', (e) => setTime(+e.target.value));
     document.addEventListener('keydown', (e) => {
       const moves = {ArrowLeft: [0, -1], ArrowRight: [0, 1], ArrowUp: [-1, 0], ArrowDown: [1, 0]};
       if (moves[e.key]) {
@@ -244,6 +264,8 @@
       } else if (e.key === '+' || e.key === '-') {
         const step = e.key === '+' ? 0.1 : -0.1;
         setDisparity(Math.round((state.disparity + step) * 10) / 10);
+      } else if (e.key === '[' || e.key === ']') {
+        setTime(state.t + (e.key === ']' ? 1 : -1));
       }
     });
   }
@@ -270,7 +292,7 @@
     if (typeof r.luma_psnr_db === 'number') facts.push(`luma ${r.luma_psnr_db.toFixed(2)} dB`);
     if (typeof r.ssim === 'number') facts.push(`SSIM ${r.ssim.toFixed(4)}`);
     if (typeof r.seconds === 'number') facts.push(`${r.seconds.toFixed(2)} s`);
-    facts.push(`${U} x ${V} views of ${W} x ${H} pixels`);
+    facts.push((T > 1 ? `${T} frames of ` : '') + `${U} x ${V} views of ${W} x ${H} pixels`);
     $('facts').textContent = facts.join(' · ');
   }
 
@@ -293,15 +315,19 @@
     const span = Math.max(4, Math.ceil(data.max_disparity || 4));
     $('disparity').min = -span;
     $('disparity').max = span;
+    $('time-control').hidden = T < 2;
+    $('time').max = T - 1;
+    setTime(0);
     bind();
     redraw();
     drawRefocus();
     api.loadMs = performance.now() - started;
     $('status').textContent = `loaded in ${Math.round(api.loadMs)} ms · mouse over the view: ` +
-        'parallax; arrows: step views; click: EPIs through a point; + / -: refocus';
+        'parallax; arrows: step views; click: EPIs through a point; + / -: refocus' +
+        (T > 1 ? '; [ / ]: step frames' : '');
   }
 
-  const api = {state, errors, loadMs: null, setView, setDisparity, pick, setShow};
+  const api = {state, errors, loadMs: null, setView, setDisparity, pick, setShow, setTime};
   api.ready = start().catch((e) => {
     errors.push(String(e));
     $('status').textContent = `cannot show the light field: ${e}`;
