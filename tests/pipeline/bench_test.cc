@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include "lfnet/core/sequence.h"
+
 using namespace lfnet;
 
 TEST_CASE("bench_case reconstructs the bench light field and reports what it measured",
@@ -25,6 +27,21 @@ TEST_CASE("bench_case reconstructs the bench light field and reports what it mea
   CHECK(r["psnr_db"].get<double>() > 15);
   CHECK(r["phi"] == "asp:2");
   CHECK(pipeline::bench_light_field(o).data().sizes() == torch::IntArrayRef({1, 5, 5, 40, 48}));
+}
+
+TEST_CASE("bench times a time-coded camera on frames of a moving scene", "[pipeline][bench]") {
+  pipeline::BenchOptions o;
+  o.height = 40;
+  o.width = 48;
+  const auto lf = pipeline::bench_light_field(o, 4);
+  REQUIRE(lf.data().sizes() == torch::IntArrayRef({1, 20, 5, 40, 48}));
+  const auto frames = lfnet::LightFieldSequence::unstack(lf, 4);
+  CHECK_FALSE(torch::equal(frames.frame(0).data(), frames.frame(3).data()));
+  o.phi = "coded_exposure:2@4";
+  const auto r = pipeline::bench_case(o, "pinv", 5, 1e9);
+  CHECK(r["frames"] == 4);
+  CHECK(r["max_speed_px_per_frame"] == 2.0);
+  CHECK(r["psnr_db"].get<double>() > 5);
 }
 
 TEST_CASE("bench_report runs every stride and method through the given runner",

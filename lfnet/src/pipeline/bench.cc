@@ -95,16 +95,30 @@ double bench_gemm_flops(int reps, const torch::Device& device) {
   return 2.0 * n * n * n / t;
 }
 
-LightField bench_light_field(const BenchOptions& a) {
+// A random scene's layers' largest speed, px per sub-frame, for a time-coded camera.
+constexpr double kBenchSpeed = 2.0;
+
+LightField bench_light_field(const BenchOptions& a, int64_t frames) {
   if (!a.scene.empty()) {
-    return scene::render_scene(scene::load_scene(a.scene), scene_render_options(a.scene))
-        .light_field.grey()
-        .central(5);
+    const auto spec = scene::load_scene(a.scene);
+    if (frames > 1) {
+      return scene::render_sequence(spec, frames, scene_render_options(a.scene))
+          .light_fields.grey()
+          .central(5)
+          .stacked();
+    }
+    return scene::render_scene(spec, scene_render_options(a.scene)).light_field.grey().central(5);
   }
   scene::RandomSceneOptions so;
   so.height = a.height;
   so.width = a.width;
   so.color = false;
+  if (frames > 1) {
+    so.max_speed = kBenchSpeed;
+    return scene::render_sequence(scene::random_scene(a.seed, so), frames)
+        .light_fields.grey()
+        .stacked();
+  }
   return scene::render_scene(scene::random_scene(a.seed, so)).light_field.grey();
 }
 
@@ -167,7 +181,11 @@ class BenchCase {
     o_.stride = stride_;
     o_.batch = a_.batch;
     o_.validate();
-    truth_ = bench_light_field(a_);
+    truth_ = bench_light_field(a_, spec_.frames);
+    if (spec_.frames > 1) {
+      extra_["frames"] = spec_.frames;
+      if (a_.scene.empty()) extra_["max_speed_px_per_frame"] = kBenchSpeed;
+    }
     sensor_ = optics::simulate_sensor(*phi_, truth_.data()[0]);
     prepare(device);
     setup_seconds_ = setup_clock.seconds();

@@ -56,8 +56,10 @@ double bench_gemm_flops(int reps, const torch::Device& device);
 // one record per layer (seconds, GFLOP/s, share of `gemm`).
 nlohmann::json bench_conv_kernels(const BenchOptions& options, double gemm);
 
-// The light field the cases reconstruct (grey).
-LightField bench_light_field(const BenchOptions& options);
+// The light field the cases reconstruct (grey): --scene's, else a random scene. For a
+// time-coded camera of `frames` sub-frames, that many frames of it stacked along the rows, the
+// random scene's layers moving up to 2 px per sub-frame, --scene's as it declares.
+LightField bench_light_field(const BenchOptions& options, int64_t frames = 1);
 
 // The dictionary of the dict cases: options.dictionary, or a small K-SVD dictionary trained on
 // another random scene (OMP's cost depends on its size, not on its training).
