@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "lfnet/core/json.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/batch.h"
@@ -73,6 +74,38 @@ TEST_CASE("discover_items finds acquisitions and light fields, and records what 
                     Catch::Contains("does not exist"));
   CHECK_THROWS_WITH(pipeline::discover_items(tmp / "in/scenes/a/lf_1_1.png"),
                     Catch::Contains("is not a folder"));
+}
+
+TEST_CASE("a sequence folder is one item, evaluated per frame", "[pipeline][batch]") {
+  test::TempDir tmp;
+  const auto lf = test::parallax_light_field(5, 5, 16, 20, 1, -1);
+  std::vector<LightField> frames;
+  for (int64_t t = 0; t < 4; ++t) frames.emplace_back(torch::roll(lf.data(), {t}, {4}));
+  io::write_light_field_sequence(LightFieldSequence(frames), tmp / "in/seq");
+  fs::create_directories(tmp / "in/gap/frame_0");
+  io::write_light_field(lf, tmp / "in/gap/frame_0");
+  io::write_light_field(lf, tmp / "in/gap/frame_2");
+  const auto items = pipeline::discover_items(tmp / "in");
+  REQUIRE(items.size() == 2);  // no frame_t folder is an item of its own
+  CHECK(items[0].name == "gap");
+  CHECK(items[0].kind == "unreadable");
+  CHECK(items[0].error.find("frame_1") != std::string::npos);
+  CHECK(items[1].name == "seq");
+  CHECK(items[1].kind == "evaluate");
+  pipeline::BatchOptions o;
+  o.in = tmp / "in";
+  o.out = tmp / "out";
+  o.phi = "exposure_aperture:2@4";
+  o.methods = {"no-parallax"};
+  const auto summary = pipeline::run_batch(o);
+  REQUIRE(summary.records.size() == 2);
+  CHECK(summary.failures == 1);  // the sequence with a gap
+  const auto& record = summary.records[1];
+  CHECK(record["item"] == "seq");
+  CHECK(record["status"] == "ok");
+  const auto full = read_json_file(tmp / "out/records/seq__no-parallax.json");
+  CHECK(full.at("frames") == 4);
+  CHECK(full.at("per_frame_psnr_db").size() == 4);
 }
 
 TEST_CASE("a whole-image net's progress counts the sensor's pixels", "[pipeline][batch]") {

@@ -113,7 +113,15 @@ std::vector<BatchItem> discover_items(const std::string& root) {
       items.push_back({dir.string(), name, "reconstruct", ""});
       continue;
     }
-    if (const auto problem = light_field_problem(dir)) {
+    // A sequence (frame_0 .. frame_{T-1}, docs/video.md) is one item, its frames no items.
+    std::optional<std::string> problem;
+    try {
+      if (io::sequence_frames(dir.string()) > 0) problem = "";
+    } catch (const std::exception& e) {
+      problem = std::string(e.what());
+    }
+    if (!problem) problem = light_field_problem(dir);
+    if (problem) {
       // A light field that cannot be read is a failed item, not a folder to skip.
       items.push_back(problem->empty() ? BatchItem{dir.string(), name, "evaluate", ""}
                                        : BatchItem{dir.string(), name, "unreadable", *problem});
@@ -311,6 +319,7 @@ class ItemProcessor {
     o.demosaic = a_.demosaic;
     context_.coded = o.reconstruct.coded = !cfa_;  // as evaluate: a grey estimate in 16-bit codes
     auto record = ok(evaluate_method(truths_[0], method, context_, o, nullptr, false));
+    add_frame_scores(record, phi_->frames(), item_.path);
     if (budget_) record_budget(*budget_, record);
     const auto needs = recon::find_method(method).needs();
     if (needs == recon::MethodNeeds::kNetwork) record["model"] = model_;

@@ -155,6 +155,14 @@ std::optional<double> declared_motion_speed(const std::string& source) {
   return fastest;
 }
 
+void add_frame_scores(nlohmann::json& record, int64_t frames, const std::string& source) {
+  if (frames <= 1) return;
+  record["frames"] = frames;
+  const auto speed = declared_motion_speed(source);
+  if (speed) record["motion_speed"] = *speed;
+  record["per_frame_psnr_db"] = eval::per_frame_psnr(record.at("per_view_psnr_db"), frames);
+}
+
 namespace {
 // A still method's estimates held in each of `frames` frames: patches (B, U V h w) and images
 // (1, U, V, H, W) repeated along the stacked rows (docs/video.md).
@@ -480,13 +488,7 @@ class Evaluation {
     if (!a_.choice.empty()) record["choice"] = a_.choice;
     if (a_.tell_camera_error) record["camera_error_told"] = true;
     if (network_) record["precision"] = nn::to_string(a_.precision);
-    if (phi_->frames() > 1) {
-      record["frames"] = phi_->frames();
-      const auto speed = declared_motion_speed(a_.scene.empty() ? a_.lf : a_.scene);
-      if (speed) record["motion_speed"] = *speed;
-      record["per_frame_psnr_db"] =
-          eval::per_frame_psnr(record.at("per_view_psnr_db"), phi_->frames());
-    }
+    add_frame_scores(record, phi_->frames(), a_.scene.empty() ? a_.lf : a_.scene);
   }
 
   const EvaluateRequest& a_;

@@ -165,6 +165,10 @@ EvaluateResult evaluate_request(const EvaluateRequest& request);
 // scene file or of a rendered sequence's scene.json, or the whole-image shift of a synthetic one
 // (sequence.json; docs/video.md). None for a source that declares nothing (a still folder).
 std::optional<double> declared_motion_speed(const std::string& source);
+// A time-coded camera's record of T = `frames` sub-frames gains `frames`, each frame's PSNR
+// (per_frame_psnr_db, from its per_view_psnr_db) and the motion `source` declares
+// (motion_speed); a still camera's (T = 1) stays as it is.
+void add_frame_scores(nlohmann::json& record, int64_t frames, const std::string& source);
 
 // Writes an evaluation's estimate into `dir`: its views, their previews, the viewer page beside
 // the truth (r.keep_estimate), then evaluation.json of `record`, whose end_to_end_seconds is set
