@@ -736,6 +736,54 @@ TEST_CASE("a section's sweep can keep one light field", "[app]") {
   }
 }
 
+TEST_CASE("a section's pivot and sweep count a scene's moving versions as one family", "[app]") {
+  lfnet::test::TempDir tmp;
+  fs::create_directories(tmp / "results/m");
+  std::ofstream(tmp / "results/m/section.json") << R"({"title": "Motion", "order": 1,
+    "pivot": {"x": "motion_speed", "label": "speed", "family": "-(s|pan)[0-9]+$"},
+    "sweep": {"x": "motion_speed", "family": "-(s|pan)[0-9]+$", "light_field": "lf"}})";
+  std::ofstream rec(tmp / "results/m/records.jsonl");
+  // lf (still: no motion_speed), lf-pan2 and scene-s0, scene-s2: pinv loses 1 dB per px, and
+  // scene is 4 dB below lf.
+  for (const auto& [name, speed] : std::vector<std::pair<std::string, double>>{
+           {"lf", -1}, {"lf-pan2", 2}, {"scene-s0", 0}, {"scene-s2", 2}}) {
+    for (const char* method : {"pinv", "no-parallax"}) {
+      const double base =
+          (name.rfind("scene", 0) == 0 ? 26.0 : 30.0) - (std::string(method) == "pinv" ? 0.0 : 2.0);
+      nlohmann::json r = {
+          {"method", method}, {"psnr_db", base - std::max(speed, 0.0)},
+          {"ssim", 0.9},      {"seconds", std::string(method) == "pinv" ? 3.0 : 1.0},
+          {"mode", "sensor"}, {"light_field", name}};
+      if (speed >= 0) r["motion_speed"] = speed;
+      rec << r.dump() << "\n";
+    }
+  }
+  rec.close();
+  const std::string md = report_of(tmp / "results", tmp / "R.md");
+  CHECK(md.find("Mean PSNR (dB) against speed, over lf, scene") != std::string::npos);
+  CHECK(md.find("| method | 0 | 2 | seconds |") != std::string::npos);
+  CHECK(md.find("| pinv | 28.00 | 26.00 | 3.00 |") != std::string::npos);
+  CHECK(md.find("| no-parallax | 26.00 | 24.00 | 1.00 |") != std::string::npos);
+  const auto spec = lfnet::read_json_file(tmp / "images/results/figures.json");
+  const nlohmann::json* sweep = nullptr;
+  for (const auto& f : spec["figures"]) {
+    if (f["kind"] == "sweep") sweep = &f;
+  }
+  REQUIRE(sweep != nullptr);
+  REQUIRE((*sweep)["series"].size() == 2);  // pinv and no-parallax of lf and lf-pan2
+  for (const auto& series : (*sweep)["series"]) {
+    CHECK(series["x"] == nlohmann::json({0.0, 2.0}));
+  }
+  // A family that is no regular expression is named.
+  std::ofstream(tmp / "results/m/section.json")
+      << R"({"title": "Motion", "order": 1, "pivot": {"x": "motion_speed", "family": "("}})";
+  std::string out;
+  CHECK(run_command(lfnet_binary() + " report " + (tmp / "results") + " --out " + (tmp / "R2.md"),
+                    out) != 0);
+  CHECK(out.find("no regular expression") != std::string::npos);
+  CHECK_FALSE(fs::exists(tmp / "R2.md"));
+}
+
 TEST_CASE("a front section is the front page: its records alone, its text, not repeated", "[app]") {
   lfnet::test::TempDir tmp;
   auto line = [](const std::string& method, const std::string& variant, double psnr,

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <regex>
 #include <set>
 #include <sstream>
 
@@ -43,16 +44,99 @@ double sweep_value(const nlohmann::json& r, const std::string& key) {
   return number(r, key.c_str(), 0.0);
 }
 
+// The section with its light fields named by family: each name less what the regular
+// expression `family` matches ("-(s|pan)[0-9]+$": a scene's moving versions are one family).
+// "" leaves the names.
+Section by_family(const Section& whole, const std::string& family) {
+  Section s = whole;
+  if (family.empty()) return s;
+  std::regex pattern;
+  try {
+    pattern = std::regex(family);
+  } catch (const std::regex_error& e) {
+    throw ConfigError("section " + whole.name + ": \"family\" " + family +
+                      " is no regular expression (" + e.what() + ")");
+  }
+  for (auto& r : s.records) {
+    if (r.contains("light_field") && r["light_field"].is_string()) {
+      r["light_field"] = std::regex_replace(r["light_field"].get<std::string>(), pattern, "");
+    }
+  }
+  return s;
+}
+
+// A record's method and variant, as a table names them: "net (lfnet-video-asp-n2-t4)".
+std::string method_label(const nlohmann::json& r) {
+  std::string label = r.value("method", "");
+  if (!r.value("variant", "").empty()) label += " (" + r.value("variant", "") + ")";
+  return label;
+}
+
+// A "pivot" table of a section (docs/results.md, "A section"): each method's mean PSNR at
+// each value of one setting ("x", e.g. motion_speed), over the light fields' families
+// (by_family), and its mean seconds: accuracy against the setting and against time in one table.
+std::string pivot_table(const Section& whole) {
+  if (!whole.meta.contains("pivot")) return "";
+  const auto& pivot = whole.meta["pivot"];
+  const std::string key = pivot.at("x").get<std::string>();
+  const Section s = by_family(whole, pivot.value("family", ""));
+  std::vector<std::string> rows;  // method labels, first seen first
+  std::set<double> xs;
+  std::set<std::string> families;
+  std::map<std::pair<std::string, double>, std::pair<double, int>> psnr;  // sum, count
+  std::map<std::string, std::pair<double, int>> seconds;
+  for (const auto& r : s.records) {
+    const double y = number(r, "psnr_db");
+    if (!std::isfinite(y)) continue;
+    const auto label = method_label(r);
+    if (std::find(rows.begin(), rows.end(), label) == rows.end()) rows.push_back(label);
+    const double x = sweep_value(r, key);
+    xs.insert(x);
+    families.insert(r.value("light_field", ""));
+    auto& cell = psnr[{label, x}];
+    cell.first += y;
+    ++cell.second;
+    const double t = number(r, "seconds");
+    if (std::isfinite(t)) {
+      seconds[label].first += t;
+      ++seconds[label].second;
+    }
+  }
+  if (rows.empty()) return "";
+  std::ostringstream md;
+  md << "Mean PSNR (dB) against " << pivot.value("label", key) << ", over";
+  for (const auto& f : families) md << (f == *families.begin() ? " " : ", ") << scene_label(f);
+  md << "; seconds: the mean of each method's reconstructions.\n\n| method |";
+  for (const double x : xs) md << " " << fmt("%g", x) << " |";
+  md << " seconds |\n|---|";
+  for (size_t i = 0; i < xs.size(); ++i) md << "---:|";
+  md << "---:|\n";
+  for (const auto& label : rows) {
+    md << "| " << label << " |";
+    for (const double x : xs) {
+      const auto it = psnr.find({label, x});
+      md << " " << (it == psnr.end() ? "" : fmt("%.2f", it->second.first / it->second.second))
+         << " |";
+    }
+    const auto t = seconds.find(label);
+    md << " " << (t == seconds.end() ? "" : fmt("%.2f", t->second.first / t->second.second))
+       << " |\n";
+  }
+  return md.str() + "\n";
+}
+
 // A "sweep" figure of a section: PSNR against one setting ("n", "stride" or "noise"), a series
 // per method (and per other setting that varies), the paper's numbers as series of their own.
 nlohmann::json sweep_spec(const Section& whole, const nlohmann::json& sweep) {
   const std::string key = sweep.at("x").get<std::string>();
-  // "light_field": the sweep of one light field only (the section's table keeps them all).
+  // "light_field": the sweep of one light field (or family, by_family) only (the section's
+  // table keeps them all).
   const std::string only = sweep.value("light_field", "");
-  Section s = whole;
+  const Section named = by_family(whole, sweep.value("family", ""));
+  Section s = named;
   if (!only.empty()) {
     s.records.clear();
-    for (const auto& r : whole.records) {
+    for (const auto& r : named.records) {
       if (r.value("light_field", "") == only) s.records.push_back(r);
     }
   }
@@ -84,8 +168,7 @@ nlohmann::json sweep_spec(const Section& whole, const nlohmann::json& sweep) {
     if (!std::isfinite(y)) continue;
     if (key == "stride" && r.value("whole_image", false)) continue;  // no stride to plot at
     const std::string method = r.value("method", "");
-    std::string label = method;
-    if (!r.value("variant", "").empty()) label += " (" + r.value("variant", "") + ")";
+    std::string label = method_label(r);
     for (const auto& k : varying) {
       label += ", " + (k == "light_field" ? scene_label(setting(r, k)) : k + " " + setting(r, k));
     }
@@ -485,7 +568,7 @@ std::string section_markdown(const Section& s, std::vector<Claim>& claims, Figur
     md << "*No records yet.*\n\n";
     return md.str();
   }
-  md << markdown_table(s, claims) << "\n";
+  md << markdown_table(s, claims) << "\n" << pivot_table(s);
   const auto m = margins(s);
   if (!m.empty()) md << "Margins of `net`:\n\n" << m << "\n";
   md << margin_charts(s, figure_set, figures_link) << training_curves(s, figure_set, figures_link)
