@@ -152,7 +152,7 @@ std::optional<double> declared_motion_speed(const std::string& source) {
     const auto& s = layer["motion"]["shift"];
     fastest = std::max(fastest, std::hypot(s.at(0).get<double>(), s.at(1).get<double>()));
   }
-  return fastest;
+  return std::round(fastest * 1000) / 1000;  // to a thousandth of a pixel: 1.9998 is 2
 }
 
 void add_frame_scores(nlohmann::json& record, int64_t frames, const std::string& source) {

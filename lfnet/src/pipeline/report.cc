@@ -90,7 +90,7 @@ std::string pivot_table(const Section& whole) {
     if (!std::isfinite(y)) continue;
     const auto label = method_label(r);
     if (std::find(rows.begin(), rows.end(), label) == rows.end()) rows.push_back(label);
-    const double x = sweep_value(r, key);
+    const double x = std::round(sweep_value(r, key) * 1000) / 1000;  // 1.9998 is 2
     xs.insert(x);
     families.insert(r.value("light_field", ""));
     auto& cell = psnr[{label, x}];

@@ -163,7 +163,8 @@ struct EvaluateResult {
 EvaluateResult evaluate_request(const EvaluateRequest& request);
 // The motion a sequence's source declares, in px per sub-frame: the fastest layer's shift of a
 // scene file or of a rendered sequence's scene.json, or the whole-image shift of a synthetic one
-// (sequence.json; docs/video.md). None for a source that declares nothing (a still folder).
+// (sequence.json; docs/video.md), to a thousandth of a pixel. None for a source that declares
+// nothing (a still folder).
 std::optional<double> declared_motion_speed(const std::string& source);
 // A time-coded camera's record of T = `frames` sub-frames gains `frames`, each frame's PSNR
 // (per_frame_psnr_db, from its per_view_psnr_db) and the motion `source` declares
