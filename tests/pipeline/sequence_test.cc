@@ -14,6 +14,7 @@
 #include "lfnet/pipeline/evaluate.h"
 #include "lfnet/pipeline/render.h"
 #include "lfnet/pipeline/simulate.h"
+#include "support/small_nets.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -207,4 +208,64 @@ TEST_CASE("an lfnet net of a time-coded camera starts from the still estimate in
   auto bad = options.to_json();
   bad["frames"] = 3;
   CHECK_THROWS_AS(lfnet::nn::NetworkOptions::from_json(bad), lfnet::ConfigError);
+}
+
+TEST_CASE("an lfnet net of a time-coded camera starts as a still net applied as if still",
+          "[pipeline][sequence]") {
+  auto spec = lfnet::optics::PhiSpec::from_json(
+      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json"));
+  const auto phi = lfnet::optics::make_phi(spec);
+  const auto still_phi = lfnet::optics::still_equivalent(*phi);
+  const nlohmann::json image = {
+      {"channels", 4}, {"levels", 2}, {"blocks", 1}, {"noise_input", true}};
+  const auto still_options = lfnet::nn::NetworkOptions::from_json(
+      {{"architecture", "lfnet"},
+       {"measurements", 2},
+       {"patch", {{"rows", 5}, {"cols", 5}, {"height", 16}, {"width", 16}}},
+       {"image", image}});
+  auto options = still_options;
+  options.frames = 4;
+  options.patch.rows = 20;
+  const int64_t p = phi->period();
+  lfnet::nn::LightFieldNet still(still_options);
+  still->set_phi(still_phi->pixel_weights(0, 0, p, p));
+  test::randomise_image_net(still, 11);
+  lfnet::nn::LightFieldNet video(options);
+  video->set_phi(phi->pixel_weights(0, 0, p, p));
+  test::randomise_image_net(video, 12);
+  lfnet::nn::WarmStartSource from;
+  from.network = still_options.to_json();
+  int64_t mapped = 0;
+  {
+    torch::NoGradGuard no_grad;
+    for (auto& param : video->named_parameters()) {
+      const auto src = still->named_parameters()[param.key()];
+      auto dst = param.value();
+      const auto how = video->architecture().warm_start(*video, param.key(), src, dst, from);
+      INFO(param.key());
+      CHECK((how == lfnet::nn::WarmStart::kCopied || how == lfnet::nn::WarmStart::kMapped));
+      if (how == lfnet::nn::WarmStart::kMapped) ++mapped;
+      if (how == lfnet::nn::WarmStart::kCopied) dst.copy_(src);
+    }
+  }
+  CHECK(mapped == 3);  // the input's weights, the output's weights and bias
+  // On a still scene the video net is the still net, in every frame; on a moving one it is not.
+  torch::NoGradGuard no_grad;
+  still->eval();
+  video->eval();
+  const auto sequence = moving_sequence();
+  const auto lf = sequence.frame(0).data()[0].slice(0, 1, 6).slice(1, 1, 6).slice(2, 0, 16);
+  const auto sensor = phi->forward(lf.repeat({4, 1, 1, 1})).unsqueeze(0);
+  const auto want = still->forward_image(sensor, 0, 0.02)[0];
+  const auto out = video->forward_image(sensor, 0, 0.02)[0].view({4, 5, 5, 16, 40});
+  for (int64_t t = 0; t < 4; ++t) test::require_close(out[t], want, 1e-4);
+  // The time-coded pseudo-inverse is read with no weight yet: a moving scene's output is the
+  // still net's on its image too.
+  std::vector<torch::Tensor> frames;
+  for (int64_t t = 0; t < 4; ++t) {
+    frames.push_back(sequence.frame(t).data()[0].slice(0, 1, 6).slice(1, 1, 6).slice(2, 0, 16));
+  }
+  const auto moving = phi->forward(torch::cat(frames, 0)).unsqueeze(0);
+  const auto moved = video->forward_image(moving, 0, 0.02)[0].view({4, 5, 5, 16, 40});
+  test::require_close(moved[3], still->forward_image(moving, 0, 0.02)[0], 1e-4);
 }

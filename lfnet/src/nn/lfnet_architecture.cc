@@ -60,17 +60,25 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
 constexpr std::string_view kImagePrefix = "image.";
 constexpr const char* kImageSection = "image";
 
+// The U-Net's input: the per-pixel estimate `base` (B, C U V, h, w), and for a net of a
+// time-coded camera the held still estimate `start` before it (B, 2 T U V, h, w).
+torch::Tensor unet_input(const LightFieldNetImpl& net, const torch::Tensor& base,
+                         const torch::Tensor& start) {
+  return net.options().frames > 1 ? torch::cat({start, base}, 1) : base;
+}
+
 // `start` (the pseudo-inverse, or a time-coded Phi's held still estimate) plus the U-Net's
 // correction read from `base` (B, C U V, h, w), with a noise channel (B sigmas, undefined: 0)
 // when the net is noise-aware.
 torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base, const torch::Tensor& noise,
                      const torch::Tensor& start) {
   const auto image = image_layers(net);
-  if (!image->options().noise_input) return start + image->forward(base);
+  const auto x = unet_input(net, base, start);
+  if (!image->options().noise_input) return start + image->forward(x);
   auto sigma =
       noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
   auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
-  return start + image->forward(torch::cat({base, channel}, 1));
+  return start + image->forward(torch::cat({x, channel}, 1));
 }
 
 // A colour net's CFA response at every pixel of crops (B, h, w) whose pixel (0, 0) has phase
@@ -116,6 +124,33 @@ torch::Tensor colour_base(const LightFieldNetImpl& net, const torch::Tensor& pin
     return rgb.reshape({pinv.size(0), 3 * pinv.size(1), pinv.size(2), pinv.size(3)});
   }
   return demosaic_base(pinv, response);
+}
+
+// The parameters of a still net's input and output layers that a net of the same U-Net for a
+// time-coded camera of T sub-frames starts from (train --init): the input layer reads each
+// sub-frame's copy of the held still estimate with 1/T of the still net's weights and the
+// time-coded pseudo-inverse with none, and the output layer gives every sub-frame the still
+// net's correction. The video net so starts as the still net applied as if nothing moved.
+// False, leaving `dst` alone, for any other parameter.
+bool frames_from_still(const std::string& name, const torch::Tensor& src, torch::Tensor& dst,
+                       int64_t views, int64_t frames) {
+  torch::NoGradGuard no_grad;
+  const int64_t extra = src.dim() == 4 ? src.size(1) - views : -1;  // the noise channel
+  if (name == "input.weight" && src.dim() == 4 && dst.dim() == 4 && src.size(0) == dst.size(0) &&
+      extra >= 0 && dst.size(1) == 2 * frames * views + extra) {
+    dst.zero_();
+    for (int64_t t = 0; t < frames; ++t) {
+      dst.narrow(1, t * views, views).copy_(src.narrow(1, 0, views) / static_cast<double>(frames));
+    }
+    if (extra > 0) dst.narrow(1, 2 * frames * views, extra).copy_(src.narrow(1, views, extra));
+    return true;
+  }
+  if ((name == "output.weight" || name == "output.bias") && src.size(0) == views &&
+      dst.size(0) == frames * views && src.dim() == dst.dim()) {
+    for (int64_t t = 0; t < frames; ++t) dst.narrow(0, t * views, views).copy_(src);
+    return true;
+  }
+  return false;
 }
 
 // The parameters of a grey net's input and output layers that a colour net of the same U-Net
@@ -176,7 +211,8 @@ class LfnetArchitecture : public NetworkArchitecture {
     }
     const int64_t channels = o.colours() * views;
     const auto image = image_options(o);
-    const int64_t in = channels + (image.noise_input ? 1 : 0);
+    // A time-coded camera's net also reads the held still estimate (unet_input).
+    const int64_t in = (o.frames > 1 ? 2 : 1) * channels + (image.noise_input ? 1 : 0);
     net.register_module("image", ImageNet(image, in, channels));
   }
 
@@ -298,6 +334,14 @@ class LfnetArchitecture : public NetworkArchitecture {
         name.rfind(kImagePrefix, 0) == 0 &&
         colour_from_grey(name.substr(kImagePrefix.size()), src, dst, o.patch.rows * o.patch.cols)) {
       return WarmStart::kWidened;
+    }
+    // A time-coded camera's net starts as a still net held over its sub-frames.
+    const bool still_source = !from.network.is_object() || from.network.value("frames", 1) == 1;
+    if (o.frames > 1 && still_source && src.sizes() != dst.sizes() &&
+        name.rfind(kImagePrefix, 0) == 0 &&
+        frames_from_still(name.substr(kImagePrefix.size()), src, dst,
+                          o.colours() * o.patch.rows / o.frames * o.patch.cols, o.frames)) {
+      return WarmStart::kMapped;
     }
     // A wider U-Net starts as the narrower one (embed_narrow_parameter).
     if (src.sizes() != dst.sizes() && name.rfind(kImagePrefix, 0) == 0 &&

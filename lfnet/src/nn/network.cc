@@ -398,8 +398,10 @@ double cnn_full_flops(const NetworkOptions& o, int64_t height, int64_t width, in
 
 double image_pixel_flops(const NetworkOptions& o) {
   const int64_t views = o.patch.rows * o.patch.cols, channels = o.colours() * views;
-  return 2.0 * static_cast<double>(o.measurements * views) +
-         image_options(o).pixel_flops(channels, channels);
+  // A time-coded camera's net also forms and reads the held still estimate.
+  const int64_t estimates = o.frames > 1 ? 2 : 1;
+  return 2.0 * static_cast<double>(estimates * o.measurements * views) +
+         image_options(o).pixel_flops(estimates * channels, channels);
 }
 
 double image_full_flops(const NetworkOptions& o, int64_t height, int64_t width, int64_t tile) {
