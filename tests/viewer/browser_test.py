@@ -119,6 +119,14 @@ class DevTools:
             self.send("Input.dispatchKeyEvent", {"type": kind, "key": key, "code": code,
                                                   "windowsVirtualKeyCode": code_number(key)})
 
+    def drag(self, element, f0, f1):
+        """Drags across an element (a slider) from f0 to f1 of its width, at its middle."""
+        x0, y0 = self.centre(element, f0, 0.5)
+        x1, _ = self.centre(element, f1, 0.5)
+        self.mouse("mousePressed", x0, y0)
+        self.mouse("mouseMoved", x1, y0)
+        self.mouse("mouseReleased", x1, y0)
+
     def centre(self, element, fx=0.5, fy=0.5):
         box = self.evaluate(f"(() => {{ const r = document.getElementById('{element}')"
                             ".getBoundingClientRect(); return [r.left, r.top, r.width, r.height]; })()")
@@ -249,13 +257,7 @@ def main(argv):
         print(f"  view (u, v) now {state()}")
         browser.screenshot(os.path.join(work, "1-view-moved.png"))
 
-        def drag_slider():
-            x0, y0 = browser.centre("disparity", 0.5, 0.5)
-            x1, _ = browser.centre("disparity", 0.85, 0.5)
-            browser.mouse("mousePressed", x0, y0)
-            browser.mouse("mouseMoved", x1, y0)
-            browser.mouse("mouseReleased", x1, y0)
-        changed("refocus slider dragged", "refocus", drag_slider)
+        changed("refocus slider dragged", "refocus", lambda: browser.drag("disparity", 0.5, 0.85))
         print(f"  disparity now {browser.evaluate('lfnetViewer.state.disparity')} px per view")
         browser.screenshot(os.path.join(work, "2-refocused.png"))
 
@@ -283,13 +285,7 @@ def main(argv):
             "[...document.querySelectorAll('#psnr td[data-u]')].map(c => c.textContent).join()")
         first_row = psnr_row()
 
-        def drag_time():
-            x0, y0 = browser.centre("time", 0.02, 0.5)
-            x1, _ = browser.centre("time", 0.98, 0.5)
-            browser.mouse("mousePressed", x0, y0)
-            browser.mouse("mouseMoved", x1, y0)
-            browser.mouse("mouseReleased", x1, y0)
-        changed("time slider dragged to the end", "view", drag_time)
+        changed("time slider dragged to the end", "view", lambda: browser.drag("time", 0.02, 0.98))
         print(f"  frame now {frame()}")
         if frame() != 3:
             failures.append(f"the time slider dragged to its end shows frame {frame()}, not 3")
