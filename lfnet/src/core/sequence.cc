@@ -66,6 +66,12 @@ LightFieldSequence LightFieldSequence::central(int64_t n) const {
 
 LightField LightFieldSequence::time_mean() const { return LightField(data_.mean(0)); }
 
+std::string sequence_frame_dir(const std::string& dir, int64_t t) {
+  std::string out = dir;
+  if (!out.empty() && out.back() != '/') out += '/';
+  return out + "frame_" + std::to_string(t);
+}
+
 std::string LightFieldSequence::shape_string() const {
   if (!defined()) return "(empty)";
   std::ostringstream s;

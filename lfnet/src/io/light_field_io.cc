@@ -22,6 +22,7 @@
 #include "lfnet/core/file_kind.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/parallel.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/io/png.h"
 #include "lfnet/io/sensor_io.h"
 
@@ -720,7 +721,7 @@ int64_t sequence_frames(const std::string& dir) {
   LFNET_CHECK_AS(IoError, !ec, "cannot list ", dir, ": ", ec.message());
   if (count != last + 1) {
     for (int64_t t = 0; t <= last; ++t) {
-      LFNET_CHECK_AS(IoError, fs::is_directory(fs::path(dir) / ("frame_" + std::to_string(t))), dir,
+      LFNET_CHECK_AS(IoError, fs::is_directory(sequence_frame_dir(dir, t)), dir,
                      " is a sequence of frames up to frame_", last, " but has no frame_", t);
     }
   }
@@ -733,7 +734,7 @@ LightFieldSequence read_light_field_sequence(const std::string& dir, int threads
   LFNET_CHECK_AS(IoError, frames > 0, dir, " is not a light-field sequence (no frame_0 folder)");
   std::vector<LightField> out;
   for (int64_t t = 0; t < frames; ++t) {
-    const auto frame = (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+    const auto frame = sequence_frame_dir(dir, t);
     out.push_back(read_light_field(frame, threads, layout));
     LFNET_CHECK_AS(IoError, out.back().data().sizes() == out.front().data().sizes(), frame, " is ",
                    out.back().shape_string(), " but frame_0 is ", out.front().shape_string());
@@ -744,8 +745,7 @@ LightFieldSequence read_light_field_sequence(const std::string& dir, int threads
 void write_light_field_sequence(const LightFieldSequence& seq, const std::string& dir,
                                 const WriteOptions& options) {
   for (int64_t t = 0; t < seq.frames(); ++t) {
-    write_light_field(seq.frame(t), (fs::path(dir) / ("frame_" + std::to_string(t))).string(),
-                      options);
+    write_light_field(seq.frame(t), sequence_frame_dir(dir, t), options);
   }
 }
 

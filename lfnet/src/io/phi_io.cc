@@ -8,6 +8,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/optics/cfa.h"
 
@@ -180,8 +181,8 @@ optics::PhiSpec read_calibrated_phi(const std::string& path) {
   LFNET_CHECK_AS(
       IoError, rows >= 1 && cols >= 1 && rows <= optics::kMaxViews && cols <= optics::kMaxViews,
       sidecar, ": rows and cols must be in 1..", optics::kMaxViews, ", got ", rows, "x", cols);
-  LFNET_CHECK_AS(IoError, frames >= 1 && frames <= optics::kMaxFrames, sidecar,
-                 ": frames must be in 1..", optics::kMaxFrames, ", got ", frames);
+  LFNET_CHECK_AS(IoError, frames >= 1 && frames <= kMaxFrames, sidecar, ": frames must be in 1..",
+                 kMaxFrames, ", got ", frames);
   LFNET_CHECK_AS(IoError, n >= 1 && n <= frames * rows * cols, sidecar, ": n must be in 1..",
                  frames * rows * cols, ", got ", n);
   LFNET_CHECK_AS(IoError, period >= 1 && period <= 64, sidecar, ": period must be in 1..64, got ",

@@ -11,6 +11,7 @@
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
+#include "lfnet/core/sequence.h"
 #include "models.h"
 
 namespace lfnet::optics {

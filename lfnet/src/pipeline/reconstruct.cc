@@ -11,6 +11,7 @@
 #include "lfnet/core/process_time.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/core/version.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
@@ -419,7 +420,7 @@ void write_estimate(const LightFieldViews& lf, const std::string& dir, const io:
     const int64_t rows = lf.rows() / frames;
     for (int64_t t = 0; t < frames; ++t) {
       write_views(lf.window({t * rows, (t + 1) * rows}, {0, lf.cols()}),
-                  (fs::path(dir) / ("frame_" + std::to_string(t))).string());
+                  sequence_frame_dir(dir, t));
     }
   } else {
     write_views(lf, dir);

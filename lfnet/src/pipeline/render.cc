@@ -70,8 +70,8 @@ namespace {
 RenderSummary synthetic_sequence_to_folder(const RenderRequest& args) {
   LFNET_CHECK_AS(ConfigError, args.random_seed < 0 && args.scene.empty(),
                  "give one of --lf DIR, --scene SCENE.json and --random SEED");
-  LFNET_CHECK_AS(ConfigError, args.frames >= 2 && args.frames <= scene::kMaxFrames,
-                 "--lf makes a sequence: --frames must lie in [2, ", scene::kMaxFrames, "], got ",
+  LFNET_CHECK_AS(ConfigError, args.frames >= 2 && args.frames <= kMaxFrames,
+                 "--lf makes a sequence: --frames must lie in [2, ", kMaxFrames, "], got ",
                  args.frames);
   OutputFolderPolicy policy;
   policy.force = args.force;
@@ -95,7 +95,7 @@ RenderSummary synthetic_sequence_to_folder(const RenderRequest& args) {
          "sub-frame) and a sideways walk of the view window (views per sub-frame)"}}}};
   write_folder(args.out, policy, [&](const std::string& dir) {
     for (int64_t t = 0; t < args.frames; ++t) {
-      const auto frame_dir = (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+      const auto frame_dir = sequence_frame_dir(dir, t);
       io::write_light_field(seq.frame(t), frame_dir, {"png", args.bits});
       io::write_previews(seq.frame(t), frame_dir);
     }
@@ -125,8 +125,8 @@ RenderSummary render_to_folder(const RenderRequest& args) {
     throw ConfigError(
         "--random-options, --size, --views and --disparity-range apply to --random only");
   }
-  if (args.frames < 1 || args.frames > scene::kMaxFrames) {
-    throw ConfigError("--frames must lie in [1, " + std::to_string(scene::kMaxFrames) + "], got " +
+  if (args.frames < 1 || args.frames > kMaxFrames) {
+    throw ConfigError("--frames must lie in [1, " + std::to_string(kMaxFrames) + "], got " +
                       std::to_string(args.frames));
   }
   scene::SceneSpec spec;
@@ -197,8 +197,7 @@ RenderSummary render_to_folder(const RenderRequest& args) {
   if (random) record["rendered"]["random_options"] = options.to_json();
   write_folder(args.out, policy, [&](const std::string& dir) {
     for (int64_t t = 0; t < args.frames; ++t) {
-      const std::string frame_dir =
-          args.frames == 1 ? dir : (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+      const std::string frame_dir = args.frames == 1 ? dir : sequence_frame_dir(dir, t);
       if (args.frames > 1) fs::create_directories(frame_dir);
       const LightField lf = result.light_fields.frame(t);
       const torch::Tensor disparity = result.disparity[t];

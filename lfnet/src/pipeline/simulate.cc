@@ -238,7 +238,7 @@ SimulateInput load_simulate_input(const SimulateSource& args, int64_t frames) {
     SimulateInput in;
     for (int64_t t = 0; t < frames; ++t) {
       auto frame = args;
-      frame.lf = (fs::path(args.lf) / ("frame_" + std::to_string(t))).string();
+      frame.lf = sequence_frame_dir(args.lf, t);
       in = load_still_input(frame);
       out.push_back(in.lf);
     }

@@ -11,6 +11,7 @@
 #include "lfnet/core/parallax.h"
 #include "lfnet/core/progress.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/core/sequence.h"
 #include "lfnet/core/text.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
@@ -79,11 +80,12 @@ LightField select_views(const LightField& lf, const std::string& views, int64_t 
   const auto out = lf.window(ru, rv);
   return colour ? out : out.grey();
 }
-// A sequence folder (or a still one, filmed still) as the stacked light field of `frames`
-// frames that a time-coded Phi of rows x cols (rows = frames U) codes, each frame windowed.
-LightField read_sequence_source(const std::string& dir, const LightFieldSources& sources,
-                                int64_t rows, int64_t cols, int64_t frames, bool colour) {
-  const int64_t folder_frames = io::sequence_frames(dir);
+// A sequence folder of `folder_frames` frames (0: a still one, filmed still) as the stacked
+// light field of `frames` frames that a time-coded Phi of rows x cols (rows = frames U) codes,
+// each frame windowed.
+LightField read_sequence_source(const std::string& dir, int64_t folder_frames,
+                                const LightFieldSources& sources, int64_t rows, int64_t cols,
+                                int64_t frames, bool colour) {
   LFNET_CHECK_AS(ConfigError, frames > 1, dir, " is a sequence of ", folder_frames,
                  " frames: code it with a time-coded Phi of as many sub-frames (NAME:N@",
                  folder_frames, ", docs/video.md)");
@@ -96,8 +98,7 @@ LightField read_sequence_source(const std::string& dir, const LightFieldSources&
       out.push_back(out.front());
       continue;
     }
-    const auto frame =
-        folder_frames == 0 ? dir : (fs::path(dir) / ("frame_" + std::to_string(t))).string();
+    const auto frame = folder_frames == 0 ? dir : sequence_frame_dir(dir, t);
     const auto lf = read_oriented(frame, sources.orient, "orient", sources.layout);
     out.push_back(select_views(lf, sources.views, rows / frames, cols, frame, colour));
   }
@@ -175,7 +176,9 @@ std::vector<NamedLightField> load_sources(const LightFieldSources& sources, int6
     const std::string name = fs::path(dir).filename().string();
     const int64_t folder_frames = io::sequence_frames(dir);
     if (frames > 1 || folder_frames > 0) {
-      out.push_back({name, read_sequence_source(dir, sources, rows, cols, frames, colour), {}});
+      out.push_back({name,
+                     read_sequence_source(dir, folder_frames, sources, rows, cols, frames, colour),
+                     {}});
       bar.advance();
       continue;
     }
@@ -257,7 +260,7 @@ void check_sources(const LightFieldSources& sources, const std::string& where) {
       const auto& dir = sources.light_fields[i];
       const int64_t frames = io::sequence_frames(dir);
       for (int64_t t = 0; t < std::max<int64_t>(frames, 1); ++t) {
-        io::scan_folder(frames == 0 ? dir : dir + "/frame_" + std::to_string(t), sources.layout);
+        io::scan_folder(frames == 0 ? dir : sequence_frame_dir(dir, t), sources.layout);
       }
     } catch (const Error& e) {
       throw ConfigError(path + ": " + e.what());

@@ -12,6 +12,12 @@
 
 namespace lfnet {
 
+// The most sub-frames of one exposure: of a sequence, a time-coded Phi and render_sequence.
+constexpr int64_t kMaxFrames = 64;
+
+// The folder of frame t of a sequence folder: DIR/frame_t (docs/video.md).
+std::string sequence_frame_dir(const std::string& dir, int64_t t);
+
 // T light fields of one shape, float32 in [0, 1], held as one (T, C, U, V, H, W) tensor: frame
 // t is the light field (C, U, V, H, W) of sub-frame t within the exposure.
 class LightFieldSequence {

@@ -16,8 +16,6 @@ namespace lfnet::optics {
 // The most views a Phi codes along each angular axis (light-field cameras and gantries have
 // at most 17; Phi codes the central window).
 constexpr int64_t kMaxViews = 64;
-// The most sub-frames a time-coded Phi codes within one exposure.
-constexpr int64_t kMaxFrames = 64;
 
 // Everything that defines a Phi; stored as JSON in every simulation, model and result.
 struct PhiSpec {

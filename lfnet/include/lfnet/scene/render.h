@@ -41,9 +41,6 @@ struct RenderResult {
 // Layer motion is ignored: the spec's pose (the middle of an exposure) is rendered.
 RenderResult render_scene(const SceneSpec& spec, const RenderOptions& options = {});
 
-// The most sub-frames render_sequence renders.
-constexpr int64_t kMaxFrames = 64;
-
 // What render_sequence produced.
 struct SequenceResult {
   LightFieldSequence light_fields;  // (T, C, U, V, H, W) in [0, 1]
