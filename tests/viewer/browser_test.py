@@ -147,34 +147,33 @@ def code_number(key):
     return {"ArrowLeft": 37, "ArrowUp": 38, "ArrowRight": 39, "ArrowDown": 40}.get(key, 0)
 
 
-def make_page(lfnet, work, source):
-    """An evaluation of a 593 x 840 procedural scene with disparities up to 4 px."""
-    with open(os.path.join(source, "configs", "scenes", "heldout_wide.json")) as f:
+def evaluate_page(lfnet, work, scene_file, size, phi, name):
+    """The viewer page of `lfnet evaluate --method pinv` of a scene file resized to `size`
+    (height, width), written under WORK/NAME."""
+    with open(scene_file) as f:
         scene = json.load(f)
-    scene["height"], scene["width"] = 593, 840
-    scene_path = os.path.join(work, "scene.json")
+    scene["height"], scene["width"] = size
+    scene_path = os.path.join(work, name + "-scene.json")
     with open(scene_path, "w") as f:
         json.dump(scene, f)
-    out = os.path.join(work, "evaluation")
-    subprocess.run([lfnet, "evaluate", "--scene", scene_path, "--phi", "asp:2", "--method",
-                    "pinv", "--out", out, "--force"], check=True, stdout=subprocess.DEVNULL)
+    out = os.path.join(work, name)
+    subprocess.run([lfnet, "evaluate", "--scene", scene_path, "--phi", phi, "--method", "pinv",
+                    "--out", out, "--force"], check=True, stdout=subprocess.DEVNULL)
     return os.path.join(out, "index.html")
+
+
+def make_page(lfnet, work, source):
+    """An evaluation of a 593 x 840 procedural scene with disparities up to 4 px."""
+    return evaluate_page(lfnet, work, os.path.join(source, "configs", "scenes", "heldout_wide.json"),
+                         (593, 840), "asp:2", "evaluation")
 
 
 def make_sequence_page(lfnet, work, source):
     """An evaluation of the held-out window scene moving 2 px per sub-frame, 4 sub-frames, at
     128 x 160 pixels."""
-    with open(os.path.join(source, "configs", "video", "scenes", "heldout_window-s2.json")) as f:
-        scene = json.load(f)
-    scene["height"], scene["width"] = 128, 160
-    scene_path = os.path.join(work, "moving-scene.json")
-    with open(scene_path, "w") as f:
-        json.dump(scene, f)
-    out = os.path.join(work, "sequence")
-    subprocess.run([lfnet, "evaluate", "--scene", scene_path, "--phi", os.path.join(source, "configs", "video", "asp-exposure.json"),
-                    "--method", "pinv", "--out", out, "--force"],
-                   check=True, stdout=subprocess.DEVNULL)
-    return os.path.join(out, "index.html")
+    video = os.path.join(source, "configs", "video")
+    return evaluate_page(lfnet, work, os.path.join(video, "scenes", "heldout_window-s2.json"),
+                         (128, 160), os.path.join(video, "asp-exposure.json"), "sequence")
 
 
 def open_page(browser, page):
