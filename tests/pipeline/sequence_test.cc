@@ -10,10 +10,13 @@
 #include "lfnet/core/sequence.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/evaluate.h"
+#include "lfnet/pipeline/export.h"
 #include "lfnet/pipeline/render.h"
 #include "lfnet/pipeline/simulate.h"
+#include "lfnet/recon/fully_convolutional.h"
 #include "support/small_nets.h"
 #include "support/test_support.h"
 
@@ -268,4 +271,44 @@ TEST_CASE("an lfnet net of a time-coded camera starts as a still net applied as 
   const auto moving = phi->forward(torch::cat(frames, 0)).unsqueeze(0);
   const auto moved = video->forward_image(moving, 0, 0.02)[0].view({4, 5, 5, 16, 40});
   test::require_close(moved[3], still->forward_image(moving, 0, 0.02)[0], 1e-4);
+}
+
+TEST_CASE("an lfnet net of a time-coded camera exports: the file reconstructs as the checkpoint",
+          "[pipeline][sequence][export]") {
+  auto spec = lfnet::optics::PhiSpec::from_json(
+      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json"));
+  const auto phi = lfnet::optics::make_phi(spec);
+  auto options = lfnet::nn::NetworkOptions::from_json(
+      {{"architecture", "lfnet"},
+       {"measurements", 2},
+       {"frames", 4},
+       {"patch", {{"rows", 20}, {"cols", 5}, {"height", 16}, {"width", 16}}},
+       {"image", {{"channels", 4}, {"levels", 2}, {"blocks", 1}, {"noise_input", true}}}});
+  lfnet::nn::LightFieldNet net(options);
+  const int64_t p = phi->period();
+  net->set_phi(phi->pixel_weights(0, 0, p, p));
+  test::randomise_image_net(net, 13);
+  test::TempDir tmp;
+  test::save_net(net, *phi, "joint_scratch", tmp / "video.ckpt");
+  lfnet::pipeline::ExportRequest request;
+  request.model = tmp / "video.ckpt";
+  request.out = tmp / "video.pt";
+  request.check = 1;
+  const auto r = lfnet::pipeline::export_model(request);  // compares the two on a sensor image
+  CHECK(r.max_difference <= 1e-5);
+  // A moving sequence's sensor image: 4 frames of 5 x 5 views come back from the file as from
+  // the checkpoint.
+  const auto loaded = lfnet::nn::load_script(tmp / "video.pt");
+  std::vector<torch::Tensor> frames;
+  for (int64_t t = 0; t < 4; ++t) {
+    frames.push_back(moving_sequence().frame(t).data()[0].slice(0, 1, 6).slice(1, 1, 6));
+  }
+  const auto sensor = phi->forward(torch::cat(frames, 0));
+  torch::NoGradGuard no_grad;
+  net->eval();
+  const auto want = lfnet::recon::reconstruct_sensor_tiled(net, sensor, 16, false, 0.02);
+  const auto got = loaded.reconstruct_image(sensor, 16, false, 0.02);
+  REQUIRE(got.sizes() == torch::IntArrayRef({20, 5, 16, 40}));
+  CHECK(want.std().item<double>() > 1e-3);
+  test::require_close(got, want.squeeze(0), 1e-5);
 }

@@ -23,20 +23,31 @@ namespace {
 // submodule `image`, traced from the C++ module itself; these methods repeat only the
 // per-pixel pseudo-inverse, the padding and the noise channel of this file, op for op
 // (reconstruct, simulate, forward and the input checks are every whole-image net's:
-// kWholeImageScriptSource).
-constexpr const char* kImageSource = R"TS(
-def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
-    t = self.pixel_pinv.size(0)
-    x = sensor.to(self.pixel_pinv.dtype)
+// kWholeImageScriptSource). A net of a time-coded camera has its own forward_image, which also
+// reads the held still estimate (unet_input).
+constexpr const char* kPixelMapSource = R"TS(
+def pixel_map_image(self, maps: Tensor, sensor: Tensor, phase: int) -> Tensor:
+    t = maps.size(0)
+    x = sensor.to(maps.dtype)
     if t == 1:
-        return torch.einsum("nk,bnij->bkij", [self.pixel_pinv[0][0], x])
+        return torch.einsum("nk,bnij->bkij", [maps[0][0], x])
     h = x.size(2)
     w = x.size(3)
     rows = torch.remainder(torch.arange(h, device=x.device) + phase // t, t)
     cols = torch.remainder(torch.arange(w, device=x.device) + phase % t, t)
-    m = self.pixel_pinv.index_select(0, rows).index_select(1, cols)
+    m = maps.index_select(0, rows).index_select(1, cols)
     return torch.einsum("ijnk,bnij->bkij", [m, x])
 
+def pixel_pinv_image(self, sensor: Tensor, phase: int = 0) -> Tensor:
+    return self.pixel_map_image(self.pixel_pinv, sensor, phase)
+
+def with_noise(self, x: Tensor, noise_sigma: float) -> Tensor:
+    if self.noise_input:
+        return torch.cat([x, x.new_full([x.size(0), 1, x.size(2), x.size(3)], noise_sigma)], 1)
+    return x
+)TS";
+
+constexpr const char* kStillForwardSource = R"TS(
 def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
     self.check_sensor_images(sensor, phase)
     b = sensor.size(0)
@@ -48,10 +59,25 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
     base = self.pixel_pinv_image(sensor, phase)
     if ph > 0 or pw > 0:
         base = torch.constant_pad_nd(base, [0, pw, 0, ph])
-    x = base
-    if self.noise_input:
-        x = torch.cat([base, base.new_full([b, 1, base.size(2), base.size(3)], noise_sigma)], 1)
-    out = base + self.image.forward(x)
+    out = base + self.image.forward(self.with_noise(base, noise_sigma))
+    return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
+)TS";
+
+constexpr const char* kFramesForwardSource = R"TS(
+def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
+    self.check_sensor_images(sensor, phase)
+    b = sensor.size(0)
+    h = sensor.size(2)
+    w = sensor.size(3)
+    m = self.multiple
+    ph = (m - h % m) % m
+    pw = (m - w % m) % m
+    base = self.pixel_pinv_image(sensor, phase)
+    start = self.pixel_map_image(self.pixel_hold, sensor, phase)
+    if ph > 0 or pw > 0:
+        base = torch.constant_pad_nd(base, [0, pw, 0, ph])
+        start = torch.constant_pad_nd(start, [0, pw, 0, ph])
+    out = start + self.image.forward(self.with_noise(torch.cat([start, base], 1), noise_sigma))
     return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
 )TS";
 
@@ -307,12 +333,11 @@ class LfnetArchitecture : public NetworkArchitecture {
     const auto& o = net.options();
     LFNET_CHECK_AS(ConfigError, o.colours() == 1, "a colour net (cfa ", o.cfa,
                    ") cannot be exported to TorchScript yet; ", "use its checkpoint");
-    LFNET_CHECK_AS(ConfigError, o.frames == 1, "a net of a time-coded camera (", o.frames,
-                   " sub-frames) cannot be exported to TorchScript yet; use its checkpoint");
     for (const auto& b : net.named_buffers()) builder.buffer(b.key(), b.value());
     auto module = image_layers(net);  // the same module, callable
     const auto& image = module->options();
-    const int64_t channels = o.patch.rows * o.patch.cols + (image.noise_input ? 1 : 0);
+    const int64_t channels =
+        (o.frames > 1 ? 2 : 1) * o.patch.rows * o.patch.cols + (image.noise_input ? 1 : 0);
     const int64_t m = image.multiple();
     // The U-Net has no size-dependent operations, so one trace serves every image size.
     builder.trace(
@@ -321,7 +346,8 @@ class LfnetArchitecture : public NetworkArchitecture {
     builder.attribute("multiple", m);
     builder.attribute("receptive_radius", image.receptive_radius());
     builder.attribute("noise_input", image.noise_input);
-    return std::string(kImageSource) + kWholeImageScriptSource;
+    return std::string(kPixelMapSource) +
+           (o.frames > 1 ? kFramesForwardSource : kStillForwardSource) + kWholeImageScriptSource;
   }
 
   WarmStart warm_start(const LightFieldNetImpl& net, const std::string& name,
