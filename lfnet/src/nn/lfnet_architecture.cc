@@ -47,7 +47,7 @@ def with_noise(self, x: Tensor, noise_sigma: float) -> Tensor:
     return x
 )TS";
 
-constexpr const char* kStillForwardSource = R"TS(
+constexpr const char* kForwardSource = R"TS(
 def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
     self.check_sensor_images(sensor, phase)
     b = sensor.size(0)
@@ -56,29 +56,26 @@ def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0
     m = self.multiple
     ph = (m - h % m) % m
     pw = (m - w % m) % m
-    base = self.pixel_pinv_image(sensor, phase)
+    start, x = self.estimates(sensor, phase)
     if ph > 0 or pw > 0:
-        base = torch.constant_pad_nd(base, [0, pw, 0, ph])
-    out = base + self.image.forward(self.with_noise(base, noise_sigma))
+        start = torch.constant_pad_nd(start, [0, pw, 0, ph])
+        x = torch.constant_pad_nd(x, [0, pw, 0, ph])
+    out = start + self.image.forward(self.with_noise(x, noise_sigma))
     return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
 )TS";
 
-constexpr const char* kFramesForwardSource = R"TS(
-def forward_image(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
-    self.check_sensor_images(sensor, phase)
-    b = sensor.size(0)
-    h = sensor.size(2)
-    w = sensor.size(3)
-    m = self.multiple
-    ph = (m - h % m) % m
-    pw = (m - w % m) % m
+// The estimate the U-Net corrects and what it reads (unet_input): a still net's pseudo-inverse,
+// twice; a time-coded camera's held still estimate, and that beside the pseudo-inverse.
+constexpr const char* kStillEstimatesSource = R"TS(
+def estimates(self, sensor: Tensor, phase: int) -> Tuple[Tensor, Tensor]:
     base = self.pixel_pinv_image(sensor, phase)
+    return base, base
+)TS";
+
+constexpr const char* kFramesEstimatesSource = R"TS(
+def estimates(self, sensor: Tensor, phase: int) -> Tuple[Tensor, Tensor]:
     start = self.pixel_map_image(self.pixel_hold, sensor, phase)
-    if ph > 0 or pw > 0:
-        base = torch.constant_pad_nd(base, [0, pw, 0, ph])
-        start = torch.constant_pad_nd(start, [0, pw, 0, ph])
-    out = start + self.image.forward(self.with_noise(torch.cat([start, base], 1), noise_sigma))
-    return out.narrow(2, 0, h).narrow(3, 0, w).reshape([b, self.patch_shape[0], self.patch_shape[1], h, w])
+    return start, torch.cat([start, self.pixel_pinv_image(sensor, phase)], 1)
 )TS";
 
 // The prefix of the U-Net's parameter names: the network's submodule "image"; its options are
@@ -347,7 +344,8 @@ class LfnetArchitecture : public NetworkArchitecture {
     builder.attribute("receptive_radius", image.receptive_radius());
     builder.attribute("noise_input", image.noise_input);
     return std::string(kPixelMapSource) +
-           (o.frames > 1 ? kFramesForwardSource : kStillForwardSource) + kWholeImageScriptSource;
+           (o.frames > 1 ? kFramesEstimatesSource : kStillEstimatesSource) + kForwardSource +
+           kWholeImageScriptSource;
   }
 
   WarmStart warm_start(const LightFieldNetImpl& net, const std::string& name,
