@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <memory>
 
 #include "lfnet/core/error.h"
 #include "lfnet/core/json.h"
@@ -34,6 +35,27 @@ LightFieldSequence moving_sequence() {
   std::vector<LightField> frames;
   for (int64_t t = 0; t < 4; ++t) frames.emplace_back(torch::roll(lf.data(), {2 * t}, {4}));
   return LightFieldSequence(frames);
+}
+// The exposure-coded ASP camera of configs/video/asp-exposure.json (4 sub-frames).
+std::unique_ptr<lfnet::optics::Phi> exposure_camera() {
+  return lfnet::optics::make_phi(lfnet::optics::PhiSpec::from_json(
+      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json")));
+}
+
+// The options of a small lfnet net of that camera: 4 frames of 5 x 5 views, U-Net `image`.
+lfnet::nn::NetworkOptions video_options(const nlohmann::json& image) {
+  return lfnet::nn::NetworkOptions::from_json(
+      {{"architecture", "lfnet"},
+       {"measurements", 2},
+       {"frames", 4},
+       {"patch", {{"rows", 20}, {"cols", 5}, {"height", 16}, {"width", 16}}},
+       {"image", image}});
+}
+
+// `net` holding one period of `phi`'s per-pixel weights.
+void set_camera(lfnet::nn::LightFieldNet& net, const lfnet::optics::Phi& phi) {
+  const int64_t p = phi.period();
+  net->set_phi(phi.pixel_weights(0, 0, p, p));
 }
 }  // namespace
 
@@ -170,19 +192,11 @@ TEST_CASE("render --lf gives a real light field synthetic motion, said as such",
 
 TEST_CASE("an lfnet net of a time-coded camera starts from the still estimate in every frame",
           "[pipeline][sequence]") {
-  auto spec = lfnet::optics::PhiSpec::from_json(
-      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json"));
-  const auto phi = lfnet::optics::make_phi(spec);
-  auto options = lfnet::nn::NetworkOptions::from_json(
-      {{"architecture", "lfnet"},
-       {"measurements", 2},
-       {"frames", 4},
-       {"patch", {{"rows", 20}, {"cols", 5}, {"height", 16}, {"width", 16}}},
-       {"image", {{"channels", 4}, {"levels", 2}, {"blocks", 1}}}});
+  const auto phi = exposure_camera();
+  auto options = video_options({{"channels", 4}, {"levels", 2}, {"blocks", 1}});
   CHECK(options.to_json().at("frames") == 4);
   lfnet::nn::LightFieldNet net(options);
-  const int64_t p = phi->period();
-  net->set_phi(phi->pixel_weights(0, 0, p, p));
+  set_camera(net, *phi);
   // The base of a still scene is the still camera's pseudo-inverse, the same in every frame.
   const auto lf = test::parallax_light_field(5, 5, 16, 16, 1, -1).data()[0];
   const auto still_scene = lf.repeat({4, 1, 1, 1});
@@ -215,9 +229,7 @@ TEST_CASE("an lfnet net of a time-coded camera starts from the still estimate in
 
 TEST_CASE("an lfnet net of a time-coded camera starts as a still net applied as if still",
           "[pipeline][sequence]") {
-  auto spec = lfnet::optics::PhiSpec::from_json(
-      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json"));
-  const auto phi = lfnet::optics::make_phi(spec);
+  const auto phi = exposure_camera();
   const auto still_phi = lfnet::optics::still_equivalent(*phi);
   const nlohmann::json image = {
       {"channels", 4}, {"levels", 2}, {"blocks", 1}, {"noise_input", true}};
@@ -226,15 +238,11 @@ TEST_CASE("an lfnet net of a time-coded camera starts as a still net applied as 
        {"measurements", 2},
        {"patch", {{"rows", 5}, {"cols", 5}, {"height", 16}, {"width", 16}}},
        {"image", image}});
-  auto options = still_options;
-  options.frames = 4;
-  options.patch.rows = 20;
-  const int64_t p = phi->period();
   lfnet::nn::LightFieldNet still(still_options);
-  still->set_phi(still_phi->pixel_weights(0, 0, p, p));
+  set_camera(still, *still_phi);
   test::randomise_image_net(still, 11);
-  lfnet::nn::LightFieldNet video(options);
-  video->set_phi(phi->pixel_weights(0, 0, p, p));
+  lfnet::nn::LightFieldNet video(video_options(image));
+  set_camera(video, *phi);
   test::randomise_image_net(video, 12);
   lfnet::nn::WarmStartSource from;
   from.network = still_options.to_json();
@@ -275,18 +283,10 @@ TEST_CASE("an lfnet net of a time-coded camera starts as a still net applied as 
 
 TEST_CASE("an lfnet net of a time-coded camera exports: the file reconstructs as the checkpoint",
           "[pipeline][sequence][export]") {
-  auto spec = lfnet::optics::PhiSpec::from_json(
-      lfnet::read_json_file(std::string(LFNET_SOURCE_DIR) + "/configs/video/asp-exposure.json"));
-  const auto phi = lfnet::optics::make_phi(spec);
-  auto options = lfnet::nn::NetworkOptions::from_json(
-      {{"architecture", "lfnet"},
-       {"measurements", 2},
-       {"frames", 4},
-       {"patch", {{"rows", 20}, {"cols", 5}, {"height", 16}, {"width", 16}}},
-       {"image", {{"channels", 4}, {"levels", 2}, {"blocks", 1}, {"noise_input", true}}}});
-  lfnet::nn::LightFieldNet net(options);
-  const int64_t p = phi->period();
-  net->set_phi(phi->pixel_weights(0, 0, p, p));
+  const auto phi = exposure_camera();
+  lfnet::nn::LightFieldNet net(
+      video_options({{"channels", 4}, {"levels", 2}, {"blocks", 1}, {"noise_input", true}}));
+  set_camera(net, *phi);
   test::randomise_image_net(net, 13);
   test::TempDir tmp;
   test::save_net(net, *phi, "joint_scratch", tmp / "video.ckpt");
