@@ -458,6 +458,43 @@ TEST_CASE("noise in the views is in the truth and the measurements, on training 
   CHECK(torch::equal(again.next_train().target, b.target));
 }
 
+TEST_CASE("dim exposures scale a share of the training crops by a gain in the range", "[data]") {
+  const LightField flat(torch::full({1, 5, 5, 60, 60}, 0.5f));
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.dark_fraction = 0.5;
+  o.dark_gain_range = {0.2, 0.6};
+  data::PatchDataset ds({flat}, *phi, o, 32);
+  ds.start_epoch(0, 200);
+  const auto b = ds.next_train();
+  const auto level = b.target.flatten(1).mean(1);  // per patch
+  const auto dark = level < 0.49;
+  const double share = dark.to(torch::kFloat32).mean().item<double>();
+  CHECK(share > 0.35);
+  CHECK(share < 0.65);
+  CHECK(level.min().item<double>() >= 0.5 * 0.2 - 1e-6);
+  CHECK(level.masked_select(dark).max().item<double>() <= 0.5 * 0.6 + 1e-6);
+  CHECK(level.masked_select(~dark).min().item<double>() == Approx(0.5));
+  // The measurements are of the dimmed views: measurement over level is the same for all.
+  const auto ratio = b.y.flatten(1).mean(1) / level;
+  CHECK(torch::allclose(ratio, ratio.mean().expand_as(ratio), 1e-4, 1e-6));
+  for (const auto& v : ds.validation()) CHECK(v.target.mean().item<double>() == Approx(0.5));
+  // The crops are those a config without the option draws, each scaled by its own gain.
+  torch::manual_seed(3);
+  const LightField textured(torch::rand({1, 5, 5, 60, 60}) * 0.5 + 0.25);
+  data::PatchDataset dimmed({textured}, *phi, o, 32), plain({textured}, *phi, small_options(), 32);
+  dimmed.start_epoch(0, 64);
+  plain.start_epoch(0, 64);
+  const auto d = dimmed.next_train().target.flatten(1), p = plain.next_train().target.flatten(1);
+  const auto gain = d.sum(1) / p.sum(1);
+  CHECK(torch::allclose(d, p * gain.unsqueeze(1), 1e-4, 1e-6));
+  CHECK(gain.min().item<double>() < 0.6);
+  o.dark_gain_range = {0.0, 0.5};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("dark_gain_range"));
+  o.dark_gain_range = {0.5, 0.2};
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("dark_gain_range"));
+}
+
 TEST_CASE("correlated view noise is shared by neighbouring views and by the colours", "[data]") {
   const LightField flat(torch::full({3, 5, 5, 200, 60}, 0.5f));
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));

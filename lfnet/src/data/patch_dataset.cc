@@ -112,6 +112,10 @@ void DatasetOptions::validate() const {
   for (int64_t step : angular_steps) {
     if (step < 1 || step > 8) throw ConfigError("angular_steps must lie in 1..8");
   }
+  if (dark_gain_range.size() != 2 || !(dark_gain_range[0] > 0) ||
+      !(dark_gain_range[0] <= dark_gain_range[1]) || !(dark_gain_range[1] <= 1)) {
+    throw ConfigError("dark_gain_range must be [lo, hi] with 0 < lo <= hi <= 1");
+  }
   for (double j : {jitter_gamma, jitter_contrast, jitter_brightness}) {
     if (!(std::isfinite(j) && j >= 0 && j <= 1)) {
       throw ConfigError("jitter_gamma, jitter_contrast and jitter_brightness must lie in [0, 1]");
@@ -245,7 +249,8 @@ PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
           part(calibration),
           part(placement),
           part(view_sigma),
-          part(view_correlated)};
+          part(view_correlated),
+          part(gain)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
@@ -353,6 +358,16 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
       d.view_correlated.push_back(correlated ? 1.0f : 0.0f);
     }
   }
+  // Dim exposures last of all, so that configs without them draw what they always drew.
+  if (!validation && options_.dark_fraction > 0) {
+    const double log_lo = std::log(options_.dark_gain_range[0]);
+    const double log_hi = std::log(options_.dark_gain_range[1]);
+    for (int64_t i = 0; i < count; ++i) {
+      const bool dark = 0.5 * (unit(rng) + 1.0) < options_.dark_fraction;
+      const double gain = std::exp(log_lo + (log_hi - log_lo) * 0.5 * (unit(rng) + 1.0));
+      d.gain.push_back(dark ? static_cast<float>(gain) : 1.0f);
+    }
+  }
   return d;
 }
 
@@ -376,6 +391,7 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
       const auto mean = p.mean();
       p = ((p - mean) * d.contrast[i] + mean + d.brightness[i]).clamp(0.0, 1.0);
     }
+    if (!d.gain.empty() && d.gain[i] != 1.0f) p = p * d.gain[i];
     if (!d.view_sigma.empty() && d.view_sigma[i] > 0) {
       auto gen = torch::make_generator<at::CPUGeneratorImpl>(
           noise_seed ^ (0x766965776eULL + static_cast<uint64_t>(i)));

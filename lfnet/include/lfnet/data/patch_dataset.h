@@ -84,6 +84,11 @@ struct DatasetOptions {
   // still splits into training and validation rows of whole patches): f times finer texture at
   // 1/f the disparity. {1}: as loaded.
   std::vector<int64_t> downscales = {1};
+  // Dim exposures: this share of training crops is multiplied by a gain drawn log-uniformly in
+  // `dark_gain_range`, after the photometric jitter and before any view noise, so the noise
+  // stands higher against the signal (a dark, flat scene). 0: off.
+  double dark_fraction = 0.0;
+  std::vector<double> dark_gain_range = {0.2, 0.6};
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
   // A colour net's Bayer pattern (network.cfa, not a dataset key): the patches keep their three
@@ -123,6 +128,8 @@ struct DatasetOptions {
     f("view_noise_angular", view_noise_angular);
     f("view_noise_spatial", view_noise_spatial);
     f("downscales", downscales);
+    f("dark_fraction", dark_fraction, Range::closed(0, 1));
+    f("dark_gain_range", dark_gain_range);
     f("seed", seed);
     f("effects", effects);
   }
@@ -171,6 +178,7 @@ class PatchDataset : public train::BatchSource {
     std::vector<optics::SensorPlacement> placement;
     std::vector<float> view_sigma;       // per patch with view_noise_range (0: clean), else empty
     std::vector<float> view_correlated;  // per patch with view_noise_range: 1 correlated noise
+    std::vector<float> gain;             // per patch with dark_fraction (1: as is), else empty
     Draw slice(int64_t begin, int64_t end) const;
   };
   // An angular window: views u0, u0 + step, ... (U of them), and likewise v.
