@@ -18,6 +18,8 @@
 #include "lfnet/pipeline/render.h"
 #include "lfnet/pipeline/simulate.h"
 #include "lfnet/recon/fully_convolutional.h"
+#include "lfnet/train/checkpoint.h"
+#include "lfnet/train/trainer.h"
 #include "support/small_nets.h"
 #include "support/test_support.h"
 
@@ -246,20 +248,12 @@ TEST_CASE("an lfnet net of a time-coded camera starts as a still net applied as 
   test::randomise_image_net(video, 12);
   lfnet::nn::WarmStartSource from;
   from.network = still_options.to_json();
-  int64_t mapped = 0;
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& param : video->named_parameters()) {
-      const auto src = still->named_parameters()[param.key()];
-      auto dst = param.value();
-      const auto how = video->architecture().warm_start(*video, param.key(), src, dst, from);
-      INFO(param.key());
-      CHECK((how == lfnet::nn::WarmStart::kCopied || how == lfnet::nn::WarmStart::kMapped));
-      if (how == lfnet::nn::WarmStart::kMapped) ++mapped;
-      if (how == lfnet::nn::WarmStart::kCopied) dst.copy_(src);
-    }
-  }
-  CHECK(mapped == 3);  // the input's weights, the output's weights and bias
+  const auto report =
+      lfnet::train::warm_start_net(*video, lfnet::train::module_state(*still), from, "", "still");
+  CHECK(report.mapped.size() == 3);  // the input's weights, the output's weights and bias
+  CHECK(report.widened.empty());
+  CHECK(report.reinitialised.empty());
+  CHECK(report.copied.size() + 3 == video->parameters().size());
   // On a still scene the video net is the still net, in every frame; on a moving one it is not.
   torch::NoGradGuard no_grad;
   still->eval();

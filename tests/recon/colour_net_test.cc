@@ -8,6 +8,8 @@
 #include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/fully_convolutional.h"
+#include "lfnet/train/checkpoint.h"
+#include "lfnet/train/trainer.h"
 #include "support/small_nets.h"
 #include "support/test_support.h"
 
@@ -151,20 +153,12 @@ TEST_CASE("a colour net starts from a grey one: the grey net's correction of the
   test::randomise_image_net(colour, 6);
   nn::WarmStartSource from;
   from.network = grey_options.to_json();
-  int64_t coloured = 0;
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& p : colour->named_parameters()) {
-      const auto src = grey->named_parameters()[p.key()];
-      auto dst = p.value();
-      const auto how = colour->architecture().warm_start(*colour, p.key(), src, dst, from);
-      INFO(p.key());
-      CHECK((how == nn::WarmStart::kCopied || how == nn::WarmStart::kWidened));
-      if (how == nn::WarmStart::kWidened) ++coloured;
-      if (how == nn::WarmStart::kCopied) dst.copy_(src);
-    }
-  }
-  CHECK(coloured == 3);  // the input's weights, the output's weights and bias
+  const auto report =
+      train::warm_start_net(*colour, train::module_state(*grey), from, "", "the grey net");
+  CHECK(report.widened.size() == 3);  // the input's weights, the output's weights and bias
+  CHECK(report.mapped.empty());
+  CHECK(report.reinitialised.empty());
+  CHECK(report.copied.size() + 3 == colour->parameters().size());
   // Three equal colours (their luma is that colour) come out as the grey net's output, thrice.
   const int64_t views = phi->rows() * phi->cols();
   auto gen = torch::make_generator<at::CPUGeneratorImpl>(8);

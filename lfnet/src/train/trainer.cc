@@ -611,6 +611,51 @@ std::vector<std::string> Trainer::start_code_from(const TensorMap& model, const 
   return copied;
 }
 
+InitReport warm_start_net(nn::LightFieldNetImpl& net, const TensorMap& model,
+                          const nn::WarmStartSource& from, const std::string& prefix,
+                          const std::string& what) {
+  const auto& arch = net.architecture();
+  InitReport report;
+  torch::NoGradGuard no_grad;
+  for (auto& p : net.named_parameters()) {
+    const std::string& name = p.key();
+    if (name.rfind(prefix, 0) != 0) continue;
+    auto it = model.find(name);
+    if (it == model.end()) {
+      report.reinitialised.push_back(name);
+      continue;
+    }
+    const auto& src = it->second;
+    switch (arch.warm_start(net, name, src, p.value(), from)) {
+      case nn::WarmStart::kCopied:
+        report.copied.push_back(name);
+        break;
+      case nn::WarmStart::kMapped:
+        report.mapped.push_back(name);
+        break;
+      case nn::WarmStart::kWidened:
+        report.widened.push_back(name);
+        break;
+      case nn::WarmStart::kReinitialised:
+        report.reinitialised.push_back(name);
+        break;
+      case nn::WarmStart::kMismatch: {
+        std::ostringstream m;
+        m << what << ": " << name << " is " << src.sizes() << " there but " << p.value().sizes()
+          << " here; finetuning needs the same architecture apart from the autoencoder's "
+             "first layer";
+        throw CheckpointError(m.str());
+      }
+    }
+  }
+  for (const auto& name : arch.finish_warm_start(net, from)) {
+    auto& re = report.reinitialised;
+    re.erase(std::remove(re.begin(), re.end(), name), re.end());
+    report.deepened.push_back(name);
+  }
+  return report;
+}
+
 InitReport Trainer::init_from(const std::string& path, const std::string& prefix) {
   const std::string what = "checkpoint " + path;
   auto ck = load_checkpoint(path);
@@ -621,53 +666,13 @@ InitReport Trainer::init_from(const std::string& path, const std::string& prefix
   from.phi_changed = ck.phi != run_.phi || !old_phi.defined() ||
                      old_phi.sizes() != net_->phi.sizes() ||
                      !torch::equal(old_phi, net_->phi.to(torch::kCPU));
-  const auto& arch = net_->architecture();
-  InitReport report;
-  {
-    torch::NoGradGuard no_grad;
-    for (auto& p : net_->named_parameters()) {
-      const std::string& name = p.key();
-      if (name.rfind(prefix, 0) != 0) continue;
-      auto it = ck.model.find(name);
-      if (it == ck.model.end()) {
-        report.reinitialised.push_back(name);
-        continue;
-      }
-      const auto& src = it->second;
-      switch (arch.warm_start(*net_, name, src, p.value(), from)) {
-        case nn::WarmStart::kCopied:
-          report.copied.push_back(name);
-          break;
-        case nn::WarmStart::kMapped:
-          report.mapped.push_back(name);
-          break;
-        case nn::WarmStart::kWidened:
-          report.widened.push_back(name);
-          break;
-        case nn::WarmStart::kReinitialised:
-          report.reinitialised.push_back(name);
-          break;
-        case nn::WarmStart::kMismatch: {
-          std::ostringstream m;
-          m << what << ": " << name << " is " << src.sizes() << " there but " << p.value().sizes()
-            << " here; finetuning needs the same architecture apart from the autoencoder's "
-               "first layer";
-          throw CheckpointError(m.str());
-        }
-      }
-    }
-  }
+  auto report = warm_start_net(*net_, ck.model, from, prefix, what);
   if (code_) {
     // A model that learned a code of this family and shape hands it on (the code's own Adam
     // starts afresh, like the net's).
     for (auto& name : start_code_from(ck.model, what, /*strict=*/false)) {
       report.copied.push_back(std::move(name));
     }
-  }
-  for (const auto& name : arch.finish_warm_start(*net_, from)) {
-    auto& re = report.reinitialised;
-    re.erase(std::remove(re.begin(), re.end(), name), re.end());
-    report.deepened.push_back(name);
   }
   if (report.copied.empty() && report.mapped.empty() && report.widened.empty()) {
     throw CheckpointError(what + " shares no parameters" +

@@ -217,6 +217,15 @@ struct InitReport {
   nlohmann::json to_json() const;
 };
 
+// train --init's start of `net` from a checkpoint's tensors `model` (its network and Phi in
+// `from`) for the parameters whose names start with `prefix`: each is taken the way the net's
+// architecture says (nn::NetworkArchitecture::warm_start), then finish_warm_start adjusts what
+// it started. Throws CheckpointError naming `what` for a tensor of another shape. The caller
+// checks that something was taken.
+InitReport warm_start_net(nn::LightFieldNetImpl& net, const TensorMap& model,
+                          const nn::WarmStartSource& from, const std::string& prefix,
+                          const std::string& what);
+
 // Trains one LightFieldNet for one stage; owns its Adam optimizer and training state.
 class Trainer {
  public:
