@@ -151,13 +151,18 @@ nlohmann::json sweep_spec(const Section& whole, const nlohmann::json& sweep) {
     series[label]["x"].push_back(x);
     series[label]["y"].push_back(y);
   };
-  // Other settings that vary name the series (e.g. "net, mode per_patch").
+  // Other settings that vary within one method's records name its series (e.g. "net, mode
+  // per_patch"); one that only tells methods apart (a patch method's stride beside a
+  // whole-image net's) does not.
   std::vector<std::string> varying;
   for (const auto& k : kSettings) {
     if (k == key || k == "method" || k == "variant") continue;
-    std::set<std::string> values;
-    for (const auto& r : s.records) values.insert(setting(r, k));
-    if (values.size() > 1) varying.push_back(k);
+    std::map<std::string, std::set<std::string>> values;  // per method label
+    for (const auto& r : s.records) values[method_label(r)].insert(setting(r, k));
+    if (std::any_of(values.begin(), values.end(),
+                    [](const auto& v) { return v.second.size() > 1; })) {
+      varying.push_back(k);
+    }
   }
   auto rows = s.records;
   std::stable_sort(rows.begin(), rows.end(), [&](const auto& x, const auto& y) {
