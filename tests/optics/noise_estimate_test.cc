@@ -3,10 +3,12 @@
 #include "lfnet/optics/noise_estimate.h"
 
 #include <catch2/catch.hpp>
+#include <torch/torch.h>
 
 #include <cmath>
 
 #include "lfnet/core/error.h"
+#include "lfnet/core/view_noise.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/optics/sensor.h"
@@ -81,6 +83,39 @@ TEST_CASE("under shot and read noise the estimate is the sigma at the median sig
     const double want = e.equivalent_sigma(clean.median().item<double>());
     CHECK(std::abs(estimate_noise_sigma(*phi, noisy) - want) <= 0.1 * want);
   }
+}
+
+TEST_CASE("white noise is the sensor's; noise correlated over pixels was in the scene",
+          "[optics][noise]") {
+  using lfnet::optics::white_noise_share;
+  const auto lf = scene();
+  for (const char* spec : {"asp:2", "mask:2"}) {
+    const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(spec));
+    INFO(spec);
+    for (double sigma : {0.01, 0.05}) {
+      INFO("sensor noise of sigma " << sigma);
+      const auto noisy = lfnet::optics::simulate_sensor(
+          *phi, lf, effects(("{\"gaussian\": {\"sigma\": " + std::to_string(sigma) + "}}").c_str()),
+          7);
+      CHECK(white_noise_share(*phi, noisy) > 0.95);
+    }
+    // Noise of sigma 0.03 in the views, correlated over neighbouring views and pixels as a
+    // plenoptic camera's: the sensor image carries it, but not as white noise.
+    auto generator = torch::make_generator<at::CPUGeneratorImpl>(5);
+    const auto noise =
+        lfnet::view_noise({1, 5, 5, lf.size(2), lf.size(3)}, 1, 1, generator)[0];
+    const auto carried = lfnet::optics::simulate_sensor(*phi, lf + 0.03 * noise);
+    CHECK(estimate_noise_sigma(*phi, carried) > 0.003);
+    CHECK(white_noise_share(*phi, carried) < 0.5);
+    // Views whose noise is independent from pixel to pixel give the sensor white noise: the same
+    // as the sensor's own, and told apart from it by nothing in the image.
+    const auto independent =
+        lfnet::view_noise({1, 5, 5, lf.size(2), lf.size(3)}, 0, 0, generator)[0];
+    CHECK(white_noise_share(*phi, lfnet::optics::simulate_sensor(*phi, lf + 0.03 * independent)) >
+          0.8);
+  }
+  // Too small for three scales: all of it counts.
+  CHECK(white_noise_share(torch::rand({2, 6, 40}), torch::ones({2, 1, 1})) == 1.0);
 }
 
 TEST_CASE("noise estimation refuses what is no sensor image", "[optics][noise]") {

@@ -21,7 +21,8 @@ struct HaarCoefficients {
   torch::Tensor signal;      // (K,) float64
 };
 
-HaarCoefficients haar_coefficients(const torch::Tensor& sensor, const torch::Tensor& white) {
+// The white response at every pixel of a sensor image: the period's tile (N, T, T) repeated.
+torch::Tensor response_image(const torch::Tensor& sensor, const torch::Tensor& white) {
   LFNET_CHECK_AS(ConfigError, sensor.dim() == 3, "a sensor image is (N, H, W), not of ",
                  sensor.dim(), " dimensions");
   LFNET_CHECK_AS(ConfigError,
@@ -29,15 +30,28 @@ HaarCoefficients haar_coefficients(const torch::Tensor& sensor, const torch::Ten
                      white.size(1) == white.size(2) && white.size(1) >= 1,
                  "the white response must be (N, T, T) for a sensor image of ", sensor.size(0),
                  " measurements");
-  const int64_t h = sensor.size(1) / 2 * 2, w = sensor.size(2) / 2 * 2, t = white.size(1);
+  const int64_t h = sensor.size(1), w = sensor.size(2), t = white.size(1);
+  return white.to(torch::kFloat64)
+      .repeat({1, (h + t - 1) / t, (w + t - 1) / t})
+      .slice(1, 0, h)
+      .slice(2, 0, w);
+}
+
+// Pixels whose white response is below a fifth of the mean carry too much noise to be used.
+double usable_floor(const torch::Tensor& white) {
+  return 0.2 * white.to(torch::kFloat64).mean().item<double>();
+}
+
+// `sensor` and its white response `response` (both (N, H, W)), each pixel carrying noise of the
+// same sigma; pixels whose response is not above `floor` are left out.
+HaarCoefficients haar_coefficients(const torch::Tensor& sensor, const torch::Tensor& response_in,
+                                   double floor) {
+  const int64_t h = sensor.size(1) / 2 * 2, w = sensor.size(2) / 2 * 2;
   LFNET_CHECK_AS(ConfigError, h >= 2 && w >= 2, "a sensor image of ", sensor.size(1), " x ",
                  sensor.size(2), " pixels is too small to estimate its noise");
-  // The white response at every pixel: the period's tile repeated over the image.
-  const auto tile = white.to(torch::kFloat64);
-  const auto response =
-      tile.repeat({1, (h + t - 1) / t, (w + t - 1) / t}).slice(1, 0, h).slice(2, 0, w);
+  const auto response = response_in.slice(1, 0, h).slice(2, 0, w);
   const auto y = sensor.to(torch::kFloat64).slice(1, 0, h).slice(2, 0, w);
-  const auto usable = response > 0.2 * tile.mean();
+  const auto usable = response > floor;
   const auto ratio = y / response.clamp_min(1e-12);
   // Per pixel, the noise's factor after the division; per 2 x 2 block, the diagonal Haar
   // coefficient (a - b - c + d) / 2 and its noise sqrt(sum of the squared factors) / 2.
@@ -65,17 +79,59 @@ HaarCoefficients haar_coefficients(const torch::Tensor& sensor, const torch::Ten
 // The median of |z| of a zero-mean Gaussian is 0.6745 sigma.
 constexpr double kMadToSigma = 1.0 / 0.6744897501960817;
 
+// White noise reads the same sigma at scales 1 and 2 to within sampling (a few % on a sensor
+// image of 100 000 pixels); a sigma that grows by more than this is scene content.
+constexpr double kWhiteGrowth = 1.2;
+
 // The white response of a local Phi: (N, U, V, T, T) summed over the views.
 torch::Tensor white_response(const Phi& phi) {
   const int64_t t = phi.period();
   return phi.pixel_weights(0, 0, t, t).sum({1, 2});
 }
 
+// A sensor image's 2 x 2 blocks summed: (N, H / 2, W / 2).
+torch::Tensor bin2(const torch::Tensor& x) {
+  const auto even = x.slice(1, 0, x.size(1) / 2 * 2).slice(2, 0, x.size(2) / 2 * 2);
+  return even.slice(1, 0, even.size(1), 2).slice(2, 0, even.size(2), 2) +
+         even.slice(1, 0, even.size(1), 2).slice(2, 1, even.size(2), 2) +
+         even.slice(1, 1, even.size(1), 2).slice(2, 0, even.size(2), 2) +
+         even.slice(1, 1, even.size(1), 2).slice(2, 1, even.size(2), 2);
+}
+
 }  // namespace
 
 double estimate_noise_sigma(const torch::Tensor& sensor, const torch::Tensor& white) {
-  const auto c = haar_coefficients(sensor, white);
+  const auto c = haar_coefficients(sensor, response_image(sensor, white), usable_floor(white));
   return c.normalised.abs().median().item<double>() * kMadToSigma;
+}
+
+double white_noise_share(const torch::Tensor& sensor, const torch::Tensor& white) {
+  auto y = sensor.to(torch::kFloat64);
+  auto response = response_image(sensor, white);
+  double floor = usable_floor(white);
+  if (y.size(1) < 8 || y.size(2) < 8) return 1.0;  // too small for three scales
+  // The estimate at scales 1, 2 and 4: a block of 2^j x 2^j pixels summed carries 2^j times
+  // the noise of one, so white noise reads the same sigma at every scale.
+  double variance[3];
+  for (int j = 0; j < 3; ++j) {
+    const auto c = haar_coefficients(y, response, floor);
+    const double sigma = c.normalised.abs().median().item<double>() * kMadToSigma / (1 << j);
+    variance[j] = sigma * sigma;
+    y = bin2(y);
+    response = bin2(response);
+    floor *= 4;
+  }
+  if (!(variance[0] > 0) || variance[1] <= kWhiteGrowth * kWhiteGrowth * variance[0]) return 1.0;
+  // Scene content grows by a factor g per octave (g = d2 / d1, at least 2): its part of the
+  // finest scale's variance is d1 / (g - 1).
+  const double d1 = variance[1] - variance[0], d2 = variance[2] - variance[1];
+  const double growth = std::max(d2 / d1, 2.0);
+  const double white_variance = std::max(variance[0] - d1 / (growth - 1), 0.0);
+  return std::sqrt(white_variance / variance[0]);
+}
+
+double white_noise_share(const Phi& phi, const torch::Tensor& sensor) {
+  return white_noise_share(sensor, white_response(phi));
 }
 
 double ShotReadEstimate::sigma_at(double signal) const {
@@ -85,7 +141,7 @@ double ShotReadEstimate::sigma_at(double signal) const {
 ShotReadEstimate estimate_shot_read(const torch::Tensor& sensor, const torch::Tensor& white,
                                     int64_t bins) {
   LFNET_CHECK_AS(ConfigError, bins >= 2, "estimate_shot_read needs at least 2 signal bins");
-  const auto c = haar_coefficients(sensor, white);
+  const auto c = haar_coefficients(sensor, response_image(sensor, white), usable_floor(white));
   const int64_t k = c.normalised.numel();
   LFNET_CHECK_AS(ConfigError, k >= 16 * bins, "a sensor image of ", sensor.size(1), " x ",
                  sensor.size(2), " pixels is too small to fit signal-dependent noise");

@@ -25,6 +25,17 @@ double estimate_noise_sigma(const torch::Tensor& sensor, const torch::Tensor& wh
 // The same for a local Phi (phi.h, is_local): its white response from pixel_weights.
 double estimate_noise_sigma(const Phi& phi, const torch::Tensor& sensor);
 
+// The share of estimate_noise_sigma that is white noise, independent from pixel to pixel as a
+// sensor's own noise is, in [0, 1]. Scene detail finer than a pixel, and noise the scene's views
+// carry (a plenoptic camera's sub-aperture images: correlated over neighbouring pixels), read as
+// noise too, but grow from one scale to the next where white noise does not. The estimate at
+// scales 1, 2 and 4 (the image's 2^j x 2^j blocks summed) gives the variance v_j; what v_1
+// adds to v_0 is scene content, which grows by g = (v_2 - v_1) / (v_1 - v_0) per octave (at
+// least 2), so that its part of v_0 is (v_1 - v_0) / (g - 1). 1 when the sigma grows by less
+// than 20 % from scale 1 to 2 (white within sampling) or the image is under 8 x 8 pixels.
+double white_noise_share(const torch::Tensor& sensor, const torch::Tensor& white);
+double white_noise_share(const Phi& phi, const torch::Tensor& sensor);
+
 // Signal-dependent noise: variance = shot * signal + read, signal relative to white. Photon
 // shot noise at photons_at_white P gives shot = 1 / P; read noise of e electrons and Gaussian
 // noise of sigma give read = (e / P)^2 + sigma^2 (optics/sensor.h).
