@@ -58,6 +58,10 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
   r.net = c.net;
   r.noisy_net = c.noisy_net;
   r.switch_sigma = c.switch_sigma;
+  if (!c.noisy_net.is_empty()) {
+    p.switch_choice = std::make_shared<recon::SwitchChoice>();
+    r.switch_choice = p.switch_choice;
+  }
   r.script = c.script.get();
   r.self_ensemble = c.self_ensemble;
   r.self_ensemble_passes = c.self_ensemble_passes;
@@ -97,6 +101,12 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
                  "' is not a whole-image network (the lfnet architecture's net)");
   p.options = m.options_used(r);
   return p;
+}
+
+void record_switch_choice(nlohmann::json& record, const recon::SwitchChoice& choice) {
+  record["noise_switch_choice"] = {{"member", choice.noisy ? "noisy" : "quiet"},
+                                   {"white_share", choice.white_share},
+                                   {"sigma", choice.sigma}};
 }
 
 void check_method_options(const nlohmann::json& by_method, const std::vector<std::string>& methods,
@@ -246,6 +256,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
   if (prepared.calibration) {
     record_estimated_camera_error(result.record, *prepared.calibration, label + ": ");
   }
+  if (prepared.switch_choice) record_switch_choice(result.record, *prepared.switch_choice);
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
     if (report->unconverged > 0) {

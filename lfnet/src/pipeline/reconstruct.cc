@@ -211,6 +211,7 @@ class AcquisitionReconstruction {
     image_ = prepared.image;
     options_used_ = prepared.options;
     calibration_ = prepared.calibration;
+    switch_choice_ = prepared.switch_choice;
     LFNET_CHECK_AS(ConfigError, !(image_ && full_),
                    "--cnn-mode full applies to the paper's architecture; a model of a "
                    "whole-image architecture always reconstructs the whole image");
@@ -349,6 +350,7 @@ class AcquisitionReconstruction {
     }
     if (!options_used_.empty()) r.record["method_options"] = options_used_;
     if (calibration_) record_estimated_camera_error(r.record, *calibration_, "");
+    if (switch_choice_) record_switch_choice(r.record, *switch_choice_);
     if (noise_aware_) {
       r.record["noise_sigma"] = noise_told_ ? nlohmann::json(told_sigma_) : estimated_;
     }
@@ -379,6 +381,7 @@ class AcquisitionReconstruction {
   bool full_ = false;
   nlohmann::json options_used_;                            // the method's options, complete
   std::shared_ptr<optics::CalibrationError> calibration_;  // --self-calibrate's estimate
+  std::shared_ptr<recon::SwitchChoice> switch_choice_;     // a noise switch's member
   bool network_method_ = false;
   bool noise_aware_ = false, noise_told_ = false;
   double told_sigma_ = 0;

@@ -5,6 +5,7 @@
 #include "lfnet/dict/omp.h"
 #include "lfnet/dict/sparse_coding.h"
 #include "lfnet/optics/measure.h"
+#include "lfnet/optics/noise_estimate.h"
 #include "lfnet/recon/fully_convolutional.h"
 #include "lfnet/recon/self_calibration.h"
 
@@ -113,11 +114,18 @@ class NetworkMethod : public Method {
       };
     };
     if (r.noisy_net.is_empty()) return solver_of(r.net);
-    // A noise switch: the sigma the image is told (or estimated) picks the net.
+    // A noise switch: the part of the sigma the image is told (or estimated) that is the
+    // sensor's own, white noise picks the net; scene detail and noise the scene's views carry
+    // are the quiet net's to keep (docs/models.md, "One model for any noise").
     auto quiet = solver_of(r.net), noisy = solver_of(r.noisy_net);
     const double from = r.switch_sigma;
-    return [quiet, noisy, from](const torch::Tensor& sensor, double noise_sigma) {
-      return noise_sigma < from ? quiet(sensor, noise_sigma) : noisy(sensor, noise_sigma);
+    const optics::Phi* phi = r.phi;
+    auto choice = r.switch_choice;
+    return [quiet, noisy, from, phi, choice](const torch::Tensor& sensor, double noise_sigma) {
+      const double share = noise_sigma < from ? 1.0 : optics::white_noise_share(*phi, sensor);
+      const bool loud = noise_sigma * share >= from;
+      if (choice) *choice = {loud, share, noise_sigma * share};
+      return loud ? noisy(sensor, noise_sigma) : quiet(sensor, noise_sigma);
     };
   }
   double patch_flops(const MethodResources& r) const override {

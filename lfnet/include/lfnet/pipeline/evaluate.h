@@ -60,7 +60,13 @@ struct PreparedMethod {
   std::shared_ptr<ModelCache> files;            // a dictionary read without the context's cache
   // With self-calibration: the camera error estimated from the last sensor image.
   std::shared_ptr<optics::CalibrationError> calibration;
+  // With a noise switch: which member reconstructed the last sensor image, and why.
+  std::shared_ptr<recon::SwitchChoice> switch_choice;
 };
+
+// A noise switch's choice (PreparedMethod::switch_choice) into `record`, as
+// record["noise_switch_choice"]: {"member": "quiet" or "noisy", "white_share", "sigma"}.
+void record_switch_choice(nlohmann::json& record, const recon::SwitchChoice& choice);
 
 // The method `method` with the context's resources, its options checked: the one place that
 // turns a MethodContext into recon::MethodResources. `patch_h` x `patch_w`: the patch of patch

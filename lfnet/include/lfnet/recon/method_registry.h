@@ -30,6 +30,13 @@ enum class MethodNeeds {
 };
 
 // What a method's solver may use; the caller fills in what the method needs.
+// A noise switch's choice for the last sensor image (MethodResources::switch_choice).
+struct SwitchChoice {
+  bool noisy = false;        // the noise-aware member ran
+  double white_share = 1.0;  // optics::white_noise_share of the image (1: not needed)
+  double sigma = 0.0;        // the sigma told (or estimated) times white_share: what decided
+};
+
 struct MethodResources {
   const optics::Phi* phi = nullptr;
   int64_t patch_h = 9, patch_w = 9;
@@ -37,6 +44,8 @@ struct MethodResources {
   // with a noise switch (pipeline::ModelFile): the whole-image net for sigmas >= switch_sigma
   nn::LightFieldNet noisy_net{nullptr};
   double switch_sigma = 0;
+  // A noise switch's choice for each sensor image goes here (optional).
+  std::shared_ptr<SwitchChoice> switch_choice;
   const nn::ScriptedNetwork* script = nullptr;   // or an exported one (used when set)
   const dict::Dictionary* dictionary = nullptr;  // kDictionary
   // The method's options as given (--method-options; docs/methods.md "Method options"),
