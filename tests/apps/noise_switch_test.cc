@@ -100,6 +100,7 @@ TEST_CASE("a noise switch that cannot work is one clear error", "[app]") {
       {with("noisy", kModels + "asp-n2.ckpt"), "not of a whole-image architecture"},
       {with("noisy", kModels + "lfnet-asp-n2-bayer-blend.ckpt"), "reconstruct different colours"},
       {with("switch_sigma", -1), "$.switch_sigma: must be a finite sigma > 0"},
+      {with("exposure_target", 2), "$.exposure_target: must be an exposure in [0, 1]"},
       {with("version", 2), "$.version: this lfnet reads version 1"},
       {with("colour", true), "colour"},
   };
@@ -121,4 +122,42 @@ TEST_CASE("a noise switch that cannot work is one clear error", "[app]") {
   CHECK(run_command(lfnet + "export --model " + path + " --out " + (tmp / "x.pt"), out) != 0);
   CHECK(out.find("export each of them") != std::string::npos);
   CHECK_FALSE(fs::exists(tmp / "x.pt"));
+}
+
+TEST_CASE("a noise switch brightens a dim sensor image to its exposure target", "[app][slow]") {
+  lfnet::test::TempDir tmp;
+  std::string out;
+  const std::string lfnet = lfnet_binary() + " --threads 2 ";
+  // A random scene at a third of its brightness, and the same switch without the target.
+  std::ofstream(tmp / "set.json") << R"({"name": "dim", "role": "validation", "light_fields": [
+      {"name": "dim", "description": "dim", "classes": ["dark-low-contrast"], "random": 5,
+       "random_options": {"height": 96, "width": 96}, "gain": 0.3, "seed": 5}]})";
+  REQUIRE(run_command(lfnet + "sets make " + (tmp / "set.json") + " --out " + (tmp / "sets"),
+                      out) == 0);
+  auto file = read_json(kModels + "lfnet-asp-n2-auto.json");
+  const double target = file.value("exposure_target", 0.0);
+  REQUIRE(target > 0);
+  for (const char* key : {"quiet", "noisy"}) file[key] = kModels + file[key].get<std::string>();
+  std::ofstream(tmp / "with.json") << file.dump();
+  file.erase("exposure_target");
+  std::ofstream(tmp / "without.json") << file.dump();
+  auto score = [&](const std::string& model, const std::string& source) {
+    const std::string json = tmp / "r.json";
+    REQUIRE(run_command(lfnet + "evaluate --model " + model + " " + source +
+                            " --method net --estimate-noise --force --json " + json,
+                        out) == 0);
+    return read_json(json);
+  };
+  const std::string lf = "--lf " + (tmp / "sets/dim");
+  const auto dim = score(tmp / "with.json", lf);
+  const auto plain = score(tmp / "without.json", lf);
+  INFO(dim.dump());
+  CHECK(dim["exposure_gain"].get<double>() > 1.5);
+  CHECK(dim["noise_switch"]["exposure_target"] == target);
+  CHECK_FALSE(plain.contains("exposure_gain"));
+  CHECK(dim["psnr_db"] != plain["psnr_db"]);
+  // A scene bright enough is reconstructed as it would be without the target.
+  const auto bright = score(tmp / "with.json", "--scene " + kScene);
+  CHECK(bright["exposure_gain"] == 1.0);
+  CHECK(bright["psnr_db"] == score(tmp / "without.json", "--scene " + kScene)["psnr_db"]);
 }

@@ -118,6 +118,29 @@ TEST_CASE("white noise is the sensor's; noise correlated over pixels was in the 
   CHECK(white_noise_share(torch::rand({2, 6, 40}), torch::ones({2, 1, 1})) == 1.0);
 }
 
+TEST_CASE("a sensor image's exposure is its bright end over the code's white response",
+          "[optics][noise]") {
+  using lfnet::optics::sensor_exposure;
+  for (const char* spec : {"asp:2", "mask:2"}) {
+    const auto phi = lfnet::optics::make_phi(lfnet::optics::PhiSpec::parse(spec));
+    INFO(spec);
+    // A uniform grey scene of 0.3 measures 0.3 of white at every pixel, whatever the code.
+    const auto grey = lfnet::optics::simulate_sensor(*phi, torch::full({5, 5, 40, 48}, 0.3));
+    CHECK(sensor_exposure(*phi, grey) == Approx(0.3).epsilon(1e-4));
+    // The scene: its 99th percentile lies below its brightest pixels and above its mean; a
+    // scene dimmed by 0.4 is 0.4 as bright.
+    const auto lf = scene();
+    const auto sensor = lfnet::optics::simulate_sensor(*phi, lf);
+    const double exposure = sensor_exposure(*phi, sensor);
+    CHECK(exposure < lf.max().item<double>());
+    CHECK(exposure > lf.mean().item<double>());
+    CHECK(sensor_exposure(*phi, lfnet::optics::simulate_sensor(*phi, 0.4 * lf)) ==
+          Approx(0.4 * exposure).epsilon(1e-4));
+    CHECK(sensor_exposure(*phi, sensor, 0.0) < sensor_exposure(*phi, sensor, 0.5));
+    CHECK_THROWS_AS(sensor_exposure(*phi, sensor, 1.5), lfnet::ConfigError);
+  }
+}
+
 TEST_CASE("noise estimation refuses what is no sensor image", "[optics][noise]") {
   const auto white = torch::ones({2, 1, 1});
   CHECK_THROWS_AS(estimate_noise_sigma(torch::zeros({8, 8}), white), lfnet::ConfigError);

@@ -130,6 +130,21 @@ double white_noise_share(const torch::Tensor& sensor, const torch::Tensor& white
   return std::sqrt(white_variance / variance[0]);
 }
 
+double sensor_exposure(const Phi& phi, const torch::Tensor& sensor, double quantile) {
+  LFNET_CHECK_AS(ConfigError, quantile >= 0 && quantile <= 1, "a quantile is in [0, 1], not ",
+                 quantile);
+  const auto white = white_response(phi);
+  const auto response = response_image(sensor, white);
+  const auto usable = response > usable_floor(white);
+  const auto ratio = (sensor.to(torch::kFloat64) / response.clamp_min(1e-12)).masked_select(usable);
+  LFNET_CHECK_AS(ConfigError, ratio.numel() > 0,
+                 "the code's white response leaves no pixel to measure the exposure of");
+  const int64_t k = std::clamp<int64_t>(
+      static_cast<int64_t>(std::ceil(quantile * static_cast<double>(ratio.numel()))), 1,
+      ratio.numel());
+  return std::get<0>(ratio.kthvalue(k)).item<double>();
+}
+
 double white_noise_share(const Phi& phi, const torch::Tensor& sensor) {
   return white_noise_share(sensor, white_response(phi));
 }

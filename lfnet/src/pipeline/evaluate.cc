@@ -62,6 +62,11 @@ PreparedMethod prepare_method(const std::string& method, const MethodContext& c,
     p.switch_choice = std::make_shared<recon::SwitchChoice>();
     r.switch_choice = p.switch_choice;
   }
+  r.exposure_target = c.exposure_target;
+  if (c.exposure_target > 0) {
+    p.exposure_gain = std::make_shared<double>(1.0);
+    r.exposure_gain = p.exposure_gain;
+  }
   r.script = c.script.get();
   r.self_ensemble = c.self_ensemble;
   r.self_ensemble_passes = c.self_ensemble_passes;
@@ -257,6 +262,7 @@ nlohmann::json evaluate_method(const NamedLightField& truth, const std::string& 
     record_estimated_camera_error(result.record, *prepared.calibration, label + ": ");
   }
   if (prepared.switch_choice) record_switch_choice(result.record, *prepared.switch_choice);
+  if (prepared.exposure_gain) result.record["exposure_gain"] = *prepared.exposure_gain;
   if (report) {
     result.record["unconverged_patches"] = report->unconverged.load();
     if (report->unconverged > 0) {
@@ -282,6 +288,7 @@ void use_model(MethodContext& context, const ModelFile& model) {
   context.script = model.script;
   context.noisy_net = model.noisy;
   context.switch_sigma = model.switch_sigma;
+  context.exposure_target = model.exposure_target;
 }
 
 void place_network(const ModelFile& model, const std::string& device, nn::Precision precision) {

@@ -91,7 +91,7 @@ namespace {
 // A noise switch: its two checkpoints, checked to fit together.
 ModelFile load_noise_switch(const std::string& path, bool network) {
   std::string quiet, noisy;
-  double sigma = 0;
+  double sigma = 0, exposure = 0;
   int64_t version = 0;
   try {
     const auto j = read_json_file(path);
@@ -103,11 +103,14 @@ ModelFile load_noise_switch(const std::string& path, bool network) {
     r.require("quiet", quiet);
     r.require("noisy", noisy);
     r.require("switch_sigma", sigma);
+    r.get("exposure_target", exposure);
     r.finish();
     LFNET_CHECK_AS(ConfigError, version == 1, r.path_of("version"),
                    ": this lfnet reads version 1, got ", version);
     LFNET_CHECK_AS(ConfigError, sigma > 0 && std::isfinite(sigma), r.path_of("switch_sigma"),
                    ": must be a finite sigma > 0, got ", sigma);
+    LFNET_CHECK_AS(ConfigError, exposure >= 0 && exposure <= 1, r.path_of("exposure_target"),
+                   ": must be an exposure in [0, 1] (0: none), got ", exposure);
   } catch (const ConfigError& e) {
     throw ConfigError(std::string("noise switch ") + e.what());
   }
@@ -137,6 +140,7 @@ ModelFile load_noise_switch(const std::string& path, bool network) {
   model.noisy_path = above.path;
   model.noisy = above.net;
   model.switch_sigma = sigma;
+  model.exposure_target = exposure;
   return model;
 }
 
@@ -191,7 +195,9 @@ void ModelFile::check_phi(const nlohmann::json& phi_spec) const {
 
 nlohmann::json ModelFile::noise_switch_record() const {
   if (!noise_switch()) return nullptr;
-  return {{"quiet", quiet_path}, {"noisy", noisy_path}, {"switch_sigma", switch_sigma}};
+  nlohmann::json j = {{"quiet", quiet_path}, {"noisy", noisy_path}, {"switch_sigma", switch_sigma}};
+  if (exposure_target > 0) j["exposure_target"] = exposure_target;
+  return j;
 }
 
 double ModelFile::measurement_mean() const {

@@ -212,6 +212,7 @@ class AcquisitionReconstruction {
     options_used_ = prepared.options;
     calibration_ = prepared.calibration;
     switch_choice_ = prepared.switch_choice;
+    exposure_gain_ = prepared.exposure_gain;
     LFNET_CHECK_AS(ConfigError, !(image_ && full_),
                    "--cnn-mode full applies to the paper's architecture; a model of a "
                    "whole-image architecture always reconstructs the whole image");
@@ -351,6 +352,7 @@ class AcquisitionReconstruction {
     if (!options_used_.empty()) r.record["method_options"] = options_used_;
     if (calibration_) record_estimated_camera_error(r.record, *calibration_, "");
     if (switch_choice_) record_switch_choice(r.record, *switch_choice_);
+    if (exposure_gain_) r.record["exposure_gain"] = *exposure_gain_;
     if (noise_aware_) {
       r.record["noise_sigma"] = noise_told_ ? nlohmann::json(told_sigma_) : estimated_;
     }
@@ -382,6 +384,7 @@ class AcquisitionReconstruction {
   nlohmann::json options_used_;                            // the method's options, complete
   std::shared_ptr<optics::CalibrationError> calibration_;  // --self-calibrate's estimate
   std::shared_ptr<recon::SwitchChoice> switch_choice_;     // a noise switch's member
+  std::shared_ptr<double> exposure_gain_;                   // the exposure target's gain
   bool network_method_ = false;
   bool noise_aware_ = false, noise_told_ = false;
   double told_sigma_ = 0;

@@ -1,5 +1,7 @@
 #include "lfnet/recon/builtin_methods.h"
 
+#include <algorithm>
+
 #include "lfnet/core/error.h"
 #include "lfnet/core/light_field.h"
 #include "lfnet/dict/omp.h"
@@ -88,36 +90,57 @@ class NetworkMethod : public Method {
         return maybe_coded(script->reconstruct_image(sensor, tile, true, noise_sigma).unsqueeze(0));
       };
     }
-    auto solver_of = [&r, tile, coded, maybe_coded](const nn::LightFieldNet& net) -> ImageSolver {
+    // `coded_out`: the result in 16-bit codes.
+    auto solver_of = [&r, tile](const nn::LightFieldNet& net, bool coded_out) -> ImageSolver {
       if (r.self_ensemble) {
         const int64_t passes = r.self_ensemble_passes;
-        return [net, tile, passes, maybe_coded](const torch::Tensor& sensor, double noise_sigma) {
-          return maybe_coded(
-              reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes));
+        return [net, tile, passes, coded_out](const torch::Tensor& sensor, double noise_sigma) {
+          auto lf = reconstruct_sensor_mirrored(net, sensor, tile, true, noise_sigma, {}, passes);
+          return coded_out ? encode_codes(lf) : lf;
         };
       }
       if (r.self_calibrate) {
         const optics::Phi* phi = r.phi;
         auto found = r.calibration;
-        return [net, phi, tile, coded, found](const torch::Tensor& sensor, double noise_sigma) {
+        return [net, phi, tile, coded_out, found](const torch::Tensor& sensor, double noise_sigma) {
           // The camera's angular shift from its own sensor image, then the whole image with the
           // net told the Phi so displaced; the net holds the nominal Phi again afterwards.
           const auto calibration = estimate_angular_shift(net, *phi, sensor, noise_sigma);
           if (found) *found = calibration.error;
           tell_camera(net, *phi, calibration.error);
           const NominalPhiOnExit nominal(net, *phi);
-          return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded);
+          return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded_out);
         };
       }
-      return [net, tile, coded](const torch::Tensor& sensor, double noise_sigma) {
-        return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded);
+      return [net, tile, coded_out](const torch::Tensor& sensor, double noise_sigma) {
+        return reconstruct_sensor_tiled(net, sensor, tile, true, noise_sigma, {}, coded_out);
       };
     };
-    if (r.noisy_net.is_empty()) return solver_of(r.net);
+    // A sensor image dimmer than exposure_target is brightened to it (its noise sigma with it),
+    // reconstructed, and the light field dimmed back: the net sees the exposures it trained on.
+    auto exposed_of = [&r, coded, &solver_of](const nn::LightFieldNet& net) -> ImageSolver {
+      auto as_is = solver_of(net, coded);
+      if (r.exposure_target <= 0) return as_is;
+      auto in_float = solver_of(net, false);
+      const optics::Phi* phi = r.phi;
+      const double target = r.exposure_target;
+      auto applied = r.exposure_gain;
+      return [as_is, in_float, phi, target, applied, coded](const torch::Tensor& sensor,
+                                                            double noise_sigma) {
+        const double exposure = optics::sensor_exposure(*phi, sensor);
+        const double gain =
+            std::clamp(target / std::max(exposure, 1e-12), 1.0, kMaxExposureGain);
+        if (applied) *applied = gain;
+        if (gain == 1.0) return as_is(sensor, noise_sigma);
+        auto lf = in_float(sensor * gain, noise_sigma * gain).div_(gain);
+        return coded ? encode_codes(lf) : lf;
+      };
+    };
+    if (r.noisy_net.is_empty()) return exposed_of(r.net);
     // A noise switch: the part of the sigma the image is told (or estimated) that is the
     // sensor's own, white noise picks the net; scene detail and noise the scene's views carry
     // are the quiet net's to keep (docs/models.md, "One model for any noise").
-    auto quiet = solver_of(r.net), noisy = solver_of(r.noisy_net);
+    auto quiet = exposed_of(r.net), noisy = exposed_of(r.noisy_net);
     const double from = r.switch_sigma;
     const optics::Phi* phi = r.phi;
     auto choice = r.switch_choice;

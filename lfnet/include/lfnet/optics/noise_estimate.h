@@ -36,6 +36,11 @@ double estimate_noise_sigma(const Phi& phi, const torch::Tensor& sensor);
 double white_noise_share(const torch::Tensor& sensor, const torch::Tensor& white);
 double white_noise_share(const Phi& phi, const torch::Tensor& sensor);
 
+// How bright a sensor image is: the `quantile` of its pixels, each over its white response (1
+// where the scene is white). Pixels whose white response is below a fifth of the mean are left
+// out.
+double sensor_exposure(const Phi& phi, const torch::Tensor& sensor, double quantile = 0.99);
+
 // Signal-dependent noise: variance = shot * signal + read, signal relative to white. Photon
 // shot noise at photons_at_white P gives shot = 1 / P; read noise of e electrons and Gaussian
 // noise of sigma give read = (e / P)^2 + sigma^2 (optics/sensor.h).

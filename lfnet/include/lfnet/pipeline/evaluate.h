@@ -29,6 +29,7 @@ struct MethodContext {
   nn::LightFieldNet net{nullptr};                     // for net, ae, cnn
   nn::LightFieldNet noisy_net{nullptr};               // a noise switch's net for noisy images
   double switch_sigma = 0;                            // and the sigma from which it takes over
+  double exposure_target = 0;  // dim sensor images brightened to it (recon/method_registry.h)
   std::shared_ptr<nn::ScriptedNetwork> script;        // or an exported net (used when set)
   std::string dictionary;                             // for dict: a dictionary file,
   const dict::Dictionary* dictionary_data = nullptr;  // or the dictionary itself (used when set)
@@ -62,6 +63,8 @@ struct PreparedMethod {
   std::shared_ptr<optics::CalibrationError> calibration;
   // With a noise switch: which member reconstructed the last sensor image, and why.
   std::shared_ptr<recon::SwitchChoice> switch_choice;
+  // With an exposure target: the gain applied to the last sensor image.
+  std::shared_ptr<double> exposure_gain;
 };
 
 // A noise switch's choice (PreparedMethod::switch_choice) into `record`, as

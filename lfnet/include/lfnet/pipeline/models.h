@@ -38,6 +38,8 @@ struct ModelFile {
   nn::LightFieldNet noisy{nullptr};
   std::string quiet_path, noisy_path;
   double switch_sigma = 0;
+  // A noise switch's exposure_target (recon::MethodResources::exposure_target; 0: none).
+  double exposure_target = 0;
   bool noise_switch() const { return !noisy_path.empty(); }
   // What a record says of a noise switch: {"quiet", "noisy", "switch_sigma"}; null otherwise.
   nlohmann::json noise_switch_record() const;

@@ -37,6 +37,9 @@ struct SwitchChoice {
   double sigma = 0.0;        // the sigma told (or estimated) times white_share: what decided
 };
 
+// The largest gain MethodResources::exposure_target applies.
+constexpr double kMaxExposureGain = 4.0;
+
 struct MethodResources {
   const optics::Phi* phi = nullptr;
   int64_t patch_h = 9, patch_w = 9;
@@ -46,6 +49,11 @@ struct MethodResources {
   double switch_sigma = 0;
   // A noise switch's choice for each sensor image goes here (optional).
   std::shared_ptr<SwitchChoice> switch_choice;
+  // Whole-image networks of a checkpoint: a sensor image whose exposure (optics::sensor_exposure)
+  // is below this is brightened to it, by a gain of at most kMaxExposureGain, reconstructed and
+  // dimmed back (0: never); each gain goes to *exposure_gain (optional).
+  double exposure_target = 0;
+  std::shared_ptr<double> exposure_gain;
   const nn::ScriptedNetwork* script = nullptr;   // or an exported one (used when set)
   const dict::Dictionary* dictionary = nullptr;  // kDictionary
   // The method's options as given (--method-options; docs/methods.md "Method options"),
