@@ -147,9 +147,9 @@ TEST_CASE("files read through other files and JSON options are inputs too, even 
   const fs::path models = fs::path(LFNET_SOURCE_DIR) / "models";
   fs::create_directories(tmp.path() / "sw");
   const auto members = lfnet::read_json_file((models / "lfnet-asp-n2-auto.json").string());
-  for (const std::string f : {std::string("lfnet-asp-n2-auto.json"),
-                              members.at("quiet").get<std::string>(),
-                              members.at("noisy").get<std::string>()}) {
+  for (const std::string& f :
+       {std::string("lfnet-asp-n2-auto.json"), members.at("quiet").get<std::string>(),
+        members.at("noisy").get<std::string>()}) {
     fs::copy_file(models / f, tmp.path() / "sw" / f);
   }
   const std::string sw = tmp / "sw", opts = tmp / "opts";

@@ -2,8 +2,8 @@
 // noise the simulation added.
 #include "lfnet/optics/noise_estimate.h"
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+#include <catch2/catch.hpp>
 
 #include <cmath>
 
@@ -102,8 +102,7 @@ TEST_CASE("white noise is the sensor's; noise correlated over pixels was in the 
     // Noise of sigma 0.03 in the views, correlated over neighbouring views and pixels as a
     // plenoptic camera's: the sensor image carries it, but not as white noise.
     auto generator = torch::make_generator<at::CPUGeneratorImpl>(5);
-    const auto noise =
-        lfnet::view_noise({1, 5, 5, lf.size(2), lf.size(3)}, 1, 1, generator)[0];
+    const auto noise = lfnet::view_noise({1, 5, 5, lf.size(2), lf.size(3)}, 1, 1, generator)[0];
     const auto carried = lfnet::optics::simulate_sensor(*phi, lf + 0.03 * noise);
     CHECK(estimate_noise_sigma(*phi, carried) > 0.003);
     CHECK(white_noise_share(*phi, carried) < 0.5);

@@ -384,7 +384,7 @@ class AcquisitionReconstruction {
   nlohmann::json options_used_;                            // the method's options, complete
   std::shared_ptr<optics::CalibrationError> calibration_;  // --self-calibrate's estimate
   std::shared_ptr<recon::SwitchChoice> switch_choice_;     // a noise switch's member
-  std::shared_ptr<double> exposure_gain_;                   // the exposure target's gain
+  std::shared_ptr<double> exposure_gain_;                  // the exposure target's gain
   bool network_method_ = false;
   bool noise_aware_ = false, noise_told_ = false;
   double told_sigma_ = 0;

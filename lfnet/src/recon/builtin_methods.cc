@@ -128,8 +128,7 @@ class NetworkMethod : public Method {
       return [as_is, in_float, phi, target, applied, coded](const torch::Tensor& sensor,
                                                             double noise_sigma) {
         const double exposure = optics::sensor_exposure(*phi, sensor);
-        const double gain =
-            std::clamp(target / std::max(exposure, 1e-12), 1.0, kMaxExposureGain);
+        const double gain = std::clamp(target / std::max(exposure, 1e-12), 1.0, kMaxExposureGain);
         if (applied) *applied = gain;
         if (gain == 1.0) return as_is(sensor, noise_sigma);
         auto lf = in_float(sensor * gain, noise_sigma * gain).div_(gain);

@@ -26,9 +26,9 @@ namespace lfnet::pipeline {
 // resources in one place (prepare_method).
 struct MethodContext {
   const optics::Phi* phi = nullptr;
-  nn::LightFieldNet net{nullptr};                     // for net, ae, cnn
-  nn::LightFieldNet noisy_net{nullptr};               // a noise switch's net for noisy images
-  double switch_sigma = 0;                            // and the sigma from which it takes over
+  nn::LightFieldNet net{nullptr};        // for net, ae, cnn
+  nn::LightFieldNet noisy_net{nullptr};  // a noise switch's net for noisy images
+  double switch_sigma = 0;               // and the sigma from which it takes over
   double exposure_target = 0;  // dim sensor images brightened to it (recon/method_registry.h)
   std::shared_ptr<nn::ScriptedNetwork> script;        // or an exported net (used when set)
   std::string dictionary;                             // for dict: a dictionary file,
