@@ -39,7 +39,7 @@ def rows_of(psnr):
                                  get(p, "pinv", "Bayer RGGB, malvar")]), default=None)
 
     rows = [
-        ("grey default lfnet-asp-n2 - pinv",
+        ("lfnet-asp-n2 - pinv",
          lambda p: diff(get(p, "net", "lfnet-asp-n2"), get(p, "pinv"))),
         ("colour blend, one pass - (pinv + better demosaic)",
          lambda p: diff(get(p, "net", "Bayer RGGB, blend"), best_colour_pinv(p))),
@@ -49,7 +49,7 @@ def rows_of(psnr):
          lambda p: diff(get(p, "net", LEARNED[1]), get(p, "net", "lfnet-asp-n2"))),
         ("noise-aware lfnet-asp-n2-noise - pinv",
          lambda p: diff(get(p, "net", "lfnet-asp-n2-noise"), get(p, "pinv"))),
-        ("noise switch blind, noiseless sensor - pinv",
+        ("grey default lfnet-asp-n2-auto (noise switch) blind, noiseless sensor - pinv",
          lambda p: diff(get(p, "net", "lfnet-asp-n2-auto, estimated"), get(p, "pinv"))),
         ("noise switch blind - pinv-nlm told, sigma 0.05",
          lambda p: diff(get(p, "net", "lfnet-asp-n2-auto, estimated", 0.05),
