@@ -5,6 +5,8 @@
     scripts/results.py pictures       # only the reconstructions the report shows
     scripts/results.py report         # nothing measured: the report from the records as they are
     MODELS="NAME_OR_FILE ..." scripts/results.py cross-scene-add  # also holdout-(colour-)add
+    ONLY=PREFIX scripts/results.py SECTION...  # only the records whose variant starts with PREFIX,
+                                               # made again in place of theirs
     scripts/results.py --list         # the sections, one a line
 
 The sections are data, configs/results.json: each names its models, light fields, methods and
@@ -187,8 +189,10 @@ class Plan:
         a = {"refs": refs, "logs": logs}
         if "evaluate" in node:
             a["type"] = "evaluate"
-            a["args"] = self.args(node["evaluate"], env, refs)
             a["variant"] = self.string(node.get("variant", ""), env, refs)
+            if not a["variant"].startswith(os.environ.get("ONLY", "")):
+                return
+            a["args"] = self.args(node["evaluate"], env, refs)
             a["training"] = ""
             if "training" in node:
                 a["training"] = self.models.log(self.string(node["training"], env, []))
@@ -361,14 +365,14 @@ class Runner:
 
     def run(self, name):
         spec = self.data["sections"][name]
-        write = spec.get("write", "replace")
+        write = "replace-variants" if os.environ.get("ONLY") else spec.get("write", "replace")
         target = records_file(spec.get("records", name))
         fresh = spec.get("fresh")
         if fresh and os.environ.get(fresh["env"], "0") == "1":
             for s in fresh["records"]:
                 if os.path.exists(records_file(s)):
                     os.remove(records_file(s))
-        for pics in spec.get("pictures", []):
+        for pics in [] if os.environ.get("ONLY") else spec.get("pictures", []):
             shutil.rmtree(pics, ignore_errors=True)
             os.makedirs(pics, exist_ok=True)
         runtime = {}
