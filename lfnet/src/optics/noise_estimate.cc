@@ -130,6 +130,10 @@ double white_noise_share(const torch::Tensor& sensor, const torch::Tensor& white
   return std::sqrt(white_variance / variance[0]);
 }
 
+double white_noise_share(const Phi& phi, const torch::Tensor& sensor) {
+  return white_noise_share(sensor, white_response(phi));
+}
+
 double sensor_exposure(const Phi& phi, const torch::Tensor& sensor, double quantile) {
   LFNET_CHECK_AS(ConfigError, quantile >= 0 && quantile <= 1, "a quantile is in [0, 1], not ",
                  quantile);
@@ -143,10 +147,6 @@ double sensor_exposure(const Phi& phi, const torch::Tensor& sensor, double quant
       static_cast<int64_t>(std::ceil(quantile * static_cast<double>(ratio.numel()))), 1,
       ratio.numel());
   return std::get<0>(ratio.kthvalue(k)).item<double>();
-}
-
-double white_noise_share(const Phi& phi, const torch::Tensor& sensor) {
-  return white_noise_share(sensor, white_response(phi));
 }
 
 double ShotReadEstimate::sigma_at(double signal) const {

@@ -118,21 +118,21 @@ class NetworkMethod : public Method {
     };
     // A sensor image dimmer than exposure_target is brightened to it (its noise sigma with it),
     // reconstructed, and the light field dimmed back: the net sees the exposures it trained on.
-    auto exposed_of = [&r, coded, &solver_of](const nn::LightFieldNet& net) -> ImageSolver {
+    auto exposed_of = [&r, coded, maybe_coded,
+                       &solver_of](const nn::LightFieldNet& net) -> ImageSolver {
       auto as_is = solver_of(net, coded);
       if (r.exposure_target <= 0) return as_is;
-      auto in_float = solver_of(net, false);
+      auto in_float = coded ? solver_of(net, false) : as_is;
       const optics::Phi* phi = r.phi;
       const double target = r.exposure_target;
       auto applied = r.exposure_gain;
-      return [as_is, in_float, phi, target, applied, coded](const torch::Tensor& sensor,
-                                                            double noise_sigma) {
+      return [as_is, in_float, phi, target, applied, maybe_coded](const torch::Tensor& sensor,
+                                                                  double noise_sigma) {
         const double exposure = optics::sensor_exposure(*phi, sensor);
         const double gain = std::clamp(target / std::max(exposure, 1e-12), 1.0, kMaxExposureGain);
         if (applied) *applied = gain;
         if (gain == 1.0) return as_is(sensor, noise_sigma);
-        auto lf = in_float(sensor * gain, noise_sigma * gain).div_(gain);
-        return coded ? encode_codes(lf) : lf;
+        return maybe_coded(in_float(sensor * gain, noise_sigma * gain).div_(gain));
       };
     };
     if (r.noisy_net.is_empty()) return exposed_of(r.net);

@@ -29,7 +29,6 @@ enum class MethodNeeds {
   kTruth,       // the true light field: an evaluation baseline, not a reconstruction
 };
 
-// What a method's solver may use; the caller fills in what the method needs.
 // A noise switch's choice for the last sensor image (MethodResources::switch_choice).
 struct SwitchChoice {
   bool noisy = false;        // the noise-aware member ran
@@ -40,6 +39,7 @@ struct SwitchChoice {
 // The largest gain MethodResources::exposure_target applies.
 constexpr double kMaxExposureGain = 4.0;
 
+// What a method's solver may use; the caller fills in what the method needs.
 struct MethodResources {
   const optics::Phi* phi = nullptr;
   int64_t patch_h = 9, patch_w = 9;
