@@ -9,6 +9,8 @@ import sys
 from collections import defaultdict
 
 LEARNED = ("lfnet-learned-mask-n2-full-l3", "lfnet-learned-asp-n2-full")
+SELF_ENSEMBLE = "self-ensemble, lfnet-asp-n2-auto"
+COLOUR = "Bayer RGGB, hard-dark-blend"  # the zoo's colour default
 
 
 def load(path):
@@ -41,8 +43,8 @@ def rows_of(psnr):
     rows = [
         ("lfnet-asp-n2 - pinv",
          lambda p: diff(get(p, "net", "lfnet-asp-n2"), get(p, "pinv"))),
-        ("colour blend, one pass - (pinv + better demosaic)",
-         lambda p: diff(get(p, "net", "Bayer RGGB, blend"), best_colour_pinv(p))),
+        ("colour default, one pass - (pinv + better demosaic)",
+         lambda p: diff(get(p, "net", COLOUR), best_colour_pinv(p))),
         ("learned mask - lfnet-asp-n2",
          lambda p: diff(get(p, "net", LEARNED[0]), get(p, "net", "lfnet-asp-n2"))),
         ("learned ASP - lfnet-asp-n2",
@@ -51,6 +53,8 @@ def rows_of(psnr):
          lambda p: diff(get(p, "net", "lfnet-asp-n2-noise"), get(p, "pinv"))),
         ("grey default lfnet-asp-n2-auto (noise switch) blind, noiseless sensor - pinv",
          lambda p: diff(get(p, "net", "lfnet-asp-n2-auto, estimated"), get(p, "pinv"))),
+        ("grey default, four-pass self-ensemble (--self-ensemble) - pinv",
+         lambda p: diff(get(p, "net", SELF_ENSEMBLE), get(p, "pinv"))),
         ("noise switch blind - pinv-nlm told, sigma 0.05",
          lambda p: diff(get(p, "net", "lfnet-asp-n2-auto, estimated", 0.05),
                         get(p, "pinv-nlm", "", 0.05))),
@@ -62,7 +66,7 @@ def rows_of(psnr):
     extra = sorted({k[1] for p in psnr.values() for k in p
                     if k[0] == "net" and k[2] == 0 and k[1] not in ("lfnet-asp-n2", "lfnet-asp-n2-noise",
                                                     "lfnet-asp-n2-auto, estimated",
-                                                    "lfnet-asp-n2-auto, told") + LEARNED
+                                                    "lfnet-asp-n2-auto, told", SELF_ENSEMBLE) + LEARNED
                     and not k[1].startswith("Bayer") and "learned" not in k[1]})
     learned = sorted({k[1] for p in psnr.values() for k in p
                       if k[0] == "net" and k[2] == 0 and "learned" in k[1] and k[1] not in LEARNED})
@@ -76,7 +80,7 @@ def rows_of(psnr):
                          lambda p, v=v, base=base: diff(get(p, "net", v), get(p, "net", base))))
     colour = sorted({k[1] for p in psnr.values() for k in p
                      if k[0] == "net" and k[1].startswith("Bayer RGGB, ")
-                     and k[1] != "Bayer RGGB, blend"})
+                     and k[1] != COLOUR})
     for v in colour:
         rows.append((f"colour {v[len('Bayer RGGB, '):]} - (pinv + better demosaic)",
                      lambda p, v=v: diff(get(p, "net", v), best_colour_pinv(p))))

@@ -133,7 +133,7 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
   // A colour net learns from a colour teacher's self-ensemble (its crops' mirror images read at
   // their phases of the pattern).
   REQUIRE(run_command(train + " --set network.cfa=RGGB --set distill.teacher=" + models +
-                          "lfnet-asp-n2-bayer-blend.ckpt --out " + (tmp / "colour"),
+                          "lfnet-asp-n2-bayer-hard-dark-blend.ckpt --out " + (tmp / "colour"),
                       out) == 0);
   CHECK(out.find("(4 passes)") != std::string::npos);
 
@@ -143,7 +143,7 @@ TEST_CASE("train with $.distill learns from a teacher's self-ensemble and checks
       {"distill.teacher=" + models + "lfnet-asp-n15.ckpt", "Phi"},
       {"distill.teacher=" + (tmp / "missing.ckpt"), "missing.ckpt: no such file"},
       // A colour net teaches colour nets of its pattern only.
-      {"distill.teacher=" + models + "lfnet-asp-n2-bayer-blend.ckpt",
+      {"distill.teacher=" + models + "lfnet-asp-n2-bayer-hard-dark-blend.ckpt",
        "behind a Bayer RGGB filter, the net reconstructs grey sensor images"},
       {"distill.weight=1.5", "$.distill.weight: must lie in [0, 1]"},
       {"distill.passes=-1", "$.distill.passes: must lie in [0, 64], got -1"},

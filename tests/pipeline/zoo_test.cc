@@ -96,7 +96,7 @@ TEST_CASE("the zoo's default model for a sensor follows its camera and colour", 
   const auto colour =
       pipeline::zoo_default_model(acquisition("colour", "asp:2", {{"pattern", "RGGB"}}), "");
   CHECK(colour.colour == "RGGB");
-  CHECK(colour.name == "lfnet-asp-n2-bayer-blend");
+  CHECK(colour.name == "lfnet-asp-n2-bayer-hard-dark-blend");
   // Another pattern, or a camera without a default: no model.
   const auto grbg =
       pipeline::zoo_default_model(acquisition("grbg", "asp:2", {{"pattern", "GRBG"}}), "");
@@ -114,7 +114,7 @@ TEST_CASE("the zoo's default model for a sensor follows its camera and colour", 
   // Its colour is its --cfa.
   const auto plain_colour = pipeline::zoo_default_model(tmp / "image.png", "asp:2", "RGGB");
   CHECK(plain_colour.colour == "RGGB");
-  CHECK(plain_colour.name == "lfnet-asp-n2-bayer-blend");
+  CHECK(plain_colour.name == "lfnet-asp-n2-bayer-hard-dark-blend");
   CHECK(pipeline::zoo_default_model(tmp / "image.png", "asp:2", "").name == "lfnet-asp-n2-auto");
   CHECK(pipeline::zoo_default_model(tmp / "image.png", "").camera.empty());
   fs::create_directories(tmp.path() / "empty");

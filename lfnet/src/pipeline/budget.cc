@@ -365,7 +365,7 @@ std::vector<CalibrationEntry> calibrate_machine(
     calibration.put(e);
     timed.push_back(e);
     char line[256];
-    std::snprintf(line, sizeof line, "%-30s %-10s %-6s %6.2f s at %lldx%lld, %6.2f s at %lldx%lld",
+    std::snprintf(line, sizeof line, "%-34s %-10s %-6s %6.2f s at %lldx%lld, %6.2f s at %lldx%lld",
                   e.model.c_str(), e.camera.c_str(), e.colour.c_str(), e.timings[0].second,
                   static_cast<long long>(sizes[0].first), static_cast<long long>(sizes[0].second),
                   e.timings[1].second, static_cast<long long>(o.height),

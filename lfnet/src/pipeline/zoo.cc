@@ -1,5 +1,6 @@
 #include "lfnet/pipeline/zoo.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -173,7 +174,9 @@ std::string worst(const nlohmann::json& card, const char* role) {
 std::string zoo_table(const Zoo& zoo) {
   std::ostringstream out;
   char line[512];
-  std::snprintf(line, sizeof line, "%-30s %-10s %-6s %-10s %-7s %-5s %-6s %-6s %s\n", "name",
+  int width = 30;  // the name column fits the longest name
+  for (const auto& m : zoo.models) width = std::max(width, static_cast<int>(m.name.size()));
+  std::snprintf(line, sizeof line, "%-*s %-10s %-6s %-10s %-7s %-5s %-6s %-6s %s\n", width, "name",
                 "camera", "colour", "params", "MB", "val", "test", "def", "use");
   out << line;
   for (const auto& m : zoo.models) {
@@ -182,7 +185,7 @@ std::string zoo_table(const Zoo& zoo) {
     std::string camera = m.card.value("camera", "");
     if (camera.rfind("learned", 0) == 0) camera = "learned";
     if (camera.rfind("any", 0) == 0) camera = "any";
-    std::snprintf(line, sizeof line, "%-30s %-10s %-6s %-10s %-7s %-5s %-6s %-6s %s\n",
+    std::snprintf(line, sizeof line, "%-*s %-10s %-6s %-10s %-7s %-5s %-6s %-6s %s\n", width,
                   m.name.c_str(), camera.c_str(), m.card.value("colour", "").c_str(),
                   f.parameters.c_str(), f.megabytes.c_str(), worst(m.card, "validation").c_str(),
                   worst(m.card, "test").c_str(), m.card.value("default", false) ? "yes" : "",
