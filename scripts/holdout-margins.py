@@ -45,6 +45,8 @@ def rows_of(psnr):
          lambda p: diff(get(p, "net", "lfnet-asp-n2"), get(p, "pinv"))),
         ("colour default, one pass - (pinv + better demosaic)",
          lambda p: diff(get(p, "net", COLOUR), best_colour_pinv(p))),
+        ("colour default, four-pass self-ensemble - (pinv + better demosaic)",
+         lambda p: diff(get(p, "net", COLOUR + ", self-ensemble"), best_colour_pinv(p))),
         ("learned mask - lfnet-asp-n2",
          lambda p: diff(get(p, "net", LEARNED[0]), get(p, "net", "lfnet-asp-n2"))),
         ("learned ASP - lfnet-asp-n2",
@@ -80,7 +82,7 @@ def rows_of(psnr):
                          lambda p, v=v, base=base: diff(get(p, "net", v), get(p, "net", base))))
     colour = sorted({k[1] for p in psnr.values() for k in p
                      if k[0] == "net" and k[1].startswith("Bayer RGGB, ")
-                     and k[1] != COLOUR})
+                     and k[1] not in (COLOUR, COLOUR + ", self-ensemble")})
     for v in colour:
         rows.append((f"colour {v[len('Bayer RGGB, '):]} - (pinv + better demosaic)",
                      lambda p, v=v: diff(get(p, "net", v), best_colour_pinv(p))))
