@@ -340,6 +340,8 @@ std::vector<CalibrationEntry> calibrate_machine(
     }
     return scenes[key];
   };
+  int width = 30;  // the model column fits the longest name, as in `lfnet models`
+  for (const auto& j : jobs) width = std::max(width, static_cast<int>(j.model.size()));
   bool warm = false;
   for (const auto& j : jobs) {
     CalibrationEntry e;
@@ -365,8 +367,8 @@ std::vector<CalibrationEntry> calibrate_machine(
     calibration.put(e);
     timed.push_back(e);
     char line[256];
-    std::snprintf(line, sizeof line, "%-34s %-10s %-6s %6.2f s at %lldx%lld, %6.2f s at %lldx%lld",
-                  e.model.c_str(), e.camera.c_str(), e.colour.c_str(), e.timings[0].second,
+    std::snprintf(line, sizeof line, "%-*s %-10s %-6s %6.2f s at %lldx%lld, %6.2f s at %lldx%lld",
+                  width, e.model.c_str(), e.camera.c_str(), e.colour.c_str(), e.timings[0].second,
                   static_cast<long long>(sizes[0].first), static_cast<long long>(sizes[0].second),
                   e.timings[1].second, static_cast<long long>(o.height),
                   static_cast<long long>(o.width));
