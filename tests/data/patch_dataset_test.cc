@@ -495,6 +495,61 @@ TEST_CASE("dim exposures scale a share of the training crops by a gain in the ra
   CHECK_THROWS_WITH(o.validate(), Catch::Contains("dark_gain_range"));
 }
 
+TEST_CASE("chroma jitter scales and reorders a colour crop's colours about its grey", "[data]") {
+  // A flat colour: every crop's target is this colour, jittered.
+  const auto colour = torch::tensor({0.6f, 0.45f, 0.3f}).view({3, 1, 1, 1, 1});
+  const LightField flat(colour.expand({3, 5, 5, 60, 60}).contiguous());
+  auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto o = small_options();
+  o.cfa = "RGGB";
+  o.jitter_saturation = 0.5;
+  data::PatchDataset ds({flat}, *phi, o, 32);
+  ds.start_epoch(0, 200);
+  const auto t = ds.next_train().target;                           // (B, 3, U, V, h, w)
+  const auto rgb = t.flatten(2).mean(2);                           // (B, 3)
+  const auto grey = rgb.mean(1);                                   // unchanged: 0.45
+  const auto scale = (rgb.select(1, 0) - rgb.select(1, 2)) / 0.3;  // R - B over the original
+  CHECK(torch::allclose(grey, torch::full_like(grey, 0.45), 1e-5, 1e-6));
+  CHECK(scale.min().item<double>() >= std::exp(-0.5) - 1e-4);
+  CHECK(scale.max().item<double>() <= std::exp(0.5) + 1e-4);
+  CHECK(scale.min().item<double>() < 0.8);
+  CHECK(scale.max().item<double>() > 1.3);
+  CHECK(torch::allclose(rgb.select(1, 1), grey, 1e-5, 1e-6));  // G sat at the grey
+  for (const auto& v : ds.validation()) {
+    CHECK(torch::allclose(v.target.flatten(2).mean(2)[0], colour.flatten(), 1e-5, 1e-6));
+  }
+  // Reordered channels: every one of the six orders, each crop a permutation of the colour.
+  o.jitter_saturation = 0;
+  o.permute_channels = true;
+  data::PatchDataset permuted({flat}, *phi, o, 32);
+  permuted.start_epoch(0, 200);
+  const auto p = permuted.next_train().target.flatten(2).mean(2);  // (B, 3)
+  std::set<std::tuple<int, int, int>> orders;
+  for (int64_t i = 0; i < p.size(0); ++i) {
+    const auto sorted = std::get<0>(p[i].sort());
+    CHECK(torch::allclose(sorted, torch::tensor({0.3f, 0.45f, 0.6f}), 1e-5, 1e-6));
+    auto rank = [&](int c) { return static_cast<int>(std::lround(p[i][c].item<double>() * 20)); };
+    orders.insert({rank(0), rank(1), rank(2)});
+  }
+  CHECK(orders.size() == 6);
+  // The crops are those a config without the options draws: their grey is the same.
+  torch::manual_seed(5);
+  const LightField textured(torch::rand({3, 5, 5, 60, 60}) * 0.5 + 0.25);
+  o.jitter_saturation = 0.5;
+  auto plain_options = small_options();
+  plain_options.cfa = "RGGB";
+  data::PatchDataset jittered({textured}, *phi, o, 32), plain({textured}, *phi, plain_options, 32);
+  jittered.start_epoch(0, 64);
+  plain.start_epoch(0, 64);
+  const auto a = jittered.next_train().target, b = plain.next_train().target;
+  CHECK(!torch::allclose(a, b));
+  // Clipping can move a pixel's grey, so compare where nothing clipped: most pixels.
+  const auto same = (a.mean(1) - b.mean(1)).abs() < 1e-5;
+  CHECK(same.to(torch::kFloat32).mean().item<double>() > 0.9);
+  o.jitter_saturation = 2.5;
+  CHECK_THROWS_WITH(o.validate(), Catch::Contains("jitter_saturation"));
+}
+
 TEST_CASE("correlated view noise is shared by neighbouring views and by the colours", "[data]") {
   const LightField flat(torch::full({3, 5, 5, 200, 60}, 0.5f));
   auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));

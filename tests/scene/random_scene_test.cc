@@ -199,6 +199,68 @@ TEST_CASE("random scenes draw man-made frames in front when asked", "[scene][ran
   CHECK_THROWS_WITH(framed.validate("$"), Catch::StartsWith("$.frame_probability"));
 }
 
+TEST_CASE("random scenes draw vivid palettes, contrast in chroma, when asked", "[scene][random]") {
+  RandomSceneOptions o;
+  o.height = o.width = 48;
+  // Per palette: the smallest saturation, the largest hue gap and brightness gap between colours.
+  struct Stats {
+    double saturation = 0, hue_gap = 0, value_gap = 0;
+    int palettes = 0;
+  };
+  auto stats = [](const RandomSceneOptions& options) {
+    Stats st;
+    for (uint64_t seed = 0; seed < 30; ++seed) {
+      for (const auto& layer : random_scene(seed, options).layers) {
+        const auto& colors = layer.texture.colors;
+        if (colors.size() < 2) continue;
+        double min_sat = 1, max_gap = 0, max_value_gap = 0;
+        std::vector<double> hues, values;
+        for (const auto& c : colors) {
+          const double hi = std::max({c[0], c[1], c[2]}), lo = std::min({c[0], c[1], c[2]});
+          min_sat = std::min(min_sat, hi > 0 ? (hi - lo) / hi : 0.0);
+          hues.push_back(std::atan2(std::sqrt(3.0) * (c[1] - c[2]), 2 * c[0] - c[1] - c[2]));
+          values.push_back(hi);
+        }
+        for (size_t i = 0; i < hues.size(); ++i) {
+          for (size_t j = 0; j < i; ++j) {
+            const double d = std::abs(std::remainder(hues[i] - hues[j], 2 * M_PI));
+            max_gap = std::max(max_gap, d);
+            max_value_gap = std::max(max_value_gap, std::abs(values[i] - values[j]));
+          }
+        }
+        st.saturation += min_sat;
+        st.hue_gap += max_gap;
+        st.value_gap += max_value_gap;
+        ++st.palettes;
+      }
+    }
+    st.saturation /= st.palettes;
+    st.hue_gap /= st.palettes;
+    st.value_gap /= st.palettes;
+    return st;
+  };
+  const auto before = random_scene(4, o).to_json();
+  const Stats muted = stats(o);
+  o.vivid_probability = 0.0;
+  CHECK(random_scene(4, o).to_json() == before);  // 0 draws nothing: scenes stay as they were
+  o.vivid_probability = 1.0;
+  const Stats vivid = stats(o);
+  CHECK(random_scene(4, o).to_json() != before);
+  REQUIRE(vivid.palettes > 50);
+  // Every vivid colour is at least half saturated and the hues lie at least 72 degrees apart.
+  CHECK(vivid.saturation >= 0.5 - 1e-9);
+  CHECK(vivid.hue_gap >= 72.0 * M_PI / 180.0 - 1e-6);
+  INFO("saturation " << muted.saturation << " / " << vivid.saturation << ", hue gap "
+                     << muted.hue_gap << " / " << vivid.hue_gap);
+  CHECK(muted.saturation < 0.3);
+  // (A near-grey colour's hue is noise: the natural palettes' gaps are not zero.)
+  CHECK(vivid.hue_gap > 2.0 * muted.hue_gap);
+  // Brightness varies less than in the natural palettes: the contrast is in chroma.
+  CHECK(vivid.value_gap < muted.value_gap);
+  o.vivid_probability = -0.1;
+  CHECK_THROWS_WITH(o.validate("$"), Catch::StartsWith("$.vivid_probability"));
+}
+
 TEST_CASE("random scenes take regions of natural images as textures when asked",
           "[scene][random]") {
   lfnet::test::TempDir tmp;

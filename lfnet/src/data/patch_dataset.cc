@@ -121,6 +121,9 @@ void DatasetOptions::validate() const {
       throw ConfigError("jitter_gamma, jitter_contrast and jitter_brightness must lie in [0, 1]");
     }
   }
+  if (!(std::isfinite(jitter_saturation) && jitter_saturation >= 0 && jitter_saturation <= 2)) {
+    throw ConfigError("jitter_saturation must lie in [0, 2]");
+  }
 }
 
 namespace {
@@ -250,7 +253,9 @@ PatchDataset::Draw PatchDataset::Draw::slice(int64_t begin, int64_t end) const {
           part(placement),
           part(view_sigma),
           part(view_correlated),
-          part(gain)};
+          part(gain),
+          part(saturation),
+          part(channel_order)};
 }
 
 PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt19937_64& rng) const {
@@ -368,6 +373,16 @@ PatchDataset::Draw PatchDataset::draw(bool validation, int64_t count, std::mt199
       d.gain.push_back(dark ? static_cast<float>(gain) : 1.0f);
     }
   }
+  // Chroma after everything else, so that configs without it draw what they always drew.
+  if (!validation && options_.jitter_saturation > 0) {
+    for (int64_t i = 0; i < count; ++i) {
+      d.saturation.push_back(static_cast<float>(std::exp(options_.jitter_saturation * unit(rng))));
+    }
+  }
+  if (!validation && options_.permute_channels) {
+    std::uniform_int_distribution<int> orders(0, 5);
+    for (int64_t i = 0; i < count; ++i) d.channel_order.push_back(orders(rng));
+  }
   return d;
 }
 
@@ -390,6 +405,16 @@ train::Batch PatchDataset::make_batch(const Draw& d, uint64_t noise_seed) const 
       p = p.pow(d.gamma[i]);
       const auto mean = p.mean();
       p = ((p - mean) * d.contrast[i] + mean + d.brightness[i]).clamp(0.0, 1.0);
+    }
+    if (!d.saturation.empty() && d.saturation[i] != 1.0f && p.size(0) == 3) {
+      const auto grey = p.mean(0, true);
+      p = (grey + (p - grey) * d.saturation[i]).clamp(0.0, 1.0);
+    }
+    if (!d.channel_order.empty() && d.channel_order[i] != 0 && p.size(0) == 3) {
+      static const int64_t kOrders[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2},
+                                            {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+      const auto* o = kOrders[d.channel_order[i]];
+      p = p.index_select(0, torch::tensor({o[0], o[1], o[2]}, torch::kInt64));
     }
     if (!d.gain.empty() && d.gain[i] != 1.0f) p = p * d.gain[i];
     if (!d.view_sigma.empty() && d.view_sigma[i] > 0) {

@@ -68,6 +68,25 @@ std::vector<Rgb> random_palette(Rng& rng) {
   return colors;
 }
 
+// A vivid palette: 2 or 3 saturated colours of distinct hues whose brightness differs little, so
+// that much of the texture's contrast is in chroma alone (dyed fabric, flowers, painted signs):
+// what a colour filter array aliases most.
+std::vector<Rgb> vivid_palette(Rng& rng) {
+  const double hue = rng.uniform();
+  const double contrast = rng.log_uniform(0.02, 0.5);
+  const double mid = rng.uniform(0.3 + contrast / 2.0 * 0.8, 0.9 - contrast / 2.0 * 0.8);
+  const int64_t n = rng.bernoulli(0.35) ? 3 : 2;
+  std::vector<Rgb> colors;
+  double h = hue;
+  for (int64_t i = 0; i < n; ++i) {
+    const double f = static_cast<double>(i) / static_cast<double>(n - 1) - 0.5;  // -0.5 .. 0.5
+    const double v = std::clamp(mid + f * contrast, 0.02, 0.98);
+    colors.push_back(hsv_to_rgb(h + 1.0, rng.uniform(0.5, 1.0), v));
+    h += rng.uniform(0.2, 0.8);  // the next colour's hue is at least 72 degrees away
+  }
+  return colors;
+}
+
 TextureSpec random_texture(Rng& rng, const RandomSceneOptions& o, bool background,
                            const std::vector<std::string>& images) {
   const double extent = static_cast<double>(std::max(o.height, o.width));
@@ -125,7 +144,9 @@ TextureSpec random_texture(Rng& rng, const RandomSceneOptions& o, bool backgroun
       t = TextureSpec::defaults(TextureKind::kConstant);
       break;
   }
-  t.colors = random_palette(rng);
+  // Drawn only when vivid palettes are in play, so that scenes without them stay as they were.
+  const bool vivid = o.vivid_probability > 0.0 && rng.bernoulli(o.vivid_probability);
+  t.colors = vivid ? vivid_palette(rng) : random_palette(rng);
   if (t.kind == TextureKind::kConstant) t.colors.resize(1);
   if (t.kind == TextureKind::kFractal || t.kind == TextureKind::kNoise) t.seed = rng.next() >> 11;
   return t;
@@ -368,6 +389,7 @@ void RandomSceneOptions::validate(const std::string& p) const {
       {"defocus_probability", defocus_probability},
       {"frame_probability", frame_probability},
       {"image_probability", image_probability},
+      {"vivid_probability", vivid_probability},
       {"motion_probability", motion_probability}};
   for (const auto& [key, value] : probabilities) {
     if (!(value >= 0.0 && value <= 1.0)) fail(p + "." + key, "a probability must lie in [0, 1]");

@@ -89,6 +89,12 @@ struct DatasetOptions {
   // stands higher against the signal (a dark, flat scene). 0: off.
   double dark_fraction = 0.0;
   std::vector<double> dark_gain_range = {0.2, 0.6};
+  // Chroma of colour training crops: each crop's colours about their per-pixel grey are scaled
+  // by exp(+-jitter_saturation) (uniform; clipped to [0, 1]), and with `permute_channels` its
+  // R, G, B are put in one of the six orders at random, so hues the data lacks are seen too.
+  // After the dim exposures' draws; 0 and false: off, crops as they were.
+  double jitter_saturation = 0.0;
+  bool permute_channels = false;
   uint64_t seed = 1;              // patch draws, augmentation and noise
   optics::SensorOptions effects;  // sensor effects on the measurements (none by default)
   // A colour net's Bayer pattern (network.cfa, not a dataset key): the patches keep their three
@@ -130,6 +136,8 @@ struct DatasetOptions {
     f("downscales", downscales);
     f("dark_fraction", dark_fraction, Range::closed(0, 1));
     f("dark_gain_range", dark_gain_range);
+    f("jitter_saturation", jitter_saturation);
+    f("permute_channels", permute_channels);
     f("seed", seed);
     f("effects", effects);
   }
@@ -179,6 +187,8 @@ class PatchDataset : public train::BatchSource {
     std::vector<float> view_sigma;       // per patch with view_noise_range (0: clean), else empty
     std::vector<float> view_correlated;  // per patch with view_noise_range: 1 correlated noise
     std::vector<float> gain;             // per patch with dark_fraction (1: as is), else empty
+    std::vector<float> saturation;       // per patch with jitter_saturation (1: as is), else empty
+    std::vector<int> channel_order;      // per patch with permute_channels: 0..5 (0: R, G, B)
     Draw slice(int64_t begin, int64_t end) const;
   };
   // An angular window: views u0, u0 + step, ... (U of them), and likewise v.

@@ -39,6 +39,9 @@ struct RandomSceneOptions {
   // (zoom 1..4) with this probability; 0 keeps the procedural textures only.
   std::vector<std::string> texture_images;
   double image_probability = 0.0;
+  // Procedural textures in vivid palettes: saturated colours of distinct hues and similar
+  // brightness, texture in chroma more than in luma. 0 (default) leaves scenes as they were.
+  double vivid_probability = 0.0;
   // Motion for light-field video (render_sequence), per sub-frame. With all three maxima 0
   // (default) nothing moves and scenes stay as they were; otherwise each layer moves with
   // motion_probability, its speed, depth speed and (not the background) rotation drawn
@@ -67,6 +70,7 @@ struct RandomSceneOptions {
     f("frame_probability", frame_probability);
     f("texture_images", texture_images);
     f("image_probability", image_probability);
+    f("vivid_probability", vivid_probability);
     f("max_speed", max_speed);
     f("max_disparity_speed", max_disparity_speed);
     f("max_rotation", max_rotation);
