@@ -7,6 +7,8 @@
     MODELS="NAME_OR_FILE ..." scripts/results.py cross-scene-add  # also holdout-(colour-)add
     ONLY=PREFIX scripts/results.py SECTION...  # only the records whose variant starts with PREFIX,
                                                # made again in place of theirs
+    ONLY_LF="NAME ..." scripts/results.py SECTION...  # only the light-field folders of these names
+                                               # (of {"dirs"} loops), made again in place of theirs
     scripts/results.py --list         # the sections, one a line
 
 The sections are data, configs/results.json: each names its models, light fields, methods and
@@ -105,9 +107,11 @@ def values(spec, env, where):
         return spec["default"]
     if "dirs" in spec:
         found = []
+        only = os.environ.get("ONLY_LF", "").split()
         for pattern in spec["dirs"]:
             found += [d for d in sorted(glob.glob(pattern))
-                      if os.path.isfile(os.path.join(d, spec["with"]))]
+                      if os.path.isfile(os.path.join(d, spec["with"]))
+                      and (not only or os.path.basename(d) in only)]
         return found
     raise Failure(f"{where}: cannot loop over {spec!r}")
 
@@ -251,11 +255,18 @@ def append_record(out, path, variant="", training="", run=None):
     open(out, "a").write(json.dumps(r) + "\n")
 
 
-def replace_variants(old_path, new_path):
-    """Replaces the records of `old_path` whose variant is among those of `new_path`."""
+def replace_variants(old_path, new_path, light_fields=False):
+    """Replaces the records of `old_path` whose variant is among those of `new_path`; with
+    `light_fields`, only those of the same variant and light field."""
     new = [json.loads(l) for l in open(new_path) if l.strip()]
     variants = {r.get("variant") for r in new}
-    kept = [l for l in open(old_path) if l.strip() and json.loads(l).get("variant") not in variants]
+    lfs = {(r.get("variant"), r.get("light_field")) for r in new}
+
+    def replaced(r):
+        if light_fields:
+            return (r.get("variant"), r.get("light_field")) in lfs
+        return r.get("variant") in variants
+    kept = [l for l in open(old_path) if l.strip() and not replaced(json.loads(l))]
     with open(old_path + ".tmp", "w") as f:
         f.writelines(kept)
         f.writelines(json.dumps(r) + "\n" for r in new)
@@ -365,14 +376,15 @@ class Runner:
 
     def run(self, name):
         spec = self.data["sections"][name]
-        write = "replace-variants" if os.environ.get("ONLY") else spec.get("write", "replace")
+        narrowed = os.environ.get("ONLY") or os.environ.get("ONLY_LF")
+        write = "replace-variants" if narrowed else spec.get("write", "replace")
         target = records_file(spec.get("records", name))
         fresh = spec.get("fresh")
         if fresh and os.environ.get(fresh["env"], "0") == "1":
             for s in fresh["records"]:
                 if os.path.exists(records_file(s)):
                     os.remove(records_file(s))
-        for pics in [] if os.environ.get("ONLY") else spec.get("pictures", []):
+        for pics in [] if narrowed else spec.get("pictures", []):
             shutil.rmtree(pics, ignore_errors=True)
             os.makedirs(pics, exist_ok=True)
         runtime = {}
@@ -399,7 +411,7 @@ class Runner:
                 shutil.copyfile(records, target + ".tmp")
                 os.replace(target + ".tmp", target)
             elif write == "replace-variants":
-                replace_variants(target, records)
+                replace_variants(target, records, bool(os.environ.get("ONLY_LF")))
             self.execute(name, after, name + " after", runtime, records)
         finally:
             if records:

@@ -833,3 +833,13 @@ TEST_CASE("a front section is the front page: its records alone, its text, not r
   CHECK(md.find("old-model") > older);
   CHECK(md.find("## Front") == std::string::npos);
 }
+
+TEST_CASE("results.py narrowed to light fields replaces only their records", "[apps][report]") {
+  std::string out;
+  const int rc = lfnet::test::run_command(std::string(LFNET_TEST_PYTHON) + " " + LFNET_SOURCE_DIR +
+                                              "/tests/apps/check_results_narrowing.py",
+                                          out);
+  INFO(out);
+  CHECK(rc == 0);
+  CHECK(out.find("ok") != std::string::npos);
+}

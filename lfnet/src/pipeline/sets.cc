@@ -21,13 +21,9 @@ namespace fs = std::filesystem;
 namespace lfnet::pipeline {
 
 const std::vector<std::string>& hard_classes() {
-  static const std::vector<std::string> classes = {"fine-texture",
-                                                   "small-disparity",
-                                                   "large-disparity",
-                                                   "occlusion-edges",
-                                                   "dark-low-contrast",
-                                                   "noisy-views",
-                                                   "plain"};
+  static const std::vector<std::string> classes = {
+      "fine-texture",      "small-disparity", "large-disparity", "occlusion-edges",
+      "dark-low-contrast", "noisy-views",     "colour-texture",  "plain"};
   return classes;
 }
 
