@@ -263,9 +263,11 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
     if (f.model && !f.model->empty()) models.push_back(*f.model);
     *f.precision = pipeline::choose_precision(models, *f.device);
   });
-  cmd->add_option("--tile", *f.tile,
-                  "spatial tile of whole-image models (default 256) and of --cnn-mode full "
-                  "(default 128)")
+  cmd->add_option(
+         "--tile", *f.tile,
+         "spatial tile of whole-image models (default: the whole image up to 800 x 800 pixels "
+         "with halos, else the largest tiles that fit it) and of --cnn-mode full "
+         "(default 128)")
       ->check(kCount);
   if (f.strides) {
     cmd->add_option("--strides", *f.strides,

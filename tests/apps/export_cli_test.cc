@@ -377,6 +377,10 @@ TEST_CASE(
       tiled = lfnet::recon::reconstruct_sensor_tiled(net, sensor, tile, false, sigma);
       CHECK(max_abs_diff(scripted.reconstruct_image(sensor, tile, false, sigma), tiled[0]) <= 1e-5);
     }
+    // A tile of 0 is the automatic one, in the file's own code as in lfnet's.
+    CHECK(max_abs_diff(scripted.module.get_method("reconstruct")({sensor, int64_t{0}, false, sigma})
+                           .toTensor(),
+                       tiled[0]) <= 1e-5);
     // The noise channel is read: another sigma gives another result.
     CHECK(max_abs_diff(scripted.reconstruct_image(sensor, 8, false, 0.0), tiled[0]) > 1e-3);
     CHECK(max_abs_diff(tiled, whole) <= 1e-4);

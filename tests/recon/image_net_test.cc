@@ -120,13 +120,32 @@ TEST_CASE("tiled inference of the lfnet architecture equals one pass over the wh
       REQUIRE(whole.sizes() == torch::IntArrayRef({1, phi->rows(), phi->cols(), 70, 53}));
       // Without clamping, so the comparison sees every value; the U-Net's output is far from
       // the pseudo-inverse (random weights), so a wrong halo would show.
-      for (int64_t tile : {4, 16, 20, 64}) {
+      for (int64_t tile : {0, 4, 16, 20, 64}) {  // 0: automatic
         INFO("tile " << tile);
         auto tiled = recon::reconstruct_sensor_tiled(net, sensor, tile, false);
         CHECK(torch::allclose(tiled, whole, 1e-4, 1e-4));
       }
     }
   }
+}
+
+TEST_CASE("the automatic tile is the whole image when it fits, else the largest that fits",
+          "[recon][image]") {
+  const nn::ImageTiling tiling{8, 60};  // a halo of 64
+  // 593 x 840 pads to 600 x 840 (504,000 pixels <= 800^2): one tile, no halo.
+  CHECK(nn::auto_image_tile(tiling, 593, 840) == 840);
+  auto tiles = nn::image_tiles(tiling, 593, 840, 0);
+  REQUIRE(tiles.size() == 1);
+  CHECK((tiles[0].a0 == 0 && tiles[0].a1 == 600 && tiles[0].b0 == 0 && tiles[0].b1 == 840));
+  // 800 x 801 pads to 800 x 808: too many pixels, so tiles of 800 - 2 x 64 = 672, each crop
+  // with its halos at most 800 pixels on a side.
+  CHECK(nn::auto_image_tile(tiling, 800, 801) == 672);
+  tiles = nn::image_tiles(tiling, 2372, 3360, 0);
+  CHECK(tiles.size() == 4 * 5);
+  for (const auto& t : tiles) CHECK((t.a1 - t.a0 <= 800 && t.b1 - t.b0 <= 800));
+  // A halo too wide for the crop: tiles of 256 at least.
+  CHECK(nn::auto_image_tile({16, 300}, 2000, 2000) == 256);
+  CHECK(nn::auto_image_tile({1, 0}, 801, 800) == 800);
 }
 
 TEST_CASE("a crop through forward() is forward_image of that crop", "[recon][image]") {

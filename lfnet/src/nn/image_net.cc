@@ -57,12 +57,22 @@ double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
   return flops;
 }
 
+int64_t auto_image_tile(const ImageTiling& tiling, int64_t height, int64_t width) {
+  const int64_t m = tiling.multiple;
+  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
+  const int64_t hp = round_up(height), wp = round_up(width);
+  if (hp * wp <= kAutoTileCrop * kAutoTileCrop) return std::max(hp, wp);
+  const int64_t side = kAutoTileCrop - 2 * round_up(tiling.receptive_radius);
+  return std::max<int64_t>(side, 256) / m * m;
+}
+
 std::vector<ImageTile> image_tiles(const ImageTiling& tiling, int64_t height, int64_t width,
                                    int64_t tile, int64_t* step_out) {
   const int64_t m = tiling.multiple;
   auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
   const int64_t halo = round_up(tiling.receptive_radius);
-  const int64_t step = round_up(std::max<int64_t>(1, tile));
+  if (tile <= 0) tile = auto_image_tile(tiling, height, width);
+  const int64_t step = round_up(tile);
   const int64_t hp = round_up(height), wp = round_up(width);
   if (step_out) *step_out = step;
   std::vector<ImageTile> tiles;

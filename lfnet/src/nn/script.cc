@@ -22,6 +22,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/zip_check.h"
+#include "lfnet/nn/image_net.h"
 
 namespace lfnet::nn {
 
@@ -199,6 +200,8 @@ std::string ScriptBuilder::literal(double value) {
   return s;
 }
 
+// `reconstruct` with a tile of 0 repeats nn::auto_image_tile.
+static_assert(kAutoTileCrop == 800, "kWholeImageScriptSource writes the automatic crop as 800");
 const char* const kWholeImageScriptSource = R"TS(
 def check_sensor_images(self, sensor: Tensor, phase: int) -> None:
     if sensor.dim() != 4 or sensor.size(1) != self.measurements:
@@ -209,11 +212,11 @@ def check_sensor_images(self, sensor: Tensor, phase: int) -> None:
 def forward(self, sensor: Tensor, phase: int = 0, noise_sigma: float = 0.0) -> Tensor:
     return self.forward_image(sensor, phase, noise_sigma)
 
-def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
+def reconstruct(self, sensor: Tensor, tile: int = 0, clamp: bool = True, noise_sigma: float = 0.0) -> Tensor:
     if sensor.dim() != 3 or sensor.size(0) != self.measurements:
         raise ValueError("reconstruct: expected a sensor image (N, H, W) with N the measurements")
-    if tile < 1:
-        raise ValueError("reconstruct: the tile must be positive")
+    if tile < 0:
+        raise ValueError("reconstruct: the tile must be positive (0: automatic)")
     m = self.multiple
     t = self.period
     h = sensor.size(1)
@@ -221,6 +224,11 @@ def reconstruct(self, sensor: Tensor, tile: int = 256, clamp: bool = True, noise
     hp = (h + m - 1) // m * m
     wp = (w + m - 1) // m * m
     halo = (self.receptive_radius + m - 1) // m * m
+    if tile == 0:
+        if hp * wp <= 800 * 800:
+            tile = max(hp, wp)
+        else:
+            tile = max(800 - 2 * halo, 256) // m * m
     step = (tile + m - 1) // m * m
     padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
     out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)
@@ -333,6 +341,10 @@ torch::Tensor ScriptedNetwork::reconstruct_image(const torch::Tensor& sensor, in
   LFNET_CHECK_AS(ConfigError, network.arch().whole_image(), "exported model ", path, " is of the ",
                  network.architecture, " architecture, which reconstructs patches");
   torch::NoGradGuard no_grad;
+  // Resolved here, so that files exported before the automatic tile take it as well.
+  if (tile <= 0 && sensor.dim() == 3) {
+    tile = auto_image_tile(network.arch().image_tiling(network), sensor.size(1), sensor.size(2));
+  }
   auto fn = module.get_method("reconstruct");
   return fn({sensor, tile, clamp, noise_sigma}).toTensor();
 }

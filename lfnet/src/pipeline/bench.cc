@@ -263,7 +263,11 @@ class BenchCase {
     if (!prepared_.options.empty()) extra_["method_options"] = prepared_.options;
     if (prepared_.options.contains("omp"))
       extra_["omp_atoms"] = prepared_.options["omp"]["max_atoms"];
-    if (prepared_.image) extra_["tile"] = image_tile_;
+    if (prepared_.image) {
+      extra_["tile"] = image_tile_ > 0 ? image_tile_
+                                       : nn::auto_image_tile(network_.arch().image_tiling(network_),
+                                                             a_.height, a_.width);
+    }
   }
 
   torch::Tensor reconstruct() const {

@@ -124,7 +124,7 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
                  "a whole-image architecture, not ", arch.name());
   LFNET_CHECK_AS(ConfigError, sensor.dim() == 3 && sensor.size(0) == o.measurements,
                  "the sensor image must be (", o.measurements, ", H, W), got ", sensor.sizes());
-  LFNET_CHECK_AS(ConfigError, tile >= 1, "the tile must be positive, got ", tile);
+  LFNET_CHECK_AS(ConfigError, tile >= 0, "the tile must be positive (0: automatic), got ", tile);
   LFNET_CHECK(clamp || !coded, "a result in 16-bit codes is clamped to [0, 1]");
   torch::NoGradGuard no_grad;
   net->eval();

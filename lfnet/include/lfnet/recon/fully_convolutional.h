@@ -58,15 +58,16 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
     nn::LightFieldNet net, const std::string& method, const optics::Phi& phi,
     const torch::Tensor& sensor, const ReconstructOptions& options, int64_t tile = kDefaultCnnTile);
 
-// Spatial tile of the lfnet architecture's whole-image pass, without its halo.
-constexpr int64_t kDefaultImageTile = 256;
+// Spatial tile of the lfnet architecture's whole-image pass, without its halo: 0, automatic
+// (nn::auto_image_tile: the whole image when it fits in a crop of 800 x 800 pixels).
+constexpr int64_t kDefaultImageTile = 0;
 
 // Reconstructs a grey light field (1, U, V, H, W) from a sensor image (N, H, W) with a net of
 // the lfnet architecture (a colour net: the colour light field (3, U, V, H, W) from its
 // mosaicked sensor image), in tiles of about `tile` x `tile` pixels (rounded up to the U-Net's
-// multiple) with a halo of its receptive radius, so peak memory depends on the tile, not on
-// the image. The result equals net->forward_image on the whole image, to float rounding.
-// Runs on the device of the net's weights; returns float32 on the CPU, clamped to [0, 1]
+// multiple; 0: nn::auto_image_tile) with a halo of its receptive radius, so peak memory depends on
+// the tile, not on the image. The result equals net->forward_image on the whole image, to float
+// rounding. Runs on the device of the net's weights; returns float32 on the CPU, clamped to [0, 1]
 // when `clamp`. `noise_sigma` conditions a noise-aware net. `progress` gets (tiles done,
 // tiles in all). `coded`: the result is 16-bit codes (int16, clamped; core/light_field.h),
 // each tile encoded as it is done, so the light field is held in half the memory. `origin`:

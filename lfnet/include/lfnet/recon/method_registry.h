@@ -60,7 +60,7 @@ struct MethodResources {
   // read by the method itself (MethodWithOptions); {} for its defaults.
   nlohmann::json options = nlohmann::json::object();
   std::shared_ptr<SolverReport> report;  // iterative methods: non-convergence counts
-  int64_t tile = 256;                    // whole-image methods: spatial tile
+  int64_t tile = 0;                      // whole-image methods: spatial tile (0: automatic)
   bool self_ensemble = false;            // whole-image methods: average over the Phi's mirrors
   int64_t self_ensemble_passes = 0;      // at most this many of them (0: all)
   // Whole-image methods: return 16-bit codes (int16; core/light_field.h), a plain tiled pass
