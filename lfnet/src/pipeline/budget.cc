@@ -20,6 +20,7 @@
 #include "lfnet/core/version.h"
 #include "lfnet/io/light_field_io.h"
 #include "lfnet/io/sensor_io.h"
+#include "lfnet/nn/image_net.h"
 #include "lfnet/optics/cfa.h"
 #include "lfnet/optics/phi.h"
 #include "lfnet/pipeline/catalog.h"
@@ -53,7 +54,9 @@ nlohmann::json machine_fingerprint() {
   return {{"cpu", cpu_info("model name")},
           {"logical_cpus", static_cast<int64_t>(std::thread::hardware_concurrency())},
           {"lfnet_version", kVersion},
-          {"torch_version", TORCH_VERSION}};
+          {"torch_version", TORCH_VERSION},
+          // Timings made under another automatic tile (nn::auto_image_tile) are stale.
+          {"auto_tile_crop", nn::kAutoTileCrop}};
 }
 
 nlohmann::json TimingSetting::to_json() const {
