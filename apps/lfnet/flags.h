@@ -265,8 +265,8 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
   });
   cmd->add_option(
          "--tile", *f.tile,
-         "spatial tile of whole-image models (default: the whole image up to 800 x 800 pixels "
-         "with halos, else the largest tiles that fit it) and of --cnn-mode full "
+         "spatial tile of whole-image models (default: the whole image up to 800 x 800 pixels, "
+         "else the largest tiles whose crops with halos fit 512 x 512) and of --cnn-mode full "
          "(default 128)")
       ->check(kCount);
   if (f.strides) {

@@ -137,15 +137,15 @@ TEST_CASE("the automatic tile is the whole image when it fits, else the largest 
   auto tiles = nn::image_tiles(tiling, 593, 840, 0);
   REQUIRE(tiles.size() == 1);
   CHECK((tiles[0].a0 == 0 && tiles[0].a1 == 600 && tiles[0].b0 == 0 && tiles[0].b1 == 840));
-  // 800 x 801 pads to 800 x 808: too many pixels, so tiles of 800 - 2 x 64 = 672, each crop
-  // with its halos at most 800 pixels on a side.
-  CHECK(nn::auto_image_tile(tiling, 800, 801) == 672);
+  // 800 x 801 pads to 800 x 808: too many pixels, so tiles of 512 - 2 x 64 = 384, each crop
+  // with its halos at most 512 pixels on a side.
+  CHECK(nn::auto_image_tile(tiling, 800, 801) == 384);
   tiles = nn::image_tiles(tiling, 2372, 3360, 0);
-  CHECK(tiles.size() == 4 * 5);
-  for (const auto& t : tiles) CHECK((t.a1 - t.a0 <= 800 && t.b1 - t.b0 <= 800));
+  CHECK(tiles.size() == 7 * 9);
+  for (const auto& t : tiles) CHECK((t.a1 - t.a0 <= 512 && t.b1 - t.b0 <= 512));
   // A halo too wide for the crop: tiles of 256 at least.
   CHECK(nn::auto_image_tile({16, 300}, 2000, 2000) == 256);
-  CHECK(nn::auto_image_tile({1, 0}, 801, 800) == 800);
+  CHECK(nn::auto_image_tile({1, 0}, 801, 800) == 512);
 }
 
 TEST_CASE("a crop through forward() is forward_image of that crop", "[recon][image]") {

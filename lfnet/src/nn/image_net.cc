@@ -61,7 +61,7 @@ int64_t auto_image_tile(const ImageTiling& tiling, int64_t height, int64_t width
   const int64_t m = tiling.multiple;
   auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
   const int64_t hp = round_up(height), wp = round_up(width);
-  if (hp * wp <= kAutoTileCrop * kAutoTileCrop) return std::max(hp, wp);
+  if (hp * wp <= kAutoTileWhole * kAutoTileWhole) return std::max(hp, wp);
   const int64_t side = kAutoTileCrop - 2 * round_up(tiling.receptive_radius);
   return std::max<int64_t>(side, 256) / m * m;
 }

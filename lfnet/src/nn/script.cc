@@ -201,7 +201,8 @@ std::string ScriptBuilder::literal(double value) {
 }
 
 // `reconstruct` with a tile of 0 repeats nn::auto_image_tile.
-static_assert(kAutoTileCrop == 800, "kWholeImageScriptSource writes the automatic crop as 800");
+static_assert(kAutoTileWhole == 800 && kAutoTileCrop == 512,
+              "kWholeImageScriptSource writes the automatic tile's sizes as 800 and 512");
 const char* const kWholeImageScriptSource = R"TS(
 def check_sensor_images(self, sensor: Tensor, phase: int) -> None:
     if sensor.dim() != 4 or sensor.size(1) != self.measurements:
@@ -228,7 +229,7 @@ def reconstruct(self, sensor: Tensor, tile: int = 0, clamp: bool = True, noise_s
         if hp * wp <= 800 * 800:
             tile = max(hp, wp)
         else:
-            tile = max(800 - 2 * halo, 256) // m * m
+            tile = max(512 - 2 * halo, 256) // m * m
     step = (tile + m - 1) // m * m
     padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
     out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)

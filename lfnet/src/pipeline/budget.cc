@@ -56,7 +56,7 @@ nlohmann::json machine_fingerprint() {
           {"lfnet_version", kVersion},
           {"torch_version", TORCH_VERSION},
           // Timings made under another automatic tile (nn::auto_image_tile) are stale.
-          {"auto_tile_crop", nn::kAutoTileCrop}};
+          {"auto_tile", {nn::kAutoTileWhole, nn::kAutoTileCrop}}};
 }
 
 nlohmann::json TimingSetting::to_json() const {

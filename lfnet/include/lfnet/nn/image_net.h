@@ -72,13 +72,16 @@ struct ImageNetOptions {
 struct ImageTile {
   int64_t y0 = 0, x0 = 0, a0 = 0, a1 = 0, b0 = 0, b1 = 0;
 };
-// Side of the largest crop, halo included, that the automatic tile computes at once: crops of
-// up to 800 x 800 pixels keep lfnet-asp-n2's float32 pass under about 1.4 GB.
-constexpr int64_t kAutoTileCrop = 800;
+// The automatic tile reconstructs an image whose padded pixels fit in kAutoTileWhole^2 at once
+// (593 x 840 does; lfnet-asp-n2's float32 pass then peaks near 1.4 GB), and a larger one in
+// tiles whose crops, halos included, are at most kAutoTileCrop on a side, so that the peak
+// stays bounded whatever the image's size.
+constexpr int64_t kAutoTileWhole = 800;
+constexpr int64_t kAutoTileCrop = 512;
 // The automatic tile (a `tile` of 0) for a height x width image: the whole padded image when it
-// fits in a crop of kAutoTileCrop^2 pixels, so that no halo is computed twice; else the largest
-// tile whose crop with its halos fits in kAutoTileCrop x kAutoTileCrop, at least 256, a
-// multiple of the multiple.
+// fits in kAutoTileWhole^2 pixels, so that no halo is computed twice; else the largest tile
+// whose crop with its halos fits in kAutoTileCrop x kAutoTileCrop, at least 256, a multiple of
+// the multiple.
 int64_t auto_image_tile(const ImageTiling& tiling, int64_t height, int64_t width);
 // The tiles of `tile` x `tile` pixels (rounded up to the multiple; 0: auto_image_tile) covering
 // height x width, row by row, for a whole-image net tiled as `tiling`
