@@ -14,6 +14,7 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
+#include "lfnet/nn/auto_precision.h"
 #include "lfnet/pipeline/bench.h"
 #include "lfnet/pipeline/budget.h"
 #include "lfnet/pipeline/evaluate.h"
@@ -185,7 +186,9 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                 "calibration file ($LFNET_CALIBRATION, else ~/.cache/lfnet/calibration.json)");
   cmd->add_flag("--ladder", args->ladder,
                 "time the zoo's grey checkpoints for --phi (default asp:2) that --budget chooses "
-                "among, most accurate first, as if each were given as --model");
+                "among, most accurate first, as if each were given as --model; without "
+                "--precision, each in float32 and, on a CPU with native bfloat16 or a GPU, in "
+                "bfloat16");
   cmd->callback([args, cmd] {
     args->phi_given = cmd->count("--phi") > 0;
     if (args->ladder) {
@@ -193,6 +196,13 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
                      "--ladder times the zoo's models: leave out --model");
       args->options.models =
           pipeline::ladder_models(pipeline::phi_from_argument(args->options.phi).label());
+      // Without a --precision, each rung in float32 and, where bfloat16 is native, in it too.
+      if (!given_precision(cmd, args->options.precision) && !args->calibrate) {
+        args->options.precisions = {nn::Precision::kFloat32};
+        if (args->options.device != "cpu" || nn::cpu_has_native_bfloat16()) {
+          args->options.precisions.push_back(nn::Precision::kBFloat16);
+        }
+      }
     }
     if (args->calibrate) {
       LFNET_CHECK_AS(ConfigError, args->json.empty() && args->one_case.empty(),

@@ -62,15 +62,28 @@ TEST_CASE("a budget runs the zoo model that fits and records its predicted and a
   CHECK_THAT(out, Catch::Contains("--calibrate writes the calibration file"));
   CHECK_FALSE(fs::exists(tmp / "x.json"));
 
-  // bench --ladder times the camera's checkpoints in one run, most accurate first.
+  // bench --ladder times the camera's checkpoints in one run, most accurate first: in float32,
+  // and in bfloat16 as well where bfloat16 is native, unless --precision names one.
   const std::string ladder = tmp / "ladder.json";
-  REQUIRE(run_command(lfnet + "bench --ladder --methods net --strides 5 --height 36 --width 45 " +
-                          "--skip-kernels --json " + ladder,
-                      out) == 0);
-  const auto cases = read_record(ladder)["cases"];
+  const std::string bench = "bench --ladder --methods net --strides 5 --height 36 --width 45 " +
+                            std::string("--skip-kernels --force --json ") + ladder;
+  REQUIRE(run_command("LFNET_NATIVE_BFLOAT16=0 " + lfnet + bench, out) == 0);
+  auto cases = read_record(ladder)["cases"];
   REQUIRE(cases.size() == 2);
   CHECK(cases[0]["model"] == zoo + "/wide.ckpt");
   CHECK(cases[1]["model"] == zoo + "/narrow.ckpt");
+  CHECK(cases[1]["precision"] == "float32");
+  REQUIRE(run_command("LFNET_NATIVE_BFLOAT16=1 " + lfnet + bench, out) == 0);
+  cases = read_record(ladder)["cases"];
+  REQUIRE(cases.size() == 4);
+  for (size_t i = 0; i < 4; ++i) {
+    CHECK(cases[i]["model"] == zoo + (i < 2 ? "/wide.ckpt" : "/narrow.ckpt"));
+    CHECK(cases[i]["precision"] == (i % 2 == 0 ? "float32" : "bfloat16"));
+  }
+  CHECK_THAT(out, Catch::Contains("narrow.ckpt, bfloat16]"));
+  REQUIRE(run_command("LFNET_NATIVE_BFLOAT16=1 " + lfnet + bench + " --precision float32", out) ==
+          0);
+  CHECK(read_record(ladder)["cases"].size() == 2);
   CHECK(run_command(lfnet + "bench --ladder --phi mask:2 --methods net", out) != 0);
   CHECK_THAT(out, Catch::Contains("no measured checkpoint for mask:2"));
 

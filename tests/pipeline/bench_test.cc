@@ -191,4 +191,14 @@ TEST_CASE("bench_table prints a line per case, its architecture and its error",
   CHECK(table.find("dict           2       the child process failed (status 9)\n") !=
         std::string::npos);
   CHECK(std::count(table.begin(), table.end(), '\n') == 4);
+  CHECK(table.find("model") == std::string::npos);  // no trained model, no model column
+
+  // Cases of trained models end with the model and a precision other than float32.
+  report["cases"][0]["model"] = "models/lfnet-asp-n2.ckpt";
+  report["cases"][0]["precision"] = "bfloat16";
+  const auto named = pipeline::bench_table(report);
+  INFO(named);
+  CHECK(named.substr(0, named.find('\n')).find("PSNR dB  model") != std::string::npos);
+  CHECK(named.find("36.50  lfnet-asp-n2, bfloat16\n") != std::string::npos);
+  CHECK(named.find("28.12\n") != std::string::npos);  // pinv names none
 }

@@ -3,6 +3,7 @@
 #include <sys/resource.h>
 #include <torch/torch.h>
 #include <unistd.h>
+#include <filesystem>
 
 #include <cstdio>
 #include <cstdlib>
@@ -449,7 +450,15 @@ std::vector<std::pair<BenchOptions, bool>> bench_nets(const BenchOptions& a) {
       } else {
         options = load_model(model, false).network;
       }
-      nets.emplace_back(n, !options.patch_grid());
+      if (a.precisions.empty()) {
+        nets.emplace_back(n, !options.patch_grid());
+      } else {
+        for (const auto precision : a.precisions) {
+          n.precision = precision;
+          n.precisions = {};
+          nets.emplace_back(n, !options.patch_grid());
+        }
+      }
       if (!model.empty()) break;  // a checkpoint has its own architecture
     }
   }
@@ -516,6 +525,8 @@ nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_ca
                      : method + " [" +
                            (narrowed.models.empty() ? narrowed.architectures.front()
                                                     : narrowed.models.front()) +
+                           (a.precisions.size() > 1 ? ", " + nn::to_string(narrowed.precision)
+                                                    : std::string()) +
                            "]";
         print(case_line(label, image ? "whole image" : "stride " + std::to_string(stride), r));
         report["cases"].push_back(r);
@@ -653,10 +664,19 @@ nlohmann::json bench_case_in_child(const BenchOptions& a, const std::string& met
 
 std::string bench_table(const nlohmann::json& report) {
   // Whole-image cases have no stride and no patches ("image", "-"); Mpx/s compares every case.
-  std::string out = format_text("%-14s %-6s %8s %10s %12s %8s %9s %8s %9s %6s %8s\n", "method",
+  // Cases of trained models end with the model's file stem, and a precision other than float32.
+  bool models = false;
+  for (const auto& r : report["cases"]) models = models || r.contains("model");
+  std::string out = format_text("%-14s %-6s %8s %10s %12s %8s %9s %8s %9s %6s %8s%s\n", "method",
                                 "stride", "patches", "seconds", "patches/s", "Mpx/s", "peak MB",
-                                "GFLOP/s", "% GEMM", "util", "PSNR dB");
+                                "GFLOP/s", "% GEMM", "util", "PSNR dB", models ? "  model" : "");
   for (const auto& r : report["cases"]) {
+    std::string model;
+    if (r.contains("model") && r["model"].is_string()) {
+      model = "  " + std::filesystem::path(r["model"].get<std::string>()).stem().string();
+      const auto precision = r.value("precision", std::string("float32"));
+      if (precision != "float32") model += ", " + precision;
+    }
     // Network cases name their architecture: both may share a run.
     std::string method = r["method"].get<std::string>();
     if (r.contains("architecture")) method += "/" + r["architecture"].get<std::string>();
@@ -671,12 +691,12 @@ std::string bench_table(const nlohmann::json& report) {
         image ? std::string("-") : std::to_string(r["patches"].get<int64_t>());
     const std::string rate =
         image ? std::string("-") : format_text("%.1f", r["patches_per_second"].get<double>());
-    out += format_text("%-14s %-6s %8s %10.2f %12s %8.2f %9.0f %8.1f %8.1f%% %6.2f %8.2f\n",
+    out += format_text("%-14s %-6s %8s %10.2f %12s %8.2f %9.0f %8.1f %8.1f%% %6.2f %8.2f%s\n",
                        method.c_str(), stride.c_str(), patches.c_str(), r["seconds"].get<double>(),
                        rate.c_str(), r.value("megapixels_per_second", 0.0),
                        r["peak_rss_mb"].get<double>(), r["gflops"].get<double>(),
                        100 * r["gemm_fraction"].get<double>(), r["cpu_utilisation"].get<double>(),
-                       r["psnr_db"].get<double>());
+                       r["psnr_db"].get<double>(), model.c_str());
   }
   return out;
 }

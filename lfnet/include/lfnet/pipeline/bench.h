@@ -43,8 +43,10 @@ struct BenchOptions {
   recon::CnnMode cnn_mode = recon::CnnMode::kPatches;
   // Untrained nets without models: registered architectures (nn/architecture.h).
   std::vector<std::string> architectures = {nn::kPaperArchitecture};
-  int64_t tile = 0;  // tile of cnn_mode full and of lfnet models (0: 128 and 256)
+  int64_t tile = 0;  // tile of cnn_mode full and of lfnet models (0: 128 and automatic)
   nn::Precision precision = nn::Precision::kFloat32;  // of the CNN branch's convolutions
+  // Several precisions: every network case runs in each, one after another (empty: precision).
+  std::vector<nn::Precision> precisions;
   bool self_ensemble = false;        // lfnet models: average over the Phi's mirror images
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
 };
