@@ -141,7 +141,7 @@ TEST_CASE("the automatic tile is the whole image when it fits, else the largest 
   // with its halos at most 512 pixels on a side.
   CHECK(nn::auto_image_tile(tiling, 800, 801) == 384);
   tiles = nn::image_tiles(tiling, 2372, 3360, 0);
-  CHECK(tiles.size() == 7 * 9);
+  CHECK(tiles.size() == size_t{7 * 9});
   for (const auto& t : tiles) CHECK((t.a1 - t.a0 <= 512 && t.b1 - t.b0 <= 512));
   // A halo too wide for the crop: tiles of 256 at least.
   CHECK(nn::auto_image_tile({16, 300}, 2000, 2000) == 256);
