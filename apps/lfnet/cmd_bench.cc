@@ -14,7 +14,6 @@
 #include "lfnet/core/json.h"
 #include "lfnet/core/output.h"
 #include "lfnet/core/runtime.h"
-#include "lfnet/nn/auto_precision.h"
 #include "lfnet/pipeline/bench.h"
 #include "lfnet/pipeline/budget.h"
 #include "lfnet/pipeline/evaluate.h"
@@ -198,10 +197,7 @@ void add_bench_command(CLI::App& app, const GlobalOptions&) {
           pipeline::ladder_models(pipeline::phi_from_argument(args->options.phi).label());
       // Without a --precision, each rung in float32 and, where bfloat16 is native, in it too.
       if (!given_precision(cmd, args->options.precision) && !args->calibrate) {
-        args->options.precisions = {nn::Precision::kFloat32};
-        if (args->options.device != "cpu" || nn::cpu_has_native_bfloat16()) {
-          args->options.precisions.push_back(nn::Precision::kBFloat16);
-        }
+        args->options.precisions = pipeline::ladder_precisions(args->options.device);
       }
     }
     if (args->calibrate) {

@@ -21,6 +21,7 @@
 #include "lfnet/core/text.h"
 #include "lfnet/dict/ksvd.h"
 #include "lfnet/dict/patch_sampling.h"
+#include "lfnet/nn/auto_precision.h"
 #include "lfnet/nn/network.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/optics/phi.h"
@@ -480,6 +481,14 @@ std::string case_line(const std::string& label, const std::string& where, const 
 }
 
 }  // namespace
+
+std::vector<nn::Precision> ladder_precisions(const std::string& device) {
+  std::vector<nn::Precision> precisions = {nn::Precision::kFloat32};
+  if (device != "cpu" || nn::cpu_has_native_bfloat16()) {
+    precisions.push_back(nn::Precision::kBFloat16);
+  }
+  return precisions;
+}
 
 nlohmann::json bench_report(const BenchOptions& a, const BenchCaseRunner& run_case,
                             const std::function<void(const std::string&)>& print) {

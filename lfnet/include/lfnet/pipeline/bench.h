@@ -51,6 +51,10 @@ struct BenchOptions {
   int64_t self_ensemble_passes = 0;  // at most this many of them (0: all)
 };
 
+// The precisions `bench --ladder` times each rung in when no --precision is given: float32, and
+// bfloat16 too on a CPU with native bfloat16 (nn::cpu_has_native_bfloat16) or a GPU.
+std::vector<nn::Precision> ladder_precisions(const std::string& device);
+
 // FLOP/s of a 2048^3 single-precision matrix product, the best of `reps` after a warm-up.
 double bench_gemm_flops(int reps, const torch::Device& device);
 
