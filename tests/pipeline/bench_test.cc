@@ -105,6 +105,12 @@ TEST_CASE("bench_case times an untrained lfnet network on the whole image", "[pi
   const auto r = pipeline::bench_case(o, "net", 5, 1e9);
   CHECK(r["architecture"] == "lfnet");
   CHECK(r["tile"] == 52);  // automatic: the whole image, its wider side
+  {
+    // A --scene is rendered at its own size (384 x 192), and the tile recorded is its own.
+    pipeline::BenchOptions s = o;
+    s.scene = std::string(LFNET_SOURCE_DIR) + "/configs/scenes/probe_cross.json";
+    CHECK(pipeline::bench_case(s, "net", 5, 1e9)["tile"] == 384);
+  }
   CHECK(r["gflops"].get<double>() > 0);
   // Untrained, the U-Net adds nothing: the result is the pseudo-inverse's.
   const auto pinv = pipeline::bench_case(o, "pinv", 5, 1e9);

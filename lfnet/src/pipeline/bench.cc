@@ -266,9 +266,10 @@ class BenchCase {
     if (prepared_.options.contains("omp"))
       extra_["omp_atoms"] = prepared_.options["omp"]["max_atoms"];
     if (prepared_.image) {
+      // The sensor image's own size: a --scene is rendered at its own, not --height x --width.
       extra_["tile"] = image_tile_ > 0 ? image_tile_
                                        : nn::auto_image_tile(network_.arch().image_tiling(network_),
-                                                             a_.height, a_.width);
+                                                             sensor_.size(-2), sensor_.size(-1));
     }
   }
 
