@@ -57,23 +57,26 @@ double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
   return flops;
 }
 
+namespace {
+// `v` rounded up to a multiple of `m`.
+int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
+}  // namespace
+
 int64_t auto_image_tile(const ImageTiling& tiling, int64_t height, int64_t width) {
   const int64_t m = tiling.multiple;
-  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
-  const int64_t hp = round_up(height), wp = round_up(width);
+  const int64_t hp = round_up(height, m), wp = round_up(width, m);
   if (hp * wp <= kAutoTileWhole * kAutoTileWhole) return std::max(hp, wp);
-  const int64_t side = kAutoTileCrop - 2 * round_up(tiling.receptive_radius);
+  const int64_t side = kAutoTileCrop - 2 * round_up(tiling.receptive_radius, m);
   return std::max<int64_t>(side, 256) / m * m;
 }
 
 std::vector<ImageTile> image_tiles(const ImageTiling& tiling, int64_t height, int64_t width,
                                    int64_t tile, int64_t* step_out) {
   const int64_t m = tiling.multiple;
-  auto round_up = [m](int64_t v) { return (v + m - 1) / m * m; };
-  const int64_t halo = round_up(tiling.receptive_radius);
+  const int64_t halo = round_up(tiling.receptive_radius, m);
   if (tile <= 0) tile = auto_image_tile(tiling, height, width);
-  const int64_t step = round_up(tile);
-  const int64_t hp = round_up(height), wp = round_up(width);
+  const int64_t step = round_up(tile, m);
+  const int64_t hp = round_up(height, m), wp = round_up(width, m);
   if (step_out) *step_out = step;
   std::vector<ImageTile> tiles;
   for (int64_t y0 = 0; y0 < hp; y0 += step) {

@@ -452,14 +452,11 @@ std::vector<std::pair<BenchOptions, bool>> bench_nets(const BenchOptions& a) {
       } else {
         options = load_model(model, false).network;
       }
-      if (a.precisions.empty()) {
+      // One net per precision of `precisions`, else the one `precision`.
+      n.precisions.clear();
+      for (const auto precision : a.precisions.empty() ? std::vector{a.precision} : a.precisions) {
+        n.precision = precision;
         nets.emplace_back(n, !options.patch_grid());
-      } else {
-        for (const auto precision : a.precisions) {
-          n.precision = precision;
-          n.precisions = {};
-          nets.emplace_back(n, !options.patch_grid());
-        }
       }
       if (!model.empty()) break;  // a checkpoint has its own architecture
     }
