@@ -70,6 +70,33 @@ TEST_CASE("stitching in bands equals stitching at once", "[core][patches]") {
   CHECK_FALSE(torch::allclose(whole.result(), data, 0, 1e-4));
 }
 
+TEST_CASE("stitching averages every estimate of a pixel, weighted", "[core][patches]") {
+  torch::manual_seed(5);
+  // Ragged borders, so origins are evenly spaced and then flush with the edge.
+  for (int64_t stride : {1, 3, 4, 7}) {
+    PatchGrid grid(23, 19, 9, 7, stride);
+    const auto estimates = torch::rand({2 * grid.size(), 2, 1, 9, 7}, torch::kFloat64);
+    const auto window = torch::rand({9, 7}, torch::kFloat64) + 0.5;
+    // The weighted mean, pixel by pixel.
+    auto sum = torch::zeros({2, 2, 1, 23, 19}, torch::kFloat64);
+    auto count = torch::zeros({23, 19}, torch::kFloat64);
+    for (int64_t c = 0; c < 2; ++c) {
+      for (int64_t i = 0; i < grid.rows(); ++i) {
+        for (int64_t j = 0; j < grid.cols(); ++j) {
+          const int64_t y = grid.ys()[i], x = grid.xs()[j];
+          const auto e = estimates[(c * grid.rows() + i) * grid.cols() + j];
+          sum[c].slice(2, y, y + 9).slice(3, x, x + 7) += e * window;
+          if (c == 0) count.slice(0, y, y + 9).slice(1, x, x + 7) += window;
+        }
+      }
+    }
+    Stitcher s(grid, 2, 2, 1, window);
+    s.add(estimates.to(torch::kFloat32), 0, grid.rows());
+    INFO("stride " << stride);
+    test::require_close(s.result(), (sum / count).to(torch::kFloat32), 1e-6);
+  }
+}
+
 TEST_CASE("stitching takes patch rows in order and refuses rows left without estimates",
           "[core][patches]") {
   auto data = torch::rand({1, 1, 1, 31, 17});

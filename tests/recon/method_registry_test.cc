@@ -70,6 +70,10 @@ TEST_CASE("make_solver names what a method is missing", "[recon]") {
   const auto phase = torch::zeros({6}, torch::kInt64);
   const auto direct = recon::pinv_solver(optics::pinv_matrix_stack(*phi, 9, 9))(y, phase);
   CHECK(torch::equal(recon::make_solver("pinv", r)(y, phase), direct));
+  // A local Phi's pinv is per pixel: N multiply-adds per value; random projections' dense.
+  CHECK(recon::find_method("pinv").patch_flops(r) == 2.0 * 2 * 25 * 81);
+  auto random = optics::make_phi(optics::PhiSpec::parse("random:2"));
+  r.phi = random.get();
   CHECK(recon::find_method("pinv").patch_flops(r) == 2.0 * (2 * 81) * (25 * 81));
 }
 

@@ -94,6 +94,35 @@ TEST_CASE("per-patch and sensor modes agree for a local Phi without noise", "[re
   test::require_close(per_patch, sensor, 1e-5);
 }
 
+TEST_CASE("a local Phi's per-pixel pseudo-inverses are its patch pseudo-inverses", "[recon]") {
+  for (const char* spec : {"asp:2", "mask:2", "aperture:3", "lenslet:4"}) {
+    INFO(spec);
+    auto phi = optics::make_phi(optics::PhiSpec::parse(spec));
+    REQUIRE(phi->local());
+    const int64_t h = 6, w = 7, n = phi->measurements(), uv = phi->rows() * phi->cols();
+    const auto dense = optics::pinv_matrix_stack(*phi, h, w, 1e-3, torch::kFloat64);
+    const auto pixel = optics::pixel_pinv_stack(*phi, h, w, 1e-3, torch::kFloat64);
+    REQUIRE(pixel.sizes() == torch::IntArrayRef({dense.size(0), n, uv, h * w}));
+    // The dense (P, U V h w, N h w) holds pixel[p, n, k, q] at row (k, q), column (n, q).
+    const auto eye = torch::eye(h * w, torch::kFloat64);
+    const auto expanded =
+        torch::einsum("pnkq,qQ->pkqnQ", {pixel, eye}).reshape({dense.size(0), uv * h * w, -1});
+    test::require_close(expanded, dense, 1e-12);
+    // So do their solvers, on any measurements.
+    const auto y = torch::rand({40, n * h * w});
+    const auto phase = torch::randint(dense.size(0), {40}, torch::kLong);
+    test::require_close(recon::pixel_pinv_solver(pixel)(y, phase),
+                        recon::pinv_solver(dense)(y, phase), 1e-5);
+  }
+  // Random projections mix pixels: no per-pixel form, and pinv_solver(phi) takes the dense one.
+  auto random = optics::make_phi(optics::PhiSpec::parse("random:2"));
+  CHECK_THROWS(optics::pixel_pinv_stack(*random, 9, 9));
+  const auto y = torch::rand({3, 2 * 81});
+  const auto phase = torch::zeros({3}, torch::kLong);
+  test::require_close(recon::pinv_solver(*random, 9, 9)(y, phase),
+                      recon::pinv_solver(optics::pinv_matrix_stack(*random, 9, 9))(y, phase), 1e-6);
+}
+
 TEST_CASE("random projections refuse patches off the block grid in sensor mode", "[recon]") {
   auto phi = optics::make_phi(optics::PhiSpec::parse("random:2"));
   auto lf = smooth_lf(18, 18);

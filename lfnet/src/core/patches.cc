@@ -1,5 +1,7 @@
 #include "lfnet/core/patches.h"
 
+#include <torch/nn/functional/fold.h>
+
 #include "lfnet/core/error.h"
 #include "lfnet/core/file_backed.h"
 #include "lfnet/core/light_field.h"
@@ -54,6 +56,30 @@ torch::Tensor PatchGrid::extract(const torch::Tensor& lf, int64_t row_begin,
       .reshape({c * ny * nx, u, v, patch_h_, patch_w_});
 }
 
+namespace {
+
+// Maximal runs of evenly spaced origins: (first index, count, step); a grid's origins are one
+// run, then at most one origin flush with the edge.
+struct OriginRun {
+  int64_t first, count, step;
+};
+
+std::vector<OriginRun> origin_runs(const std::vector<int64_t>& origins, int64_t begin,
+                                   int64_t end) {
+  std::vector<OriginRun> runs;
+  for (int64_t i = begin; i < end;) {
+    const auto at = [&](int64_t k) { return origins[static_cast<size_t>(k)]; };
+    const int64_t step = i + 1 < end ? at(i + 1) - at(i) : 1;
+    int64_t j = i + 1;
+    while (j < end && at(j) - at(j - 1) == step) ++j;
+    runs.push_back({i, j - i, step});
+    i = j;
+  }
+  return runs;
+}
+
+}  // namespace
+
 Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_t cols,
                    const torch::Tensor& weight, bool coded)
     : grid_(grid), channels_(channels), rows_(rows), cols_(cols), coded_(coded) {
@@ -62,30 +88,31 @@ Stitcher::Stitcher(const PatchGrid& grid, int64_t channels, int64_t rows, int64_
     LFNET_CHECK(
         weight.dim() == 2 && weight.size(0) == grid.patch_h() && weight.size(1) == grid.patch_w(),
         "stitching window must be (h, w) = (", grid.patch_h(), ", ", grid.patch_w(), ")");
-    weight_ = weight.to(torch::kFloat64).reshape({-1}).contiguous();
+    weight_ = weight.to(torch::kFloat64).contiguous();
+    window_ = true;
   } else {
-    weight_ = torch::ones({grid.patch_h() * grid.patch_w()}, opts);
+    weight_ = torch::ones({grid.patch_h(), grid.patch_w()}, opts);
   }
   // Codes of a large light field are file-backed, and finished rows leave memory
   // (core/file_backed.h).
   out_ = coded
              ? file_backed_empty({channels, rows, cols, grid.height(), grid.width()}, torch::kInt16)
              : torch::empty({channels, rows, cols, grid.height(), grid.width()});
-  sum_ = torch::zeros({channels, rows, cols, 0}, opts);
-  count_ = torch::zeros({0}, opts);
+  sum_ = torch::zeros({channels * rows * cols, 0, grid.width()}, opts);
+  count_ = torch::zeros({1, 0, grid.width()}, opts);
 }
 
 void Stitcher::flush(int64_t until) {
   const int64_t w = grid_.width(), n = until - top_;
   if (n <= 0) return;
-  LFNET_CHECK(count_.size(0) >= n * w, "stitching left pixels without any estimate");
-  auto count = count_.slice(0, 0, n * w);
+  LFNET_CHECK(count_.size(1) >= n, "stitching left pixels without any estimate");
+  auto count = count_.slice(1, 0, n);
   LFNET_CHECK(count.min().item<double>() > 0, "stitching left pixels without any estimate");
-  auto rows = (sum_.slice(3, 0, n * w) / count).reshape({channels_, rows_, cols_, n, w});
+  auto rows = (sum_.slice(1, 0, n) / count).reshape({channels_, rows_, cols_, n, w});
   out_.slice(3, top_, until).copy_(coded_ ? encode_codes(rows) : rows);
   page_out(out_);  // every row above `until` is final
-  sum_ = sum_.slice(3, n * w);
-  count_ = count_.slice(0, n * w);
+  sum_ = sum_.slice(1, n);
+  count_ = count_.slice(1, n);
   top_ = until;
 }
 
@@ -106,28 +133,40 @@ void Stitcher::add(const torch::Tensor& patches, int64_t row_begin, int64_t row_
   flush(ys[static_cast<size_t>(row_begin)]);
   // Grow the buffer down to the band's last image row.
   const int64_t bottom = ys[static_cast<size_t>(row_end - 1)] + h;
-  const int64_t held = sum_.size(3) / width, wanted = bottom - top_;
+  const int64_t held = sum_.size(1), wanted = bottom - top_;
   if (wanted > held) {
     auto opts = torch::TensorOptions().dtype(torch::kFloat64);
-    sum_ = torch::cat(
-        {sum_, torch::zeros({channels_, rows_, cols_, (wanted - held) * width}, opts)}, 3);
-    count_ = torch::cat({count_, torch::zeros({(wanted - held) * width}, opts)}, 0);
+    sum_ = torch::cat({sum_, torch::zeros({sum_.size(0), wanted - held, width}, opts)}, 1);
+    count_ = torch::cat({count_, torch::zeros({1, wanted - held, width}, opts)}, 1);
   }
-  // Flat indices into the buffer, whose first row is image row top_.
-  auto yb =
-      torch::tensor(std::vector<int64_t>(ys.begin() + row_begin, ys.begin() + row_end)) - top_;
-  auto xs = torch::tensor(grid_.xs());
-  auto y = yb.view({-1, 1, 1, 1}) + torch::arange(h).view({1, 1, h, 1});
-  auto x = xs.view({1, -1, 1, 1}) + torch::arange(w).view({1, 1, 1, w});
-  auto idx = (y * width + x).reshape({-1});
-  // (C, ny, nx, U, V, h, w) -> (C, U, V, ny * nx * h * w), weighted
-  auto src = patches.to(torch::kFloat64)
-                 .reshape({channels_, ny * nx, rows_, cols_, h * w})
-                 .mul(weight_)
-                 .permute({0, 2, 3, 1, 4})
-                 .reshape({channels_, rows_, cols_, -1});
-  sum_.index_add_(3, idx, src);
-  count_.index_add_(0, idx, weight_.repeat({ny * nx}));
+  // (C, ny, nx, U, V, h, w) -> (C, U, V, h, w, ny, nx): fold's (col2im) layout, a view
+  const auto src =
+      patches.reshape({channels_, ny, nx, rows_, cols_, h, w}).permute({0, 3, 4, 5, 6, 1, 2});
+  const auto weight = weight_.view({1, h, w, 1, 1}).expand({1, h, w, ny, nx});
+  // A run of evenly spaced origins is a strided sliding window: fold adds its patches.
+  const auto& xs = grid_.xs();
+  for (const auto& ry : origin_runs(ys, row_begin, row_end)) {
+    for (const auto& rx : origin_runs(xs, 0, nx)) {
+      const int64_t y0 = ys[static_cast<size_t>(ry.first)] - top_;
+      const int64_t x0 = xs[static_cast<size_t>(rx.first)];
+      const int64_t iy = ry.first - row_begin;
+      const int64_t out_h = ry.step * (ry.count - 1) + h, out_w = rx.step * (rx.count - 1) + w;
+      const auto fold =
+          torch::nn::functional::FoldFuncOptions({out_h, out_w}, {h, w}).stride({ry.step, rx.step});
+      const auto add = [&](torch::Tensor& buffer, const torch::Tensor& block, bool weigh) {
+        const auto run =
+            block.slice(-2, iy, iy + ry.count).slice(-1, rx.first, rx.first + rx.count);
+        // float64 in one pass, (..., h, w, my, mx) -> (1, ... h w, my mx)
+        auto cols = torch::empty(run.sizes(), run.options().dtype(torch::kFloat64)).copy_(run);
+        if (weigh) cols.mul_(weight_.view({h, w, 1, 1}));
+        buffer.slice(1, y0, y0 + out_h)
+            .slice(2, x0, x0 + out_w)
+            .add_(torch::nn::functional::fold(cols.view({1, -1, ry.count * rx.count}), fold)[0]);
+      };
+      add(sum_, src, window_);
+      add(count_, weight, false);
+    }
+  }
 }
 
 torch::Tensor Stitcher::result() {

@@ -4,6 +4,7 @@
 
 #include "lfnet/core/enum_names.h"
 #include "lfnet/core/error.h"
+#include "models.h"
 
 namespace lfnet::optics {
 
@@ -64,6 +65,19 @@ torch::Tensor pinv_matrix_stack(const Phi& phi, int64_t h, int64_t w, double lam
     for (int64_t px = 0; px < t; ++px) mats.push_back(phi.pinv_matrix(py, px, h, w, lambda, dtype));
   }
   return torch::stack(mats);
+}
+
+torch::Tensor pixel_pinv_stack(const Phi& phi, int64_t h, int64_t w, double lambda,
+                               torch::ScalarType dtype) {
+  LFNET_CHECK(phi.local(), "pixel_pinv_stack: Phi '", phi.spec().label(),
+              "' mixes pixels; use pinv_matrix_stack");
+  auto weights = pixel_weight_stack(phi, h, w, torch::kFloat64);  // (P, N, U, V, h, w)
+  const int64_t p = weights.size(0), n = weights.size(1);
+  const int64_t uv = weights.size(2) * weights.size(3), q = h * w;
+  // Per pixel, A (N, U V) -> (U V, N), as LocalPhi::pinv_matrix computes it.
+  auto per_pixel = weights.reshape({p, n, uv, q}).permute({0, 3, 1, 2});  // (P, h w, N, U V)
+  auto pinv = detail::tikhonov_pinv(per_pixel, lambda);                   // (P, h w, U V, N)
+  return pinv.permute({0, 3, 2, 1}).to(dtype).contiguous();
 }
 
 void check_sensor_consistent(const Phi& phi, const PatchGrid& grid, int64_t row_begin,

@@ -26,6 +26,12 @@ double linear_patch_flops(const MethodResources& r) {
          static_cast<double>(r.phi->rows() * r.phi->cols() * r.patch_h * r.patch_w);
 }
 
+double pinv_patch_flops(const MethodResources& r) {
+  if (!r.phi->local()) return linear_patch_flops(r);
+  return 2.0 * static_cast<double>(r.phi->measurements() * r.phi->rows() * r.phi->cols() *
+                                   r.patch_h * r.patch_w);
+}
+
 void register_builtin_methods(const MethodSink& add) {
   add(make_network_method("net"));
   add(make_network_method("ae"));
@@ -215,9 +221,9 @@ class PinvMethod : public Method {
   std::string summary() const override { return "the regularised pseudo-inverse (linear)"; }
   bool baseline() const override { return true; }
   PatchSolver solver(const MethodResources& r) const override {
-    return pinv_solver(optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w));
+    return pinv_solver(*r.phi, r.patch_h, r.patch_w);
   }
-  double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }
+  double patch_flops(const MethodResources& r) const override { return pinv_patch_flops(r); }
 };
 
 // no-parallax: every view is the angular mean of the truth (an evaluation baseline).

@@ -52,12 +52,19 @@ class PinvNlmMethod : public MethodWithOptions<PinvNlmOptions> {
     const nlohmann::json o = read_options(r.options, "--method-options");
     const Denoiser* denoiser = &find_denoiser(o["denoiser"].get<std::string>());
     const nlohmann::json& denoiser_options = o["options"];
-    const auto pinv = optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w);
     // The pseudo-inverse's noise per unit of measurement noise (the same for every phase of
-    // the periodic models, up to their small differences: the mean over phases).
+    // the periodic models, up to their small differences: the mean over phases). A local
+    // model's rows hold its per-pixel pseudo-inverses and zeros.
+    const bool local = r.phi->local();
+    const auto pinv = local ? optics::pixel_pinv_stack(*r.phi, r.patch_h, r.patch_w)
+                            : optics::pinv_matrix_stack(*r.phi, r.patch_h, r.patch_w);
     double gain = 0;
-    for (int64_t i = 0; i < pinv.size(0); ++i) gain += pinv_noise_sigma(pinv[i], 1.0);
+    for (int64_t i = 0; i < pinv.size(0); ++i) {
+      const auto rows = local ? pinv[i].permute({1, 2, 0}).reshape({-1, pinv.size(1)}) : pinv[i];
+      gain += pinv_noise_sigma(rows, 1.0);
+    }
     gain /= static_cast<double>(pinv.size(0));
+    const PatchSolver solver = local ? pixel_pinv_solver(pinv) : pinv_solver(pinv);
     ReconstructOptions ro;
     ro.patch_h = r.patch_h;
     ro.patch_w = r.patch_w;
@@ -65,16 +72,16 @@ class PinvNlmMethod : public MethodWithOptions<PinvNlmOptions> {
     ro.clamp = false;                                    // clamping would bias the noise
     const optics::Phi* phi = r.phi;
     const bool coded = r.coded;
-    return [phi, pinv, gain, ro, denoiser, denoiser_options, coded](const torch::Tensor& sensor,
-                                                                    double sigma) {
-      auto lf = reconstruct_sensor(*phi, sensor, pinv_solver(pinv), ro);  // (1, U, V, H, W)
+    return [phi, solver, gain, ro, denoiser, denoiser_options, coded](const torch::Tensor& sensor,
+                                                                      double sigma) {
+      auto lf = reconstruct_sensor(*phi, sensor, solver, ro);  // (1, U, V, H, W)
       const auto shape = lf.sizes().vec();
       auto views = lf.reshape({shape[1] * shape[2], shape[3], shape[4]});
       auto out = denoiser->denoise(views, sigma * gain, denoiser_options).reshape(shape);
       return coded ? encode_codes(out) : out.clamp(0.0, 1.0);
     };
   }
-  double patch_flops(const MethodResources& r) const override { return linear_patch_flops(r); }
+  double patch_flops(const MethodResources& r) const override { return pinv_patch_flops(r); }
 };
 
 }  // namespace

@@ -72,9 +72,11 @@ torch::Tensor reconstruct_patches(const optics::Phi& phi, const PatchGrid& grid,
       parts.push_back(solver(meas.values.slice(0, b, e), meas.phases.slice(0, b, e)));
     }
     auto est = torch::cat(parts, 0).reshape({n, u, v, h, w});
-    if (!torch::isfinite(est).all().item<bool>()) {
-      throw NumericalError("the reconstruction produced NaN or infinite values in patch rows " +
-                           std::to_string(r0) + ".." + std::to_string(r1 - 1));
+    // One NaN or infinity makes the sum NaN or infinite (as do values too large to sum).
+    if (!std::isfinite(est.sum().item<double>())) {
+      throw NumericalError(
+          "the reconstruction produced NaN, infinite or huge values in patch rows " +
+          std::to_string(r0) + ".." + std::to_string(r1 - 1));
     }
     stitcher.add(est, r0, r1);
     done += n;
@@ -121,6 +123,26 @@ PatchSolver pinv_solver(const torch::Tensor& pinv_matrices) {
       return torch::matmul(rows, r[p].t());
     });
   };
+}
+
+PatchSolver pixel_pinv_solver(const torch::Tensor& pixel_pinv) {
+  LFNET_CHECK(pixel_pinv.dim() == 4, "pixel_pinv_solver: expected (P, N, U V, h w), got ",
+              pixel_pinv.sizes());
+  auto r = pixel_pinv.to(torch::kFloat32).contiguous();
+  const int64_t n = r.size(1), uv = r.size(2), q = r.size(3);
+  return [r, n, uv, q](const torch::Tensor& y, const torch::Tensor& phase) {
+    return by_phase(y, phase, uv * q, [&](const torch::Tensor& rows, int64_t p) {
+      const auto x = rows.reshape({-1, n, 1, q});  // (B, N, 1, h w)
+      auto out = x.select(1, 0) * r[p][0];         // (B, U V, h w)
+      for (int64_t i = 1; i < n; ++i) out.addcmul_(x.select(1, i), r[p][i]);
+      return out.reshape({-1, uv * q});
+    });
+  };
+}
+
+PatchSolver pinv_solver(const optics::Phi& phi, int64_t h, int64_t w) {
+  if (phi.local()) return pixel_pinv_solver(optics::pixel_pinv_stack(phi, h, w));
+  return pinv_solver(optics::pinv_matrix_stack(phi, h, w));
 }
 
 double match_mean(torch::Tensor& measurements, double target_mean) {

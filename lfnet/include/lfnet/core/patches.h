@@ -68,13 +68,14 @@ class Stitcher {
 
   const PatchGrid grid_;
   int64_t channels_, rows_, cols_;
-  torch::Tensor weight_;  // (h * w) float64
+  torch::Tensor weight_;  // (h, w) float64
+  bool window_ = false;   // weight_ is a window, not ones
   bool coded_;
   torch::Tensor out_;     // (C, U, V, H, W) float32, or int16 codes
   int64_t next_row_ = 0;  // the first patch row not added yet
   int64_t top_ = 0;       // the first image row not in out_ yet: the buffer's first row
-  torch::Tensor sum_;     // (C, U, V, buffer rows * W) float64
-  torch::Tensor count_;   // (buffer rows * W) float64
+  torch::Tensor sum_;     // (C U V, buffer rows, W) float64
+  torch::Tensor count_;   // (1, buffer rows, W) float64
 };
 
 }  // namespace lfnet

@@ -56,6 +56,13 @@ torch::Tensor pinv_matrix_stack(const Phi& phi, int64_t h, int64_t w,
                                 double lambda = kDefaultPinvLambda,
                                 torch::ScalarType dtype = torch::kFloat32);
 
+// The same pseudo-inverses of a local model in compact form, pixel by pixel:
+// (period^2, N, U V, h w), entry [p, n, k, q] the weight of measurement n at pixel q in view k
+// of the patch of phase p. The patch's pinv_matrix holds exactly these and zeros.
+torch::Tensor pixel_pinv_stack(const Phi& phi, int64_t h, int64_t w,
+                               double lambda = kDefaultPinvLambda,
+                               torch::ScalarType dtype = torch::kFloat32);
+
 // Throws ConfigError naming the first patch of grid rows [row_begin, row_end) whose
 // measurements are not a crop of one sensor image (random projections off the block grid).
 void check_sensor_consistent(const Phi& phi, const PatchGrid& grid, int64_t row_begin,

@@ -74,6 +74,11 @@ torch::Tensor by_phase(const torch::Tensor& x, const torch::Tensor& phase, int64
 PatchSolver adjoint_solver(const torch::Tensor& matrices);
 // pinv: a solver over a stack of pseudo-inverses (optics::pinv_matrix_stack), (P, D, N h w).
 PatchSolver pinv_solver(const torch::Tensor& pinv_matrices);
+// The same for a local model from its per-pixel pseudo-inverses (optics::pixel_pinv_stack),
+// (P, N, U V, h w): N multiply-adds per output value instead of N h w.
+PatchSolver pixel_pinv_solver(const torch::Tensor& pixel_pinv);
+// pixel_pinv_solver for local models, pinv_solver for the others.
+PatchSolver pinv_solver(const optics::Phi& phi, int64_t h, int64_t w);
 
 // Scales real measurements linearly so their mean equals `target_mean` (the paper's step for
 // real data); returns the scale applied.
