@@ -60,6 +60,9 @@ namespace {
 // Rows of a view scored at a time: the float64 copies stay a band high (a 12-megapixel view is
 // 48 MB in float32, 96 MB per float64 copy).
 constexpr int64_t kScoreBand = 128;
+// SSIM's bands are lower, so that its five float64 maps of a band stay near a core's cache:
+// the SSIM of 5 x 5 views of 593 x 840 takes 0.47 s in bands of 48 rows, 0.85 s in 128.
+constexpr int64_t kSsimBand = 48;
 
 // The mean squared error of each view (U, V) in float64, a band of rows at a time.
 torch::Tensor per_view_mse(const LightFieldViews& estimate, const LightFieldViews& truth) {
@@ -152,8 +155,8 @@ double ssim_image(const torch::Tensor& a, const torch::Tensor& b, const SsimOpti
   // only windows inside the image count: rows are taken a band at a time (with the radius
   // above and below), which keeps the float64 maps a band high.
   auto total = torch::zeros({c}, torch::kFloat64);
-  for (int64_t y0 = r; y0 < h - r; y0 += kScoreBand) {
-    const int64_t rows = std::min(kScoreBand, h - r - y0);
+  for (int64_t y0 = r; y0 < h - r; y0 += kSsimBand) {
+    const int64_t rows = std::min(kSsimBand, h - r - y0);
     total += window.band_sum(x.narrow(1, y0 - r, rows + 2 * r), y.narrow(1, y0 - r, rows + 2 * r));
   }
   return window.mean(total, h, w);
@@ -170,8 +173,8 @@ double ssim(const LightFieldViews& estimate, const LightFieldViews& truth,
   for (int64_t u = 0; u < truth.rows(); ++u) {
     for (int64_t v = 0; v < truth.cols(); ++v) {
       auto sum = torch::zeros({truth.channels()}, torch::kFloat64);
-      for (int64_t y0 = r; y0 < h - r; y0 += kScoreBand) {
-        const int64_t y1 = std::min(h - r, y0 + kScoreBand);
+      for (int64_t y0 = r; y0 < h - r; y0 += kSsimBand) {
+        const int64_t y1 = std::min(h - r, y0 + kSsimBand);
         sum += window.band_sum(estimate.view_rows(u, v, y0 - r, y1 + r),
                                truth.view_rows(u, v, y0 - r, y1 + r));
       }

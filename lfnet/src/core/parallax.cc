@@ -70,8 +70,7 @@ torch::Tensor matching_cost(const torch::Tensor& centre, const std::vector<torch
         auto c = view.narrow(dim, margin + shift, along_x ? w : h);
         return c.narrow(1 - dim, margin, along_x ? h : w);
       };
-      auto warped = crop(i0) * (1.0 - f) + crop(i0 + 1) * f;
-      cost.add_((warped - target).abs());
+      cost.add_(torch::lerp(crop(i0), crop(i0 + 1), f).sub_(target).abs_());
     }
     costs.push_back(torch::avg_pool2d(cost.unsqueeze(0), {block, block}).squeeze(0));
   }
