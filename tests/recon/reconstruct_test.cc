@@ -117,7 +117,7 @@ TEST_CASE("a local Phi's per-pixel pseudo-inverses are its patch pseudo-inverses
   // Random projections mix pixels: no per-pixel form, and pinv_solver(phi) takes the dense one.
   auto random = optics::make_phi(optics::PhiSpec::parse("random:2"));
   CHECK_THROWS(optics::pixel_pinv_stack(*random, 9, 9));
-  const auto y = torch::rand({3, 2 * 81});
+  const auto y = torch::rand({3, int64_t{2} * 81});
   const auto phase = torch::zeros({3}, torch::kLong);
   test::require_close(recon::pinv_solver(*random, 9, 9)(y, phase),
                       recon::pinv_solver(optics::pinv_matrix_stack(*random, 9, 9))(y, phase), 1e-6);
