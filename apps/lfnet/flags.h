@@ -266,8 +266,8 @@ inline void add_reconstruction_flags(CLI::App* cmd, const ReconstructionFlags& f
   cmd->add_option(
          "--tile", *f.tile,
          "spatial tile of whole-image models (default: the whole image up to 800 x 800 pixels, "
-         "else the largest tiles whose crops with halos fit 512 x 512) and of --cnn-mode full "
-         "(default 128)")
+         "else the largest tiles whose crops with halos fit 512 x 512; a colour net 640 and "
+         "720) and of --cnn-mode full (default 128)")
       ->check(kCount);
   if (f.strides) {
     cmd->add_option("--strides", *f.strides,

@@ -4,7 +4,9 @@
 #include <catch2/catch.hpp>
 
 #include "lfnet/core/error.h"
+#include "lfnet/nn/image_net.h"
 #include "lfnet/nn/network.h"
+#include "lfnet/nn/script.h"
 #include "lfnet/optics/cfa.h"
 #include "lfnet/optics/measure.h"
 #include "lfnet/recon/fully_convolutional.h"
@@ -136,6 +138,37 @@ TEST_CASE("tiled inference of a colour net equals one pass over the whole image"
   const auto via_forward = net->forward(crop.flatten(1), torch::full({1}, phase, torch::kInt64));
   REQUIRE(via_forward.sizes() == torch::IntArrayRef({1, 3, phi->rows(), phi->cols(), 16, 16}));
   CHECK(torch::allclose(via_forward, net->forward_image(crop, phase), 1e-5, 1e-5));
+}
+
+TEST_CASE("a colour net runs whole only on smaller images; an export carries its limits",
+          "[recon][image][colour]") {
+  const auto phi = optics::make_phi(optics::PhiSpec::parse("asp:2"));
+  auto grey_options = colour_options(*phi, "RGGB");
+  grey_options.cfa = "";
+  const auto colour = net_of(colour_options(*phi, "RGGB"), *phi);
+  const auto grey = net_of(grey_options, *phi);
+  const auto colour_tiling = colour->architecture().image_tiling(colour->options());
+  const auto grey_tiling = grey->architecture().image_tiling(grey->options());
+  REQUIRE(colour_tiling.receptive_radius == grey_tiling.receptive_radius);
+  CHECK((grey_tiling.whole == 800 && grey_tiling.crop == 512));
+  CHECK((colour_tiling.whole == 640 && colour_tiling.crop == 720));
+  // 593 x 840 (pads to 596 x 840): whole for a grey net, two tiles of 720 - 2 halos in colour.
+  const int64_t halo = (colour_tiling.receptive_radius + 3) / 4 * 4;  // 3 levels: multiple 4
+  CHECK(nn::auto_image_tile(grey_tiling, 593, 840) == 840);
+  CHECK(nn::auto_image_tile(colour_tiling, 593, 840) == 720 - 2 * halo);
+  CHECK(nn::image_tiles(colour_tiling, 593, 840, 0).size() == 2);
+  CHECK(nn::auto_image_tile(colour_tiling, 500, 800) == 800);  // 500 x 800 <= 640^2
+
+  // An export carries the limits its `reconstruct` resolves a tile of 0 with (a grey net's:
+  // colour nets are not exported).
+  const test::TempDir tmp;
+  nn::ScriptMetadata meta;
+  meta.phi = phi->spec().to_json();
+  meta.period = grey->period();
+  nn::export_network(grey, meta, tmp / "g.pt");
+  const auto scripted = nn::load_script(tmp / "g.pt");
+  CHECK(scripted.module.attr("auto_tile_whole").toInt() == 800);
+  CHECK(scripted.module.attr("auto_tile_crop").toInt() == 512);
 }
 
 TEST_CASE("a colour net starts from a grey one: the grey net's correction of the luma",

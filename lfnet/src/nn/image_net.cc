@@ -57,16 +57,13 @@ double ImageNetOptions::pixel_flops(int64_t in, int64_t out) const {
   return flops;
 }
 
-namespace {
-// `v` rounded up to a multiple of `m`.
-int64_t round_up(int64_t v, int64_t m) { return (v + m - 1) / m * m; }
-}  // namespace
+int64_t round_up(int64_t v, int64_t multiple) { return (v + multiple - 1) / multiple * multiple; }
 
 int64_t auto_image_tile(const ImageTiling& tiling, int64_t height, int64_t width) {
   const int64_t m = tiling.multiple;
   const int64_t hp = round_up(height, m), wp = round_up(width, m);
-  if (hp * wp <= kAutoTileWhole * kAutoTileWhole) return std::max(hp, wp);
-  const int64_t side = kAutoTileCrop - 2 * round_up(tiling.receptive_radius, m);
+  if (hp * wp <= tiling.whole * tiling.whole) return std::max(hp, wp);
+  const int64_t side = tiling.crop - 2 * round_up(tiling.receptive_radius, m);
   return std::max<int64_t>(side, 256) / m * m;
 }
 
@@ -205,20 +202,23 @@ torch::Tensor ImageNetImpl::forward(const torch::Tensor& x) {
                            .stride(c->options.stride())
                            .padding(c->options.padding())));
   };
-  auto h = torch::relu(conv(input_, q(x.to(input_->weight.scalar_type()))));
+  // Every ReLU is in place on a fresh convolution's output, and a skip is let go once added:
+  // each level holds one activation fewer, which bounds the peak of a large image.
+  auto h = conv(input_, q(x.to(input_->weight.scalar_type()))).relu_();
   std::vector<torch::Tensor> skips;
   const int64_t levels = options_.levels;
   for (int64_t l = 0; l < levels; ++l) {
-    for (auto& c : encoder_[l]) h = torch::relu(conv(c, h));
+    for (auto& c : encoder_[l]) h = conv(c, h).relu_();
     if (l + 1 < levels) {
       skips.push_back(h);
-      h = torch::relu(conv(down_[l], h));
+      h = conv(down_[l], h).relu_();
     }
   }
   for (int64_t l = levels - 2; l >= 0; --l) {
     const auto type = h.scalar_type();
-    h = q(torch::relu(q(up_[l]->forward(h.to(up_[l]->weight.scalar_type())).to(type))) + skips[l]);
-    for (auto& c : decoder_[l]) h = torch::relu(conv(c, h));
+    h = q(q(up_[l]->forward(h.to(up_[l]->weight.scalar_type())).to(type)).relu_() + skips[l]);
+    skips[l] = torch::Tensor();
+    for (auto& c : decoder_[l]) h = conv(c, h).relu_();
   }
   return conv(output_, h).to(x.scalar_type());
 }

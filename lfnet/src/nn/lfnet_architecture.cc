@@ -97,11 +97,12 @@ torch::Tensor refine(LightFieldNetImpl& net, const torch::Tensor& base, const to
                      const torch::Tensor& start) {
   const auto image = image_layers(net);
   const auto x = unet_input(net, base, start);
-  if (!image->options().noise_input) return start + image->forward(x);
+  // The correction is a fresh tensor: `start` is added into it.
+  if (!image->options().noise_input) return image->forward(x).add_(start);
   auto sigma =
       noise.defined() ? noise.to(base.options()) : torch::zeros({base.size(0)}, base.options());
   auto channel = sigma.view({-1, 1, 1, 1}).expand({base.size(0), 1, base.size(2), base.size(3)});
-  return start + image->forward(torch::cat({x, channel}, 1));
+  return image->forward(torch::cat({x, channel}, 1)).add_(start);
 }
 
 // A colour net's CFA response at every pixel of crops (B, h, w) whose pixel (0, 0) has phase
@@ -119,7 +120,6 @@ torch::Tensor response_maps(const torch::Tensor& tile, const torch::Tensor& phas
 // Bayer pattern this is optics::demosaic but on the image's outermost pixels, where that mirrors
 // the image.
 torch::Tensor demosaic_base(const torch::Tensor& base, const torch::Tensor& response) {
-  const int64_t b = base.size(0), k = base.size(1), h = base.size(2), w = base.size(3);
   const auto kernel =
       torch::tensor({0.25, 0.5, 0.25, 0.5, 1.0, 0.5, 0.25, 0.5, 0.25}, torch::kFloat64)
           .to(base.options())
@@ -127,9 +127,9 @@ torch::Tensor demosaic_base(const torch::Tensor& base, const torch::Tensor& resp
   std::vector<torch::Tensor> colours;
   for (int64_t c = 0; c < 3; ++c) {
     const auto own = response.select(1, c).unsqueeze(1).to(base.options());  // (B, 1, h, w)
-    const auto sum = torch::conv2d((base * own).reshape({b * k, 1, h, w}), kernel, {}, 1, 1);
+    const auto sum = optics::filter_channels(base * own, kernel, 1).squeeze(2);
     const auto weight = torch::conv2d(own, kernel, {}, 1, 1).clamp_min(1e-6);
-    colours.push_back(own * base + (1 - own) * (sum.view({b, k, h, w}) / weight));
+    colours.push_back(own * base + (1 - own) * (sum / weight));
   }
   return torch::cat(colours, 1);
 }
@@ -288,7 +288,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     const auto& p = o.patch;
     const int64_t m = image_layers(net)->options().multiple(), h = sensor.size(2),
                   w = sensor.size(3);
-    const int64_t ph = (m - h % m) % m, pw = (m - w % m) % m;
+    const int64_t ph = round_up(h, m) - h, pw = round_up(w, m) - w;
     LFNET_CHECK(phase >= 0 && phase < net.phases(), "forward_image: phase ", phase, " outside [0, ",
                 net.phases(), ")");
     const auto phases =
@@ -307,7 +307,12 @@ class LfnetArchitecture : public NetworkArchitecture {
   }
 
   ImageTiling image_tiling(const NetworkOptions& o) const override {
-    return image_options(o).tiling();
+    auto tiling = image_options(o).tiling();
+    if (o.colours() > 1) {
+      tiling.whole = kAutoTileWholeColour;
+      tiling.crop = kAutoTileCropColour;
+    }
+    return tiling;
   }
 
   void set_precision(LightFieldNetImpl& net, torch::Dtype dtype) const override {
@@ -340,8 +345,7 @@ class LfnetArchitecture : public NetworkArchitecture {
     builder.trace(
         "image", [&](const torch::Tensor& x) { return module->forward(x); },
         torch::rand({1, channels, 2 * m, 2 * m}));
-    builder.attribute("multiple", m);
-    builder.attribute("receptive_radius", image.receptive_radius());
+    builder.tiling(image_tiling(o));
     builder.attribute("noise_input", image.noise_input);
     return std::string(kPixelMapSource) +
            (o.frames > 1 ? kFramesEstimatesSource : kStillEstimatesSource) + kForwardSource +

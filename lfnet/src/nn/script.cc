@@ -192,6 +192,13 @@ void ScriptBuilder::attribute(const std::string& name, bool value) {
   root_.register_attribute(name, c10::BoolType::get(), value);
 }
 
+void ScriptBuilder::tiling(const ImageTiling& tiling) {
+  attribute("multiple", tiling.multiple);
+  attribute("receptive_radius", tiling.receptive_radius);
+  attribute("auto_tile_whole", tiling.whole);
+  attribute("auto_tile_crop", tiling.crop);
+}
+
 std::string ScriptBuilder::literal(double value) {
   char buf[64];
   std::snprintf(buf, sizeof(buf), "%.17g", value);
@@ -201,8 +208,6 @@ std::string ScriptBuilder::literal(double value) {
 }
 
 // `reconstruct` with a tile of 0 repeats nn::auto_image_tile.
-static_assert(kAutoTileWhole == 800 && kAutoTileCrop == 512,
-              "kWholeImageScriptSource writes the automatic tile's sizes as 800 and 512");
 const char* const kWholeImageScriptSource = R"TS(
 def check_sensor_images(self, sensor: Tensor, phase: int) -> None:
     if sensor.dim() != 4 or sensor.size(1) != self.measurements:
@@ -226,10 +231,10 @@ def reconstruct(self, sensor: Tensor, tile: int = 0, clamp: bool = True, noise_s
     wp = (w + m - 1) // m * m
     halo = (self.receptive_radius + m - 1) // m * m
     if tile == 0:
-        if hp * wp <= 800 * 800:
+        if hp * wp <= self.auto_tile_whole * self.auto_tile_whole:
             tile = max(hp, wp)
         else:
-            tile = max(512 - 2 * halo, 256) // m * m
+            tile = max(self.auto_tile_crop - 2 * halo, 256) // m * m
     step = (tile + m - 1) // m * m
     padded = torch.constant_pad_nd(sensor.to(self.pixel_pinv.dtype), [0, wp - w, 0, hp - h])
     out = torch.empty([self.patch_shape[0], self.patch_shape[1], h, w], dtype=self.pixel_pinv.dtype, device=sensor.device)

@@ -189,7 +189,8 @@ class UnrolledArchitecture : public NetworkArchitecture {
     const int64_t m = unrolled_options(net.options()).denoiser.multiple();
     const int64_t b = sensor.size(0), h = sensor.size(2), w = sensor.size(3);
     // Padded with zeros below and right, so pixel (0, 0) keeps its phase.
-    const auto padded = torch::constant_pad_nd(sensor, {0, (m - w % m) % m, 0, (m - h % m) % m});
+    const auto padded =
+        torch::constant_pad_nd(sensor, {0, round_up(w, m) - w, 0, round_up(h, m) - h});
     const auto phases = torch::full({b}, phase, torch::kInt64);
     const auto out = iterate(net, padded, phases, torch::full({b}, noise_sigma));
     return out.slice(2, 0, h).slice(3, 0, w).reshape({b, p.rows, p.cols, h, w});
@@ -244,8 +245,7 @@ class UnrolledArchitecture : public NetworkArchitecture {
       }
     }
     if (!u.shared) denoise += "    raise ValueError(\"denoise: no such iteration\")\n";
-    builder.attribute("multiple", m);
-    builder.attribute("receptive_radius", image_tiling(o).receptive_radius);
+    builder.tiling(image_tiling(o));
     builder.attribute("noise_input", u.denoiser.noise_input);
     builder.attribute("iterations", u.iterations);
     return std::string(kUnrolledSource) + denoise + kWholeImageScriptSource;

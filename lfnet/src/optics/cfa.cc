@@ -181,7 +181,7 @@ torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& res
                   response.size(3) == own.size(3),
               "demosaic_malvar: expected (B, K, h, w) and (B, 3, h, w), got ", own.sizes(), " and ",
               response.sizes());
-  const int64_t b = own.size(0), k = own.size(1), h = own.size(2), w = own.size(3);
+  const int64_t b = own.size(0), h = own.size(2), w = own.size(3);
   LFNET_CHECK_AS(ConfigError, h >= 3 && w >= 3, "demosaic: an image of ", h, " x ", w,
                  " pixels is too small for malvar demosaicing (3 x 3 at least)");
   const auto is = (response > 0).to(own.options());  // (B, 3, h, w)
@@ -191,9 +191,8 @@ torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& res
   const auto red_row = std::get<0>(red.max(3, /*keepdim=*/true)).expand({b, 1, h, w});
   const auto blue_row = 1 - red_row;
   const auto padded = torch::nn::functional::pad(
-      own.reshape({b * k, 1, h, w}),
-      torch::nn::functional::PadFuncOptions({2, 2, 2, 2}).mode(torch::kReflect));
-  const auto f = torch::conv2d(padded, malvar_filters(own.options())).view({b, k, 4, h, w});
+      own, torch::nn::functional::PadFuncOptions({2, 2, 2, 2}).mode(torch::kReflect));
+  const auto f = filter_channels(padded, malvar_filters(own.options()));  // (B, K, 4, h, w)
   const auto g_at_rb = f.select(2, 0), along_row = f.select(2, 1), along_column = f.select(2, 2),
              across = f.select(2, 3);  // (B, K, h, w)
   const auto at_green = [&](const torch::Tensor& in_row) {
@@ -203,6 +202,17 @@ torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& res
   auto g = green * own + (1 - green) * g_at_rb;
   auto bl = blue * own + green * at_green(blue_row) + red * across;
   return torch::stack({r, g, bl}, 1);
+}
+
+torch::Tensor filter_channels(const torch::Tensor& images, const torch::Tensor& filters,
+                              int64_t padding) {
+  LFNET_CHECK(images.dim() == 4 && filters.dim() == 4 && filters.size(1) == 1,
+              "filter_channels: expected (B, K, h, w) and (F, 1, kh, kw), got ", images.sizes(),
+              " and ", filters.sizes());
+  const int64_t k = images.size(1);
+  // Output channel c F + j is channel c under filter j.
+  const auto out = torch::conv2d(images, filters.repeat({k, 1, 1, 1}), {}, 1, padding, 1, k);
+  return out.view({images.size(0), k, filters.size(0), out.size(2), out.size(3)});
 }
 
 torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& cfa,
@@ -224,7 +234,7 @@ torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& 
   const auto options = mosaicked.options();
   const auto response = cfa.response_image(h, w).to(options);
   // Each pixel's value in its own colour: divided by its filter's weight (1 for Bayer).
-  const auto images = mosaicked.reshape({-1, 1, h, w}) / response.sum(0).view({1, 1, h, w});
+  const auto images = mosaicked.reshape({1, -1, h, w}) / response.sum(0).view({1, 1, h, w});
   const auto kernel =
       torch::tensor({1.0, 2.0, 1.0, 2.0, 4.0, 2.0, 1.0, 2.0, 1.0}, options).view({1, 1, 3, 3});
   const auto reflect = [](const torch::Tensor& x) {
@@ -238,7 +248,7 @@ torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& 
     LFNET_CHECK_AS(ConfigError, (weight > 0).all().item<bool>(),
                    "demosaic: the colour filter array leaves pixels with no ", "RGB"[c],
                    " pixel among their eight neighbours");
-    const auto mean = torch::conv2d(reflect(images * mask), kernel) / weight;
+    const auto mean = filter_channels(reflect(images * mask), kernel).squeeze(2) / weight;
     colours.push_back(torch::where(mask > 0, images, mean));
   }
   return torch::stack(colours).reshape(shape);

@@ -51,12 +51,14 @@ std::string calibration_path() {
 }
 
 nlohmann::json machine_fingerprint() {
-  return {{"cpu", cpu_info("model name")},
-          {"logical_cpus", static_cast<int64_t>(std::thread::hardware_concurrency())},
-          {"lfnet_version", kVersion},
-          {"torch_version", TORCH_VERSION},
-          // Timings made under another automatic tile (nn::auto_image_tile) are stale.
-          {"auto_tile", {nn::kAutoTileWhole, nn::kAutoTileCrop}}};
+  return {
+      {"cpu", cpu_info("model name")},
+      {"logical_cpus", static_cast<int64_t>(std::thread::hardware_concurrency())},
+      {"lfnet_version", kVersion},
+      {"torch_version", TORCH_VERSION},
+      // Timings made under another automatic tile (nn::auto_image_tile) are stale.
+      {"auto_tile",
+       {nn::kAutoTileWhole, nn::kAutoTileCrop, nn::kAutoTileWholeColour, nn::kAutoTileCropColour}}};
 }
 
 nlohmann::json TimingSetting::to_json() const {

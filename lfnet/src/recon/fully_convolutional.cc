@@ -9,6 +9,7 @@
 #include "lfnet/core/error.h"
 #include "lfnet/core/file_backed.h"
 #include "lfnet/core/light_field.h"
+#include "lfnet/nn/image_net.h"
 #include "lfnet/recon/methods.h"
 
 namespace lfnet::recon {
@@ -130,7 +131,7 @@ torch::Tensor reconstruct_sensor_tiled(nn::LightFieldNet net, const torch::Tenso
   net->eval();
   const auto tiling = arch.image_tiling(o);
   const int64_t m = tiling.multiple, h = sensor.size(1), w = sensor.size(2);
-  const int64_t hp = (h + m - 1) / m * m, wp = (w + m - 1) / m * m, t = net->period();
+  const int64_t hp = nn::round_up(h, m), wp = nn::round_up(w, m), t = net->period();
   LFNET_CHECK(origin >= 0 && origin < t * t, "reconstruct_sensor_tiled: origin ", origin,
               " outside the net's period of ", t, " x ", t);
   const int64_t oy = origin / t, ox = origin % t;

@@ -37,10 +37,14 @@ enum class PhiInput {
 };
 
 // How a whole-image net is run in tiles (recon::reconstruct_sensor_tiled): image sides are
-// padded to `multiple`, and a tile needs a halo of `receptive_radius` pixels.
+// padded to `multiple`, and a tile needs a halo of `receptive_radius` pixels. The automatic tile
+// (nn::auto_image_tile) runs an image whole when its padded pixels fit in `whole`^2, else in
+// tiles whose crops, halos included, are at most `crop` on a side.
 struct ImageTiling {
   int64_t multiple = 1;
   int64_t receptive_radius = 0;
+  int64_t whole = 800;
+  int64_t crop = 512;
 };
 
 // What train --init did with one parameter of the new net.

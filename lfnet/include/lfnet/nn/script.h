@@ -85,6 +85,9 @@ class ScriptBuilder {
   // Attributes of the root.
   void attribute(const std::string& name, int64_t value);
   void attribute(const std::string& name, bool value);
+  // The attributes multiple, receptive_radius, auto_tile_whole and auto_tile_crop of a
+  // whole-image net tiled as `tiling` (kWholeImageScriptSource's reconstruct reads them).
+  void tiling(const ImageTiling& tiling);
   // A float literal that TorchScript reads back as the same double.
   static std::string literal(double value);
 
@@ -95,7 +98,7 @@ class ScriptBuilder {
 
 // The TorchScript methods every whole-image net's export shares, written on its
 // forward_image(sensor, phase, noise_sigma) and the root's buffers phi (N, U, V, T, T) and
-// pixel_pinv and attributes multiple, receptive_radius, period and patch_shape:
+// pixel_pinv and attributes period and patch_shape and those of ScriptBuilder::tiling:
 // reconstruct(sensor, tile, clamp, noise_sigma), the tiles of nn::image_tiles and
 // recon::reconstruct_sensor_tiled op for op, simulate(lf), forward (forward_image), and
 // check_sensor_images(sensor, phase), the input checks each forward_image starts with.

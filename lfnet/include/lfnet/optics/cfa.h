@@ -76,4 +76,11 @@ torch::Tensor demosaic(const torch::Tensor& mosaicked, const ColourFilterArray& 
 // edges mirrored (h, w >= 3). The core of demosaic(..., kMalvar) and of a colour net's input.
 torch::Tensor demosaic_malvar(const torch::Tensor& own, const torch::Tensor& response);
 
+// Each channel of `images` (B, K, h, w) filtered by each of `filters` (F, 1, kh, kw), with
+// `padding` zeros on every side: (B, K, F, h', w'), as one grouped convolution. Not as B K
+// images of one channel: oneDNN pads a single input channel to a block of 16, 16 times the
+// images' memory (800 MB for a colour net's 593 x 840 x 5 x 5 input).
+torch::Tensor filter_channels(const torch::Tensor& images, const torch::Tensor& filters,
+                              int64_t padding = 0);
+
 }  // namespace lfnet::optics

@@ -59,7 +59,8 @@ torch::Tensor reconstruct_sensor_fully_convolutional(
     const torch::Tensor& sensor, const ReconstructOptions& options, int64_t tile = kDefaultCnnTile);
 
 // Spatial tile of the lfnet architecture's whole-image pass, without its halo: 0, automatic
-// (nn::auto_image_tile: the whole image up to 800 x 800 pixels, else crops of 512 with halos).
+// (nn::auto_image_tile: the whole image up to 800 x 800 pixels, else crops of 512 with halos;
+// a colour net 640 and 720).
 constexpr int64_t kDefaultImageTile = 0;
 
 // Reconstructs a grey light field (1, U, V, H, W) from a sensor image (N, H, W) with a net of
