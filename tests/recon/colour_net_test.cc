@@ -153,7 +153,7 @@ TEST_CASE("a colour net runs whole only on smaller images; an export carries its
   CHECK((grey_tiling.whole == 800 && grey_tiling.crop == 512));
   CHECK((colour_tiling.whole == 640 && colour_tiling.crop == 720));
   // 593 x 840 (pads to 596 x 840): whole for a grey net, two tiles of 720 - 2 halos in colour.
-  const int64_t halo = (colour_tiling.receptive_radius + 3) / 4 * 4;  // 3 levels: multiple 4
+  const int64_t halo = nn::round_up(colour_tiling.receptive_radius, colour_tiling.multiple);
   CHECK(nn::auto_image_tile(grey_tiling, 593, 840) == 840);
   CHECK(nn::auto_image_tile(colour_tiling, 593, 840) == 720 - 2 * halo);
   CHECK(nn::image_tiles(colour_tiling, 593, 840, 0).size() == 2);

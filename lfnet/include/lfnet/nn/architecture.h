@@ -36,6 +36,18 @@ enum class PhiInput {
   kPixelWeights,   // (N, U, V, T, T): the per-pixel weights of one period T (a local Phi)
 };
 
+// The automatic tile of a grey net reconstructs an image whose padded pixels fit in
+// kAutoTileWhole^2 at once (593 x 840 does; lfnet-asp-n2's float32 pass then peaks near 1.4 GB),
+// and a larger one in tiles whose crops, halos included, are at most kAutoTileCrop on a side,
+// so that the peak stays bounded whatever the image's size.
+constexpr int64_t kAutoTileWhole = 800;
+constexpr int64_t kAutoTileCrop = 512;
+// A colour net carries three times the views through its first and last layers: it runs whole
+// only up to kAutoTileWholeColour^2 pixels, so 593 x 840 runs in two tiles (1.6 GB, not 2.0 GB
+// whole, about 12 % slower).
+constexpr int64_t kAutoTileWholeColour = 640;
+constexpr int64_t kAutoTileCropColour = 720;
+
 // How a whole-image net is run in tiles (recon::reconstruct_sensor_tiled): image sides are
 // padded to `multiple`, and a tile needs a halo of `receptive_radius` pixels. The automatic tile
 // (nn::auto_image_tile) runs an image whole when its padded pixels fit in `whole`^2, else in
@@ -43,8 +55,8 @@ enum class PhiInput {
 struct ImageTiling {
   int64_t multiple = 1;
   int64_t receptive_radius = 0;
-  int64_t whole = 800;
-  int64_t crop = 512;
+  int64_t whole = kAutoTileWhole;
+  int64_t crop = kAutoTileCrop;
 };
 
 // What train --init did with one parameter of the new net.

@@ -76,17 +76,6 @@ struct ImageTile {
 // U-Net whose sides must be multiples of it.
 int64_t round_up(int64_t v, int64_t multiple);
 
-// The automatic tile of a grey net reconstructs an image whose padded pixels fit in
-// kAutoTileWhole^2 at once (593 x 840 does; lfnet-asp-n2's float32 pass then peaks near 1.4 GB),
-// and a larger one in tiles whose crops, halos included, are at most kAutoTileCrop on a side,
-// so that the peak stays bounded whatever the image's size (ImageTiling's defaults).
-constexpr int64_t kAutoTileWhole = 800;
-constexpr int64_t kAutoTileCrop = 512;
-// A colour net carries three times the views through its first and last layers: it runs whole
-// only up to kAutoTileWholeColour^2 pixels, and 593 x 840 in two tiles of 640 (1.8 GB, not
-// 2.0 GB whole, in the same time).
-constexpr int64_t kAutoTileWholeColour = 640;
-constexpr int64_t kAutoTileCropColour = 720;
 // The automatic tile (a `tile` of 0) for a height x width image: the whole padded image when it
 // fits in tiling.whole^2 pixels, so that no halo is computed twice; else the largest tile whose
 // crop with its halos fits in tiling.crop x tiling.crop, at least 256, a multiple of the
